@@ -1,0 +1,15 @@
+//! The glissade launcher as a library: loads scenes, builds the nodes of a run and drives them on
+//! a bus, and writes run outputs. The `glissade` binary only parses arguments and calls this.
+
+pub mod output;
+pub mod runner;
+
+use anyhow::Context;
+use glissade_mechanics::scene::{load_str, LoadedScene};
+use std::path::Path;
+
+/// Reads and validates a scene file.
+pub fn load_scene(path: &Path) -> anyhow::Result<LoadedScene> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scene file {}", path.display()))?;
+    Ok(load_str(&text, &path.display().to_string())?)
+}

@@ -1,0 +1,196 @@
+//! The `glissade` command line. It parses arguments, loads the scene and hands over to the
+//! library (`glissade::runner`, `glissade::output`); errors are reported once, here.
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use glissade::load_scene;
+use glissade::output::{interface_fields, summary, write_json};
+use glissade::runner::{run_in_process, IterationRecord, RunOptions};
+use glissade_mechanics::monolithic::solve_glued;
+use glissade_messages::Verdict;
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Quasi-static 2D frictional contact between many elastic parts, by the mixed multiscale LATIN
+/// domain decomposition method.
+#[derive(Parser)]
+#[command(name = "glissade", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Solve a scene with the LATIN method and write its summary and interface fields.
+    Run(RunArgs),
+    /// Validate a scene and print what it contains.
+    Check {
+        /// Scene file (TOML).
+        scene: PathBuf,
+    },
+    /// Solve a scene monolithically with every interface glued (linear elastic) and print a summary.
+    Monolithic {
+        /// Scene file (TOML).
+        scene: PathBuf,
+    },
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// Scene file (TOML).
+    scene: PathBuf,
+    /// Run every node in this process (the only mode of this version).
+    #[arg(long)]
+    in_process: bool,
+    /// Folder for the outputs.
+    #[arg(long, default_value = "recordings")]
+    out: PathBuf,
+    /// Run id (namespaces the run's messages and output files); default: generated.
+    #[arg(long)]
+    run_id: Option<String>,
+    /// Also write every subdomain's displacement field.
+    #[arg(long)]
+    interior: bool,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Exit code of a run that ended without converging (outputs are still written).
+const NOT_CONVERGED: u8 = 3;
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match dispatch(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {
+        Command::Run(args) => run(args),
+        Command::Check { scene } => {
+            let sc = load_scene(&scene)?;
+            let m = &sc.model;
+            println!(
+                "scene `{}` ({:016x}): {} subdomains, {} interfaces ({} contact), {} time points, {} dofs",
+                m.name,
+                sc.fingerprint,
+                m.subdomains.len(),
+                m.interfaces.len(),
+                m.interfaces.iter().filter(|i| i.is_contact()).count(),
+                m.time.n_points(),
+                m.subdomains.iter().map(|s| s.n_dofs()).sum::<usize>()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Monolithic { scene } => {
+            let sc = load_scene(&scene)?;
+            let t0 = std::time::Instant::now();
+            let sol = solve_glued(&sc.model).context("glued solve")?;
+            let umax = sol
+                .u
+                .iter()
+                .flat_map(|u| (0..u.ncols()).flat_map(move |j| (0..u.nrows()).map(move |i| u[(i, j)].abs())))
+                .fold(0.0, f64::max);
+            println!("scene `{}`: glued linear-elastic solve of {} subdomains, {} time points in {:.3} s; max |u_i| = {umax:.6e} mm",
+                sc.model.name, sc.model.subdomains.len(), sc.model.time.n_points(), t0.elapsed().as_secs_f64());
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn default_run_id(scene: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in format!("{scene}{nanos}{}", std::process::id()).bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
+    let sc = load_scene(&args.scene)?;
+    let run_id = args.run_id.clone().unwrap_or_else(|| default_run_id(&sc.model.name));
+    if !run_id
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        || run_id.is_empty()
+    {
+        anyhow::bail!("--run-id `{run_id}`: only letters, digits, `-` and `_` are allowed (it becomes a key-expression chunk and a file name)");
+    }
+    // Fail before solving if the outputs cannot be written.
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    let probe = args.out.join(format!(".{run_id}.probe"));
+    std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", args.out.display()))?;
+    let _ = std::fs::remove_file(&probe);
+
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(sc.model.solver.max_iterations as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {pos} it  {msg}").expect("valid template"),
+    );
+    bar.set_message(format!(
+        "building operators of {} subdomains",
+        sc.model.subdomains.len()
+    ));
+    let opts = RunOptions {
+        run_id: run_id.clone(),
+        interior: args.interior,
+    };
+    let result = run_in_process(&sc, &opts, |r: &IterationRecord| {
+        let d = &r.decision;
+        bar.set_position(r.iteration as u64 + 1);
+        bar.set_message(format!(
+            "η {:.3e}  e_c {:.3e}  sep/stick/slip {}/{}/{}  changed {}  {:.2} s",
+            d.eta, d.contact_indicator, d.counts[0], d.counts[1], d.counts[2], d.status_changes, r.elapsed_s
+        ));
+    })?;
+    bar.finish_and_clear();
+    for l in &result.left_out {
+        println!("left out: {l}");
+    }
+    let stem = format!("{}-{run_id}", sc.model.name);
+    let summary_path = write_json(
+        &args.out,
+        &format!("{stem}.summary.json"),
+        &summary(&sc, &result, &run_id),
+    )?;
+    let fields_path = write_json(
+        &args.out,
+        &format!("{stem}.fields.json"),
+        &interface_fields(&sc.model, &result),
+    )?;
+    if args.interior || sc.model.interfaces.is_empty() {
+        let u: Vec<_> = result.displacements.iter().map(|(s, f)| serde_json::json!({"subdomain": sc.model.subdomains[*s as usize].name, "rows": f.rows, "cols": f.cols, "u": f.data})).collect();
+        let p = write_json(
+            &args.out,
+            &format!("{stem}.displacement.json"),
+            &serde_json::json!({"displacements": u}),
+        )?;
+        println!("displacements: {}", p.display());
+    }
+    let last = result.iterations.last();
+    println!("scene `{}`: {:?} after {} iterations, η = {:.3e}, contact indicator = {:.3e}; setup {:.2} s, iterations {:.2} s",
+        sc.model.name, result.verdict, result.iterations.len(), last.map_or(0.0, |r| r.decision.eta),
+        last.map_or(0.0, |r| r.decision.contact_indicator), result.setup_s, result.solve_s);
+    println!("summary: {}\nfields: {}", summary_path.display(), fields_path.display());
+    Ok(match result.verdict {
+        Verdict::Converged => ExitCode::SUCCESS,
+        _ => ExitCode::from(NOT_CONVERGED),
+    })
+}

@@ -1,0 +1,114 @@
+//! Run outputs: the JSON summary and the interface fields, written under an output folder.
+
+use crate::runner::RunResult;
+use anyhow::Context;
+use glissade_mechanics::model::{InterfaceKind, Model};
+use glissade_mechanics::scene::LoadedScene;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// Status counts (separated, stick, slip) per time point over all contact interfaces.
+pub fn status_counts_per_time(model: &Model, result: &RunResult) -> Vec<[u64; 3]> {
+    let nt = model.time.n_points();
+    let mut counts = vec![[0u64; 3]; nt];
+    for sol in &result.interfaces {
+        let itf = &model.interfaces[sol.interface as usize];
+        if !itf.is_contact() {
+            continue;
+        }
+        let np = itf.n_pairs();
+        for (k, st) in sol.status.iter().enumerate() {
+            counts[k / np][*st as usize] += 1;
+        }
+    }
+    counts
+}
+
+/// The JSON summary of a run.
+pub fn summary(scene: &LoadedScene, result: &RunResult, run_id: &str) -> Value {
+    let model = &scene.model;
+    let per_time = status_counts_per_time(model, result);
+    let last = result.iterations.last();
+    json!({
+        "scene": model.name,
+        "scene_fingerprint": format!("{:016x}", scene.fingerprint),
+        "run_id": run_id,
+        "software": { "name": "glissade", "version": env!("CARGO_PKG_VERSION"), "profile": if cfg!(debug_assertions) { "debug" } else { "release" } },
+        "machine": { "cores": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1) },
+        "problem": {
+            "subdomains": model.subdomains.len(),
+            "interfaces": model.interfaces.len(),
+            "contact_interfaces": model.interfaces.iter().filter(|i| i.is_contact()).count(),
+            "time_points": model.time.n_points(),
+            "dofs": model.subdomains.iter().map(|s| s.n_dofs()).sum::<usize>(),
+        },
+        "nodes": result.nodes,
+        "left_out": result.left_out,
+        "verdict": result.verdict,
+        "iterations": result.iterations.len(),
+        "eta": last.map(|r| r.decision.eta),
+        "contact_indicator": last.map(|r| r.decision.contact_indicator),
+        "setup_s": result.setup_s,
+        "solve_s": result.solve_s,
+        "status_counts_per_time": per_time.iter().enumerate().map(|(i, c)| json!({"t": model.time.t(i), "separated": c[0], "stick": c[1], "slip": c[2]})).collect::<Vec<_>>(),
+        "history": result.iterations,
+    })
+}
+
+/// Interface fields of ŝ (the last local stage) in each interface's local frame: normal and
+/// tangential force on side a (N/mm) and jump [Ŵ] (mm), per time point and pair; plus status.
+pub fn interface_fields(model: &Model, result: &RunResult) -> Value {
+    let items: Vec<Value> = result
+        .interfaces
+        .iter()
+        .map(|sol| {
+            let itf = &model.interfaces[sol.interface as usize];
+            let np = itf.n_pairs();
+            let nt = model.time.n_points();
+            let proj = |f: &glissade_messages::Field, g: Option<&glissade_messages::Field>, dir: [f64; 2]| -> Vec<Vec<f64>> {
+                (0..nt)
+                    .map(|i| {
+                        (0..np)
+                            .map(|p| {
+                                let v = |c: usize| f.get(2 * p + c, i) - g.map_or(0.0, |g| g.get(2 * p + c, i));
+                                v(0) * dir[0] + v(1) * dir[1]
+                            })
+                            .collect()
+                    })
+                    .collect()
+            };
+            let kind = match &itf.kind {
+                InterfaceKind::Perfect => json!("perfect"),
+                InterfaceKind::Contact { friction, .. } => json!({"contact": {"friction": friction}}),
+            };
+            json!({
+                "interface": sol.interface,
+                "a": model.subdomains[itf.a].name,
+                "b": model.subdomains[itf.b].name,
+                "kind": kind,
+                "normal": itf.normal,
+                "tangent": itf.tangent,
+                "coords": itf.coords,
+                "weights": itf.weights,
+                "f_n": proj(&sol.f_a_hat, None, itf.normal),
+                "f_t": proj(&sol.f_a_hat, None, itf.tangent),
+                "jump_n": proj(&sol.w_b_hat, Some(&sol.w_a_hat), itf.normal),
+                "jump_t": proj(&sol.w_b_hat, Some(&sol.w_a_hat), itf.tangent),
+                "status": if itf.is_contact() { (0..nt).map(|i| sol.status[i * np..(i + 1) * np].to_vec()).collect::<Vec<_>>() } else { Vec::new() },
+            })
+        })
+        .collect();
+    json!({ "scene": model.name, "times": (0..model.time.n_points()).map(|i| model.time.t(i)).collect::<Vec<_>>(), "interfaces": items })
+}
+
+/// Writes `value` as JSON to `dir/name`, creating `dir`; returns the path.
+pub fn write_json(dir: &Path, name: &str, value: &Value) -> anyhow::Result<PathBuf> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create output folder {}", dir.display()))?;
+    let path = dir.join(name);
+    let tmp = dir.join(format!(".{name}.partial"));
+    let file = std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
+    serde_json::to_writer(std::io::BufWriter::new(file), value)
+        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, &path).with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))?;
+    Ok(path)
+}

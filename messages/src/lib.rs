@@ -1,0 +1,543 @@
+//! Wire types of glissade (DESIGN §4): every message is an [`Envelope`] plus a [`Payload`],
+//! encoded with serde + bincode 2. Key expressions come only from the functions of this crate.
+//!
+//! Encoding: the envelope and the payload are encoded one after the other, so a decoder checks
+//! the schema version, the run and the scene before it reads a payload whose layout may differ.
+
+use serde::{Deserialize, Serialize};
+
+/// Version of the wire schema; decoding rejects any other.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// Role of a node on the bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum Role {
+    Subdomain,
+    Interface,
+    Coarse,
+    Launcher,
+    Recorder,
+}
+
+impl Role {
+    /// The role's chunk in key expressions.
+    pub fn key(self) -> &'static str {
+        match self {
+            Role::Subdomain => "subdomain",
+            Role::Interface => "interface",
+            Role::Coarse => "coarse",
+            Role::Launcher => "launcher",
+            Role::Recorder => "recorder",
+        }
+    }
+}
+
+/// Sender of a message: its role and index (a subdomain index for subdomain messages).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct NodeId {
+    pub role: Role,
+    pub index: u32,
+}
+
+impl std::fmt::Display for NodeId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.role.key(), self.index)
+    }
+}
+
+/// Stage of the LATIN iteration a message belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum Stage {
+    Setup,
+    /// Micro problem 1 and its macro forces.
+    Micro1,
+    /// The macro problem's solution.
+    Macro,
+    /// End of a linear stage: the new s.
+    Linear,
+    /// Local stage results and the stop decision.
+    Local,
+    /// Final output after the stop decision.
+    Final,
+}
+
+/// Header of every message.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Envelope {
+    pub schema_version: u32,
+    pub run_id: String,
+    pub scene_fingerprint: u64,
+    pub iteration: u32,
+    pub stage: Stage,
+    pub sender: NodeId,
+}
+
+/// A dense column-major matrix: one row per boundary entry (or macro unknown), one column per
+/// time point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Field {
+    pub rows: u32,
+    pub cols: u32,
+    pub data: Vec<f64>,
+}
+
+impl Field {
+    pub fn zeros(rows: usize, cols: usize) -> Self {
+        Self {
+            rows: rows as u32,
+            cols: cols as u32,
+            data: vec![0.0; rows * cols],
+        }
+    }
+
+    /// Builds a field from `f(row, col)`.
+    pub fn from_fn(rows: usize, cols: usize, f: impl Fn(usize, usize) -> f64) -> Self {
+        let mut data = Vec::with_capacity(rows * cols);
+        for c in 0..cols {
+            for r in 0..rows {
+                data.push(f(r, c));
+            }
+        }
+        Self {
+            rows: rows as u32,
+            cols: cols as u32,
+            data,
+        }
+    }
+
+    #[inline]
+    pub fn get(&self, r: usize, c: usize) -> f64 {
+        self.data[c * self.rows as usize + r]
+    }
+
+    pub fn rows(&self) -> usize {
+        self.rows as usize
+    }
+
+    pub fn cols(&self) -> usize {
+        self.cols as usize
+    }
+
+    /// First (row, col, value) that is NaN or infinite.
+    pub fn first_non_finite(&self) -> Option<(usize, usize, f64)> {
+        let r = self.rows as usize;
+        self.data
+            .iter()
+            .position(|v| !v.is_finite())
+            .map(|k| (k % r.max(1), k / r.max(1), self.data[k]))
+    }
+
+    fn check(&self, what: &str) -> Result<(), DecodeError> {
+        let expected = self.rows as u64 * self.cols as u64;
+        if expected != self.data.len() as u64 {
+            return Err(DecodeError::WrongSize {
+                field: what.to_string(),
+                rows: self.rows,
+                cols: self.cols,
+                len: self.data.len(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// How a run ended, or that it goes on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Verdict {
+    Continue,
+    /// η (and the contact indicator, if required) reached the tolerance.
+    Converged,
+    MaxIterations,
+    /// η stopped decreasing.
+    Stagnated {
+        detail: String,
+    },
+    /// η grew without bound or a value became NaN/Inf; the detail names where.
+    Diverged {
+        detail: String,
+    },
+}
+
+impl Verdict {
+    pub fn is_stop(&self) -> bool {
+        !matches!(self, Verdict::Continue)
+    }
+}
+
+/// Indicators of one iteration and the stop decision (interface node → everyone).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Decision {
+    /// LATIN indicator η (eq. 10).
+    pub eta: f64,
+    /// Contact indicator e_c = max(e_F, e_W) (independent of k).
+    pub contact_indicator: f64,
+    pub force_error: f64,
+    pub jump_error: f64,
+    /// Contact points (pair × time) separated, stuck, slipping.
+    pub counts: [u64; 3],
+    pub status_changes: u64,
+    /// Contact interfaces whose search direction was updated at this iteration.
+    pub direction_updates: Vec<u32>,
+    pub verdict: Verdict,
+}
+
+/// One interface's fields at the end of a run: s (last linear stage) and ŝ (last local stage),
+/// and the contact status per (pair, time) at index p + n_pairs·i (0 separated, 1 stick, 2 slip).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InterfaceSolution {
+    pub interface: u32,
+    pub w_a: Field,
+    pub w_b: Field,
+    pub f_a: Field,
+    pub f_b: Field,
+    pub w_a_hat: Field,
+    pub w_b_hat: Field,
+    pub f_a_hat: Field,
+    pub f_b_hat: Field,
+    pub status: Vec<u8>,
+}
+
+/// The payloads of DESIGN §4.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Payload {
+    /// The scene file's text, so that remote nodes need no file.
+    Scene {
+        text: String,
+    },
+    /// L_E of a subdomain over its macro slots (interface, number of modes), sent once.
+    HomogenizedOperator {
+        subdomain: u32,
+        slots: Vec<(u32, u32)>,
+        l_e: Field,
+    },
+    /// F̂ᴹ_{E,d} = 𝔼ᵀ M F₁ (n_m × (N+1)) after micro problem 1.
+    MacroForces {
+        subdomain: u32,
+        forces: Field,
+    },
+    /// w̃ over the subdomain's macro columns (n_m × (N+1)).
+    MacroDisplacements {
+        subdomain: u32,
+        w_tilde: Field,
+    },
+    /// s = (W, F) of a subdomain's boundary after a linear stage (n_b × (N+1) each).
+    BoundaryState {
+        subdomain: u32,
+        w: Field,
+        f: Field,
+    },
+    /// q̂ = F̂ + k⁻Ŵ on a subdomain's boundary: all the linear stage needs from the local stage.
+    LocalDirections {
+        subdomain: u32,
+        q_hat: Field,
+    },
+    Decision(Decision),
+    InterfaceSolution(InterfaceSolution),
+    /// Full displacement field of a subdomain (n_dofs × (N+1)), on request at the end.
+    Displacement {
+        subdomain: u32,
+        u: Field,
+    },
+}
+
+impl Payload {
+    /// The field chunk of the key expression.
+    pub fn field_key(&self) -> &'static str {
+        match self {
+            Payload::Scene { .. } => "scene",
+            Payload::HomogenizedOperator { .. } => "homogenized_operator",
+            Payload::MacroForces { .. } => "macro_forces",
+            Payload::MacroDisplacements { .. } => "macro_displacements",
+            Payload::BoundaryState { .. } => "boundary_state",
+            Payload::LocalDirections { .. } => "local_directions",
+            Payload::Decision(_) => "decision",
+            Payload::InterfaceSolution(_) => "interface_solution",
+            Payload::Displacement { .. } => "displacement",
+        }
+    }
+
+    /// Subdomain a payload is addressed to, for payloads with one recipient subdomain.
+    pub fn destination(&self) -> Option<u32> {
+        match self {
+            Payload::MacroDisplacements { subdomain, .. } | Payload::LocalDirections { subdomain, .. } => {
+                Some(*subdomain)
+            }
+            _ => None,
+        }
+    }
+
+    fn check(&self) -> Result<(), DecodeError> {
+        match self {
+            Payload::Scene { .. } => Ok(()),
+            Payload::HomogenizedOperator { l_e, .. } => l_e.check("l_e"),
+            Payload::MacroForces { forces, .. } => forces.check("forces"),
+            Payload::MacroDisplacements { w_tilde, .. } => w_tilde.check("w_tilde"),
+            Payload::BoundaryState { w, f, .. } => {
+                w.check("w")?;
+                f.check("f")?;
+                if (w.rows, w.cols) != (f.rows, f.cols) {
+                    return Err(DecodeError::WrongSize {
+                        field: "f (differs from w)".into(),
+                        rows: f.rows,
+                        cols: f.cols,
+                        len: f.data.len(),
+                    });
+                }
+                Ok(())
+            }
+            Payload::LocalDirections { q_hat, .. } => q_hat.check("q_hat"),
+            Payload::Decision(_) => Ok(()),
+            Payload::InterfaceSolution(s) => {
+                for (name, f) in [
+                    ("w_a", &s.w_a),
+                    ("w_b", &s.w_b),
+                    ("f_a", &s.f_a),
+                    ("f_b", &s.f_b),
+                    ("w_a_hat", &s.w_a_hat),
+                    ("w_b_hat", &s.w_b_hat),
+                    ("f_a_hat", &s.f_a_hat),
+                    ("f_b_hat", &s.f_b_hat),
+                ] {
+                    f.check(name)?;
+                }
+                Ok(())
+            }
+            Payload::Displacement { u, .. } => u.check("u"),
+        }
+    }
+}
+
+/// A message: envelope + payload.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Message {
+    pub envelope: Envelope,
+    pub payload: Payload,
+}
+
+impl Message {
+    /// The key expression this message is published on.
+    pub fn topic(&self) -> String {
+        topic(&self.envelope.run_id, self.envelope.sender, &self.payload)
+    }
+}
+
+/// `glissade/<run>/<role>/<id>/<field>[/<destination subdomain>]`.
+pub fn topic(run_id: &str, sender: NodeId, payload: &Payload) -> String {
+    let base = format!(
+        "glissade/{run_id}/{}/{}/{}",
+        sender.role.key(),
+        sender.index,
+        payload.field_key()
+    );
+    match payload.destination() {
+        Some(d) => format!("{base}/{d}"),
+        None => base,
+    }
+}
+
+/// Everything of one run: `glissade/<run>/**`.
+pub fn run_topics(run_id: &str) -> String {
+    format!("glissade/{run_id}/**")
+}
+
+/// Key expression of one field from any sender of a role, optionally for one destination.
+pub fn role_field_topic(run_id: &str, role: Role, field: &str, destination: Option<u32>) -> String {
+    match destination {
+        Some(d) => format!("glissade/{run_id}/{}/*/{field}/{d}", role.key()),
+        None => format!("glissade/{run_id}/{}/*/{field}", role.key()),
+    }
+}
+
+/// Does key `key` match the key expression `expr` (`*`: one chunk, `**`: any number of chunks)?
+pub fn key_matches(expr: &str, key: &str) -> bool {
+    fn rec(e: &[&str], k: &[&str]) -> bool {
+        match (e.first(), k.first()) {
+            (None, None) => true,
+            (Some(&"**"), _) => rec(&e[1..], k) || (!k.is_empty() && rec(e, &k[1..])),
+            (Some(&"*"), Some(_)) => rec(&e[1..], &k[1..]),
+            (Some(a), Some(b)) if a == b => rec(&e[1..], &k[1..]),
+            _ => false,
+        }
+    }
+    let e: Vec<&str> = expr.split('/').collect();
+    let k: Vec<&str> = key.split('/').collect();
+    rec(&e, &k)
+}
+
+/// Why bytes could not be accepted as a message of this run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    #[error("schema version {got} is not this build's {expected}")]
+    SchemaVersion { got: u32, expected: u32 },
+    #[error("message of run `{got}`, expected run `{expected}`")]
+    OtherRun { got: String, expected: String },
+    #[error("message of scene {got:016x}, expected scene {expected:016x}")]
+    OtherScene { got: u64, expected: u64 },
+    #[error("{0} trailing bytes after the payload")]
+    TrailingBytes(usize),
+    #[error("field `{field}` declares {rows} × {cols} values but holds {len}")]
+    WrongSize {
+        field: String,
+        rows: u32,
+        cols: u32,
+        len: usize,
+    },
+    #[error("malformed {part}: {detail}")]
+    Malformed { part: &'static str, detail: String },
+}
+
+/// What a receiver expects of every message.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Expected {
+    pub run_id: String,
+    pub scene_fingerprint: u64,
+}
+
+fn config() -> impl bincode::config::Config {
+    bincode::config::standard()
+        .with_little_endian()
+        .with_fixed_int_encoding()
+        .with_limit::<{ 1 << 31 }>()
+}
+
+/// Encodes envelope then payload.
+pub fn encode(msg: &Message) -> Vec<u8> {
+    let mut out = bincode::serde::encode_to_vec(&msg.envelope, config()).expect("encoding into a Vec cannot fail");
+    out.extend(bincode::serde::encode_to_vec(&msg.payload, config()).expect("encoding into a Vec cannot fail"));
+    out
+}
+
+/// Decodes and checks a message: schema version, run, scene, trailing bytes, field sizes.
+pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError> {
+    let (envelope, used): (Envelope, usize) =
+        bincode::serde::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Malformed {
+            part: "envelope",
+            detail: e.to_string(),
+        })?;
+    if envelope.schema_version != SCHEMA_VERSION {
+        return Err(DecodeError::SchemaVersion {
+            got: envelope.schema_version,
+            expected: SCHEMA_VERSION,
+        });
+    }
+    if envelope.run_id != expected.run_id {
+        return Err(DecodeError::OtherRun {
+            got: envelope.run_id,
+            expected: expected.run_id.clone(),
+        });
+    }
+    if envelope.scene_fingerprint != expected.scene_fingerprint {
+        return Err(DecodeError::OtherScene {
+            got: envelope.scene_fingerprint,
+            expected: expected.scene_fingerprint,
+        });
+    }
+    let rest = &bytes[used..];
+    let (payload, used): (Payload, usize) =
+        bincode::serde::decode_from_slice(rest, config()).map_err(|e| DecodeError::Malformed {
+            part: "payload",
+            detail: e.to_string(),
+        })?;
+    if used != rest.len() {
+        return Err(DecodeError::TrailingBytes(rest.len() - used));
+    }
+    payload.check()?;
+    Ok(Message { envelope, payload })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn msg() -> Message {
+        Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: "r1".into(),
+                scene_fingerprint: 7,
+                iteration: 3,
+                stage: Stage::Linear,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index: 2,
+                },
+            },
+            payload: Payload::BoundaryState {
+                subdomain: 2,
+                w: Field::from_fn(3, 2, |r, c| (r + 10 * c) as f64),
+                f: Field::zeros(3, 2),
+            },
+        }
+    }
+
+    fn expected() -> Expected {
+        Expected {
+            run_id: "r1".into(),
+            scene_fingerprint: 7,
+        }
+    }
+
+    #[test]
+    fn round_trip_and_topic() {
+        let m = msg();
+        let bytes = encode(&m);
+        assert_eq!(decode(&bytes, &expected()).unwrap(), m);
+        assert_eq!(m.topic(), "glissade/r1/subdomain/2/boundary_state");
+        assert!(key_matches(
+            &role_field_topic("r1", Role::Subdomain, "boundary_state", None),
+            &m.topic()
+        ));
+        assert!(key_matches(&run_topics("r1"), &m.topic()));
+        assert!(!key_matches(&run_topics("r2"), &m.topic()));
+        assert!(key_matches(
+            "glissade/r1/*/*/local_directions/4",
+            "glissade/r1/interface/0/local_directions/4"
+        ));
+        assert!(!key_matches(
+            "glissade/r1/*/*/local_directions/4",
+            "glissade/r1/interface/0/local_directions/40"
+        ));
+    }
+
+    #[test]
+    fn rejections_say_why() {
+        let m = msg();
+        let bytes = encode(&m);
+        let e = decode(
+            &bytes,
+            &Expected {
+                run_id: "other".into(),
+                scene_fingerprint: 7,
+            },
+        )
+        .unwrap_err();
+        assert!(matches!(e, DecodeError::OtherRun { .. }), "{e}");
+        let e = decode(
+            &bytes,
+            &Expected {
+                run_id: "r1".into(),
+                scene_fingerprint: 8,
+            },
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("scene"), "{e}");
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(decode(&longer, &expected()).unwrap_err(), DecodeError::TrailingBytes(1));
+        let e = decode(&bytes[..bytes.len() - 3], &expected()).unwrap_err();
+        assert!(matches!(e, DecodeError::Malformed { part: "payload", .. }), "{e}");
+        let mut v2 = m.clone();
+        v2.envelope.schema_version = SCHEMA_VERSION + 1;
+        let e = decode(&encode(&v2), &expected()).unwrap_err();
+        assert!(matches!(e, DecodeError::SchemaVersion { .. }), "{e}");
+        let mut bad = m.clone();
+        if let Payload::BoundaryState { w, .. } = &mut bad.payload {
+            w.data.pop();
+        }
+        let e = decode(&encode(&bad), &expected()).unwrap_err();
+        assert!(
+            e.to_string().contains("field `w` declares 3 × 2 values but holds 5"),
+            "{e}"
+        );
+    }
+}

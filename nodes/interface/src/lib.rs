@@ -1,0 +1,356 @@
+//! The interface node: receives s = (W, F) from every subdomain, runs the local stage on every
+//! interface (DESIGN §3), computes the indicators, updates search directions when asked, decides
+//! whether to continue, and sends each subdomain q̂ = F̂ + k⁻Ŵ for its next linear stage. At the
+//! stop it publishes every interface's s and ŝ.
+
+use faer::Mat;
+use glissade_bus::convert::field_of;
+use glissade_bus::{expect_shape, Node, NodeError, RunContext};
+use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
+use glissade_mechanics::model::{Model, Side};
+use glissade_messages::{
+    role_field_topic, Decision, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
+};
+use std::collections::BTreeSet;
+use std::sync::Arc;
+
+/// The stop rules of DESIGN §3: tolerance, max iterations, stagnation, divergence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StopRule {
+    pub tolerance: f64,
+    pub contact_tolerance: Option<f64>,
+    pub max_iterations: usize,
+    pub stagnation_window: usize,
+    pub stagnation_ratio: f64,
+    /// Diverged when Σ(‖s‖² + ‖ŝ‖²) exceeds this factor times its value at iteration 1.
+    pub growth_limit: f64,
+    history: Vec<f64>,
+    first_norm: Option<f64>,
+}
+
+impl StopRule {
+    pub fn new(p: &glissade_mechanics::model::SolverParams) -> Self {
+        Self {
+            tolerance: p.tolerance,
+            contact_tolerance: p.contact_tolerance,
+            max_iterations: p.max_iterations,
+            stagnation_window: p.stagnation_window,
+            stagnation_ratio: p.stagnation_ratio,
+            growth_limit: 1e12,
+            history: Vec::new(),
+            first_norm: None,
+        }
+    }
+
+    /// Verdict after the local stage of iteration `n` (0-based).
+    pub fn decide(&mut self, n: u32, sums: &IndicatorSums) -> Verdict {
+        let eta = sums.eta();
+        self.history.push(eta);
+        if !eta.is_finite() || !sums.contact_indicator().is_finite() {
+            return Verdict::Diverged {
+                detail: format!("indicator is not finite at iteration {n} (η = {eta})"),
+            };
+        }
+        if n == 1 {
+            self.first_norm = Some(sums.eta_den);
+        }
+        if let Some(first) = self.first_norm {
+            if first > 0.0 && sums.eta_den > self.growth_limit * first {
+                return Verdict::Diverged {
+                    detail: format!(
+                        "the solution's norm grew {:.1e}-fold since iteration 1 (iteration {n})",
+                        sums.eta_den / first
+                    ),
+                };
+            }
+        }
+        let contact_ok = self.contact_tolerance.is_none_or(|t| sums.contact_indicator() <= t);
+        if eta <= self.tolerance && contact_ok {
+            return Verdict::Converged;
+        }
+        if n as usize + 1 >= self.max_iterations {
+            return Verdict::MaxIterations;
+        }
+        let w = self.stagnation_window;
+        if w > 0 && self.history.len() > 2 * w {
+            let k = self.history.len();
+            let recent = self.history[k - w..].iter().cloned().fold(f64::INFINITY, f64::min);
+            let before = self.history[..k - w].iter().cloned().fold(f64::INFINITY, f64::min);
+            if recent > self.stagnation_ratio * before {
+                return Verdict::Stagnated {
+                    detail: format!("min η over the last {w} iterations is {recent:.3e}, not below {} × the earlier minimum {before:.3e}", self.stagnation_ratio),
+                };
+            }
+        }
+        Verdict::Continue
+    }
+}
+
+pub struct InterfaceNode {
+    id: NodeId,
+    ctx: RunContext,
+    model: Arc<Model>,
+    layouts: Vec<Option<BoundaryLayout>>,
+    participants: Vec<u32>,
+    locals: Vec<InterfaceLocal>,
+    fields: Vec<InterfaceFields>,
+    received: BTreeSet<u32>,
+    iteration: u32,
+    time_weights: Vec<f64>,
+    rule: StopRule,
+    finished: bool,
+}
+
+impl InterfaceNode {
+    /// An interface node owning every interface of `model`, with k⁻ = k₀ = `k0[i]`.
+    pub fn new(ctx: RunContext, model: Arc<Model>, k0: &[f64]) -> Self {
+        let nt = model.time.n_points();
+        let layouts: Vec<Option<BoundaryLayout>> = (0..model.subdomains.len())
+            .map(|s| {
+                let l = BoundaryLayout::new(&model, s, k0);
+                (!l.is_empty()).then_some(l)
+            })
+            .collect();
+        let participants = layouts
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| l.is_some())
+            .map(|(s, _)| s as u32)
+            .collect();
+        let locals = model
+            .interfaces
+            .iter()
+            .enumerate()
+            .map(|(i, itf)| InterfaceLocal::new(i, itf, k0[i], nt))
+            .collect();
+        let fields = model
+            .interfaces
+            .iter()
+            .map(|itf| InterfaceFields::zeros(itf.n_pairs(), nt))
+            .collect();
+        Self {
+            id: NodeId {
+                role: Role::Interface,
+                index: 0,
+            },
+            ctx,
+            time_weights: model.time.trapezoid_weights(),
+            rule: StopRule::new(&model.solver),
+            model,
+            layouts,
+            participants,
+            locals,
+            fields,
+            received: BTreeSet::new(),
+            iteration: 0,
+            finished: false,
+        }
+    }
+
+    /// Subdomains that take part in the iteration.
+    pub fn participants(&self) -> &[u32] {
+        &self.participants
+    }
+
+    fn msg(&self, stage: Stage, iteration: u32, payload: Payload) -> Message {
+        Message {
+            envelope: self.ctx.envelope(self.id, iteration, stage),
+            payload,
+        }
+    }
+
+    /// Names a boundary entry: interface, pair and component.
+    fn locate(&self, s: usize, row: usize) -> String {
+        let layout = self.layouts[s].as_ref().expect("participant");
+        for slot in &layout.slots {
+            if row >= slot.offset && row < slot.offset + 2 * slot.n_pairs {
+                let e = row - slot.offset;
+                let itf = &self.model.interfaces[slot.interface];
+                let [x, y] = itf.coords[e / 2];
+                return format!(
+                    "interface {} ({} | {}), pair {} at ({x}, {y}), component {}",
+                    slot.interface,
+                    self.model.subdomains[itf.a].name,
+                    self.model.subdomains[itf.b].name,
+                    e / 2,
+                    if e % 2 == 0 { "x" } else { "y" }
+                );
+            }
+        }
+        format!("boundary entry {row}")
+    }
+
+    fn store(&mut self, s: u32, w: &glissade_messages::Field, f: &glissade_messages::Field) {
+        let layout = self.layouts[s as usize].as_ref().expect("participant");
+        for slot in &layout.slots {
+            let fields = &mut self.fields[slot.interface];
+            let (wm, fm) = match slot.side {
+                Side::A => (&mut fields.w_a, &mut fields.f_a),
+                Side::B => (&mut fields.w_b, &mut fields.f_b),
+            };
+            for j in 0..w.cols() {
+                for e in 0..2 * slot.n_pairs {
+                    wm[(e, j)] = w.get(slot.offset + e, j);
+                    fm[(e, j)] = f.get(slot.offset + e, j);
+                }
+            }
+        }
+    }
+
+    fn local_stage(&mut self) -> Vec<Message> {
+        let n = self.iteration;
+        let mut sums = IndicatorSums::default();
+        let mut updates = Vec::new();
+        for (i, itf) in self.model.interfaces.iter().enumerate() {
+            let local = &mut self.locals[i];
+            local.local_stage(itf, &self.fields[i]);
+            sums.add(&local.indicator_sums(itf, &self.time_weights, &self.fields[i], n == 0));
+            if self.model.solver.search_direction_update
+                && local.update_directions(itf, self.model.solver.alpha, self.model.solver.i0)
+            {
+                updates.push(i as u32);
+            }
+        }
+        let verdict = self.rule.decide(n, &sums);
+        self.finish_iteration(sums, updates, verdict)
+    }
+
+    fn finish_iteration(&mut self, sums: IndicatorSums, updates: Vec<u32>, verdict: Verdict) -> Vec<Message> {
+        let n = self.iteration;
+        let stop = verdict.is_stop();
+        let decision = Decision {
+            eta: sums.eta(),
+            contact_indicator: sums.contact_indicator(),
+            force_error: sums.force_error(),
+            jump_error: sums.jump_error(),
+            counts: sums.counts,
+            status_changes: sums.status_changes,
+            direction_updates: updates,
+            verdict,
+        };
+        let mut out = vec![self.msg(Stage::Local, n, Payload::Decision(decision))];
+        if stop {
+            self.finished = true;
+            for (i, local) in self.locals.iter().enumerate() {
+                let s = &self.fields[i];
+                let h = &local.hat;
+                out.push(self.msg(
+                    Stage::Final,
+                    n,
+                    Payload::InterfaceSolution(InterfaceSolution {
+                        interface: i as u32,
+                        w_a: field_of(s.w_a.as_ref()),
+                        w_b: field_of(s.w_b.as_ref()),
+                        f_a: field_of(s.f_a.as_ref()),
+                        f_b: field_of(s.f_b.as_ref()),
+                        w_a_hat: field_of(h.w_a.as_ref()),
+                        w_b_hat: field_of(h.w_b.as_ref()),
+                        f_a_hat: field_of(h.f_a.as_ref()),
+                        f_b_hat: field_of(h.f_b.as_ref()),
+                        status: local.status.iter().map(|s| *s as u8).collect(),
+                    }),
+                ));
+            }
+        } else {
+            let nt = self.model.time.n_points();
+            for &s in &self.participants {
+                let layout = self.layouts[s as usize].as_ref().expect("participant");
+                let mut q = Mat::<f64>::zeros(layout.len(), nt);
+                for slot in &layout.slots {
+                    self.locals[slot.interface].q_hat_into(slot.side == Side::A, q.as_mut(), slot.offset);
+                }
+                out.push(self.msg(
+                    Stage::Local,
+                    n + 1,
+                    Payload::LocalDirections {
+                        subdomain: s,
+                        q_hat: field_of(q.as_ref()),
+                    },
+                ));
+            }
+        }
+        self.iteration += 1;
+        self.received.clear();
+        out
+    }
+}
+
+impl Node for InterfaceNode {
+    fn id(&self) -> NodeId {
+        self.id
+    }
+
+    fn subscriptions(&self) -> Vec<String> {
+        vec![role_field_topic(
+            &self.ctx.run_id,
+            Role::Subdomain,
+            "boundary_state",
+            None,
+        )]
+    }
+
+    fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+        Ok(Vec::new())
+    }
+
+    fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError> {
+        if self.finished {
+            return Ok(Vec::new());
+        }
+        let Payload::BoundaryState { subdomain, w, f } = &msg.payload else {
+            return Ok(Vec::new());
+        };
+        let s = *subdomain;
+        if !self.participants.contains(&s) {
+            return Err(NodeError::new(
+                self.id,
+                format!("boundary state from subdomain {s}, which has no interface"),
+            ));
+        }
+        if msg.envelope.iteration != self.iteration {
+            return Err(NodeError::new(
+                self.id,
+                format!(
+                    "boundary state of iteration {} from subdomain {s} while at iteration {}",
+                    msg.envelope.iteration, self.iteration
+                ),
+            ));
+        }
+        if !self.received.insert(s) {
+            return Err(NodeError::new(
+                self.id,
+                format!(
+                    "second boundary state of iteration {} from subdomain {s}",
+                    self.iteration
+                ),
+            ));
+        }
+        let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
+        let nt = self.model.time.n_points();
+        expect_shape(self.id, "w", w, n_b, nt)?;
+        expect_shape(self.id, "f", f, n_b, nt)?;
+        for (name, field) in [("W", w), ("F", f)] {
+            if let Some((r, c, v)) = field.first_non_finite() {
+                let detail = format!(
+                    "subdomain {} (`{}`) sent {name} = {v} at {}, time t_{c} = {} s, iteration {}",
+                    s,
+                    self.model.subdomains[s as usize].name,
+                    self.locate(s as usize, r),
+                    self.model.time.t(c),
+                    self.iteration
+                );
+                return Ok(self.finish_iteration(IndicatorSums::default(), Vec::new(), Verdict::Diverged { detail }));
+            }
+        }
+        self.store(s, w, f);
+        if self.received.len() == self.participants.len() {
+            return Ok(self.local_stage());
+        }
+        Ok(Vec::new())
+    }
+
+    fn is_finished(&self) -> bool {
+        self.finished
+    }
+}

@@ -1,0 +1,205 @@
+//! The condensed boundary operator of a subdomain (DESIGN §3):
+//! A_E = B (K_E + Bᵀ k⁻ M B)⁻¹ Bᵀ, a dense SPD n_b × n_b matrix built once from a sparse Cholesky
+//! factorisation, and the boundary responses to the subdomain's own loads (W_d patterns).
+//!
+//! Prescribed displacements are imposed strongly: constrained dofs are eliminated, so A_E has
+//! zero rows and columns at constrained boundary entries and W_d carries their prescribed values.
+
+use crate::assembly::{stiffness_triplets, triplet_matvec, AssemblyError, SparseSpd};
+use crate::model::{Model, Plane, Side, Subdomain};
+use faer::Mat;
+
+/// Where each boundary entry of a subdomain lives. The boundary vector stacks, interface by
+/// interface (in the model's interface order), the x and y traces of that interface's node copies
+/// (DESIGN §2: one copy of a node per interface).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoundaryLayout {
+    /// Subdomain dof of each boundary entry (n_b entries).
+    pub dofs: Vec<usize>,
+    /// Diagonal of the lumped interface mass M (mm) per entry.
+    pub mass: Vec<f64>,
+    /// Search direction k⁻ (MPa/mm) per entry.
+    pub k: Vec<f64>,
+    /// The interfaces of this subdomain, in boundary order.
+    pub slots: Vec<InterfaceSlot>,
+}
+
+/// One interface's block of a subdomain's boundary vector.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InterfaceSlot {
+    pub interface: usize,
+    pub side: Side,
+    /// First boundary entry of this interface (entry 2p + c is pair p, component c).
+    pub offset: usize,
+    pub n_pairs: usize,
+}
+
+impl BoundaryLayout {
+    /// Layout of subdomain `s` of `model`, with k⁻ = `k_interface[i]` on interface i.
+    pub fn new(model: &Model, s: usize, k_interface: &[f64]) -> Self {
+        let mut dofs = Vec::new();
+        let mut mass = Vec::new();
+        let mut k = Vec::new();
+        let mut slots = Vec::new();
+        for (i, itf) in model.interfaces.iter().enumerate() {
+            let Some(side) = itf.side_of(s) else { continue };
+            slots.push(InterfaceSlot {
+                interface: i,
+                side,
+                offset: dofs.len(),
+                n_pairs: itf.n_pairs(),
+            });
+            for p in 0..itf.n_pairs() {
+                let node = itf.node(side, p);
+                for c in 0..2 {
+                    dofs.push(2 * node + c);
+                    mass.push(itf.weights[p]);
+                    k.push(k_interface[i]);
+                }
+            }
+        }
+        Self { dofs, mass, k, slots }
+    }
+
+    /// n_b, the length of the boundary vector.
+    pub fn len(&self) -> usize {
+        self.dofs.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.dofs.is_empty()
+    }
+}
+
+/// Condensed operator of one subdomain and its load responses.
+pub struct CondensedOperator {
+    n_dofs: usize,
+    /// Free-dof index of each subdomain dof (usize::MAX when constrained).
+    free: Vec<usize>,
+    factor: SparseSpd,
+    /// A_E (n_b × n_b, mm/N).
+    pub a: Mat<f64>,
+    /// Boundary trace of the response to each load case (n_b × n_cases), mm per unit φ.
+    pub load_boundary: Mat<f64>,
+    /// Full displacement response to each load case (n_dofs × n_cases), mm per unit φ.
+    pub load_full: Mat<f64>,
+    pub layout: BoundaryLayout,
+}
+
+impl CondensedOperator {
+    /// Assembles K_E + Bᵀ k⁻ M B on the free dofs, factorises it, and builds A_E and the load responses.
+    pub fn new(sub: &Subdomain, plane: Plane, layout: BoundaryLayout) -> Result<Self, AssemblyError> {
+        let n_dofs = sub.n_dofs();
+        let k_full = stiffness_triplets(&sub.mesh, sub.material, plane)?;
+        let mut free = vec![usize::MAX; n_dofs];
+        let mut n_free = 0;
+        for (d, f) in free.iter_mut().enumerate() {
+            if !sub.constrained[d] {
+                *f = n_free;
+                n_free += 1;
+            }
+        }
+        let mut trip: Vec<(usize, usize, f64)> = k_full
+            .iter()
+            .filter(|&&(i, j, _)| free[i] != usize::MAX && free[j] != usize::MAX)
+            .map(|&(i, j, v)| (free[i], free[j], v))
+            .collect();
+        for (b, &d) in layout.dofs.iter().enumerate() {
+            if free[d] != usize::MAX {
+                trip.push((free[d], free[d], layout.k[b] * layout.mass[b]));
+            }
+        }
+        let factor = SparseSpd::factorize(n_free, &trip, &format!("subdomain `{}` (K_E + Bᵀk⁻MB)", sub.name))?;
+
+        // A_E: solve for each distinct free boundary dof, then expand to the copies.
+        let n_b = layout.len();
+        let mut col_of_dof = vec![usize::MAX; n_dofs];
+        let mut unique = Vec::new();
+        for &d in &layout.dofs {
+            if free[d] != usize::MAX && col_of_dof[d] == usize::MAX {
+                col_of_dof[d] = unique.len();
+                unique.push(d);
+            }
+        }
+        let mut x = Mat::<f64>::zeros(n_free, unique.len());
+        for (c, &d) in unique.iter().enumerate() {
+            x[(free[d], c)] = 1.0;
+        }
+        factor.solve_in_place(&mut x);
+        let a = Mat::from_fn(n_b, n_b, |r, c| {
+            let (dr, dc) = (layout.dofs[r], layout.dofs[c]);
+            if free[dr] == usize::MAX || free[dc] == usize::MAX {
+                0.0
+            } else {
+                x[(free[dr], col_of_dof[dc])]
+            }
+        });
+
+        // Load responses: K̃_ff u_f = f_f − K_fd u_d.
+        let n_cases = sub.loads.len();
+        let mut load_full = Mat::<f64>::zeros(n_dofs, n_cases);
+        let mut load_boundary = Mat::<f64>::zeros(n_b, n_cases);
+        let mut ku = vec![0.0; n_dofs];
+        for (j, case) in sub.loads.iter().enumerate() {
+            triplet_matvec(&k_full, &case.displacement, &mut ku);
+            let mut rhs = Mat::<f64>::zeros(n_free, 1);
+            for d in 0..n_dofs {
+                if free[d] != usize::MAX {
+                    rhs[(free[d], 0)] = case.force[d] - ku[d];
+                }
+            }
+            factor.solve_in_place(&mut rhs);
+            for d in 0..n_dofs {
+                load_full[(d, j)] = if free[d] == usize::MAX {
+                    case.displacement[d]
+                } else {
+                    rhs[(free[d], 0)]
+                };
+            }
+            for (b, &d) in layout.dofs.iter().enumerate() {
+                load_boundary[(b, j)] = load_full[(d, j)];
+            }
+        }
+        Ok(Self {
+            n_dofs,
+            free,
+            factor,
+            a,
+            load_boundary,
+            load_full,
+            layout,
+        })
+    }
+
+    pub fn n_dofs(&self) -> usize {
+        self.n_dofs
+    }
+
+    /// Full displacement field u = Σ_j φ_j u_j + (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q for a boundary
+    /// right-hand side q (n_b; N/mm², i.e. F̂ + k⁻(Ŵ + W̃ᴹ), or F + k⁻W at a solution) and load
+    /// factors φ_j.
+    pub fn recover(&self, q: &[f64], load_factors: &[f64]) -> Vec<f64> {
+        let mut rhs = Mat::<f64>::zeros(self.factor.n(), 1);
+        for (b, &d) in self.layout.dofs.iter().enumerate() {
+            if self.free[d] != usize::MAX {
+                rhs[(self.free[d], 0)] += self.layout.mass[b] * q[b];
+            }
+        }
+        self.factor.solve_in_place(&mut rhs);
+        (0..self.n_dofs)
+            .map(|d| {
+                let loads: f64 = load_factors
+                    .iter()
+                    .enumerate()
+                    .map(|(j, phi)| phi * self.load_full[(d, j)])
+                    .sum();
+                loads
+                    + if self.free[d] == usize::MAX {
+                        0.0
+                    } else {
+                        rhs[(self.free[d], 0)]
+                    }
+            })
+            .collect()
+    }
+}

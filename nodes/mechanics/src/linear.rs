@@ -1,0 +1,253 @@
+//! The linear stage of the LATIN method on one subdomain (DESIGN §3), on the condensed operator:
+//! micro problem 1, W₁ = A_E M q̂ + W_d, F₁ = q̂ − k⁻W₁ with q̂ = F̂ + k⁻Ŵ;
+//! macro forces F̂ᴹ_{E,d} = 𝔼ᵀ M F₁; micro problem 2, W₂ = A_E M k⁻ 𝔼 w̃, F₂ = k⁻(𝔼 w̃ − W₂);
+//! and the homogenized operator L_E = 𝔼ᵀ M k⁻ 𝔼 − (M k⁻ 𝔼)ᵀ A_E (M k⁻ 𝔼).
+//!
+//! Fields are column-major matrices, one row per boundary entry, one column per time point.
+
+use crate::assembly::AssemblyError;
+use crate::condensed::{BoundaryLayout, CondensedOperator};
+use crate::model::{Interface, Model};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatMut, MatRef, Par};
+
+/// Default search direction per interface: k₀ = k0_factor · E/L_Γ, with E the geometric mean of
+/// the Young moduli of the two sides (the neighbour's E when both sides share a material) and
+/// L_Γ the interface length. MPa/mm.
+pub fn default_k0(model: &Model) -> Vec<f64> {
+    model
+        .interfaces
+        .iter()
+        .map(|itf| {
+            let e = (model.subdomains[itf.a].material.e * model.subdomains[itf.b].material.e).sqrt();
+            model.solver.k0_factor * e / itf.length
+        })
+        .collect()
+}
+
+/// Macro basis of an interface (DESIGN §3): translation along t, translation along n, rotation
+/// about the centroid, extension along t (s·t, s the abscissa from the centroid), made
+/// orthonormal for the lumped mass M by modified Gram–Schmidt (twice). Vectors whose norm
+/// collapses (an interface of one pair) are dropped, so an interface has 1 to 4 modes. Entry 2p+c
+/// is pair p, component c.
+pub fn macro_basis(itf: &Interface) -> Vec<Vec<f64>> {
+    let np = itf.n_pairs();
+    let (n, t, g) = (itf.normal, itf.tangent, itf.centroid);
+    let mut raw = vec![vec![0.0; 2 * np]; 4];
+    for p in 0..np {
+        let r = [itf.coords[p][0] - g[0], itf.coords[p][1] - g[1]];
+        let s = r[0] * t[0] + r[1] * t[1];
+        for c in 0..2 {
+            raw[0][2 * p + c] = t[c];
+            raw[1][2 * p + c] = n[c];
+            raw[3][2 * p + c] = s * t[c];
+        }
+        raw[2][2 * p] = -r[1];
+        raw[2][2 * p + 1] = r[0];
+    }
+    let dot = |a: &[f64], b: &[f64]| -> f64 { (0..2 * np).map(|e| itf.weights[e / 2] * a[e] * b[e]).sum() };
+    let scale = itf.length.max(f64::MIN_POSITIVE);
+    let mut basis: Vec<Vec<f64>> = Vec::with_capacity(4);
+    for (m, mut v) in raw.into_iter().enumerate() {
+        let norm0 = dot(&v, &v).sqrt();
+        for _ in 0..2 {
+            for b in &basis {
+                let c = dot(&v, b);
+                v.iter_mut().zip(b).for_each(|(x, y)| *x -= c * y);
+            }
+        }
+        let norm = dot(&v, &v).sqrt();
+        // Translations have norm √L; rotation/extension norms scale like L^1.5: compare to the raw norm.
+        let reference = if m < 2 { scale.sqrt() } else { norm0 };
+        if norm > 1e-10 * reference && norm > 0.0 {
+            v.iter_mut().for_each(|x| *x /= norm);
+            basis.push(v);
+        }
+    }
+    basis
+}
+
+/// Columns of one interface's macro modes in a subdomain's 𝔼.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MacroSlot {
+    pub interface: usize,
+    pub first_col: usize,
+    pub n_modes: usize,
+}
+
+/// Everything one subdomain needs for its linear stages, built once.
+pub struct SubdomainSolver {
+    pub subdomain: usize,
+    pub op: CondensedOperator,
+    /// W_d: boundary displacement due to the subdomain's own loads (n_b × (N+1)).
+    pub w_d: Mat<f64>,
+    /// 𝔼: the macro basis vectors of this subdomain's interfaces as columns (n_b × n_m).
+    pub e: Mat<f64>,
+    /// A_E M k⁻ 𝔼 (n_b × n_m).
+    pub a_mk_e: Mat<f64>,
+    /// L_E (n_m × n_m, N/mm).
+    pub l_e: Mat<f64>,
+    pub macro_slots: Vec<MacroSlot>,
+    /// Scratch M q (n_b × (N+1)), allocated once.
+    scratch: Mat<f64>,
+}
+
+impl SubdomainSolver {
+    /// Builds A_E, W_d, 𝔼, A_E M k⁻ 𝔼 and L_E for subdomain `s`. `bases[i]` is the macro basis of interface i.
+    pub fn new(model: &Model, s: usize, k_interface: &[f64], bases: &[Vec<Vec<f64>>]) -> Result<Self, AssemblyError> {
+        let sub = &model.subdomains[s];
+        let layout = BoundaryLayout::new(model, s, k_interface);
+        let op = CondensedOperator::new(sub, model.plane, layout)?;
+        let layout = &op.layout;
+        let n_b = layout.len();
+        let nt = model.time.n_points();
+        let phi = Mat::from_fn(sub.loads.len(), nt, |j, i| sub.loads[j].time.eval(model.time.t(i)));
+        let mut w_d = Mat::<f64>::zeros(n_b, nt);
+        if !sub.loads.is_empty() {
+            matmul(
+                w_d.as_mut(),
+                Accum::Replace,
+                op.load_boundary.as_ref(),
+                phi.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+        }
+        let mut macro_slots = Vec::new();
+        let mut n_m = 0;
+        for slot in &layout.slots {
+            let k = bases[slot.interface].len();
+            macro_slots.push(MacroSlot {
+                interface: slot.interface,
+                first_col: n_m,
+                n_modes: k,
+            });
+            n_m += k;
+        }
+        let mut e = Mat::<f64>::zeros(n_b, n_m);
+        for (slot, ms) in layout.slots.iter().zip(&macro_slots) {
+            for (m, v) in bases[slot.interface].iter().enumerate() {
+                for (r, x) in v.iter().enumerate() {
+                    e[(slot.offset + r, ms.first_col + m)] = *x;
+                }
+            }
+        }
+        let mk_e = Mat::from_fn(n_b, n_m, |r, c| layout.mass[r] * layout.k[r] * e[(r, c)]);
+        let mut a_mk_e = Mat::<f64>::zeros(n_b, n_m);
+        matmul(
+            a_mk_e.as_mut(),
+            Accum::Replace,
+            op.a.as_ref(),
+            mk_e.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        let mut l_e = Mat::<f64>::zeros(n_m, n_m);
+        matmul(
+            l_e.as_mut(),
+            Accum::Replace,
+            e.transpose(),
+            mk_e.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        matmul(
+            l_e.as_mut(),
+            Accum::Add,
+            mk_e.transpose(),
+            a_mk_e.as_ref(),
+            -1.0,
+            Par::Seq,
+        );
+        // Symmetrise away round-off.
+        for i in 0..n_m {
+            for j in 0..i {
+                let v = 0.5 * (l_e[(i, j)] + l_e[(j, i)]);
+                l_e[(i, j)] = v;
+                l_e[(j, i)] = v;
+            }
+        }
+        Ok(Self {
+            subdomain: s,
+            op,
+            w_d,
+            e,
+            a_mk_e,
+            l_e,
+            macro_slots,
+            scratch: Mat::zeros(n_b, nt),
+        })
+    }
+
+    pub fn n_boundary(&self) -> usize {
+        self.op.layout.len()
+    }
+
+    pub fn n_macro(&self) -> usize {
+        self.e.ncols()
+    }
+
+    /// Micro problem 1: W₁ = A_E M q̂ + W_d, F₁ = q̂ − k⁻ W₁.
+    pub fn micro1_into(&mut self, q_hat: MatRef<'_, f64>, mut w1: MatMut<'_, f64>, mut f1: MatMut<'_, f64>) {
+        let layout = &self.op.layout;
+        let (n_b, nt) = (self.n_boundary(), q_hat.ncols());
+        for j in 0..nt {
+            for r in 0..n_b {
+                self.scratch[(r, j)] = layout.mass[r] * q_hat[(r, j)];
+            }
+        }
+        w1.copy_from(self.w_d.as_ref());
+        matmul(
+            w1.rb_mut(),
+            Accum::Add,
+            self.op.a.as_ref(),
+            self.scratch.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        for j in 0..nt {
+            for r in 0..n_b {
+                f1[(r, j)] = q_hat[(r, j)] - layout.k[r] * w1[(r, j)];
+            }
+        }
+    }
+
+    /// Macro forces 𝔼ᵀ M F (n_m × (N+1)).
+    pub fn macro_forces_into(&mut self, f: MatRef<'_, f64>, out: MatMut<'_, f64>) {
+        let layout = &self.op.layout;
+        for j in 0..f.ncols() {
+            for r in 0..f.nrows() {
+                self.scratch[(r, j)] = layout.mass[r] * f[(r, j)];
+            }
+        }
+        matmul(
+            out,
+            Accum::Replace,
+            self.e.transpose(),
+            self.scratch.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+    }
+
+    /// Micro problem 2: W₂ = A_E M k⁻ 𝔼 w̃, F₂ = k⁻(𝔼 w̃ − W₂), for w̃ (n_m × (N+1)).
+    pub fn micro2_into(&self, w_tilde: MatRef<'_, f64>, mut w2: MatMut<'_, f64>, mut f2: MatMut<'_, f64>) {
+        let layout = &self.op.layout;
+        matmul(
+            w2.rb_mut(),
+            Accum::Replace,
+            self.a_mk_e.as_ref(),
+            w_tilde,
+            1.0,
+            Par::Seq,
+        );
+        matmul(f2.rb_mut(), Accum::Replace, self.e.as_ref(), w_tilde, 1.0, Par::Seq);
+        for j in 0..w_tilde.ncols() {
+            for r in 0..self.n_boundary() {
+                f2[(r, j)] = layout.k[r] * (f2[(r, j)] - w2[(r, j)]);
+            }
+        }
+    }
+}
+
+use faer::reborrow::ReborrowMut;

@@ -1,0 +1,325 @@
+//! The local stage on whole interfaces, the search-direction update and the convergence
+//! indicators (DESIGN §3).
+//!
+//! Interface fields are stored per side as (2·n_pairs) × (N+1) column-major matrices: entry
+//! 2p + c is pair p, component c (global x, y); column i is time point t_i.
+
+use crate::laws::{self, ContactPoint, PairState, Status};
+use crate::model::{Interface, InterfaceKind};
+use faer::{Mat, MatMut};
+
+/// Traces W and forces F of both sides of an interface over all time points (mm, N/mm).
+#[derive(Debug, Clone, PartialEq)]
+pub struct InterfaceFields {
+    pub w_a: Mat<f64>,
+    pub w_b: Mat<f64>,
+    pub f_a: Mat<f64>,
+    pub f_b: Mat<f64>,
+}
+
+impl InterfaceFields {
+    pub fn zeros(n_pairs: usize, n_times: usize) -> Self {
+        let z = || Mat::zeros(2 * n_pairs, n_times);
+        Self {
+            w_a: z(),
+            w_b: z(),
+            f_a: z(),
+            f_b: z(),
+        }
+    }
+
+    #[inline]
+    fn pair(&self, p: usize, i: usize) -> PairState {
+        let g = |m: &Mat<f64>| [m[(2 * p, i)], m[(2 * p + 1, i)]];
+        PairState {
+            w_a: g(&self.w_a),
+            w_b: g(&self.w_b),
+            f_a: g(&self.f_a),
+            f_b: g(&self.f_b),
+        }
+    }
+}
+
+/// Search directions k⁺ of a contact interface, per pair and time point (n_pairs × (N+1)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContactDirections {
+    pub k_n: Mat<f64>,
+    pub k_t: Mat<f64>,
+}
+
+/// Additive partial sums of the indicators; combine over interfaces with [`IndicatorSums::add`],
+/// then read the ratios.
+///
+/// - LATIN indicator (eq. 10): η² = Σ‖s − ŝ‖² / (½ Σ(‖s‖² + ‖ŝ‖²)), with
+///   ‖s‖² = Σ_i w_i (k⁻ Wᵢᵀ M Wᵢ + (k⁻)⁻¹ Fᵢᵀ M Fᵢ) over both sides of every interface.
+/// - Contact indicator, independent of k: on contact interfaces only,
+///   e_F² = Σ_i w_i Σ_sides (F − F̂)ᵀM(F − F̂) / Σ_i w_i Σ_sides F̂ᵀMF̂ (tractions) and
+///   e_W² = Σ_i w_i ([W] − [Ŵ])ᵀM([W] − [Ŵ]) / Σ_i w_i ([Ŵ]ᵀM[Ŵ] + ½Σ_sides ŴᵀMŴ) (jumps, scaled
+///   by the jump and the displacement of the interface so that it stays defined when everything
+///   sticks), and e_c = max(e_F, e_W). M is the lumped interface mass, w_i the trapezoid weights;
+///   no search direction enters, so e_c measures the distance between s and ŝ in physical units
+///   alone. A ratio whose numerator and denominator are both zero (no load) is 0.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct IndicatorSums {
+    pub eta_num: f64,
+    pub eta_den: f64,
+    pub force_num: f64,
+    pub force_den: f64,
+    pub jump_num: f64,
+    pub jump_den: f64,
+    /// Contact points (pair × time) per status: separated, stick, slip.
+    pub counts: [u64; 3],
+    /// Contact points whose status changed since the previous local stage.
+    pub status_changes: u64,
+}
+
+fn ratio(num: f64, den: f64) -> f64 {
+    if num == 0.0 {
+        0.0
+    } else {
+        (num / den).sqrt()
+    }
+}
+
+impl IndicatorSums {
+    pub fn add(&mut self, o: &IndicatorSums) {
+        self.eta_num += o.eta_num;
+        self.eta_den += o.eta_den;
+        self.force_num += o.force_num;
+        self.force_den += o.force_den;
+        self.jump_num += o.jump_num;
+        self.jump_den += o.jump_den;
+        for k in 0..3 {
+            self.counts[k] += o.counts[k];
+        }
+        self.status_changes += o.status_changes;
+    }
+
+    /// η of eq. (10).
+    pub fn eta(&self) -> f64 {
+        ratio(self.eta_num, 0.5 * self.eta_den)
+    }
+
+    /// e_F: relative distance between F and F̂ on contact interfaces.
+    pub fn force_error(&self) -> f64 {
+        ratio(self.force_num, self.force_den)
+    }
+
+    /// e_W: relative distance between [W] and [Ŵ] on contact interfaces.
+    pub fn jump_error(&self) -> f64 {
+        ratio(self.jump_num, self.jump_den)
+    }
+
+    /// e_c = max(e_F, e_W).
+    pub fn contact_indicator(&self) -> f64 {
+        self.force_error().max(self.jump_error())
+    }
+}
+
+/// Local-stage state of one interface: the last ŝ, contact statuses, and the search directions.
+#[derive(Debug, Clone)]
+pub struct InterfaceLocal {
+    pub index: usize,
+    /// k₀ (MPa/mm): k⁻, and k⁺ where no update applies.
+    pub k0: f64,
+    pub hat: InterfaceFields,
+    /// Status per (pair, time) at index p + n_pairs·i (contact interfaces only).
+    pub status: Vec<Status>,
+    prev_status: Vec<Status>,
+    /// C_N and 𝒯 = |C_T| − f|C_N| of the last two local stages (paper eq. 6), contact only.
+    c_n: Mat<f64>,
+    c_t: Mat<f64>,
+    prev_c_n: Mat<f64>,
+    prev_c_t: Mat<f64>,
+    have_prev: bool,
+    pub directions: Option<ContactDirections>,
+}
+
+impl InterfaceLocal {
+    pub fn new(index: usize, itf: &Interface, k0: f64, n_times: usize) -> Self {
+        let np = itf.n_pairs();
+        let (ns, nc) = if itf.is_contact() {
+            (np * n_times, (np, n_times))
+        } else {
+            (0, (0, 0))
+        };
+        Self {
+            index,
+            k0,
+            hat: InterfaceFields::zeros(np, n_times),
+            status: vec![Status::Stick; ns],
+            prev_status: vec![Status::Stick; ns],
+            c_n: Mat::zeros(nc.0, nc.1),
+            c_t: Mat::zeros(nc.0, nc.1),
+            prev_c_n: Mat::zeros(nc.0, nc.1),
+            prev_c_t: Mat::zeros(nc.0, nc.1),
+            have_prev: false,
+            directions: None,
+        }
+    }
+
+    /// Runs the local stage: ŝ from s along E⁺, pair by pair; contact marches in time (the slip of
+    /// t_{i−1} enters t_i) only when friction is positive.
+    pub fn local_stage(&mut self, itf: &Interface, s: &InterfaceFields) {
+        let np = itf.n_pairs();
+        let nt = s.w_a.ncols();
+        let hat = &mut self.hat;
+        let put = |m: &mut Mat<f64>, p: usize, i: usize, v: [f64; 2]| {
+            m[(2 * p, i)] = v[0];
+            m[(2 * p + 1, i)] = v[1];
+        };
+        match &itf.kind {
+            InterfaceKind::Perfect => {
+                for i in 0..nt {
+                    for p in 0..np {
+                        let h = laws::perfect(self.k0, &s.pair(p, i));
+                        put(&mut hat.w_a, p, i, h.w_a);
+                        put(&mut hat.w_b, p, i, h.w_b);
+                        put(&mut hat.f_a, p, i, h.f_a);
+                        put(&mut hat.f_b, p, i, [-h.f_a[0], -h.f_a[1]]);
+                    }
+                }
+            }
+            InterfaceKind::Contact { friction, gap } => {
+                std::mem::swap(&mut self.prev_status, &mut self.status);
+                std::mem::swap(&mut self.prev_c_n, &mut self.c_n);
+                std::mem::swap(&mut self.prev_c_t, &mut self.c_t);
+                for p in 0..np {
+                    let mut slip_prev = 0.0;
+                    for i in 0..nt {
+                        let (k_n, k_t) = match &self.directions {
+                            Some(d) => (d.k_n[(p, i)], d.k_t[(p, i)]),
+                            None => (self.k0, self.k0),
+                        };
+                        let point = ContactPoint {
+                            k_n,
+                            k_t,
+                            normal: itf.normal,
+                            tangent: itf.tangent,
+                            gap: gap[p],
+                            friction: *friction,
+                            slip_prev: if *friction > 0.0 { slip_prev } else { 0.0 },
+                        };
+                        let r = laws::contact(&point, &s.pair(p, i));
+                        slip_prev = r.slip;
+                        put(&mut hat.w_a, p, i, r.hat.w_a);
+                        put(&mut hat.w_b, p, i, r.hat.w_b);
+                        put(&mut hat.f_a, p, i, r.hat.f_a);
+                        put(&mut hat.f_b, p, i, [-r.hat.f_a[0], -r.hat.f_a[1]]);
+                        self.status[p + np * i] = r.status;
+                        self.c_n[(p, i)] = r.c_n;
+                        self.c_t[(p, i)] = r.c_t_excess;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Search-direction update (paper eq. 6, DESIGN §3), done once per contact interface: when the
+    /// stagnation ratios I_N = ‖C_N − C_N,prev‖/‖C_N,prev‖ and I_T (same on 𝒯) are both below
+    /// `i0`, set k_N = k_T = k₀(1 − α) at separated points and k_T = k₀(1 − α) at slipping ones.
+    /// Returns true when the update happened at this call.
+    pub fn update_directions(&mut self, itf: &Interface, alpha: f64, i0: f64) -> bool {
+        if !itf.is_contact() || self.directions.is_some() {
+            return false;
+        }
+        if !self.have_prev {
+            self.have_prev = true;
+            return false;
+        }
+        let rel = |a: &Mat<f64>, b: &Mat<f64>| {
+            let (mut num, mut den) = (0.0, 0.0);
+            for i in 0..a.ncols() {
+                for p in 0..a.nrows() {
+                    num += (a[(p, i)] - b[(p, i)]).powi(2);
+                    den += b[(p, i)].powi(2);
+                }
+            }
+            if num == 0.0 {
+                0.0
+            } else {
+                (num / den).sqrt()
+            }
+        };
+        let (i_n, i_t) = (rel(&self.c_n, &self.prev_c_n), rel(&self.c_t, &self.prev_c_t));
+        if !(i_n < i0 && i_t < i0) {
+            return false;
+        }
+        let np = itf.n_pairs();
+        let nt = self.c_n.ncols();
+        let low = self.k0 * (1.0 - alpha);
+        let mut d = ContactDirections {
+            k_n: Mat::from_fn(np, nt, |_, _| self.k0),
+            k_t: Mat::from_fn(np, nt, |_, _| self.k0),
+        };
+        for i in 0..nt {
+            for p in 0..np {
+                match self.status[p + np * i] {
+                    Status::Separated => {
+                        d.k_n[(p, i)] = low;
+                        d.k_t[(p, i)] = low;
+                    }
+                    Status::Slip => d.k_t[(p, i)] = low,
+                    Status::Stick => {}
+                }
+            }
+        }
+        self.directions = Some(d);
+        true
+    }
+
+    /// Indicator partial sums of this interface for s (the last linear stage) and ŝ (this local stage).
+    pub fn indicator_sums(
+        &self,
+        itf: &Interface,
+        time_weights: &[f64],
+        s: &InterfaceFields,
+        first: bool,
+    ) -> IndicatorSums {
+        let mut out = IndicatorSums::default();
+        let k = self.k0;
+        let h = &self.hat;
+        let np = itf.n_pairs();
+        for (i, &wt) in time_weights.iter().enumerate() {
+            for e in 0..2 * np {
+                let m = itf.weights[e / 2] * wt;
+                let sq = |x: f64| x * x;
+                let dw = sq(s.w_a[(e, i)] - h.w_a[(e, i)]) + sq(s.w_b[(e, i)] - h.w_b[(e, i)]);
+                let df = sq(s.f_a[(e, i)] - h.f_a[(e, i)]) + sq(s.f_b[(e, i)] - h.f_b[(e, i)]);
+                out.eta_num += m * (k * dw + df / k);
+                let sw = sq(s.w_a[(e, i)]) + sq(s.w_b[(e, i)]) + sq(h.w_a[(e, i)]) + sq(h.w_b[(e, i)]);
+                let sf = sq(s.f_a[(e, i)]) + sq(s.f_b[(e, i)]) + sq(h.f_a[(e, i)]) + sq(h.f_b[(e, i)]);
+                out.eta_den += m * (k * sw + sf / k);
+                if itf.is_contact() {
+                    out.force_num += m * df;
+                    out.force_den += m * (sq(h.f_a[(e, i)]) + sq(h.f_b[(e, i)]));
+                    let jump = s.w_b[(e, i)] - s.w_a[(e, i)];
+                    let jump_hat = h.w_b[(e, i)] - h.w_a[(e, i)];
+                    out.jump_num += m * sq(jump - jump_hat);
+                    out.jump_den += m * (sq(jump_hat) + 0.5 * (sq(h.w_a[(e, i)]) + sq(h.w_b[(e, i)])));
+                }
+            }
+        }
+        for (k, st) in self.status.iter().enumerate() {
+            out.counts[*st as usize] += 1;
+            if !first && *st != self.prev_status[k] {
+                out.status_changes += 1;
+            }
+        }
+        out
+    }
+
+    /// q̂ = F̂ + k⁻Ŵ of one side, written into rows `offset..offset + 2·n_pairs` of `out`.
+    pub fn q_hat_into(&self, side_a: bool, mut out: MatMut<'_, f64>, offset: usize) {
+        let (w, f) = if side_a {
+            (&self.hat.w_a, &self.hat.f_a)
+        } else {
+            (&self.hat.w_b, &self.hat.f_b)
+        };
+        for i in 0..w.ncols() {
+            for e in 0..w.nrows() {
+                out[(offset + e, i)] = f[(e, i)] + self.k0 * w[(e, i)];
+            }
+        }
+    }
+}

@@ -1,0 +1,232 @@
+//! The kernel's description of a problem: meshes, materials, loads, interfaces and the time
+//! grid, already validated. Built from a scene file by [`crate::scene`]; everything downstream
+//! (condensed operators, LATIN laws, monolithic solves) reads only this.
+
+use crate::expr::Expr;
+use crate::mesh::Mesh;
+
+/// Plane strain or plane stress (unit thickness).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Plane {
+    Strain,
+    Stress,
+}
+
+/// Isotropic linear elastic material. `e` in MPa.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Material {
+    pub e: f64,
+    pub nu: f64,
+}
+
+/// Time grid t_i = i·T/N, i = 0..N (t_0 is solved too).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeGrid {
+    pub t_end: f64,
+    pub n_steps: usize,
+}
+
+impl TimeGrid {
+    /// Number of time points, N + 1.
+    pub fn n_points(&self) -> usize {
+        self.n_steps + 1
+    }
+
+    /// t_i = i·T/N.
+    pub fn t(&self, i: usize) -> f64 {
+        self.t_end * i as f64 / self.n_steps as f64
+    }
+
+    /// Trapezoid weights w_i of ∫₀ᵀ (dt/2 at both ends, dt inside).
+    pub fn trapezoid_weights(&self) -> Vec<f64> {
+        let dt = self.t_end / self.n_steps as f64;
+        (0..self.n_points())
+            .map(|i| if i == 0 || i == self.n_steps { 0.5 * dt } else { dt })
+            .collect()
+    }
+}
+
+/// A scalar function of time φ(t).
+#[derive(Debug, Clone, PartialEq)]
+pub enum TimeFunction {
+    Constant(f64),
+    /// A formula in `t` (see [`crate::expr`]).
+    Formula(Expr),
+    /// Piecewise-linear interpolation of (t, v) samples, constant beyond the ends.
+    Table {
+        t: Vec<f64>,
+        v: Vec<f64>,
+    },
+}
+
+impl TimeFunction {
+    /// φ(t).
+    pub fn eval(&self, t: f64) -> f64 {
+        match self {
+            TimeFunction::Constant(c) => *c,
+            TimeFunction::Formula(e) => e.eval(&[t]),
+            TimeFunction::Table { t: ts, v } => interpolate(ts, v, t),
+        }
+    }
+}
+
+/// Piecewise-linear interpolation in a table with increasing abscissae, constant beyond the ends.
+pub fn interpolate(xs: &[f64], vs: &[f64], x: f64) -> f64 {
+    if x <= xs[0] {
+        return vs[0];
+    }
+    let last = xs.len() - 1;
+    if x >= xs[last] {
+        return vs[last];
+    }
+    let k = xs.partition_point(|&xi| xi <= x).clamp(1, last);
+    let (x0, x1) = (xs[k - 1], xs[k]);
+    let s = (x - x0) / (x1 - x0);
+    vs[k - 1] * (1.0 - s) + vs[k] * s
+}
+
+/// A load case of one subdomain: a spatial pattern times a time function. The pattern is a
+/// nodal force vector (consistent edge loads, N) and/or prescribed values at constrained dofs
+/// (mm); both are full-length dof vectors of the subdomain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadCase {
+    pub force: Vec<f64>,
+    pub displacement: Vec<f64>,
+    pub time: TimeFunction,
+}
+
+/// One elastic part of the decomposition.
+#[derive(Debug, Clone)]
+pub struct Subdomain {
+    pub name: String,
+    pub mesh: Mesh,
+    pub material: Material,
+    /// `constrained[dof]`: the dof's displacement is prescribed (imposed strongly).
+    pub constrained: Vec<bool>,
+    pub loads: Vec<LoadCase>,
+}
+
+impl Subdomain {
+    pub fn n_dofs(&self) -> usize {
+        2 * self.mesh.coords.len()
+    }
+}
+
+/// What an interface between two subdomains does.
+#[derive(Debug, Clone, PartialEq)]
+pub enum InterfaceKind {
+    /// Displacement continuity and action–reaction.
+    Perfect,
+    /// Unilateral contact with Coulomb friction `friction` ≥ 0; `gap[p]` is the initial normal
+    /// gap g0 (mm) at pair p.
+    Contact { friction: f64, gap: Vec<f64> },
+}
+
+/// A conforming interface Γ between subdomains `a` and `b`: node pairs coincide. The normal
+/// `normal` points out of `a` towards `b`; `tangent` = (−n_y, n_x).
+#[derive(Debug, Clone)]
+pub struct Interface {
+    pub kind: InterfaceKind,
+    pub a: usize,
+    pub b: usize,
+    /// (node of a, node of b) per pair, ordered along the interface.
+    pub pairs: Vec<(usize, usize)>,
+    /// Coordinates of each pair (mm).
+    pub coords: Vec<[f64; 2]>,
+    /// Lumped edge mass per pair (mm): row sums of the 3-node edge mass L/6, 4L/6, L/6.
+    pub weights: Vec<f64>,
+    pub normal: [f64; 2],
+    pub tangent: [f64; 2],
+    /// Length L_Γ (mm).
+    pub length: f64,
+    /// Centroid of the pairs weighted by `weights` (mm).
+    pub centroid: [f64; 2],
+}
+
+impl Interface {
+    pub fn n_pairs(&self) -> usize {
+        self.pairs.len()
+    }
+
+    pub fn is_contact(&self) -> bool {
+        matches!(self.kind, InterfaceKind::Contact { .. })
+    }
+
+    /// Which side of the interface subdomain `s` is (a or b), if any.
+    pub fn side_of(&self, s: usize) -> Option<Side> {
+        if s == self.a {
+            Some(Side::A)
+        } else if s == self.b {
+            Some(Side::B)
+        } else {
+            None
+        }
+    }
+
+    /// Node of side `side` at pair `p`.
+    pub fn node(&self, side: Side, p: usize) -> usize {
+        match side {
+            Side::A => self.pairs[p].0,
+            Side::B => self.pairs[p].1,
+        }
+    }
+}
+
+/// Side of an interface: `A` is the subdomain the normal points out of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    A,
+    B,
+}
+
+/// Solver parameters of a scene (DESIGN §3), already validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SolverParams {
+    /// k₀ = k0_factor · E/L_Γ.
+    pub k0_factor: f64,
+    /// Relaxation μ ∈ (0, 1].
+    pub relaxation: f64,
+    /// Stop when η ≤ tolerance.
+    pub tolerance: f64,
+    /// Also require the contact indicator ≤ this (if set).
+    pub contact_tolerance: Option<f64>,
+    pub max_iterations: usize,
+    /// Stop when η has not decreased by `stagnation_ratio` over `stagnation_window` iterations.
+    pub stagnation_window: usize,
+    pub stagnation_ratio: f64,
+    /// Solve the macro (coarse) problem.
+    pub coarse: bool,
+    /// Search-direction update (DESIGN §3): off by default.
+    pub search_direction_update: bool,
+    pub alpha: f64,
+    pub i0: f64,
+}
+
+impl Default for SolverParams {
+    fn default() -> Self {
+        Self {
+            k0_factor: 1.0,
+            relaxation: 0.8,
+            tolerance: 1e-6,
+            contact_tolerance: None,
+            max_iterations: 1000,
+            stagnation_window: 50,
+            stagnation_ratio: 0.99,
+            coarse: true,
+            search_direction_update: false,
+            alpha: 1.0 / 3.0,
+            i0: 0.1,
+        }
+    }
+}
+
+/// A validated problem.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub name: String,
+    pub plane: Plane,
+    pub time: TimeGrid,
+    pub subdomains: Vec<Subdomain>,
+    pub interfaces: Vec<Interface>,
+    pub solver: SolverParams,
+}

@@ -1,0 +1,250 @@
+//! The subdomain node: hosts one subdomain's linear stage (DESIGN §3–4).
+//!
+//! Setup: builds A_E and sends L_E (when the coarse problem is on), then runs the first linear
+//! stage from ŝ = 0. Each iteration: `LocalDirections` (q̂) → micro problem 1 → `MacroForces`;
+//! `MacroDisplacements` (w̃) → micro problem 2, relaxation → `BoundaryState` (s = (W, F)). Without
+//! the coarse problem micro 2 is skipped (w̃ = 0). A stop `Decision` ends the node, after sending
+//! the full displacement field when asked.
+
+use faer::Mat;
+use glissade_bus::convert::{copy_into, field_of};
+use glissade_bus::{expect_shape, Node, NodeError, RunContext};
+use glissade_mechanics::linear::SubdomainSolver;
+use glissade_mechanics::model::Model;
+use glissade_messages::{role_field_topic, Message, NodeId, Payload, Role, Stage};
+use std::sync::Arc;
+
+/// Options of a subdomain node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SubdomainOptions {
+    /// Solve the macro problem (wait for w̃ after micro 1).
+    pub coarse: bool,
+    /// Relaxation μ (1 on the first iteration).
+    pub relaxation: f64,
+    /// Send the full displacement field at the end.
+    pub send_displacement: bool,
+}
+
+pub struct SubdomainNode {
+    id: NodeId,
+    ctx: RunContext,
+    model: Arc<Model>,
+    solver: SubdomainSolver,
+    options: SubdomainOptions,
+    iteration: u32,
+    q_hat: Mat<f64>,
+    w1: Mat<f64>,
+    f1: Mat<f64>,
+    w2: Mat<f64>,
+    f2: Mat<f64>,
+    w: Mat<f64>,
+    f: Mat<f64>,
+    w_tilde: Mat<f64>,
+    macro_forces: Mat<f64>,
+    finished: bool,
+}
+
+impl SubdomainNode {
+    pub fn new(ctx: RunContext, model: Arc<Model>, solver: SubdomainSolver, options: SubdomainOptions) -> Self {
+        let s = solver.subdomain;
+        let (n_b, n_m, nt) = (solver.n_boundary(), solver.n_macro(), model.time.n_points());
+        let z = |r: usize| Mat::<f64>::zeros(r, nt);
+        Self {
+            id: NodeId {
+                role: Role::Subdomain,
+                index: s as u32,
+            },
+            ctx,
+            model,
+            solver,
+            options,
+            iteration: 0,
+            q_hat: z(n_b),
+            w1: z(n_b),
+            f1: z(n_b),
+            w2: z(n_b),
+            f2: z(n_b),
+            w: z(n_b),
+            f: z(n_b),
+            w_tilde: z(n_m),
+            macro_forces: z(n_m),
+            finished: false,
+        }
+    }
+
+    fn subdomain(&self) -> u32 {
+        self.solver.subdomain as u32
+    }
+
+    fn msg(&self, stage: Stage, payload: Payload) -> Message {
+        Message {
+            envelope: self.ctx.envelope(self.id, self.iteration, stage),
+            payload,
+        }
+    }
+
+    /// Micro problem 1 from the stored q̂; returns the macro forces message or, without the coarse
+    /// problem, finishes the linear stage at once.
+    fn micro1(&mut self) -> Vec<Message> {
+        self.solver
+            .micro1_into(self.q_hat.as_ref(), self.w1.as_mut(), self.f1.as_mut());
+        if self.options.coarse && self.solver.n_macro() > 0 {
+            self.solver
+                .macro_forces_into(self.f1.as_ref(), self.macro_forces.as_mut());
+            vec![self.msg(
+                Stage::Micro1,
+                Payload::MacroForces {
+                    subdomain: self.subdomain(),
+                    forces: field_of(self.macro_forces.as_ref()),
+                },
+            )]
+        } else {
+            self.w2.fill(0.0);
+            self.f2.fill(0.0);
+            vec![self.finish_linear_stage()]
+        }
+    }
+
+    /// s_new = s₁ + s₂, relaxed: s ← μ s_new + (1 − μ) s (μ = 1 for iterations 0 and 1).
+    fn finish_linear_stage(&mut self) -> Message {
+        let mu = if self.iteration <= 1 {
+            1.0
+        } else {
+            self.options.relaxation
+        };
+        let (n_b, nt) = (self.w.nrows(), self.w.ncols());
+        for j in 0..nt {
+            for r in 0..n_b {
+                let w_new = self.w1[(r, j)] + self.w2[(r, j)];
+                let f_new = self.f1[(r, j)] + self.f2[(r, j)];
+                self.w[(r, j)] = mu * w_new + (1.0 - mu) * self.w[(r, j)];
+                self.f[(r, j)] = mu * f_new + (1.0 - mu) * self.f[(r, j)];
+            }
+        }
+        self.msg(
+            Stage::Linear,
+            Payload::BoundaryState {
+                subdomain: self.subdomain(),
+                w: field_of(self.w.as_ref()),
+                f: field_of(self.f.as_ref()),
+            },
+        )
+    }
+
+    fn displacement(&self) -> Message {
+        let sub = &self.model.subdomains[self.solver.subdomain];
+        let layout = &self.solver.op.layout;
+        let nt = self.model.time.n_points();
+        let mut u = Mat::<f64>::zeros(sub.n_dofs(), nt);
+        let mut q = vec![0.0; layout.len()];
+        for i in 0..nt {
+            for (r, qr) in q.iter_mut().enumerate() {
+                *qr = self.f[(r, i)] + layout.k[r] * self.w[(r, i)];
+            }
+            let phi: Vec<f64> = sub.loads.iter().map(|c| c.time.eval(self.model.time.t(i))).collect();
+            for (d, v) in self.solver.op.recover(&q, &phi).into_iter().enumerate() {
+                u[(d, i)] = v;
+            }
+        }
+        self.msg(
+            Stage::Final,
+            Payload::Displacement {
+                subdomain: self.subdomain(),
+                u: field_of(u.as_ref()),
+            },
+        )
+    }
+}
+
+impl Node for SubdomainNode {
+    fn id(&self) -> NodeId {
+        self.id
+    }
+
+    fn subscriptions(&self) -> Vec<String> {
+        let run = &self.ctx.run_id;
+        let s = Some(self.subdomain());
+        vec![
+            role_field_topic(run, Role::Interface, "local_directions", s),
+            role_field_topic(run, Role::Coarse, "macro_displacements", s),
+            role_field_topic(run, Role::Interface, "decision", None),
+        ]
+    }
+
+    fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+        let mut out = Vec::new();
+        if self.options.coarse && self.solver.n_macro() > 0 {
+            let slots = self
+                .solver
+                .macro_slots
+                .iter()
+                .map(|m| (m.interface as u32, m.n_modes as u32))
+                .collect();
+            out.push(self.msg(
+                Stage::Setup,
+                Payload::HomogenizedOperator {
+                    subdomain: self.subdomain(),
+                    slots,
+                    l_e: field_of(self.solver.l_e.as_ref()),
+                },
+            ));
+        }
+        // Iteration 0: linear stage from ŝ = 0.
+        self.q_hat.fill(0.0);
+        out.extend(self.micro1());
+        Ok(out)
+    }
+
+    fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError> {
+        if self.finished {
+            return Ok(Vec::new());
+        }
+        let it = msg.envelope.iteration;
+        match &msg.payload {
+            Payload::LocalDirections { subdomain, q_hat } if *subdomain == self.subdomain() => {
+                if it != self.iteration + 1 {
+                    return Err(NodeError::new(
+                        self.id,
+                        format!(
+                            "local directions of iteration {it} while at iteration {}",
+                            self.iteration
+                        ),
+                    ));
+                }
+                expect_shape(self.id, "q_hat", q_hat, self.q_hat.nrows(), self.q_hat.ncols())?;
+                self.iteration = it;
+                copy_into(q_hat, &mut self.q_hat);
+                Ok(self.micro1())
+            }
+            Payload::MacroDisplacements { subdomain, w_tilde } if *subdomain == self.subdomain() => {
+                if it != self.iteration {
+                    return Err(NodeError::new(
+                        self.id,
+                        format!(
+                            "macro displacements of iteration {it} while at iteration {}",
+                            self.iteration
+                        ),
+                    ));
+                }
+                expect_shape(self.id, "w_tilde", w_tilde, self.w_tilde.nrows(), self.w_tilde.ncols())?;
+                copy_into(w_tilde, &mut self.w_tilde);
+                self.solver
+                    .micro2_into(self.w_tilde.as_ref(), self.w2.as_mut(), self.f2.as_mut());
+                Ok(vec![self.finish_linear_stage()])
+            }
+            Payload::Decision(d) if d.verdict.is_stop() => {
+                self.finished = true;
+                Ok(if self.options.send_displacement {
+                    vec![self.displacement()]
+                } else {
+                    Vec::new()
+                })
+            }
+            _ => Ok(Vec::new()),
+        }
+    }
+
+    fn is_finished(&self) -> bool {
+        self.finished
+    }
+}

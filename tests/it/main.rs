@@ -1,0 +1,5 @@
+//! Integration tests of glissade: in-process LATIN runs against monolithic solutions and
+//! analytic references, and the `glissade` binary end to end. One test binary.
+
+mod common;
+mod latin_perfect;
