@@ -3,3 +3,4 @@
 
 mod common;
 mod latin_perfect;
+mod reference;
