@@ -9,6 +9,9 @@ use glissade_mechanics::coarse::{Contribution, MacroProblem};
 use glissade_messages::{role_field_topic, Message, NodeId, Payload, Role, Stage};
 use std::collections::BTreeMap;
 
+/// A subdomain's macro slots (interface, number of modes) and its L_E.
+type MacroContribution = (Vec<(usize, usize)>, Mat<f64>);
+
 pub struct CoarseNode {
     id: NodeId,
     ctx: RunContext,
@@ -17,7 +20,8 @@ pub struct CoarseNode {
     /// Subdomains that take part (those with at least one interface).
     subdomains: Vec<u32>,
     n_times: usize,
-    operators: BTreeMap<u32, (Vec<(usize, usize)>, Mat<f64>)>,
+    /// Per subdomain: its macro slots (interface, modes) and L_E.
+    operators: BTreeMap<u32, MacroContribution>,
     problem: Option<MacroProblem>,
     columns: BTreeMap<u32, Vec<usize>>,
     forces: BTreeMap<u32, Mat<f64>>,

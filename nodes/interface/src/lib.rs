@@ -174,7 +174,7 @@ impl InterfaceNode {
                     self.model.subdomains[itf.a].name,
                     self.model.subdomains[itf.b].name,
                     e / 2,
-                    if e % 2 == 0 { "x" } else { "y" }
+                    if e.is_multiple_of(2) { "x" } else { "y" }
                 );
             }
         }

@@ -70,7 +70,7 @@ impl MacroProblem {
         let lf = llt.L();
         let min_pivot = (0..n).map(|i| lf[(i, i)] * lf[(i, i)]).fold(f64::INFINITY, f64::min);
         let ratio = if n == 0 { 1.0 } else { min_pivot / max_diag };
-        if !(ratio > 1e-12) {
+        if ratio.is_nan() || ratio <= 1e-12 {
             return Err(MacroError::Singular {
                 what: "the structure".into(),
                 ratio,

@@ -143,10 +143,11 @@ pub fn edge_shape(s: f64) -> ([f64; 3], [f64; 3]) {
     )
 }
 
-/// Consistent nodal forces (N) of a traction `traction(x, y, outward normal)` (MPa) on a 3-node edge
-/// (3-point Gauss). Returned per edge node as (f_x, f_y). The outward normal is that of the
-/// edge traversed from node 0 to node 2 with the body on the left, i.e. (dy, −dx)/|.|.
-pub fn edge_load(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2], [f64; 2]) -> [f64; 2]) -> [[f64; 2]; 3] {
+/// Consistent nodal forces (N) of a traction `traction(position)` (MPa, global axes) on a 3-node
+/// edge (3-point Gauss). Returned per edge node as (f_x, f_y). The edge's node order says nothing
+/// about which side the body is on, so a pressure must be turned into a traction by the caller,
+/// who knows the outward normal.
+pub fn edge_load(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2]) -> [f64; 2]) -> [[f64; 2]; 3] {
     let mut f = [[0.0; 2]; 3];
     for &(s, w) in &GAUSS3 {
         let (n, dn) = edge_shape(s);
@@ -159,8 +160,7 @@ pub fn edge_load(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2], [f64; 2]) -> [f6
             }
         }
         let jac = (tan[0] * tan[0] + tan[1] * tan[1]).sqrt();
-        let normal = [tan[1] / jac, -tan[0] / jac];
-        let t = traction(p, normal);
+        let t = traction(p);
         for k in 0..3 {
             for c in 0..2 {
                 f[k][c] += n[k] * t[c] * jac * w;

@@ -15,4 +15,5 @@ pub mod local;
 pub mod mesh;
 pub mod model;
 pub mod monolithic;
+pub mod reference;
 pub mod scene;

@@ -184,7 +184,7 @@ impl InterfaceLocal {
                 std::mem::swap(&mut self.prev_status, &mut self.status);
                 std::mem::swap(&mut self.prev_c_n, &mut self.c_n);
                 std::mem::swap(&mut self.prev_c_t, &mut self.c_t);
-                for p in 0..np {
+                for (p, &gap_p) in gap.iter().enumerate().take(np) {
                     let mut slip_prev = 0.0;
                     for i in 0..nt {
                         let (k_n, k_t) = match &self.directions {
@@ -196,7 +196,7 @@ impl InterfaceLocal {
                             k_t,
                             normal: itf.normal,
                             tangent: itf.tangent,
-                            gap: gap[p],
+                            gap: gap_p,
                             friction: *friction,
                             slip_prev: if *friction > 0.0 { slip_prev } else { 0.0 },
                         };

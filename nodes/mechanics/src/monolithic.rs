@@ -47,13 +47,13 @@ impl GluedNumbering {
         let mut id = vec![usize::MAX; n];
         let mut merged = vec![0; n];
         let mut n_merged = 0;
-        for x in 0..n {
+        for (x, m) in merged.iter_mut().enumerate() {
             let r = find(&mut parent, x);
             if id[r] == usize::MAX {
                 id[r] = n_merged;
                 n_merged += 1;
             }
-            merged[x] = id[r];
+            *m = id[r];
         }
         Self {
             node_offset,

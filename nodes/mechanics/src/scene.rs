@@ -1365,7 +1365,7 @@ impl Ctx<'_> {
                         };
                         for e in &mesh.sides[side as usize] {
                             let x = [mesh.coords[e[0]], mesh.coords[e[1]], mesh.coords[e[2]]];
-                            let f = edge_load(&x, |_, _| unit);
+                            let f = edge_load(&x, |_| unit);
                             for k in 0..3 {
                                 force[2 * e[k]] += f[k][0];
                                 force[2 * e[k] + 1] += f[k][1];
