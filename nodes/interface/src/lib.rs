@@ -12,6 +12,7 @@ use glissade_mechanics::model::{Model, Side};
 use glissade_messages::{
     role_field_topic, Decision, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
 };
+use rayon::prelude::*;
 use std::collections::BTreeSet;
 use std::sync::Arc;
 
@@ -200,15 +201,28 @@ impl InterfaceNode {
 
     fn local_stage(&mut self) -> Vec<Message> {
         let n = self.iteration;
+        // Interfaces are independent: run them in parallel, then combine in interface order so
+        // the sums are the same whatever the thread count.
+        let model = &self.model;
+        let weights = &self.time_weights;
+        let per_interface: Vec<(IndicatorSums, bool)> = self
+            .locals
+            .par_iter_mut()
+            .zip(self.fields.par_iter())
+            .zip(model.interfaces.par_iter())
+            .map(|((local, fields), itf)| {
+                local.local_stage(itf, fields);
+                let sums = local.indicator_sums(itf, weights, fields, n == 0);
+                let updated = model.solver.search_direction_update
+                    && local.update_directions(itf, model.solver.alpha, model.solver.i0);
+                (sums, updated)
+            })
+            .collect();
         let mut sums = IndicatorSums::default();
         let mut updates = Vec::new();
-        for (i, itf) in self.model.interfaces.iter().enumerate() {
-            let local = &mut self.locals[i];
-            local.local_stage(itf, &self.fields[i]);
-            sums.add(&local.indicator_sums(itf, &self.time_weights, &self.fields[i], n == 0));
-            if self.model.solver.search_direction_update
-                && local.update_directions(itf, self.model.solver.alpha, self.model.solver.i0)
-            {
+        for (i, (s, updated)) in per_interface.iter().enumerate() {
+            sums.add(s);
+            if *updated {
                 updates.push(i as u32);
             }
         }
@@ -352,5 +366,128 @@ impl Node for InterfaceNode {
 
     fn is_finished(&self) -> bool {
         self.finished
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glissade_mechanics::local::IndicatorSums;
+    use glissade_mechanics::model::SolverParams;
+    use glissade_mechanics::scene::load_str;
+    use glissade_messages::{Envelope, Field, SCHEMA_VERSION};
+
+    fn sums(eta: f64, norm: f64) -> IndicatorSums {
+        // η² = num / (½ den)
+        IndicatorSums {
+            eta_num: 0.5 * eta * eta * norm,
+            eta_den: norm,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn stop_rules() {
+        let p = SolverParams {
+            tolerance: 1e-3,
+            max_iterations: 100,
+            stagnation_window: 5,
+            stagnation_ratio: 0.9,
+            ..Default::default()
+        };
+        let mut r = StopRule::new(&p);
+        assert_eq!(r.decide(0, &sums(0.5, 1.0)), Verdict::Continue);
+        assert_eq!(r.decide(1, &sums(1e-4, 1.0)), Verdict::Converged);
+
+        let mut r = StopRule::new(&p);
+        let mut v = Verdict::Continue;
+        for n in 0..20 {
+            v = r.decide(n, &sums(0.1, 1.0));
+            if v.is_stop() {
+                assert_eq!(n, 10, "stagnation is seen once the history holds two windows");
+                break;
+            }
+        }
+        assert!(matches!(v, Verdict::Stagnated { .. }), "{v:?}");
+
+        let mut r = StopRule::new(&p);
+        r.decide(0, &sums(0.5, 1.0));
+        r.decide(1, &sums(0.5, 1.0));
+        let v = r.decide(2, &sums(0.5, 1e13));
+        assert!(
+            matches!(&v, Verdict::Diverged { detail } if detail.contains("grew")),
+            "{v:?}"
+        );
+
+        let mut r = StopRule::new(&SolverParams { max_iterations: 3, ..p });
+        assert_eq!(r.decide(0, &sums(0.5, 1.0)), Verdict::Continue);
+        assert_eq!(r.decide(1, &sums(0.4, 1.0)), Verdict::Continue);
+        assert_eq!(r.decide(2, &sums(0.3, 1.0)), Verdict::MaxIterations);
+    }
+
+    #[test]
+    fn nan_stops_the_run_and_names_where() {
+        let text = r#"
+[time]
+T = 1.0
+N = 2
+[materials.m]
+E = 1000.0
+nu = 0.3
+[[block]]
+name = "b"
+material = "m"
+x = [0.0, 2.0]
+y = [0.0, 1.0]
+nx = 2
+ny = 1
+split = [2, 1]
+[[boundary]]
+x = 0.0
+ux = 0.0
+uy = 0.0
+"#;
+        let sc = load_str(text, "nan.toml").unwrap();
+        let model = Arc::new(sc.model);
+        let ctx = RunContext {
+            run_id: "r".into(),
+            scene_fingerprint: sc.fingerprint,
+        };
+        let k0 = vec![1000.0; model.interfaces.len()];
+        let mut node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+        let n_b = BoundaryLayout::new(&model, 1, &k0).len();
+        let mut w = Field::zeros(n_b, 3);
+        w.data[n_b + 3] = f64::NAN;
+        let msg = Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: "r".into(),
+                scene_fingerprint: sc.fingerprint,
+                iteration: 0,
+                stage: Stage::Linear,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index: 1,
+                },
+            },
+            payload: Payload::BoundaryState {
+                subdomain: 1,
+                w,
+                f: Field::zeros(n_b, 3),
+            },
+        };
+        let out = node.handle(&msg).unwrap();
+        let Payload::Decision(d) = &out[0].payload else {
+            panic!("expected a decision")
+        };
+        let Verdict::Diverged { detail } = &d.verdict else {
+            panic!("{:?}", d.verdict)
+        };
+        assert!(detail.contains("subdomain 1 (`b.2`) sent W = NaN"), "{detail}");
+        assert!(
+            detail.contains("pair 1") && detail.contains("component y") && detail.contains("t_1 = 0.5"),
+            "{detail}"
+        );
+        assert!(node.is_finished());
     }
 }

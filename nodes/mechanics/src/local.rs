@@ -323,3 +323,90 @@ impl InterfaceLocal {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::load_str;
+
+    /// The contact indicator reads only s, ŝ, M and the time weights: evaluating it on the same
+    /// pair (s, ŝ) with k₀ and 100 k₀ gives the same value, while η changes.
+    #[test]
+    fn contact_indicator_does_not_depend_on_k() {
+        let text = r#"
+[time]
+T = 1.0
+N = 3
+[materials.m]
+E = 1000.0
+nu = 0.3
+[[block]]
+name = "lo"
+material = "m"
+x = [0.0, 4.0]
+y = [0.0, 1.0]
+nx = 4
+ny = 1
+[[block]]
+name = "hi"
+material = "m"
+x = [0.0, 4.0]
+y = [1.0, 2.0]
+nx = 4
+ny = 1
+[[interface]]
+between = ["lo", "hi"]
+kind = "contact"
+friction = 0.3
+[[boundary]]
+y = 0.0
+ux = 0.0
+uy = 0.0
+[[boundary]]
+y = 2.0
+ux = "0.01*t"
+uy = "-0.01*t"
+"#;
+        let model = load_str(text, "k.toml").unwrap().model;
+        let itf = &model.interfaces[0];
+        let nt = model.time.n_points();
+        let mut s = InterfaceFields::zeros(itf.n_pairs(), nt);
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for m in [&mut s.w_a, &mut s.w_b] {
+            for j in 0..nt {
+                for r in 0..m.nrows() {
+                    m[(r, j)] = 0.01 * rnd();
+                }
+            }
+        }
+        for m in [&mut s.f_a, &mut s.f_b] {
+            for j in 0..nt {
+                for r in 0..m.nrows() {
+                    m[(r, j)] = 10.0 * rnd();
+                }
+            }
+        }
+        let w = model.time.trapezoid_weights();
+        let mut a = InterfaceLocal::new(0, itf, 250.0, nt);
+        a.local_stage(itf, &s);
+        let sums_a = a.indicator_sums(itf, &w, &s, true);
+        // Same ŝ, read with another k.
+        let mut b = InterfaceLocal::new(0, itf, 25_000.0, nt);
+        b.hat = a.hat.clone();
+        let sums_b = b.indicator_sums(itf, &w, &s, true);
+        assert!(sums_a.contact_indicator() > 0.0);
+        assert_eq!(sums_a.contact_indicator(), sums_b.contact_indicator());
+        assert_eq!(sums_a.force_error(), sums_b.force_error());
+        assert_eq!(sums_a.jump_error(), sums_b.jump_error());
+        assert!(
+            (sums_a.eta() - sums_b.eta()).abs() > 1e-3 * sums_a.eta(),
+            "η depends on k"
+        );
+    }
+}
