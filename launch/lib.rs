@@ -2,6 +2,7 @@
 //! a bus, and writes run outputs. The `glissade` binary only parses arguments and calls this.
 
 pub mod output;
+pub mod report;
 pub mod runner;
 
 use anyhow::Context;

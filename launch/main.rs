@@ -4,9 +4,11 @@
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use glissade::load_scene;
-use glissade::output::{interface_fields, summary, write_json};
+use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
+use glissade::report::{build_report, plot_svg};
 use glissade::runner::{run_in_process, IterationRecord, RunOptions};
 use glissade_mechanics::monolithic::solve_glued;
+use glissade_mechanics::reference::{solve_reference, verify, ReferenceOptions};
 use glissade_messages::Verdict;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -34,6 +36,30 @@ enum Command {
     Monolithic {
         /// Scene file (TOML).
         scene: PathBuf,
+    },
+    /// Solve a scene with the monolithic incremental Newton contact solver (the reference) and
+    /// write its summary and interface fields.
+    Reference {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+    },
+    /// Run the reference and the LATIN solver, and write the error-against-run-time report
+    /// (`<scene>-report.json` and `<scene>-report.svg`).
+    Report {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+        /// LATIN stops at this η (overrides the scene's tolerance).
+        #[arg(long, default_value_t = 1e-6)]
+        tolerance: f64,
+        /// LATIN iteration cap (overrides the scene's).
+        #[arg(long)]
+        max_iterations: Option<usize>,
     },
 }
 
@@ -90,6 +116,13 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
+        Command::Reference { scene, out } => reference(&scene, &out),
+        Command::Report {
+            scene,
+            out,
+            tolerance,
+            max_iterations,
+        } => report(&scene, &out, tolerance, max_iterations),
         Command::Monolithic { scene } => {
             let sc = load_scene(&scene)?;
             let t0 = std::time::Instant::now();
@@ -173,7 +206,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let fields_path = write_json(
         &args.out,
         &format!("{stem}.fields.json"),
-        &interface_fields(&sc.model, &result),
+        &interface_fields(&sc.model, &result.interfaces),
     )?;
     if args.interior || sc.model.interfaces.is_empty() {
         let u: Vec<_> = result.displacements.iter().map(|(s, f)| serde_json::json!({"subdomain": sc.model.subdomains[*s as usize].name, "rows": f.rows, "cols": f.cols, "u": f.data})).collect();
@@ -193,4 +226,94 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         Verdict::Converged => ExitCode::SUCCESS,
         _ => ExitCode::from(NOT_CONVERGED),
     })
+}
+
+fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create output folder {}", out.display()))?;
+    let probe = out.join(format!(".probe-{}", std::process::id()));
+    std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", out.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+fn reference(scene: &std::path::Path, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+    let sc = load_scene(scene)?;
+    ensure_writable(out)?;
+    let t0 = std::time::Instant::now();
+    let sol = solve_reference(&sc.model, &ReferenceOptions::default())?;
+    let wall = t0.elapsed().as_secs_f64();
+    let checks = verify(&sc.model, &sol)?;
+    let total: usize = sol.newton_iterations.iter().sum();
+    let max = sol.newton_iterations.iter().copied().max().unwrap_or(0);
+    let summary = serde_json::json!({
+        "scene": sc.model.name,
+        "scene_fingerprint": format!("{:016x}", sc.fingerprint),
+        "solver": "monolithic incremental semi-smooth Newton (Alart–Curnier)",
+        "software": { "name": "glissade", "version": env!("CARGO_PKG_VERSION"), "profile": if cfg!(debug_assertions) { "debug" } else { "release" } },
+        "wall_s": wall,
+        "newton_iterations_per_step": sol.newton_iterations,
+        "newton_iterations_total": total,
+        "r_factor_used": sol.r_factor_used,
+        "checks": format!("{checks:?}"),
+    });
+    let stem = format!("{}-reference", sc.model.name);
+    let s = write_json(out, &format!("{stem}.summary.json"), &summary)?;
+    let f = write_json(
+        out,
+        &format!("{stem}.fields.json"),
+        &interface_fields(&sc.model, &reference_interfaces(&sc.model, &sol)),
+    )?;
+    println!(
+        "scene `{}`: reference solved {} time points in {wall:.2} s, {total} Newton iterations (max {max} per step)",
+        sc.model.name,
+        sc.model.time.n_points()
+    );
+    println!("checks: {checks:?}");
+    println!("summary: {}\nfields: {}", s.display(), f.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn report(
+    scene: &std::path::Path,
+    out: &std::path::Path,
+    tolerance: f64,
+    max_iterations: Option<usize>,
+) -> anyhow::Result<ExitCode> {
+    let mut sc = load_scene(scene)?;
+    if !(tolerance > 0.0 && tolerance.is_finite()) {
+        anyhow::bail!("--tolerance {tolerance}: must be a positive number");
+    }
+    ensure_writable(out)?;
+    sc.model.solver.tolerance = tolerance;
+    if let Some(m) = max_iterations {
+        if m == 0 {
+            anyhow::bail!("--max-iterations 0: must be at least 1");
+        }
+        sc.model.solver.max_iterations = m;
+    }
+    let run_id = default_run_id(&sc.model.name);
+    let (report, _, _) = build_report(&sc, &run_id)?;
+    let name = &sc.model.name;
+    let j = write_json(out, &format!("{name}-report.json"), &serde_json::to_value(&report)?)?;
+    let svg_path = out.join(format!("{name}-report.svg"));
+    std::fs::write(&svg_path, plot_svg(&report)).with_context(|| format!("cannot write {}", svg_path.display()))?;
+    println!(
+        "scene `{name}`: reference {:.2} s ({} Newton iterations); LATIN setup {:.2} s + {:.2} s, {} iterations, {}",
+        report.reference_s,
+        report.reference_newton_iterations,
+        report.latin_setup_s,
+        report.latin_solve_s,
+        report.points.len(),
+        report.latin_verdict
+    );
+    println!("| contact traction error | LATIN wall time (s) | iterations | / reference time |");
+    println!("|---|---|---|---|");
+    for (th, t, it) in &report.time_to_accuracy {
+        match (t, it) {
+            (Some(t), Some(it)) => println!("| {th:.0e} | {t:.2} | {it} | {:.2} |", t / report.reference_s),
+            _ => println!("| {th:.0e} | not reached | | |"),
+        }
+    }
+    println!("report: {}\nplot: {}", j.display(), svg_path.display());
+    Ok(ExitCode::SUCCESS)
 }

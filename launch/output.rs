@@ -2,8 +2,11 @@
 
 use crate::runner::RunResult;
 use anyhow::Context;
+use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{InterfaceKind, Model};
+use glissade_mechanics::reference::ReferenceSolution;
 use glissade_mechanics::scene::LoadedScene;
+use glissade_messages::InterfaceSolution;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -57,9 +60,8 @@ pub fn summary(scene: &LoadedScene, result: &RunResult, run_id: &str) -> Value {
 
 /// Interface fields of ŝ (the last local stage) in each interface's local frame: normal and
 /// tangential force on side a (N/mm) and jump [Ŵ] (mm), per time point and pair; plus status.
-pub fn interface_fields(model: &Model, result: &RunResult) -> Value {
-    let items: Vec<Value> = result
-        .interfaces
+pub fn interface_fields(model: &Model, interfaces: &[InterfaceSolution]) -> Value {
+    let items: Vec<Value> = interfaces
         .iter()
         .map(|sol| {
             let itf = &model.interfaces[sol.interface as usize];
@@ -111,4 +113,34 @@ pub fn write_json(dir: &Path, name: &str, value: &Value) -> anyhow::Result<PathB
         .with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, &path).with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))?;
     Ok(path)
+}
+
+/// The reference solution's interface fields as [`InterfaceSolution`]s (s = ŝ), so that they are
+/// written like a LATIN run's.
+pub fn reference_interfaces(model: &Model, reference: &ReferenceSolution) -> Vec<InterfaceSolution> {
+    let field = |m: &faer::Mat<f64>| glissade_bus::convert::field_of(m.as_ref());
+    model
+        .interfaces
+        .iter()
+        .enumerate()
+        .map(|(i, _)| {
+            let f: &InterfaceFields = &reference.interfaces[i];
+            let status = reference.contact[i]
+                .as_ref()
+                .map(|c| c.status.iter().map(|s| *s as u8).collect())
+                .unwrap_or_default();
+            InterfaceSolution {
+                interface: i as u32,
+                w_a: field(&f.w_a),
+                w_b: field(&f.w_b),
+                f_a: field(&f.f_a),
+                f_b: field(&f.f_b),
+                w_a_hat: field(&f.w_a),
+                w_b_hat: field(&f.w_b),
+                f_a_hat: field(&f.f_a),
+                f_b_hat: field(&f.f_b),
+                status,
+            }
+        })
+        .collect()
 }

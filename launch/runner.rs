@@ -9,11 +9,11 @@ use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::linear::{default_k0, macro_basis, SubdomainSolver};
 use glissade_mechanics::monolithic::solve_glued;
 use glissade_mechanics::scene::LoadedScene;
-use glissade_messages::{Decision, Field, InterfaceSolution, Payload, Verdict};
+use glissade_messages::{Decision, Field, InterfaceSolution, Message, Payload, Verdict};
 use glissade_subdomain::{SubdomainNode, SubdomainOptions};
 use rayon::prelude::*;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Options of an in-process run.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,7 +66,19 @@ pub enum RunError {
 pub fn run_in_process(
     scene: &LoadedScene,
     opts: &RunOptions,
+    on_iteration: impl FnMut(&IterationRecord),
+) -> Result<RunResult, RunError> {
+    run_in_process_observed(scene, opts, on_iteration, |_| Duration::ZERO)
+}
+
+/// As [`run_in_process`], and `observe` sees every message of the run in publication order. It
+/// returns the wall time it spent, which is left out of the iterations' elapsed times (so a
+/// report may measure errors without charging the solver for it).
+pub fn run_in_process_observed(
+    scene: &LoadedScene,
+    opts: &RunOptions,
     mut on_iteration: impl FnMut(&IterationRecord),
+    mut observe: impl FnMut(&Message) -> Duration,
 ) -> Result<RunResult, RunError> {
     let model = Arc::new(scene.model.clone());
     let t0 = Instant::now();
@@ -153,12 +165,14 @@ pub fn run_in_process(
     let mut interfaces = Vec::new();
     let mut displacements = Vec::new();
     let mut bus = InProcessBus::new(nodes);
+    let mut observer_time = Duration::ZERO;
     bus.run(|m| {
+        observer_time += observe(m);
         match &m.payload {
             Payload::Decision(d) => {
                 let rec = IterationRecord {
                     iteration: m.envelope.iteration,
-                    elapsed_s: t1.elapsed().as_secs_f64(),
+                    elapsed_s: t1.elapsed().saturating_sub(observer_time).as_secs_f64(),
                     decision: d.clone(),
                 };
                 on_iteration(&rec);
@@ -176,7 +190,7 @@ pub fn run_in_process(
         .unwrap_or(Verdict::MaxIterations);
     Ok(RunResult {
         setup_s,
-        solve_s: t1.elapsed().as_secs_f64(),
+        solve_s: t1.elapsed().saturating_sub(observer_time).as_secs_f64(),
         iterations,
         verdict,
         interfaces,

@@ -185,17 +185,7 @@ impl InterfaceNode {
     fn store(&mut self, s: u32, w: &glissade_messages::Field, f: &glissade_messages::Field) {
         let layout = self.layouts[s as usize].as_ref().expect("participant");
         for slot in &layout.slots {
-            let fields = &mut self.fields[slot.interface];
-            let (wm, fm) = match slot.side {
-                Side::A => (&mut fields.w_a, &mut fields.f_a),
-                Side::B => (&mut fields.w_b, &mut fields.f_b),
-            };
-            for j in 0..w.cols() {
-                for e in 0..2 * slot.n_pairs {
-                    wm[(e, j)] = w.get(slot.offset + e, j);
-                    fm[(e, j)] = f.get(slot.offset + e, j);
-                }
-            }
+            self.fields[slot.interface].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
         }
     }
 

@@ -40,6 +40,62 @@ impl InterfaceFields {
     }
 }
 
+impl InterfaceFields {
+    /// Writes one side's trace and force from accessors of a subdomain's boundary fields
+    /// (`get_w(row, col)`, `get_f(row, col)`), rows `offset..offset + 2·n_pairs`.
+    pub fn set_side(
+        &mut self,
+        side: crate::model::Side,
+        offset: usize,
+        get_w: impl Fn(usize, usize) -> f64,
+        get_f: impl Fn(usize, usize) -> f64,
+    ) {
+        let (w, f) = match side {
+            crate::model::Side::A => (&mut self.w_a, &mut self.f_a),
+            crate::model::Side::B => (&mut self.w_b, &mut self.f_b),
+        };
+        for j in 0..w.ncols() {
+            for e in 0..w.nrows() {
+                w[(e, j)] = get_w(offset + e, j);
+                f[(e, j)] = get_f(offset + e, j);
+            }
+        }
+    }
+}
+
+/// Error of interface fields `s` against a reference solution of the same discrete problem, on
+/// contact interfaces (DESIGN §3, "error against a reference"): relative space-time norms
+/// (lumped mass M, trapezoid weights w_i)
+/// e_F = ‖F − F_ref‖ / ‖F_ref‖ over both sides' tractions, and
+/// e_W = ‖[W] − [W]_ref‖ / (‖[W]_ref‖² + ½‖W_ref‖²)^½ over the jumps (scaled like e_W of
+/// [`IndicatorSums`], so that it stays defined when every point sticks). Returns (e_F, e_W).
+pub fn error_against_reference(
+    interfaces: &[Interface],
+    s: &[InterfaceFields],
+    reference: &[InterfaceFields],
+    time_weights: &[f64],
+) -> (f64, f64) {
+    let (mut f_num, mut f_den, mut w_num, mut w_den) = (0.0, 0.0, 0.0, 0.0);
+    for ((itf, x), r) in interfaces.iter().zip(s).zip(reference) {
+        if !itf.is_contact() {
+            continue;
+        }
+        for (i, &wt) in time_weights.iter().enumerate() {
+            for e in 0..2 * itf.n_pairs() {
+                let m = itf.weights[e / 2] * wt;
+                let sq = |v: f64| v * v;
+                f_num += m * (sq(x.f_a[(e, i)] - r.f_a[(e, i)]) + sq(x.f_b[(e, i)] - r.f_b[(e, i)]));
+                f_den += m * (sq(r.f_a[(e, i)]) + sq(r.f_b[(e, i)]));
+                let jump = x.w_b[(e, i)] - x.w_a[(e, i)];
+                let jump_ref = r.w_b[(e, i)] - r.w_a[(e, i)];
+                w_num += m * sq(jump - jump_ref);
+                w_den += m * (sq(jump_ref) + 0.5 * (sq(r.w_a[(e, i)]) + sq(r.w_b[(e, i)])));
+            }
+        }
+    }
+    (ratio(f_num, f_den), ratio(w_num, w_den))
+}
+
 /// Search directions k⁺ of a contact interface, per pair and time point (n_pairs × (N+1)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ContactDirections {
