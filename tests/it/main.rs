@@ -4,4 +4,5 @@
 mod analytic;
 mod common;
 mod latin_perfect;
+mod monolithic;
 mod reference;
