@@ -119,6 +119,51 @@ fn contact(sc: &LoadedScene, result: &RunResult) -> (Interface, InterfaceSolutio
     (itf.clone(), sol.clone())
 }
 
+/// Which solver computes a contact solution: LATIN with k₀ = factor·E/L_Γ, or the monolithic
+/// Newton reference of the same discrete problem.
+#[derive(Debug, Clone, Copy)]
+enum Solver {
+    Latin(f64),
+    Reference,
+}
+
+/// Solves `text` with `solver` (LATIN to η ≤ 1e-9) and returns the scene, the contact interface,
+/// its solution (for the reference, s = ŝ) and a line describing the run.
+fn solve_contact(text: &str, solver: Solver) -> (LoadedScene, Interface, InterfaceSolution, String) {
+    match solver {
+        Solver::Latin(k0) => {
+            let (sc, result, secs) = solve(text, 1e-9, k0);
+            let (itf, sol) = contact(&sc, &result);
+            let line = format!(
+                "LATIN k0 × {k0}: {} iterations, {secs:.1} s (setup {:.1} s)",
+                result.iterations.len(),
+                result.setup_s
+            );
+            (sc, itf, sol, line)
+        }
+        Solver::Reference => {
+            let sc = scene(text);
+            let clock = Instant::now();
+            let reference =
+                glissade_mechanics::reference::solve_reference(&sc.model, &Default::default()).expect("reference");
+            let secs = clock.elapsed().as_secs_f64();
+            let k = sc
+                .model
+                .interfaces
+                .iter()
+                .position(|i| i.is_contact())
+                .expect("contact interface");
+            let sol = glissade::output::reference_interfaces(&sc.model, &reference).swap_remove(k);
+            let line = format!(
+                "reference: {} Newton iterations, {secs:.1} s",
+                reference.newton_iterations.iter().sum::<usize>()
+            );
+            let itf = sc.model.interfaces[k].clone();
+            (sc, itf, sol, line)
+        }
+    }
+}
+
 /// Traction of field `f` (N/mm, on side a) at pair `p`, time `i`, along `dir`.
 fn along(f: &glissade_messages::Field, p: usize, i: usize, dir: [f64; 2]) -> f64 {
     f.get(2 * p, i) * dir[0] + f.get(2 * p + 1, i) * dir[1]
@@ -218,17 +263,13 @@ fn hertz_2d_matches_johnson() {
         "0.0",
         &format!("{{ t = [0.0, 1.0], v = [0.0, {:?}] }}", -HERTZ_DELTA),
     );
-    let (sc, result, secs) = solve(&text, 1e-9, 1.0);
-    let (itf, sol) = contact(&sc, &result);
-    let m = normal_solution(&itf, &sol, 1);
-    let (a_j, p0_j) = johnson(m.load);
-    let (ea, ep) = (m.a / a_j - 1.0, m.p0 / p0_j - 1.0);
-    println!(
-        "hertz: mesh {w}×{h} mm, {nx}×{ny} QUA8 per block, δ = {HERTZ_DELTA} mm; {} iterations, {secs:.1} s (setup {:.1} s)",
-        result.iterations.len(),
-        result.setup_s
-    );
-    println!(
+    for solver in [Solver::Latin(1.0), Solver::Reference] {
+        let (_sc, itf, sol, line) = solve_contact(&text, solver);
+        let m = normal_solution(&itf, &sol, 1);
+        let (a_j, p0_j) = johnson(m.load);
+        let (ea, ep) = (m.a / a_j - 1.0, m.p0 / p0_j - 1.0);
+        println!("hertz: mesh {w}×{h} mm, {nx}×{ny} QUA8 per block, δ = {HERTZ_DELTA} mm; {line}");
+        println!(
         "hertz: P = {:.1} N/mm, {} pairs in contact ({} fitted); a = {:.4} mm (Johnson {a_j:.4}, {:+.2} %), p0 = {:.1} MPa (Johnson {p0_j:.1}, {:+.2} %)",
         m.load,
         m.n_contact,
@@ -238,9 +279,10 @@ fn hertz_2d_matches_johnson() {
         m.p0,
         100.0 * ep
     );
-    assert!(m.n_contact >= 15, "contact zone too small for the fit: {m:?}");
-    assert!(ea.abs() <= 0.03, "a: {m:?} vs {a_j}");
-    assert!(ep.abs() <= 0.03, "p0: {m:?} vs {p0_j}");
+        assert!(m.n_contact >= 15, "contact zone too small for the fit: {m:?}");
+        assert!(ea.abs() <= 0.03, "{solver:?}: a: {m:?} vs {a_j}");
+        assert!(ep.abs() <= 0.03, "{solver:?}: p0: {m:?} vs {p0_j}");
+    }
 }
 
 /// Cattaneo–Mindlin in 2D: at t_1 a Hertz load (friction f = 0.3), at t_2 the top additionally
@@ -279,21 +321,19 @@ fn cattaneo_mindlin_stick_zone() {
         &format!("{{ t = [0.0, 0.5, 1.0], v = [0.0, 0.0, {delta_x:?}] }}"),
         &format!("{{ t = [0.0, 0.5, 1.0], v = [0.0, {d:?}, {d:?}] }}", d = -delta_y),
     );
-    let (sc, result, secs) = solve(&text, 1e-9, 10.0);
-    let (itf, sol) = contact(&sc, &result);
-    let np = itf.n_pairs();
-    let x_dir = [1.0, 0.0];
-    println!(
-        "cattaneo: mesh {w}×{h} mm, {nx}×{ny} QUA8 per block, δ = {delta_y} mm, Δ = {delta_x} mm, f = {f}; {} iterations, {secs:.1} s (setup {:.1} s)",
-        result.iterations.len(),
-        result.setup_s
-    );
+    for solver in [Solver::Latin(10.0), Solver::Reference] {
+        let (_sc, itf, sol, line) = solve_contact(&text, solver);
+        let np = itf.n_pairs();
+        let x_dir = [1.0, 0.0];
+        println!(
+            "cattaneo: mesh {w}×{h} mm, {nx}×{ny} QUA8 per block, δ = {delta_y} mm, Δ = {delta_x} mm, f = {f}; {line}"
+        );
 
-    // t_1: normal load only; with friction the normal solution is Hertz's and there is no shear.
-    let m1 = normal_solution(&itf, &sol, 1);
-    let (a1_j, p01_j) = johnson(m1.load);
-    let q1_max = (0..np).fold(0.0f64, |s, p| s.max(along(&sol.f_a_hat, p, 1, x_dir).abs()));
-    println!(
+        // t_1: normal load only; with friction the normal solution is Hertz's and there is no shear.
+        let m1 = normal_solution(&itf, &sol, 1);
+        let (a1_j, p01_j) = johnson(m1.load);
+        let q1_max = (0..np).fold(0.0f64, |s, p| s.max(along(&sol.f_a_hat, p, 1, x_dir).abs()));
+        println!(
         "cattaneo: t_1: P = {:.1} N/mm, {} pairs in contact; a = {:.4} mm ({:+.2} % vs Johnson), p0 = {:.1} MPa ({:+.2} %), max |q| = {q1_max:.2e} MPa",
         m1.load,
         m1.n_contact,
@@ -302,56 +342,56 @@ fn cattaneo_mindlin_stick_zone() {
         m1.p0,
         100.0 * (m1.p0 / p01_j - 1.0)
     );
-    // The shear at t_1 vanishes by symmetry, up to the iteration error (η ≤ 1e-9).
-    assert!(q1_max <= 1e-6 * m1.p0, "shear at t_1: {q1_max} MPa");
-    assert!((m1.a / a1_j - 1.0).abs() <= 0.03, "a at t_1: {m1:?} vs {a1_j}");
-    assert!((m1.p0 / p01_j - 1.0).abs() <= 0.03, "p0 at t_1: {m1:?} vs {p01_j}");
+        // The shear at t_1 vanishes by symmetry, up to the iteration error (η ≤ 1e-9).
+        assert!(q1_max <= 1e-6 * m1.p0, "shear at t_1: {q1_max} MPa");
+        assert!((m1.a / a1_j - 1.0).abs() <= 0.03, "a at t_1: {m1:?} vs {a1_j}");
+        assert!((m1.p0 / p01_j - 1.0).abs() <= 0.03, "p0 at t_1: {m1:?} vs {p01_j}");
 
-    // t_2: tangential load on top.
-    let i = 2;
-    let m = normal_solution(&itf, &sol, i);
-    let q_res: f64 = (0..np)
-        .map(|p| itf.weights[p] * along(&sol.f_a_hat, p, i, itf.tangent))
-        .sum::<f64>()
-        .abs();
-    let ratio = q_res / (f * m.load);
-    let c_over_a = (1.0 - ratio).sqrt();
-    let status = |p: usize| sol.status[p + np * i];
-    // c from the statuses: walk out from the centre pair to the last stick pair on each side.
-    let centre = (0..np)
-        .min_by(|&p, &q| itf.coords[p][0].abs().total_cmp(&itf.coords[q][0].abs()))
-        .expect("pairs");
-    assert_eq!(status(centre), 1, "the centre must stick");
-    let mut ends = [0.0; 2];
-    for (end, step) in ends.iter_mut().zip([-1i64, 1]) {
-        let mut s = centre as i64;
-        while status((s + step) as usize) == 1 {
-            s += step;
+        // t_2: tangential load on top.
+        let i = 2;
+        let m = normal_solution(&itf, &sol, i);
+        let q_res: f64 = (0..np)
+            .map(|p| itf.weights[p] * along(&sol.f_a_hat, p, i, itf.tangent))
+            .sum::<f64>()
+            .abs();
+        let ratio = q_res / (f * m.load);
+        let c_over_a = (1.0 - ratio).sqrt();
+        let status = |p: usize| sol.status[p + np * i];
+        // c from the statuses: walk out from the centre pair to the last stick pair on each side.
+        let centre = (0..np)
+            .min_by(|&p, &q| itf.coords[p][0].abs().total_cmp(&itf.coords[q][0].abs()))
+            .expect("pairs");
+        assert_eq!(status(centre), 1, "the centre must stick");
+        let mut ends = [0.0; 2];
+        for (end, step) in ends.iter_mut().zip([-1i64, 1]) {
+            let mut s = centre as i64;
+            while status((s + step) as usize) == 1 {
+                s += step;
+            }
+            let (last_stick, first_slip) = (s as usize, (s + step) as usize);
+            assert_eq!(status(first_slip), 2, "the stick zone must end in slip");
+            *end = 0.5 * (itf.coords[last_stick][0] + itf.coords[first_slip][0]);
         }
-        let (last_stick, first_slip) = (s as usize, (s + step) as usize);
-        assert_eq!(status(first_slip), 2, "the stick zone must end in slip");
-        *end = 0.5 * (itf.coords[last_stick][0] + itf.coords[first_slip][0]);
-    }
-    let c_status = 0.5 * (ends[1] - ends[0]);
-    // c from the stick-zone deficit f p − |q| = f p0 (c/a) √(1 − x²/c²).
-    let (mut x2, mut d2) = (Vec::new(), Vec::new());
-    for p in (0..np).filter(|&p| status(p) == 1) {
-        let pressure = -along(&sol.f_a_hat, p, i, itf.normal);
-        let deficit = f * pressure - along(&sol.f_a_hat, p, i, itf.tangent).abs();
-        x2.push(itf.coords[p][0].powi(2));
-        d2.push(deficit * deficit);
-    }
-    let (c0, c1) = fit_line(&x2, &d2);
-    let c_fit = (-c0 / c1).sqrt();
-    let n_stick = (0..np).filter(|&p| status(p) == 1).count();
-    let n_slip = (0..np).filter(|&p| status(p) == 2).count();
-    let err_status = c_status / m.a / c_over_a - 1.0;
-    let err_fit = c_fit / m.a / c_over_a - 1.0;
-    println!(
+        let c_status = 0.5 * (ends[1] - ends[0]);
+        // c from the stick-zone deficit f p − |q| = f p0 (c/a) √(1 − x²/c²).
+        let (mut x2, mut d2) = (Vec::new(), Vec::new());
+        for p in (0..np).filter(|&p| status(p) == 1) {
+            let pressure = -along(&sol.f_a_hat, p, i, itf.normal);
+            let deficit = f * pressure - along(&sol.f_a_hat, p, i, itf.tangent).abs();
+            x2.push(itf.coords[p][0].powi(2));
+            d2.push(deficit * deficit);
+        }
+        let (c0, c1) = fit_line(&x2, &d2);
+        let c_fit = (-c0 / c1).sqrt();
+        let n_stick = (0..np).filter(|&p| status(p) == 1).count();
+        let n_slip = (0..np).filter(|&p| status(p) == 2).count();
+        let err_status = c_status / m.a / c_over_a - 1.0;
+        let err_fit = c_fit / m.a / c_over_a - 1.0;
+        println!(
         "cattaneo: t_2: P = {:.1} N/mm, Q = {q_res:.1} N/mm, Q/(fP) = {ratio:.4}; {n_stick} stick, {n_slip} slip pairs; a = {:.4} mm; √(1 − Q/(fP)) = {c_over_a:.4}",
         m.load, m.a
     );
-    println!(
+        println!(
         "cattaneo: statuses: c = {c_status:.4} mm (stick zone [{:.3}, {:.3}]), c/a = {:.4} ({:+.2} %); deficit fit: c = {c_fit:.4} mm, c/a = {:.4} ({:+.2} %), amplitude {:.1} MPa vs f p0 c/a = {:.1}",
         ends[0],
         ends[1],
@@ -362,16 +402,23 @@ fn cattaneo_mindlin_stick_zone() {
         c0.sqrt(),
         f * m.p0 * c_over_a
     );
-    assert!(
-        (m.load / m1.load - 1.0).abs() <= 1e-6,
-        "P changed under the tangential load"
-    );
-    assert!(
-        (0.4..=0.6).contains(&ratio),
-        "Q/(fP) = {ratio}: not partial slip near 0.5"
-    );
-    assert!(err_status.abs() <= 0.05, "c/a from the statuses off by {err_status}");
-    assert!(err_fit.abs() <= 0.05, "c/a from the deficit fit off by {err_fit}");
+        assert!(
+            (m.load / m1.load - 1.0).abs() <= 1e-6,
+            "P changed under the tangential load"
+        );
+        assert!(
+            (0.4..=0.6).contains(&ratio),
+            "Q/(fP) = {ratio}: not partial slip near 0.5"
+        );
+        assert!(
+            err_status.abs() <= 0.05,
+            "{solver:?}: c/a from the statuses off by {err_status}"
+        );
+        assert!(
+            err_fit.abs() <= 0.05,
+            "{solver:?}: c/a from the deficit fit off by {err_fit}"
+        );
+    }
 }
 
 /// Two 40 × 20 mm blocks, 16 × 8 QUA8 each, pressed together (no gap) by the top: uy = −0.01·t,
