@@ -63,13 +63,15 @@ impl InterfaceFields {
     }
 }
 
+/// Copies of one physical contact node pair: members (interface, pair) and their summed weight.
+pub type PairGroup = (Vec<(usize, usize)>, f64);
+
 /// Contact node pairs grouped by physical location: copies of one merged node pair (a
 /// cross-point where perfect interfaces meet a contact interface, DESIGN §2) form one group.
-/// Returns, per group, its members (interface, pair) and the summed weight.
-pub fn contact_pair_groups(interfaces: &[Interface]) -> Vec<(Vec<(usize, usize)>, f64)> {
+pub fn contact_pair_groups(interfaces: &[Interface]) -> Vec<PairGroup> {
     let scale = interfaces.iter().map(|i| i.length).fold(0.0, f64::max).max(1.0);
     let q = |v: f64| (v / (1e-9 * scale)).round() as i64;
-    let mut groups: std::collections::BTreeMap<[i64; 4], (Vec<(usize, usize)>, f64)> = Default::default();
+    let mut groups: std::collections::BTreeMap<[i64; 4], PairGroup> = Default::default();
     for (k, itf) in interfaces.iter().enumerate() {
         if !itf.is_contact() {
             continue;
