@@ -1,9 +1,11 @@
 //! The glissade launcher as a library: loads scenes, builds the nodes of a run and drives them on
 //! a bus, and writes run outputs. The `glissade` binary only parses arguments and calls this.
 
+pub mod distributed;
 pub mod output;
 pub mod report;
 pub mod runner;
+pub mod stability;
 
 use anyhow::Context;
 use glissade_mechanics::scene::{load_str, LoadedScene};

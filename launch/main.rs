@@ -3,6 +3,7 @@
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use glissade::distributed::{run_multi_process, run_node_process, NodeRole};
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
 use glissade::report::{build_report, plot_svg};
@@ -61,13 +62,55 @@ enum Command {
         #[arg(long)]
         max_iterations: Option<usize>,
     },
+    /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
+    /// endpoint and receives the scene over the bus.
+    Node(NodeArgs),
+    /// Run the stability matrix of stiff and extreme cases and write the table
+    /// (`stability.md`, `stability.json`).
+    Stability {
+        /// Only the reduced, fast subset of the test suite.
+        #[arg(long)]
+        quick: bool,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+    },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum RoleArg {
+    Subdomain,
+    Interface,
+    Coarse,
+}
+
+#[derive(clap::Args)]
+struct NodeArgs {
+    /// Role of the node.
+    role: RoleArg,
+    /// Run id of the run to join (printed by the launcher).
+    #[arg(long)]
+    run: String,
+    /// Zenoh endpoint(s) to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
+    #[arg(long, required = true)]
+    connect: Vec<String>,
+    /// Subdomains hosted (subdomain role), e.g. 0,1,2.
+    #[arg(long, value_delimiter = ',')]
+    subdomains: Vec<u32>,
+    /// Index of this subdomain node process.
+    #[arg(long, default_value_t = 0)]
+    index: u32,
+    /// Send the full displacement fields at the end (subdomain role).
+    #[arg(long)]
+    interior: bool,
 }
 
 #[derive(clap::Args)]
 struct RunArgs {
     /// Scene file (TOML).
     scene: PathBuf,
-    /// Run every node in this process (the only mode of this version).
+    /// Run every node in this process instead of one process per node group (the default:
+    /// Zenoh on loopback, the launcher hosting the router, no router to install).
     #[arg(long)]
     in_process: bool,
     /// Folder for the outputs.
@@ -123,6 +166,26 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             tolerance,
             max_iterations,
         } => report(&scene, &out, tolerance, max_iterations),
+        Command::Stability { quick, out } => stability(quick, &out),
+        Command::Node(args) => {
+            let role = match args.role {
+                RoleArg::Subdomain => NodeRole::Subdomain,
+                RoleArg::Interface => NodeRole::Interface,
+                RoleArg::Coarse => NodeRole::Coarse,
+            };
+            if matches!(role, NodeRole::Subdomain) && args.subdomains.is_empty() {
+                anyhow::bail!("a subdomain node needs --subdomains (e.g. --subdomains 0,1,2)");
+            }
+            run_node_process(
+                role,
+                &args.run,
+                &args.connect,
+                &args.subdomains,
+                args.index,
+                args.interior,
+            )?;
+            Ok(ExitCode::SUCCESS)
+        }
         Command::Monolithic { scene } => {
             let sc = load_scene(&scene)?;
             let t0 = std::time::Instant::now();
@@ -185,14 +248,20 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         run_id: run_id.clone(),
         interior: args.interior,
     };
-    let result = run_in_process(&sc, &opts, |r: &IterationRecord| {
+    let progress = |r: &IterationRecord| {
         let d = &r.decision;
         bar.set_position(r.iteration as u64 + 1);
         bar.set_message(format!(
             "η {:.3e}  e_c {:.3e}  sep/stick/slip {}/{}/{}  changed {}  {:.2} s",
             d.eta, d.contact_indicator, d.counts[0], d.counts[1], d.counts[2], d.status_changes, r.elapsed_s
         ));
-    })?;
+    };
+    let result = if args.in_process {
+        run_in_process(&sc, &opts, progress)?
+    } else {
+        let exe = std::env::current_exe().context("cannot locate the glissade executable to spawn nodes")?;
+        run_multi_process(&sc, &opts, &exe, progress)?
+    };
     bar.finish_and_clear();
     for l in &result.left_out {
         println!("left out: {l}");
@@ -316,4 +385,30 @@ fn report(
     }
     println!("report: {}\nplot: {}", j.display(), svg_path.display());
     Ok(ExitCode::SUCCESS)
+}
+
+fn stability(quick: bool, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+    use glissade::stability::{markdown, run_matrix, Assessment};
+    ensure_writable(out)?;
+    let rows = run_matrix(quick, |r| {
+        eprintln!(
+            "{}: {} after {} iterations ({:?})",
+            r.case,
+            r.outcome.kind(),
+            r.iterations.map_or("—".into(), |n| n.to_string()),
+            r.assessment
+        );
+    });
+    let table = markdown(&rows);
+    let md = out.join("stability.md");
+    std::fs::write(&md, &table).with_context(|| format!("cannot write {}", md.display()))?;
+    let j = write_json(out, "stability.json", &serde_json::to_value(&rows)?)?;
+    println!("{table}");
+    println!("table: {}\njson: {}", md.display(), j.display());
+    // Exit 3 when a case ends neither as expected nor as its known issue says.
+    Ok(if rows.iter().all(|r| r.assessment != Assessment::Unexpected) {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(NOT_CONVERGED)
+    })
 }

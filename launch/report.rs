@@ -134,12 +134,15 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
     Ok((report, reference, result))
 }
 
+/// A plotted series: name, colour, value of a point.
+type Series = (&'static str, &'static str, Box<dyn Fn(&ReportPoint) -> f64>);
+
 /// SVG plot of the errors and indicators against wall time (log scale), with the reference's
 /// run time marked.
 pub fn plot_svg(report: &Report) -> String {
     let (w, h) = (900.0, 560.0);
     let (left, right, top, bottom) = (80.0, 200.0, 40.0, 60.0);
-    let series: [(&str, &str, Box<dyn Fn(&ReportPoint) -> f64>); 4] = [
+    let series: [Series; 4] = [
         ("traction error vs reference", "#d62728", Box::new(|p| p.traction_error)),
         ("jump error vs reference", "#1f77b4", Box::new(|p| p.jump_error)),
         ("η (LATIN indicator)", "#2ca02c", Box::new(|p| p.eta)),

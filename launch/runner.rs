@@ -7,6 +7,7 @@ use glissade_coarse::CoarseNode;
 use glissade_interface::InterfaceNode;
 use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::linear::{default_k0, macro_basis, SubdomainSolver};
+use glissade_mechanics::model::Model;
 use glissade_mechanics::monolithic::solve_glued;
 use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::{Decision, Field, InterfaceSolution, Message, Payload, Verdict};
@@ -60,6 +61,139 @@ pub enum RunError {
     Bus(#[from] BusError),
     #[error("glued solve: {0}")]
     Glued(AssemblyError),
+    #[error("node selection: {0}")]
+    Selection(String),
+}
+
+/// What a scene's run needs: k₀ and macro bases per interface, the subdomains that take part
+/// (those with an interface), and whether a coarse node is needed.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub k0: Vec<f64>,
+    pub bases: Vec<Vec<Vec<f64>>>,
+    pub participants: Vec<u32>,
+    pub coarse: bool,
+}
+
+impl Plan {
+    pub fn new(model: &Model) -> Self {
+        let k0 = default_k0(model);
+        let bases = model.interfaces.iter().map(macro_basis).collect();
+        let participants = (0..model.subdomains.len())
+            .filter(|&s| model.interfaces.iter().any(|i| i.a == s || i.b == s))
+            .map(|s| s as u32)
+            .collect();
+        Self {
+            k0,
+            bases,
+            participants,
+            coarse: model.solver.coarse && !model.interfaces.is_empty(),
+        }
+    }
+
+    /// The participants split into `n` contiguous groups (one per subdomain node process).
+    pub fn groups(&self, n: usize) -> Vec<Vec<u32>> {
+        let n = n.clamp(1, self.participants.len().max(1));
+        let per = self.participants.len().div_ceil(n);
+        self.participants.chunks(per.max(1)).map(<[u32]>::to_vec).collect()
+    }
+
+    /// Nodes used (role × count) and what is left out and why.
+    pub fn describe(&self, model: &Model, subdomain_processes: usize) -> (Vec<String>, Vec<String>) {
+        let mut names = vec![
+            format!(
+                "subdomain × {} (in {} process(es))",
+                self.participants.len(),
+                subdomain_processes
+            ),
+            "interface × 1".to_string(),
+        ];
+        let mut left_out = Vec::new();
+        if self.coarse {
+            names.push("coarse × 1".into());
+        } else {
+            left_out.push("coarse node: the scene switches the coarse problem off".into());
+        }
+        if model.subdomains.len() > self.participants.len() {
+            left_out.push(format!(
+                "{} subdomain(s) without interface: not part of the iteration",
+                model.subdomains.len() - self.participants.len()
+            ));
+        }
+        (names, left_out)
+    }
+}
+
+/// Which nodes one process hosts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Selection {
+    pub subdomains: Vec<u32>,
+    pub interface: bool,
+    pub coarse: bool,
+}
+
+impl Selection {
+    pub fn everything(plan: &Plan) -> Self {
+        Self {
+            subdomains: plan.participants.clone(),
+            interface: true,
+            coarse: plan.coarse,
+        }
+    }
+}
+
+/// Builds the nodes of `selection` (subdomain operators in parallel).
+pub fn build_nodes(
+    model: &Arc<Model>,
+    ctx: &RunContext,
+    interior: bool,
+    plan: &Plan,
+    selection: &Selection,
+) -> Result<Vec<Box<dyn Node>>, RunError> {
+    for s in &selection.subdomains {
+        if !plan.participants.contains(s) {
+            return Err(RunError::Selection(format!(
+                "subdomain {s} has no interface or does not exist"
+            )));
+        }
+    }
+    let solvers: Vec<SubdomainSolver> = selection
+        .subdomains
+        .par_iter()
+        .map(|&s| {
+            SubdomainSolver::new(model, s as usize, &plan.k0, &plan.bases).map_err(|source| RunError::Operator {
+                name: model.subdomains[s as usize].name.clone(),
+                source,
+            })
+        })
+        .collect::<Result<_, _>>()?;
+    let options = SubdomainOptions {
+        coarse: plan.coarse,
+        relaxation: model.solver.relaxation,
+        send_displacement: interior,
+    };
+    let mut nodes: Vec<Box<dyn Node>> = Vec::new();
+    for solver in solvers {
+        nodes.push(Box::new(SubdomainNode::new(
+            ctx.clone(),
+            model.clone(),
+            solver,
+            options,
+        )));
+    }
+    if selection.interface {
+        nodes.push(Box::new(InterfaceNode::new(ctx.clone(), model.clone(), &plan.k0)));
+    }
+    if selection.coarse {
+        let n_modes = plan.bases.iter().map(Vec::len).collect();
+        nodes.push(Box::new(CoarseNode::new(
+            ctx.clone(),
+            n_modes,
+            plan.participants.clone(),
+            model.time.n_points(),
+        )));
+    }
+    Ok(nodes)
 }
 
 /// Runs `scene` in-process. `on_iteration` sees each iteration's decision as it is made.
@@ -109,56 +243,10 @@ pub fn run_in_process_observed(
         run_id: opts.run_id.clone(),
         scene_fingerprint: scene.fingerprint,
     };
-    let k0 = default_k0(&model);
-    let bases: Vec<Vec<Vec<f64>>> = model.interfaces.iter().map(macro_basis).collect();
-    let interface_node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
-    let participants: Vec<u32> = interface_node.participants().to_vec();
-    let coarse = model.solver.coarse;
-    let solvers: Vec<SubdomainSolver> = participants
-        .par_iter()
-        .map(|&s| {
-            SubdomainSolver::new(&model, s as usize, &k0, &bases).map_err(|source| RunError::Operator {
-                name: model.subdomains[s as usize].name.clone(),
-                source,
-            })
-        })
-        .collect::<Result<_, _>>()?;
-    let options = SubdomainOptions {
-        coarse,
-        relaxation: model.solver.relaxation,
-        send_displacement: opts.interior,
-    };
-    let mut nodes: Vec<Box<dyn Node>> = Vec::new();
-    let mut left_out = Vec::new();
-    let n_sub = solvers.len();
-    for solver in solvers {
-        nodes.push(Box::new(SubdomainNode::new(
-            ctx.clone(),
-            model.clone(),
-            solver,
-            options,
-        )));
-    }
-    nodes.push(Box::new(interface_node));
-    let mut names = vec![format!("subdomain × {n_sub}"), "interface × 1".to_string()];
-    if coarse {
-        let n_modes = bases.iter().map(Vec::len).collect();
-        nodes.push(Box::new(CoarseNode::new(
-            ctx,
-            n_modes,
-            participants.clone(),
-            model.time.n_points(),
-        )));
-        names.push("coarse × 1".into());
-    } else {
-        left_out.push("coarse node: the scene switches the coarse problem off".into());
-    }
-    if model.subdomains.len() > participants.len() {
-        left_out.push(format!(
-            "{} subdomain(s) without interface: not part of the iteration",
-            model.subdomains.len() - participants.len()
-        ));
-    }
+    let plan = Plan::new(&model);
+    let nodes = build_nodes(&model, &ctx, opts.interior, &plan, &Selection::everything(&plan))?;
+    let (names, left_out) = plan.describe(&model, 1);
+    let k0 = plan.k0.clone();
     let setup_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let mut iterations = Vec::new();

@@ -407,6 +407,29 @@ pub fn encode(msg: &Message) -> Vec<u8> {
     out
 }
 
+/// Decodes only the envelope, checking the schema version and the run (for a receiver that
+/// learns the scene fingerprint from the scene message itself).
+pub fn peek_envelope(bytes: &[u8], run_id: &str) -> Result<Envelope, DecodeError> {
+    let (envelope, _): (Envelope, usize) =
+        bincode::serde::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Malformed {
+            part: "envelope",
+            detail: e.to_string(),
+        })?;
+    if envelope.schema_version != SCHEMA_VERSION {
+        return Err(DecodeError::SchemaVersion {
+            got: envelope.schema_version,
+            expected: SCHEMA_VERSION,
+        });
+    }
+    if envelope.run_id != run_id {
+        return Err(DecodeError::OtherRun {
+            got: envelope.run_id,
+            expected: run_id.to_string(),
+        });
+    }
+    Ok(envelope)
+}
+
 /// Decodes and checks a message: schema version, run, scene, trailing bytes, field sizes.
 pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError> {
     let (envelope, used): (Envelope, usize) =

@@ -3,6 +3,8 @@
 
 mod analytic;
 mod common;
+mod distributed;
 mod latin_perfect;
 mod monolithic;
 mod reference;
+mod stability;
