@@ -277,3 +277,66 @@ pub fn wait_for_nodes(
 pub fn scene_fingerprint_of(bytes: &[u8], run_id: &str) -> Result<u64, DecodeError> {
     glissade_messages::peek_envelope(bytes, run_id).map(|e| e.scene_fingerprint)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glissade_messages::{Envelope, Field, NodeId, Payload, Role, Stage, SCHEMA_VERSION};
+
+    /// A boundary state of several MB (about the size of one subdomain's field at N = 1000)
+    /// crosses the router between two client sessions intact, and decodes.
+    #[test]
+    fn multi_megabyte_message_arrives_intact() {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let router = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+        let a = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
+        let b = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
+        let (rows, cols) = (320, 1001);
+        let msg = Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: "mb".into(),
+                scene_fingerprint: 1,
+                iteration: 0,
+                stage: Stage::Linear,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index: 0,
+                },
+            },
+            payload: Payload::BoundaryState {
+                subdomain: 0,
+                w: Field::from_fn(rows, cols, |r, c| (r * cols + c) as f64 * 1e-3),
+                f: Field::from_fn(rows, cols, |r, c| -((r + c) as f64)),
+            },
+        };
+        let (tx, rx) = mpsc::channel::<Vec<u8>>();
+        let _sub = b
+            .declare_subscriber(msg.topic())
+            .callback(move |s| {
+                let _ = tx.send(s.payload().to_bytes().into_owned());
+            })
+            .wait()
+            .unwrap();
+        // Let the subscription reach the router before publishing (pub/sub is not durable).
+        std::thread::sleep(Duration::from_millis(500));
+        publish(&a, &msg).unwrap();
+        let bytes = rx.recv_timeout(Duration::from_secs(20)).expect("the message arrived");
+        assert!(bytes.len() > 5_000_000, "{} bytes", bytes.len());
+        let back = decode(
+            &bytes,
+            &Expected {
+                run_id: "mb".into(),
+                scene_fingerprint: 1,
+            },
+        )
+        .unwrap();
+        assert_eq!(back, msg);
+        drop(router);
+    }
+}
