@@ -5,6 +5,17 @@
 //! convergence within a tolerance on η and on the contact traction error against the
 //! reference, or a stop with a named diagnosis (max iterations, stagnation, divergence, a scene
 //! rejected at validation).
+//!
+//! A case may also carry a [`KnownIssue`]: what it does today instead, why, and the fix; it is
+//! then reported as a known issue, not as unexpected, until the fix makes it meet its
+//! expectation. Every case runs with η ≤ [`ETA_TOLERANCE`] (unless it states another) and at
+//! most [`MAX_ITERATIONS`] iterations; errors against the reference are those of LATIN's s
+//! ([`error_against_reference`]: relative space-time norms on contact interfaces). Panics are
+//! caught per case and reported as such; non-finite values are flagged per case.
+//!
+//! `glissade stability` runs the whole matrix (about 25 s in release on 2 cores, most of it
+//! steps-10000 and the thin layers); `--quick` leaves out the [`SLOW`] cases (about 13 s in the
+//! debug test profile) and is what `tests/it/stability.rs` runs.
 
 use crate::runner::{run_in_process, RunOptions, RunResult};
 use glissade_bus::convert::mat_of;
@@ -378,7 +389,7 @@ pub const ERROR_TOLERANCE: f64 = 1e-4;
 
 /// Cases left out of the `--quick` subset: the slowest (in the debug test profile: steps-10000
 /// 40 s, the thin layers 5 and 10 s; everything else together about 10 s).
-const SLOW: [&str; 3] = ["steps-10000", "thin-layers-1:100", "thin-layers-1:100-bending"];
+pub const SLOW: [&str; 3] = ["steps-10000", "thin-layers-1:100", "thin-layers-1:100-bending"];
 
 fn case(name: &'static str, varies: &str, b: &Base, expect: Expect) -> Case {
     let mut b = b.clone();
@@ -624,33 +635,27 @@ pub fn cases(quick: bool) -> Vec<Case> {
         conv.clone(),
     ));
 
-    let mut thin = case(
+    out.push(case(
         "thin-layers-1:100",
         "three 100 × 1 mm layers (aspect ratio 1:100), 50 × 1 QUA8 each, pressure and end tension",
         &thin_layers(0.0),
         conv.clone(),
+    ));
+    out.push(
+        case(
+            "thin-layers-1:100-bending",
+            "as thin-layers-1:100 plus an end shear of 10 N (bending of the 3 mm stack)",
+            &thin_layers(10.0),
+            conv.clone(),
+        )
+        .known(
+            "max_iterations",
+            "",
+            "a scalar k₀ cannot match a thin layer both across (E/h) and along (E·h/L²: 1e4 times \
+             softer here), and the coarse space (rigid + extension per interface) holds no bending: \
+             η is 7.5e-7 after 20 000 iterations, and k₀ × 0.1 to × 10 do not help",
+        ),
     );
-    // The reference needs up to 172 Newton iterations at the load reversals of this scene.
-    let thin_reference = ReferenceOptions {
-        max_newton_iterations: 200,
-        ..ReferenceOptions::default()
-    };
-    thin.reference = Some(thin_reference.clone());
-    out.push(thin);
-    let mut bending = case(
-        "thin-layers-1:100-bending",
-        "as thin-layers-1:100 plus an end shear of 10 N (bending of the 3 mm stack)",
-        &thin_layers(10.0),
-        conv.clone(),
-    )
-    .known(
-        "max_iterations",
-        "",
-        "a scalar k₀ cannot match a thin layer both across (E/h) and along (E·h/L²: 1e4 times \
-         softer here), and the coarse space (rigid + extension per interface) holds no bending",
-    );
-    bending.reference = Some(thin_reference);
-    out.push(bending);
 
     for c in &mut out {
         c.quick = !SLOW.contains(&c.name);
