@@ -195,8 +195,13 @@ impl IndicatorSums {
         ratio(self.eta_num, 0.5 * self.eta_den)
     }
 
-    /// e_F: relative distance between F and F̂ on contact interfaces.
+    /// e_F: relative distance between F and F̂ on contact interfaces. When ŝ has no contact
+    /// force anywhere (every point separated) there is nothing to be relative to: e_F is 0 and η
+    /// alone measures how far F is from 0.
     pub fn force_error(&self) -> f64 {
+        if self.force_den == 0.0 {
+            return 0.0;
+        }
         ratio(self.force_num, self.force_den)
     }
 
