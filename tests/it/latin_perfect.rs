@@ -86,25 +86,6 @@ fn perfect_interfaces_converge_to_glued_solution() {
     }
 }
 
-#[test]
-#[ignore]
-fn debug_history() {
-    for coarse in [false, true] {
-        let sc = scene(
-            &bar([2, 1], coarse)
-                .replace("max_iterations = 3000", "max_iterations = 30")
-                .replace("relaxation = 1.0", "relaxation = 0.8"),
-        );
-        let result = run(&sc);
-        let h: Vec<String> = result
-            .iterations
-            .iter()
-            .map(|r| format!("{:.2e}", r.decision.eta))
-            .collect();
-        println!("coarse {coarse}: {}", h.join(" "));
-    }
-}
-
 fn scalability_bar(n: usize, coarse: bool) -> String {
     format!(
         r#"
