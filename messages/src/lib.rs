@@ -407,10 +407,10 @@ pub fn encode(msg: &Message) -> Vec<u8> {
     out
 }
 
-/// Decodes only the envelope, checking the schema version and the run (for a receiver that
-/// learns the scene fingerprint from the scene message itself).
-pub fn peek_envelope(bytes: &[u8], run_id: &str) -> Result<Envelope, DecodeError> {
-    let (envelope, _): (Envelope, usize) =
+/// Decodes the envelope at the start of `bytes`, checking the schema version and the run;
+/// returns it with the number of bytes it used.
+fn decode_envelope(bytes: &[u8], run_id: &str) -> Result<(Envelope, usize), DecodeError> {
+    let (envelope, used): (Envelope, usize) =
         bincode::serde::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Malformed {
             part: "envelope",
             detail: e.to_string(),
@@ -427,28 +427,18 @@ pub fn peek_envelope(bytes: &[u8], run_id: &str) -> Result<Envelope, DecodeError
             expected: run_id.to_string(),
         });
     }
-    Ok(envelope)
+    Ok((envelope, used))
+}
+
+/// Decodes only the envelope, checking the schema version and the run (for a receiver that
+/// learns the scene fingerprint from the scene message itself).
+pub fn peek_envelope(bytes: &[u8], run_id: &str) -> Result<Envelope, DecodeError> {
+    decode_envelope(bytes, run_id).map(|(envelope, _)| envelope)
 }
 
 /// Decodes and checks a message: schema version, run, scene, trailing bytes, field sizes.
 pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError> {
-    let (envelope, used): (Envelope, usize) =
-        bincode::serde::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Malformed {
-            part: "envelope",
-            detail: e.to_string(),
-        })?;
-    if envelope.schema_version != SCHEMA_VERSION {
-        return Err(DecodeError::SchemaVersion {
-            got: envelope.schema_version,
-            expected: SCHEMA_VERSION,
-        });
-    }
-    if envelope.run_id != expected.run_id {
-        return Err(DecodeError::OtherRun {
-            got: envelope.run_id,
-            expected: expected.run_id.clone(),
-        });
-    }
+    let (envelope, used) = decode_envelope(bytes, &expected.run_id)?;
     if envelope.scene_fingerprint != expected.scene_fingerprint {
         return Err(DecodeError::OtherScene {
             got: envelope.scene_fingerprint,
