@@ -1,0 +1,392 @@
+//! Recordings of glissade runs (DESIGN §4, "recorder"): every message of a run written to an MCAP
+//! file, and read back.
+//!
+//! Layout of a recording `<scene>-<run id>.mcap`:
+//! - one **channel per key expression** (`glissade/<run>/<role>/<id>/<field>[/<destination>]`),
+//!   message encoding `bincode2`, channel metadata naming the codec and the wire schema version;
+//! - one **schema per payload type** (`glissade.BoundaryState`, …), encoding `bincode2`, whose
+//!   data is a text description of the envelope and payload layout with the schema version;
+//! - the payload bytes are exactly the bytes on the wire (envelope + payload, [`glissade_messages::encode`]);
+//! - a metadata record `glissade` (run id, scene name and fingerprint, software version, wire
+//!   schema version, what was recorded) and the scene file as an attachment `scene.toml`;
+//! - chunked; chunk compression none by default (solver fields are full-entropy f64: lz4 and zstd
+//!   shrink them by 0.1–5 % at a fraction of the write speed), lz4 or zstd on request;
+//! - a summary section (statistics, chunk, attachment and metadata indexes) written on
+//!   [`Recorder::finish`] or drop.
+//!
+//! Durability: the current chunk is closed and the file flushed at the end of every LATIN
+//! iteration (every `Decision` message) and whenever a chunk exceeds the chunk size, so a
+//! recorder killed by SIGKILL leaves a file whose chunks up to the last completed iteration are
+//! readable by [`Recording::open`] (which reports the file as unfinished).
+
+mod reader;
+mod schema;
+
+pub use reader::{ChannelInfo, RecordedMessage, Recording};
+pub use schema::{payload_schema, PAYLOAD_FIELDS};
+
+use glissade_messages::{peek_envelope, Stage, SCHEMA_VERSION};
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+/// Message encoding of every channel and encoding of every schema.
+pub const ENCODING: &str = "bincode2";
+/// Name of the metadata record describing the run.
+pub const METADATA_NAME: &str = "glissade";
+/// Name of the attachment holding the scene file.
+pub const SCENE_ATTACHMENT: &str = "scene.toml";
+/// Codec description written into channel metadata.
+pub const CODEC: &str =
+    "serde + bincode 2, standard config, little-endian, fixed-width integers; envelope then payload";
+
+/// Errors of recording and reading.
+#[derive(Debug, thiserror::Error)]
+pub enum RecorderError {
+    #[error("recording {path}: {detail}")]
+    Io { path: PathBuf, detail: String },
+    #[error("recording {path}: {detail}")]
+    Mcap { path: PathBuf, detail: String },
+    #[error("recording {path}: message on `{topic}`: {detail}")]
+    Message {
+        path: PathBuf,
+        topic: String,
+        detail: String,
+    },
+    #[error("recording {path}: {detail}")]
+    Format { path: PathBuf, detail: String },
+}
+
+/// Chunk compression.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ChunkCompression {
+    #[default]
+    None,
+    Lz4,
+    Zstd,
+}
+
+impl ChunkCompression {
+    fn mcap(self) -> Option<mcap::Compression> {
+        match self {
+            ChunkCompression::None => None,
+            ChunkCompression::Lz4 => Some(mcap::Compression::Lz4),
+            ChunkCompression::Zstd => Some(mcap::Compression::Zstd),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ChunkCompression::None => "none",
+            ChunkCompression::Lz4 => "lz4",
+            ChunkCompression::Zstd => "zstd",
+        }
+    }
+}
+
+impl std::str::FromStr for ChunkCompression {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "none" => Ok(Self::None),
+            "lz4" => Ok(Self::Lz4),
+            "zstd" => Ok(Self::Zstd),
+            _ => Err(format!("unknown chunk compression `{s}` (none, lz4 or zstd)")),
+        }
+    }
+}
+
+/// What a recording is of: written into its metadata and attachment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunInfo {
+    pub run_id: String,
+    pub scene_name: String,
+    pub scene_fingerprint: u64,
+    /// The scene file's text.
+    pub scene_text: String,
+    /// e.g. `glissade 0.1.0 (release)`.
+    pub software: String,
+}
+
+/// What to record and how.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecorderOptions {
+    /// Key-expression patterns relative to the run (`**`, `interface/*/decision`, …).
+    pub topics: Vec<String>,
+    /// Full fields (boundary states, local directions) only every k-th iteration (k ≥ 1).
+    pub full_fields_every: u32,
+    pub compression: ChunkCompression,
+    /// A chunk is closed once it holds this many bytes (and at every iteration's end).
+    pub chunk_size: u64,
+}
+
+impl Default for RecorderOptions {
+    fn default() -> Self {
+        Self {
+            topics: vec!["**".into()],
+            full_fields_every: 1,
+            compression: ChunkCompression::None,
+            chunk_size: 4 << 20,
+        }
+    }
+}
+
+/// What [`Recorder::record`] did with a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Recorded {
+    Written,
+    /// Not among the recorded topics.
+    NotSelected,
+    /// A full field of an iteration that `full_fields_every` leaves out.
+    Thinned,
+}
+
+/// Counts of a recording.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RecordingStats {
+    pub messages: u64,
+    pub payload_bytes: u64,
+    pub not_selected: u64,
+    pub thinned: u64,
+    pub channels: usize,
+    /// File size after finishing.
+    pub file_bytes: u64,
+}
+
+/// File name of a run's recording: `<scene>-<run id>.mcap`.
+pub fn recording_file_name(scene_name: &str, run_id: &str) -> String {
+    format!("{scene_name}-{run_id}.mcap")
+}
+
+/// Writes the messages of one run into an MCAP file.
+pub struct Recorder {
+    writer: Option<mcap::Writer<BufWriter<File>>>,
+    path: PathBuf,
+    run_id: String,
+    patterns: Vec<String>,
+    full_fields_every: u32,
+    schemas: HashMap<String, u16>,
+    channels: HashMap<String, u16>,
+    sequence: u32,
+    stats: RecordingStats,
+}
+
+fn now_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
+
+impl Recorder {
+    /// Creates the file (and its folder), writes the run's metadata and scene attachment and
+    /// flushes them. Any failure names the path.
+    pub fn create(path: &Path, run: &RunInfo, options: &RecorderOptions) -> Result<Self, RecorderError> {
+        let io = |detail: String| RecorderError::Io {
+            path: path.to_path_buf(),
+            detail,
+        };
+        if options.full_fields_every == 0 {
+            return Err(io("full_fields_every must be ≥ 1".into()));
+        }
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| io(format!("cannot create folder {}: {e}", dir.display())))?;
+        }
+        let file = File::create(path).map_err(|e| io(format!("cannot create the file: {e}")))?;
+        let mcap_err = |e: mcap::McapError| RecorderError::Mcap {
+            path: path.to_path_buf(),
+            detail: e.to_string(),
+        };
+        let mut writer = mcap::WriteOptions::new()
+            .profile("glissade")
+            .library(run.software.clone())
+            .compression(options.compression.mcap())
+            .chunk_size(Some(options.chunk_size))
+            .create(BufWriter::with_capacity(1 << 20, file))
+            .map_err(mcap_err)?;
+        let mut metadata = BTreeMap::new();
+        metadata.insert("run_id".to_string(), run.run_id.clone());
+        metadata.insert("scene".to_string(), run.scene_name.clone());
+        metadata.insert(
+            "scene_fingerprint".to_string(),
+            format!("{:016x}", run.scene_fingerprint),
+        );
+        metadata.insert("software".to_string(), run.software.clone());
+        metadata.insert("schema_version".to_string(), SCHEMA_VERSION.to_string());
+        metadata.insert("codec".to_string(), CODEC.to_string());
+        metadata.insert("topics".to_string(), options.topics.join(", "));
+        metadata.insert("full_fields_every".to_string(), options.full_fields_every.to_string());
+        metadata.insert("chunk_compression".to_string(), options.compression.name().to_string());
+        writer
+            .write_metadata(&mcap::records::Metadata {
+                name: METADATA_NAME.to_string(),
+                metadata,
+            })
+            .map_err(mcap_err)?;
+        let t = now_ns();
+        writer
+            .attach(&mcap::Attachment {
+                log_time: t,
+                create_time: t,
+                name: SCENE_ATTACHMENT.to_string(),
+                media_type: "application/toml".to_string(),
+                data: std::borrow::Cow::Borrowed(run.scene_text.as_bytes()),
+            })
+            .map_err(mcap_err)?;
+        writer.flush().map_err(mcap_err)?;
+        Ok(Self {
+            writer: Some(writer),
+            path: path.to_path_buf(),
+            run_id: run.run_id.clone(),
+            patterns: options
+                .topics
+                .iter()
+                .map(|p| format!("glissade/{}/{p}", run.run_id))
+                .collect(),
+            full_fields_every: options.full_fields_every,
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            sequence: 0,
+            stats: RecordingStats::default(),
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn stats(&self) -> &RecordingStats {
+        &self.stats
+    }
+
+    fn mcap_err(&self, e: mcap::McapError) -> RecorderError {
+        RecorderError::Mcap {
+            path: self.path.clone(),
+            detail: e.to_string(),
+        }
+    }
+
+    /// Records the wire bytes `bytes` of a message published on `topic`, logged at `log_time_ns`
+    /// (ns since the Unix epoch). The bytes must be a message of this run (its envelope is
+    /// checked); a message of another run or of another schema version is an error.
+    pub fn record(&mut self, topic: &str, log_time_ns: u64, bytes: &[u8]) -> Result<Recorded, RecorderError> {
+        let msg_err = |detail: String| RecorderError::Message {
+            path: self.path.clone(),
+            topic: topic.to_string(),
+            detail,
+        };
+        if !self.patterns.iter().any(|p| glissade_messages::key_matches(p, topic)) {
+            self.stats.not_selected += 1;
+            return Ok(Recorded::NotSelected);
+        }
+        let envelope = peek_envelope(bytes, &self.run_id).map_err(|e| msg_err(e.to_string()))?;
+        // glissade/<run>/<role>/<id>/<field>[/<destination>]
+        let Some(field) = topic.split('/').nth(4) else {
+            return Err(msg_err(
+                "not a message key expression (glissade/<run>/<role>/<id>/<field>)".into(),
+            ));
+        };
+        if self.full_fields_every > 1
+            && matches!(field, "boundary_state" | "local_directions")
+            && envelope.stage != Stage::Final
+            && envelope.iteration % self.full_fields_every != 0
+        {
+            self.stats.thinned += 1;
+            return Ok(Recorded::Thinned);
+        }
+        let channel = match self.channels.get(topic) {
+            Some(&c) => c,
+            None => {
+                let writer = self.writer.as_mut().expect("recorder used after finish");
+                let (schema_name, text) = payload_schema(field);
+                let schema = match self.schemas.get(&schema_name) {
+                    Some(&s) => s,
+                    None => {
+                        let s = writer
+                            .add_schema(&schema_name, ENCODING, text.as_bytes())
+                            .map_err(|e| RecorderError::Mcap {
+                                path: self.path.clone(),
+                                detail: e.to_string(),
+                            })?;
+                        self.schemas.insert(schema_name, s);
+                        s
+                    }
+                };
+                let mut meta = BTreeMap::new();
+                meta.insert("schema_version".to_string(), SCHEMA_VERSION.to_string());
+                meta.insert("codec".to_string(), CODEC.to_string());
+                let c = writer
+                    .add_channel(schema, topic, ENCODING, &meta)
+                    .map_err(|e| RecorderError::Mcap {
+                        path: self.path.clone(),
+                        detail: e.to_string(),
+                    })?;
+                self.channels.insert(topic.to_string(), c);
+                self.stats.channels = self.channels.len();
+                c
+            }
+        };
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: self.sequence,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+        };
+        self.sequence = self.sequence.wrapping_add(1);
+        let writer = self.writer.as_mut().expect("recorder used after finish");
+        let written = writer.write_to_known_channel(&header, bytes);
+        written.map_err(|e| self.mcap_err(e))?;
+        self.stats.messages += 1;
+        self.stats.payload_bytes += bytes.len() as u64;
+        if field == "decision" {
+            // End of an iteration: make everything so far durable.
+            self.flush()?;
+        }
+        Ok(Recorded::Written)
+    }
+
+    /// Closes the current chunk and flushes the file.
+    pub fn flush(&mut self) -> Result<(), RecorderError> {
+        let writer = self.writer.as_mut().expect("recorder used after finish");
+        let r = writer.flush();
+        r.map_err(|e| self.mcap_err(e))
+    }
+
+    /// Writes the summary section and closes the file.
+    pub fn finish(mut self) -> Result<RecordingStats, RecorderError> {
+        self.finish_inner()?;
+        Ok(self.stats.clone())
+    }
+
+    fn finish_inner(&mut self) -> Result<(), RecorderError> {
+        if let Some(mut writer) = self.writer.take() {
+            writer.finish().map_err(|e| self.mcap_err(e))?;
+            let mut inner = writer.into_inner();
+            std::io::Write::flush(&mut inner).map_err(|e| RecorderError::Io {
+                path: self.path.clone(),
+                detail: e.to_string(),
+            })?;
+            self.stats.file_bytes = inner.get_ref().metadata().map(|m| m.len()).unwrap_or(0);
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Recorder {
+    /// Finalises the file (summary section) when a run ends without [`Recorder::finish`], e.g.
+    /// on an error path; a failure here can only be reported on stderr.
+    fn drop(&mut self) {
+        if let Err(e) = self.finish_inner() {
+            eprintln!("error: {e}");
+        }
+    }
+}
+
+/// Nanoseconds since the Unix epoch, the log time of recorded messages.
+pub fn log_time_now() -> u64 {
+    now_ns()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,207 @@
+//! Reading recordings back: channels, metadata, the scene, and the messages in file order.
+
+use crate::{RecorderError, METADATA_NAME, SCENE_ATTACHMENT};
+use glissade_messages::{decode, DecodeError, Expected, Message};
+use mcap::read::{ChunkFlattener, Options};
+use mcap::records::Record;
+use std::borrow::Cow;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// One channel of a recording.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelInfo {
+    pub id: u16,
+    pub topic: String,
+    pub schema_name: String,
+    pub schema_encoding: String,
+    pub message_encoding: String,
+    pub metadata: BTreeMap<String, String>,
+    /// Messages of this channel found in the file.
+    pub messages: u64,
+}
+
+/// One recorded message: its channel's topic, its log time and its wire bytes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordedMessage<'a> {
+    pub topic: &'a str,
+    pub channel: u16,
+    pub sequence: u32,
+    /// ns since the Unix epoch.
+    pub log_time: u64,
+    pub data: Cow<'a, [u8]>,
+}
+
+/// A recording loaded in memory and indexed in one pass.
+pub struct Recording {
+    path: PathBuf,
+    bytes: Vec<u8>,
+    channels: Vec<ChannelInfo>,
+    metadata: BTreeMap<String, String>,
+    scene_text: Option<String>,
+    /// The file ends with a summary and the closing magic.
+    finished: bool,
+    /// Why reading stopped before the data end (a file cut short, e.g. by a killed recorder).
+    truncated: Option<String>,
+    expected: Expected,
+}
+
+impl Recording {
+    /// Reads and indexes a recording. A file cut short (recorder killed) is accepted: everything
+    /// up to the last complete record is available and [`Recording::truncated`] says where
+    /// reading stopped.
+    pub fn open(path: &Path) -> Result<Self, RecorderError> {
+        let bytes = std::fs::read(path).map_err(|e| RecorderError::Io {
+            path: path.to_path_buf(),
+            detail: format!("cannot read: {e}"),
+        })?;
+        Self::from_bytes(path, bytes)
+    }
+
+    /// As [`Recording::open`], from bytes already read (`path` names them in errors).
+    pub fn from_bytes(path: &Path, bytes: Vec<u8>) -> Result<Self, RecorderError> {
+        let format = |detail: String| RecorderError::Format {
+            path: path.to_path_buf(),
+            detail,
+        };
+        let finished = mcap::read::footer(&bytes).is_ok();
+        let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
+        let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
+        let mut metadata = BTreeMap::new();
+        let mut scene_text = None;
+        let mut truncated = None;
+        let records = ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic.into())
+            .map_err(|e| format(format!("not an MCAP file: {e}")))?;
+        for record in records {
+            let record = match record {
+                Ok(r) => r,
+                Err(e) => {
+                    if bytes.len() < 8 || !bytes.starts_with(mcap::MAGIC) {
+                        return Err(format(format!("not an MCAP file: {e}")));
+                    }
+                    truncated = Some(e.to_string());
+                    break;
+                }
+            };
+            match record {
+                Record::Schema { header, .. } => {
+                    schemas.insert(header.id, (header.name, header.encoding));
+                }
+                Record::Channel(c) => {
+                    let (schema_name, schema_encoding) = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                    channels.entry(c.id).or_insert(ChannelInfo {
+                        id: c.id,
+                        topic: c.topic,
+                        schema_name,
+                        schema_encoding,
+                        message_encoding: c.message_encoding,
+                        metadata: c.metadata,
+                        messages: 0,
+                    });
+                }
+                Record::Message { header, .. } => match channels.get_mut(&header.channel_id) {
+                    Some(c) => c.messages += 1,
+                    None => return Err(format(format!("message on unknown channel {}", header.channel_id))),
+                },
+                Record::Metadata(m) if m.name == METADATA_NAME => metadata = m.metadata,
+                Record::Attachment { header, data, .. } if header.name == SCENE_ATTACHMENT => {
+                    scene_text = Some(
+                        String::from_utf8(data.into_owned())
+                            .map_err(|_| format("the scene attachment is not UTF-8".into()))?,
+                    );
+                }
+                Record::DataEnd(_) => break,
+                _ => {}
+            }
+        }
+        if metadata.is_empty() {
+            return Err(format(format!(
+                "no `{METADATA_NAME}` metadata record: not a glissade recording"
+            )));
+        }
+        let fingerprint = metadata
+            .get("scene_fingerprint")
+            .and_then(|s| u64::from_str_radix(s, 16).ok())
+            .ok_or_else(|| format("metadata: missing or malformed scene_fingerprint".into()))?;
+        let run_id = metadata
+            .get("run_id")
+            .cloned()
+            .ok_or_else(|| format("metadata: missing run_id".into()))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            bytes,
+            channels: channels.into_values().collect(),
+            metadata,
+            scene_text,
+            finished,
+            truncated,
+            expected: Expected {
+                run_id,
+                scene_fingerprint: fingerprint,
+            },
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Channels in id order, with their message counts.
+    pub fn channels(&self) -> &[ChannelInfo] {
+        &self.channels
+    }
+
+    /// The `glissade` metadata record (run_id, scene, scene_fingerprint, software, schema_version, …).
+    pub fn metadata(&self) -> &BTreeMap<String, String> {
+        &self.metadata
+    }
+
+    pub fn run_id(&self) -> &str {
+        &self.expected.run_id
+    }
+
+    pub fn scene_fingerprint(&self) -> u64 {
+        self.expected.scene_fingerprint
+    }
+
+    /// The scene file recorded with the run.
+    pub fn scene_text(&self) -> Option<&str> {
+        self.scene_text.as_deref()
+    }
+
+    /// The file was finalised (summary section and closing magic present).
+    pub fn is_finished(&self) -> bool {
+        self.finished
+    }
+
+    /// Why reading stopped early, for a file cut short.
+    pub fn truncated(&self) -> Option<&str> {
+        self.truncated.as_deref()
+    }
+
+    /// Every message in file order (up to the point where a cut-short file stops).
+    pub fn messages(&self) -> impl Iterator<Item = RecordedMessage<'_>> + '_ {
+        let topics: BTreeMap<u16, &str> = self.channels.iter().map(|c| (c.id, c.topic.as_str())).collect();
+        ChunkFlattener::new_with_options(&self.bytes, Options::IgnoreEndMagic.into())
+            .into_iter()
+            .flatten()
+            .map_while(Result::ok)
+            .take_while(|r| !matches!(r, Record::DataEnd(_)))
+            .filter_map(move |r| match r {
+                Record::Message { header, data } => Some(RecordedMessage {
+                    topic: topics.get(&header.channel_id).copied().unwrap_or(""),
+                    channel: header.channel_id,
+                    sequence: header.sequence,
+                    log_time: header.log_time,
+                    data,
+                }),
+                _ => None,
+            })
+    }
+
+    /// Decodes a recorded message with the checks of the wire codec (this recording's run and
+    /// scene, schema version, sizes).
+    pub fn decode(&self, m: &RecordedMessage<'_>) -> Result<Message, DecodeError> {
+        decode(&m.data, &self.expected)
+    }
+}

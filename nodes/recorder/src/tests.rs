@@ -1,0 +1,321 @@
+use super::*;
+use glissade_messages::{encode, Decision, Envelope, Field, Message, NodeId, Payload, Role, Verdict};
+use std::io::BufRead;
+
+const RUN: &str = "r1";
+
+fn run_info() -> RunInfo {
+    RunInfo {
+        run_id: RUN.into(),
+        scene_name: "tiny".into(),
+        scene_fingerprint: 0xabcd,
+        scene_text: "name = \"tiny\"\n# a scene\n".into(),
+        software: "glissade test".into(),
+    }
+}
+
+fn msg(iteration: u32, stage: Stage, sender: NodeId, payload: Payload) -> Message {
+    Message {
+        envelope: Envelope {
+            schema_version: SCHEMA_VERSION,
+            run_id: RUN.into(),
+            scene_fingerprint: 0xabcd,
+            iteration,
+            stage,
+            sender,
+        },
+        payload,
+    }
+}
+
+fn sub(i: u32) -> NodeId {
+    NodeId {
+        role: Role::Subdomain,
+        index: i,
+    }
+}
+
+const INTERFACE: NodeId = NodeId {
+    role: Role::Interface,
+    index: 0,
+};
+
+/// The messages of one iteration of a two-subdomain run, with values depending on `n`.
+fn iteration(n: u32) -> Vec<Message> {
+    let mut out = Vec::new();
+    for s in 0..2 {
+        out.push(msg(
+            n,
+            Stage::Linear,
+            sub(s),
+            Payload::BoundaryState {
+                subdomain: s,
+                w: Field::from_fn(6, 3, |r, c| {
+                    (n * 100 + s * 10) as f64 + r as f64 * 0.1 + c as f64 * 1e-3
+                }),
+                f: Field::from_fn(6, 3, |r, c| -(r as f64) * std::f64::consts::PI + c as f64 + n as f64),
+            },
+        ));
+        out.push(msg(
+            n + 1,
+            Stage::Local,
+            INTERFACE,
+            Payload::LocalDirections {
+                subdomain: s,
+                q_hat: Field::from_fn(6, 3, |r, c| (r * c) as f64 / (n + 1) as f64),
+            },
+        ));
+    }
+    out.push(msg(
+        n,
+        Stage::Local,
+        INTERFACE,
+        Payload::Decision(Decision {
+            eta: 1.0 / (n + 1) as f64,
+            contact_indicator: 0.5 / (n + 1) as f64,
+            force_error: 0.0,
+            jump_error: 0.0,
+            counts: [1, 2, 3],
+            status_changes: n as u64,
+            direction_updates: vec![],
+            verdict: Verdict::Continue,
+        }),
+    ));
+    out
+}
+
+fn record_all(rec: &mut Recorder, msgs: &[Message]) {
+    for (k, m) in msgs.iter().enumerate() {
+        rec.record(&m.topic(), 1_000 + k as u64, &encode(m)).unwrap();
+    }
+}
+
+#[test]
+fn recording_reads_back_with_channels_schemas_metadata_and_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sub/tiny-r1.mcap");
+    let msgs: Vec<Message> = (0..3).flat_map(iteration).collect();
+    let mut rec = Recorder::create(&path, &run_info(), &RecorderOptions::default()).unwrap();
+    record_all(&mut rec, &msgs);
+    let stats = rec.finish().unwrap();
+    assert_eq!(stats.messages, msgs.len() as u64);
+    assert_eq!(stats.channels, 5);
+    assert_eq!(stats.file_bytes, std::fs::metadata(&path).unwrap().len());
+
+    let r = Recording::open(&path).unwrap();
+    assert!(r.is_finished() && r.truncated().is_none());
+    assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
+    assert_eq!(r.metadata()["run_id"], RUN);
+    assert_eq!(r.metadata()["schema_version"], SCHEMA_VERSION.to_string());
+    assert_eq!(r.scene_fingerprint(), 0xabcd);
+    let topics: Vec<&str> = r.channels().iter().map(|c| c.topic.as_str()).collect();
+    assert_eq!(
+        topics,
+        [
+            "glissade/r1/subdomain/0/boundary_state",
+            "glissade/r1/interface/0/local_directions/0",
+            "glissade/r1/subdomain/1/boundary_state",
+            "glissade/r1/interface/0/local_directions/1",
+            "glissade/r1/interface/0/decision",
+        ]
+    );
+    for c in r.channels() {
+        assert_eq!(c.messages, 3, "{}", c.topic);
+        assert_eq!(
+            (c.message_encoding.as_str(), c.schema_encoding.as_str()),
+            (ENCODING, ENCODING)
+        );
+        assert_eq!(c.metadata["schema_version"], SCHEMA_VERSION.to_string());
+    }
+    assert_eq!(r.channels()[0].schema_name, "glissade.BoundaryState");
+    assert_eq!(r.channels()[4].schema_name, "glissade.Decision");
+    // Same bytes, same order, same log times; decoding gives the messages back.
+    let back: Vec<_> = r.messages().collect();
+    assert_eq!(back.len(), msgs.len());
+    for (k, (b, m)) in back.iter().zip(&msgs).enumerate() {
+        assert_eq!(b.topic, m.topic());
+        assert_eq!(b.log_time, 1_000 + k as u64);
+        assert_eq!(&*b.data, encode(m).as_slice());
+        assert_eq!(&r.decode(b).unwrap(), m);
+    }
+    // The summary section: statistics and indexes.
+    let bytes = std::fs::read(&path).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary section");
+    assert_eq!(summary.stats.unwrap().message_count, msgs.len() as u64);
+    assert_eq!(summary.channels.len(), 5);
+    assert_eq!(summary.schemas.len(), 3);
+    assert_eq!(summary.attachment_indexes.len(), 1);
+    assert_eq!(summary.metadata_indexes.len(), 1);
+    // One chunk per iteration at least (closed at every decision).
+    assert!(summary.chunk_indexes.len() >= 3, "{}", summary.chunk_indexes.len());
+}
+
+#[test]
+fn compressed_recordings_read_back() {
+    for compression in [ChunkCompression::Lz4, ChunkCompression::Zstd] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.mcap");
+        let msgs: Vec<Message> = (0..2).flat_map(iteration).collect();
+        let opts = RecorderOptions {
+            compression,
+            ..RecorderOptions::default()
+        };
+        let mut rec = Recorder::create(&path, &run_info(), &opts).unwrap();
+        record_all(&mut rec, &msgs);
+        rec.finish().unwrap();
+        let r = Recording::open(&path).unwrap();
+        assert_eq!(r.metadata()["chunk_compression"], compression.name());
+        let back: Vec<Vec<u8>> = r.messages().map(|m| m.data.into_owned()).collect();
+        assert_eq!(back, msgs.iter().map(encode).collect::<Vec<_>>());
+    }
+}
+
+#[test]
+fn topic_selection_and_thinning() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sel.mcap");
+    let msgs: Vec<Message> = (0..4).flat_map(iteration).collect();
+    let opts = RecorderOptions {
+        topics: vec!["interface/*/decision".into(), "subdomain/**".into()],
+        full_fields_every: 2,
+        ..RecorderOptions::default()
+    };
+    let mut rec = Recorder::create(&path, &run_info(), &opts).unwrap();
+    let mut outcomes = Vec::new();
+    for m in &msgs {
+        outcomes.push(rec.record(&m.topic(), 0, &encode(m)).unwrap());
+    }
+    let stats = rec.finish().unwrap();
+    // Per iteration: 2 boundary states (kept at even iterations), 2 local directions (not
+    // selected), 1 decision.
+    assert_eq!(stats.not_selected, 8);
+    assert_eq!(stats.thinned, 4);
+    assert_eq!(stats.messages, 4 + 4);
+    assert_eq!(outcomes.iter().filter(|o| **o == Recorded::Written).count(), 8);
+    let r = Recording::open(&path).unwrap();
+    let its: Vec<u32> = r
+        .messages()
+        .filter(|m| m.topic.ends_with("boundary_state"))
+        .map(|m| r.decode(&m).unwrap().envelope.iteration)
+        .collect();
+    assert_eq!(its, [0, 0, 2, 2]);
+}
+
+#[test]
+fn bad_messages_and_unwritable_paths_are_errors_naming_the_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let blocker = dir.path().join("file");
+    std::fs::write(&blocker, b"x").unwrap();
+    let path = blocker.join("r.mcap");
+    let e = Recorder::create(&path, &run_info(), &RecorderOptions::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains(&path.display().to_string()), "{e}");
+
+    let path = dir.path().join("ok.mcap");
+    let mut rec = Recorder::create(&path, &run_info(), &RecorderOptions::default()).unwrap();
+    let mut other = iteration(0).remove(0);
+    other.envelope.run_id = "r2".into();
+    let e = rec
+        .record("glissade/r1/subdomain/0/boundary_state", 0, &encode(&other))
+        .unwrap_err();
+    assert!(e.to_string().contains("message of run `r2`"), "{e}");
+    let m = &iteration(0)[0];
+    let e = rec.record("glissade/r1/subdomain/0", 0, &encode(m)).unwrap_err();
+    assert!(e.to_string().contains("not a message key expression"), "{e}");
+}
+
+/// A file cut at any length reads back as a prefix of what was recorded: never an error, never a
+/// wrong message, and complete up to the last flushed chunk.
+#[test]
+fn cut_short_files_read_back_as_a_prefix() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cut.mcap");
+    let msgs: Vec<Message> = (0..4).flat_map(iteration).collect();
+    let mut rec = Recorder::create(&path, &run_info(), &RecorderOptions::default()).unwrap();
+    record_all(&mut rec, &msgs);
+    rec.finish().unwrap();
+    let full = std::fs::read(&path).unwrap();
+    let wire: Vec<Vec<u8>> = msgs.iter().map(encode).collect();
+    let mut last_count = 0;
+    let mut opened = false;
+    for cut in (40..full.len()).step_by(37) {
+        // Cut within the metadata or scene attachment written first: not yet a recording.
+        let r = match Recording::from_bytes(&path, full[..cut].to_vec()) {
+            Ok(r) => r,
+            Err(e) => {
+                assert!(!opened && cut < 600, "cut at {cut}: {e}");
+                assert!(e.to_string().contains("no `glissade` metadata record"), "{e}");
+                continue;
+            }
+        };
+        opened = true;
+        assert!(!r.is_finished());
+        let back: Vec<Vec<u8>> = r.messages().map(|m| m.data.into_owned()).collect();
+        assert!(back.len() <= wire.len());
+        assert_eq!(back[..], wire[..back.len()], "cut at {cut}");
+        assert!(back.len() >= last_count, "a longer prefix never reads fewer messages");
+        last_count = back.len();
+    }
+    assert_eq!(last_count, wire.len());
+}
+
+/// Helper process of [`survives_sigkill`]: records iterations forever, printing the number of
+/// each iteration once its decision (and so its chunk) is flushed.
+#[test]
+#[ignore = "helper process of survives_sigkill"]
+fn sigkill_helper() {
+    let Ok(path) = std::env::var("GLISSADE_RECORDER_SIGKILL_FILE") else {
+        return;
+    };
+    let mut rec = Recorder::create(Path::new(&path), &run_info(), &RecorderOptions::default()).unwrap();
+    for n in 0.. {
+        record_all(&mut rec, &iteration(n));
+        println!("flushed {n}");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
+/// A recorder killed with SIGKILL mid-run leaves a file whose every flushed chunk reads back:
+/// every message of every iteration reported flushed before the kill.
+#[test]
+fn survives_sigkill() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("killed.mcap");
+    let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([
+            "--exact",
+            "tests::sigkill_helper",
+            "--ignored",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .env("GLISSADE_RECORDER_SIGKILL_FILE", &path)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    let mut flushed = None;
+    while let Some(Ok(line)) = lines.next() {
+        if let Some(n) = line.strip_prefix("flushed ") {
+            flushed = Some(n.trim().parse::<u32>().unwrap());
+            if flushed >= Some(20) || std::time::Instant::now() > deadline {
+                break;
+            }
+        }
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let flushed = flushed.expect("the helper reported flushed iterations");
+    assert!(flushed >= 20, "the helper stopped early at iteration {flushed}");
+    let r = Recording::open(&path).unwrap();
+    assert!(!r.is_finished());
+    let back: Vec<Vec<u8>> = r.messages().map(|m| m.data.into_owned()).collect();
+    let expected: Vec<Vec<u8>> = (0..=flushed).flat_map(iteration).map(|m| encode(&m)).collect();
+    assert!(back.len() >= expected.len(), "{} < {}", back.len(), expected.len());
+    assert_eq!(back[..expected.len()], expected[..]);
+    assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
+}
