@@ -6,7 +6,7 @@ use crate::model::{Material, Plane};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{SparseColMat, Triplet};
-use faer::{Mat, Side};
+use faer::{Mat, MatMut, Side};
 
 /// Errors of assembly and factorisation.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -91,6 +91,11 @@ impl SparseSpd {
     /// Solves in place for every column of `rhs` (n × k).
     pub fn solve_in_place(&self, rhs: &mut Mat<f64>) {
         self.llt.solve_in_place(rhs.as_mut());
+    }
+
+    /// Solves in place for every column of a view (n × k).
+    pub fn solve_view_in_place(&self, rhs: MatMut<'_, f64>) {
+        self.llt.solve_in_place(rhs);
     }
 
     /// Solves for one right-hand side, in place.

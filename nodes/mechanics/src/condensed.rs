@@ -7,7 +7,8 @@
 
 use crate::assembly::{stiffness_triplets, triplet_matvec, AssemblyError, SparseSpd};
 use crate::model::{Model, Plane, Side, Subdomain};
-use faer::Mat;
+use faer::reborrow::ReborrowMut;
+use faer::{Mat, MatMut, MatRef};
 
 /// Where each boundary entry of a subdomain lives. The boundary vector stacks, interface by
 /// interface (in the model's interface order), the x and y traces of that interface's node copies
@@ -89,6 +90,17 @@ pub struct CondensedOperator {
 impl CondensedOperator {
     /// Assembles K_E + Bᵀ k⁻ M B on the free dofs, factorises it, and builds A_E and the load responses.
     pub fn new(sub: &Subdomain, plane: Plane, layout: BoundaryLayout) -> Result<Self, AssemblyError> {
+        Self::with_dense(sub, plane, layout, true)
+    }
+
+    /// As [`CondensedOperator::new`]; with `dense` false A_E is not built (`a` is 0 × 0) and
+    /// boundary responses come from the sparse factors ([`CondensedOperator::sparse_response_into`]).
+    pub fn with_dense(
+        sub: &Subdomain,
+        plane: Plane,
+        layout: BoundaryLayout,
+        dense: bool,
+    ) -> Result<Self, AssemblyError> {
         let n_dofs = sub.n_dofs();
         let k_full = stiffness_triplets(&sub.mesh, sub.material, plane)?;
         let mut free = vec![usize::MAX; n_dofs];
@@ -121,12 +133,14 @@ impl CondensedOperator {
                 unique.push(d);
             }
         }
-        let mut x = Mat::<f64>::zeros(n_free, unique.len());
-        for (c, &d) in unique.iter().enumerate() {
+        let n_cols = if dense { unique.len() } else { 0 };
+        let mut x = Mat::<f64>::zeros(n_free, n_cols);
+        for (c, &d) in unique.iter().take(n_cols).enumerate() {
             x[(free[d], c)] = 1.0;
         }
         factor.solve_in_place(&mut x);
-        let a = Mat::from_fn(n_b, n_b, |r, c| {
+        let n_a = if dense { n_b } else { 0 };
+        let a = Mat::from_fn(n_a, n_a, |r, c| {
             let (dr, dc) = (layout.dofs[r], layout.dofs[c]);
             if free[dr] == usize::MAX || free[dc] == usize::MAX {
                 0.0
@@ -173,6 +187,37 @@ impl CondensedOperator {
 
     pub fn n_dofs(&self) -> usize {
         self.n_dofs
+    }
+
+    /// Number of free dofs (the order of K_E + Bᵀk⁻MB).
+    pub fn n_free(&self) -> usize {
+        self.factor.n()
+    }
+
+    /// w = B (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q (= A_E M q) for every column of q (n_b × m, N/mm²), by one
+    /// multi-right-hand-side solve with the sparse factors; `rhs` is caller-owned scratch of at
+    /// least n_free × m. Constrained boundary entries get 0 (as A_E's zero rows).
+    pub fn sparse_response_into(&self, q: MatRef<'_, f64>, rhs: MatMut<'_, f64>, mut w: MatMut<'_, f64>) {
+        let m = q.ncols();
+        let mut rhs = rhs.subcols_mut(0, m);
+        rhs.fill(0.0);
+        for j in 0..m {
+            for (b, &d) in self.layout.dofs.iter().enumerate() {
+                if self.free[d] != usize::MAX {
+                    rhs[(self.free[d], j)] += self.layout.mass[b] * q[(b, j)];
+                }
+            }
+        }
+        self.factor.solve_view_in_place(rhs.rb_mut());
+        for j in 0..m {
+            for (b, &d) in self.layout.dofs.iter().enumerate() {
+                w[(b, j)] = if self.free[d] == usize::MAX {
+                    0.0
+                } else {
+                    rhs[(self.free[d], j)]
+                };
+            }
+        }
     }
 
     /// Full displacement field u = Σ_j φ_j u_j + (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q for a boundary

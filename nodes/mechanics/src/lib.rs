@@ -15,5 +15,6 @@ pub mod local;
 pub mod mesh;
 pub mod model;
 pub mod monolithic;
+pub mod pgd;
 pub mod reference;
 pub mod scene;

@@ -88,16 +88,34 @@ pub struct SubdomainSolver {
     /// L_E (n_m × n_m, N/mm).
     pub l_e: Mat<f64>,
     pub macro_slots: Vec<MacroSlot>,
+    /// Whether A_E is built (condensed linear stage); without it, boundary responses come from
+    /// the sparse factors of K_E + Bᵀk⁻MB (the paper's baseline linear stage).
+    dense: bool,
     /// Scratch M q (n_b × (N+1)), allocated once.
     scratch: Mat<f64>,
+    /// Scratch right-hand sides of the sparse solves (n_free × (N+1); 0 × 0 when dense).
+    sparse_rhs: Mat<f64>,
 }
 
 impl SubdomainSolver {
     /// Builds A_E, W_d, 𝔼, A_E M k⁻ 𝔼 and L_E for subdomain `s`. `bases[i]` is the macro basis of interface i.
     pub fn new(model: &Model, s: usize, k_interface: &[f64], bases: &[Vec<Vec<f64>>]) -> Result<Self, AssemblyError> {
+        Self::with_dense(model, s, k_interface, bases, true)
+    }
+
+    /// As [`SubdomainSolver::new`]; with `dense` false A_E is not built and every boundary
+    /// response (micro problems 1 and 2, A_E M k⁻ 𝔼 for L_E) is one multi-right-hand-side solve
+    /// with the sparse factors: the same numbers to round-off, at the cost of the sparse solves.
+    pub fn with_dense(
+        model: &Model,
+        s: usize,
+        k_interface: &[f64],
+        bases: &[Vec<Vec<f64>>],
+        dense: bool,
+    ) -> Result<Self, AssemblyError> {
         let sub = &model.subdomains[s];
         let layout = BoundaryLayout::new(model, s, k_interface);
-        let op = CondensedOperator::new(sub, model.plane, layout)?;
+        let op = CondensedOperator::with_dense(sub, model.plane, layout, dense)?;
         let layout = &op.layout;
         let n_b = layout.len();
         let nt = model.time.n_points();
@@ -134,14 +152,21 @@ impl SubdomainSolver {
         }
         let mk_e = Mat::from_fn(n_b, n_m, |r, c| layout.mass[r] * layout.k[r] * e[(r, c)]);
         let mut a_mk_e = Mat::<f64>::zeros(n_b, n_m);
-        matmul(
-            a_mk_e.as_mut(),
-            Accum::Replace,
-            op.a.as_ref(),
-            mk_e.as_ref(),
-            1.0,
-            Par::Seq,
-        );
+        let width = nt.max(n_m).max(1);
+        let mut sparse_rhs = Mat::<f64>::zeros(if dense { 0 } else { op.n_free() }, if dense { 0 } else { width });
+        if dense {
+            matmul(
+                a_mk_e.as_mut(),
+                Accum::Replace,
+                op.a.as_ref(),
+                mk_e.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+        } else {
+            let k_e = Mat::from_fn(n_b, n_m, |r, c| layout.k[r] * e[(r, c)]);
+            op.sparse_response_into(k_e.as_ref(), sparse_rhs.as_mut(), a_mk_e.as_mut());
+        }
         let mut l_e = Mat::<f64>::zeros(n_m, n_m);
         matmul(
             l_e.as_mut(),
@@ -175,8 +200,51 @@ impl SubdomainSolver {
             a_mk_e,
             l_e,
             macro_slots,
-            scratch: Mat::zeros(n_b, nt),
+            dense,
+            scratch: Mat::zeros(n_b, width),
+            sparse_rhs,
         })
+    }
+
+    /// Whether the linear stage uses the dense A_E (else the sparse factors).
+    pub fn is_dense(&self) -> bool {
+        self.dense
+    }
+
+    /// out = A_E M q for every column of q (n_b × m, m ≤ N+1): a dense product with A_E, or one
+    /// multi-right-hand-side sparse solve when A_E is not built. No load term.
+    pub fn boundary_response_into(&mut self, q: MatRef<'_, f64>, mut out: MatMut<'_, f64>) {
+        // In blocks of the scratch width.
+        let width = self.scratch.ncols();
+        let mut j0 = 0;
+        while j0 < q.ncols() {
+            let m = width.min(q.ncols() - j0);
+            self.boundary_response_block(q.subcols(j0, m), out.rb_mut().subcols_mut(j0, m));
+            j0 += m;
+        }
+    }
+
+    fn boundary_response_block(&mut self, q: MatRef<'_, f64>, out: MatMut<'_, f64>) {
+        let m = q.ncols();
+        if self.dense {
+            let layout = &self.op.layout;
+            let mut mq = self.scratch.as_mut().subcols_mut(0, m);
+            for j in 0..m {
+                for r in 0..q.nrows() {
+                    mq[(r, j)] = layout.mass[r] * q[(r, j)];
+                }
+            }
+            matmul(
+                out,
+                Accum::Replace,
+                self.op.a.as_ref(),
+                self.scratch.as_ref().subcols(0, m),
+                1.0,
+                Par::Seq,
+            );
+        } else {
+            self.op.sparse_response_into(q, self.sparse_rhs.as_mut(), out);
+        }
     }
 
     pub fn n_boundary(&self) -> usize {
@@ -189,8 +257,20 @@ impl SubdomainSolver {
 
     /// Micro problem 1: W₁ = A_E M q̂ + W_d, F₁ = q̂ − k⁻ W₁.
     pub fn micro1_into(&mut self, q_hat: MatRef<'_, f64>, mut w1: MatMut<'_, f64>, mut f1: MatMut<'_, f64>) {
-        let layout = &self.op.layout;
         let (n_b, nt) = (self.n_boundary(), q_hat.ncols());
+        if !self.dense {
+            self.op
+                .sparse_response_into(q_hat, self.sparse_rhs.as_mut(), w1.rb_mut());
+            let layout = &self.op.layout;
+            for j in 0..nt {
+                for r in 0..n_b {
+                    w1[(r, j)] += self.w_d[(r, j)];
+                    f1[(r, j)] = q_hat[(r, j)] - layout.k[r] * w1[(r, j)];
+                }
+            }
+            return;
+        }
+        let layout = &self.op.layout;
         for j in 0..nt {
             for r in 0..n_b {
                 self.scratch[(r, j)] = layout.mass[r] * q_hat[(r, j)];
@@ -201,7 +281,7 @@ impl SubdomainSolver {
             w1.rb_mut(),
             Accum::Add,
             self.op.a.as_ref(),
-            self.scratch.as_ref(),
+            self.scratch.as_ref().subcols(0, nt),
             1.0,
             Par::Seq,
         );
@@ -224,14 +304,38 @@ impl SubdomainSolver {
             out,
             Accum::Replace,
             self.e.transpose(),
-            self.scratch.as_ref(),
+            self.scratch.as_ref().subcols(0, f.ncols()),
             1.0,
             Par::Seq,
         );
     }
 
-    /// Micro problem 2: W₂ = A_E M k⁻ 𝔼 w̃, F₂ = k⁻(𝔼 w̃ − W₂), for w̃ (n_m × (N+1)).
-    pub fn micro2_into(&self, w_tilde: MatRef<'_, f64>, mut w2: MatMut<'_, f64>, mut f2: MatMut<'_, f64>) {
+    /// Micro problem 2: W₂ = A_E M k⁻ 𝔼 w̃, F₂ = k⁻(𝔼 w̃ − W₂), for w̃ (n_m × (N+1)). Without
+    /// A_E, W₂ comes from one sparse solve with right-hand side Bᵀ M k⁻ 𝔼 w̃ for all time points.
+    pub fn micro2_into(&mut self, w_tilde: MatRef<'_, f64>, mut w2: MatMut<'_, f64>, mut f2: MatMut<'_, f64>) {
+        if !self.dense {
+            let nt = w_tilde.ncols();
+            matmul(f2.rb_mut(), Accum::Replace, self.e.as_ref(), w_tilde, 1.0, Par::Seq);
+            let layout = &self.op.layout;
+            let mut k_e_w = self.scratch.as_mut().subcols_mut(0, nt);
+            for j in 0..nt {
+                for r in 0..layout.len() {
+                    k_e_w[(r, j)] = layout.k[r] * f2[(r, j)];
+                }
+            }
+            self.op.sparse_response_into(
+                self.scratch.as_ref().subcols(0, nt),
+                self.sparse_rhs.as_mut(),
+                w2.rb_mut(),
+            );
+            let layout = &self.op.layout;
+            for j in 0..nt {
+                for r in 0..layout.len() {
+                    f2[(r, j)] = layout.k[r] * (f2[(r, j)] - w2[(r, j)]);
+                }
+            }
+            return;
+        }
         let layout = &self.op.layout;
         matmul(
             w2.rb_mut(),
