@@ -1,7 +1,16 @@
 //! Multi-process runs (DESIGN §4): the launcher spawns one OS process per node group as the
-//! scene's deployment section says, hosts the Zenoh router they connect to, serves them the scene
-//! over the bus, forwards their logs with a prefix, watches the run's messages for progress and
-//! results, and stops every node when one fails.
+//! scene's deployment section says, hosts the Zenoh router they connect to (or connects to a
+//! `zenohd` router), serves them the scene over the bus, forwards their logs with a prefix,
+//! watches the run's messages for progress and results, and stops every node when one fails or
+//! when it is interrupted (Ctrl-C, SIGTERM). Nodes may also be started by hand on other machines
+//! (`glissade node`); the launcher then waits, bounded, for their liveliness tokens.
+//!
+//! Failure handling: the launcher watches its children's exit statuses and every node's
+//! liveliness token. The first node that exits with a failure, or whose token disappears before
+//! the run is over, is named in the error with its exit status (when it is a child) and its last
+//! log lines; the launcher then publishes `stop`, waits briefly for the others to leave and kills
+//! what is left. Every node also watches the others' tokens and the launcher's, so a run stops
+//! even if the launcher itself is killed (local children also die with it: parent-death signal).
 
 use crate::runner::{build_nodes, IterationRecord, Plan, RunOptions, RunResult, Selection};
 use anyhow::{bail, Context};
@@ -9,9 +18,11 @@ use glissade_bus::RunContext;
 use glissade_mechanics::scene::{fingerprint, load_str, LoadedScene};
 use glissade_messages::{decode, encode, Expected, Message, NodeId, Payload, Role, Stage, Verdict};
 use glissade_zenoh as transport;
+use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
@@ -20,12 +31,151 @@ use zenoh::Wait;
 const READY_TIMEOUT: Duration = Duration::from_secs(300);
 /// Longest silence on the bus before a run is declared stalled.
 const IDLE_TIMEOUT: Duration = Duration::from_secs(600);
+/// After a peer's token disappears, how long a node still handles messages already on their way
+/// before it gives up (a peer that finished leaves right after its last messages).
+const DEPARTURE_GRACE: Duration = Duration::from_secs(2);
+/// How long a child whose token disappeared may take to exit before it counts as failed.
+const EXIT_GRACE: Duration = Duration::from_secs(3);
+/// How long nodes get to leave after `stop` before they are killed.
+const STOP_TIMEOUT: Duration = Duration::from_secs(5);
+/// How long nodes started by hand may take to leave once the run has ended.
+const FINISH_TIMEOUT: Duration = Duration::from_secs(30);
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_interrupt(_signal: libc::c_int) {
+    if INTERRUPTED.swap(true, Ordering::SeqCst) {
+        // A second Ctrl-C: leave at once (children die with us: parent-death signal).
+        // SAFETY: _exit is async-signal-safe.
+        unsafe { libc::_exit(130) };
+    }
+}
+
+/// Makes SIGINT and SIGTERM request a clean stop of the run (see [`interrupted`]); a second
+/// signal exits at once with status 130.
+pub fn install_interrupt_handler() -> anyhow::Result<()> {
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: the handler only touches an atomic and calls the async-signal-safe _exit.
+        let previous =
+            unsafe { libc::signal(signal, on_interrupt as extern "C" fn(libc::c_int) as libc::sighandler_t) };
+        if previous == libc::SIG_ERR {
+            bail!("cannot install the handler of signal {signal}");
+        }
+    }
+    Ok(())
+}
+
+/// Whether SIGINT or SIGTERM was received since [`install_interrupt_handler`].
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
+/// Role of a node process started by hand or by the launcher.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum NodeRole {
+    Subdomain,
+    Interface,
+    Coarse,
+}
+
+impl NodeRole {
+    pub fn key(self) -> &'static str {
+        match self {
+            NodeRole::Subdomain => "subdomain",
+            NodeRole::Interface => "interface",
+            NodeRole::Coarse => "coarse",
+        }
+    }
+}
+
+/// A node process of a run: its role and index (`subdomain:1`, `interface:0`, `coarse:0`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct NodeName {
+    pub role: NodeRole,
+    pub index: u32,
+}
+
+impl std::fmt::Display for NodeName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.role.key(), self.index)
+    }
+}
+
+impl std::str::FromStr for NodeName {
+    type Err = String;
+
+    /// `role[:index]` with role `subdomain`, `interface` or `coarse`; the index defaults to 0.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (role, index) = s.split_once(':').unwrap_or((s, "0"));
+        let role = match role {
+            "subdomain" => NodeRole::Subdomain,
+            "interface" => NodeRole::Interface,
+            "coarse" => NodeRole::Coarse,
+            _ => return Err(format!("`{s}`: the role must be subdomain, interface or coarse")),
+        };
+        let index = index
+            .parse()
+            .map_err(|_| format!("`{s}`: the index after `:` must be a non-negative integer"))?;
+        Ok(Self { role, index })
+    }
+}
+
+/// Where the run's bus is and which nodes the launcher leaves to be started elsewhere.
+#[derive(Debug, Clone, Default)]
+pub struct Network {
+    /// Endpoints the launcher's router listens on (e.g. `tcp/0.0.0.0:7447`); empty: a free
+    /// loopback port.
+    pub listen: Vec<String>,
+    /// Router endpoints (e.g. a `zenohd`) the launcher and its nodes connect to instead of the
+    /// launcher hosting the router.
+    pub connect: Vec<String>,
+    /// Nodes the launcher does not start: they are started by hand with `glissade node`.
+    pub remote: Vec<NodeName>,
+    /// Longest wait for the nodes started by hand to be ready (default: 300 s).
+    pub remote_timeout: Option<Duration>,
+}
+
+/// Messages and bytes of one kind seen on the bus.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct KindTraffic {
+    pub messages: u64,
+    pub bytes: u64,
+}
+
+/// What crossed the bus during a run, by message kind (the field chunk of the key), as encoded.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct Traffic {
+    pub by_kind: BTreeMap<String, KindTraffic>,
+    /// Iterations (decisions) of the run, to express the traffic per iteration.
+    pub iterations: u64,
+}
+
+/// The run was interrupted (SIGINT/SIGTERM); every node was stopped. `partial` holds the
+/// iterations done so far.
+#[derive(Debug, thiserror::Error)]
+#[error("interrupted after {} iteration(s); every node was stopped", .partial.iterations.len())]
+pub struct Interrupted {
+    pub partial: RunResult,
+}
 
 /// One spawned node process.
 struct NodeProcess {
-    name: String,
+    name: NodeName,
     child: Child,
     last_lines: Arc<Mutex<Vec<String>>>,
+    /// Exit status once it exited.
+    status: Option<ExitStatus>,
+    /// When its liveliness token disappeared while it was still running.
+    token_lost: Option<Instant>,
+}
+
+impl NodeProcess {
+    fn last_lines(&self) -> String {
+        match self.last_lines.lock() {
+            Ok(l) if !l.is_empty() => l.join("\n    "),
+            _ => "(none)".to_string(),
+        }
+    }
 }
 
 /// Kills every child still running when dropped (on any error path).
@@ -42,10 +192,25 @@ impl Drop for Children {
     }
 }
 
+impl Children {
+    /// Waits up to `timeout` for every child to exit (after `stop`); the rest are killed on drop.
+    fn wait_all(&mut self, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline && self.0.iter_mut().any(|p| matches!(p.child.try_wait(), Ok(None))) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
 /// A free TCP port on the loopback interface.
 fn free_port() -> anyhow::Result<u16> {
     let l = std::net::TcpListener::bind("127.0.0.1:0").context("cannot bind a loopback port")?;
     Ok(l.local_addr()?.port())
+}
+
+/// The endpoint a node on this machine connects to for a router listening on `listen`.
+fn local_endpoint(listen: &str) -> String {
+    listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 }
 
 fn forward(prefix: String, stream: impl std::io::Read + Send + 'static, last: Arc<Mutex<Vec<String>>>) {
@@ -63,17 +228,111 @@ fn forward(prefix: String, stream: impl std::io::Read + Send + 'static, last: Ar
     });
 }
 
+/// The `glissade node` arguments of node `name` (after the executable).
+fn node_args(name: NodeName, run_id: &str, connect: &[String], interior: bool) -> Vec<String> {
+    let mut args = vec![
+        "node".to_string(),
+        name.role.key().to_string(),
+        "--run".into(),
+        run_id.into(),
+    ];
+    for c in connect {
+        args.extend(["--connect".to_string(), c.clone()]);
+    }
+    if name.role == NodeRole::Subdomain {
+        args.extend(["--index".to_string(), name.index.to_string()]);
+        if interior {
+            args.push("--interior".into());
+        }
+    }
+    args
+}
+
+fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<NodeProcess> {
+    let mut cmd = Command::new(exe);
+    cmd.args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    {
+        use std::os::unix::process::CommandExt;
+        // Its own process group: a Ctrl-C in the terminal reaches the launcher only, which then
+        // stops every node through the bus.
+        cmd.process_group(0);
+        #[cfg(target_os = "linux")]
+        // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                // Die with the launcher: no orphans even if it is killed.
+                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+                Ok(())
+            });
+        }
+    }
+    let mut child = cmd
+        .spawn()
+        .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
+    let last = Arc::new(Mutex::new(Vec::new()));
+    if let Some(out) = child.stdout.take() {
+        forward(name.to_string(), out, last.clone());
+    }
+    if let Some(err) = child.stderr.take() {
+        forward(name.to_string(), err, last.clone());
+    }
+    Ok(NodeProcess {
+        name,
+        child,
+        last_lines: last,
+        status: None,
+        token_lost: None,
+    })
+}
+
+/// The node processes a run needs: one per subdomain group, the interface node, the coarse node.
+fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
+    let mut names: Vec<NodeName> = (0..groups as u32)
+        .map(|index| NodeName {
+            role: NodeRole::Subdomain,
+            index,
+        })
+        .collect();
+    names.push(NodeName {
+        role: NodeRole::Interface,
+        index: 0,
+    });
+    if plan.coarse {
+        names.push(NodeName {
+            role: NodeRole::Coarse,
+            index: 0,
+        });
+    }
+    names
+}
+
 /// Runs `scene` with one process per node group, all on this machine over loopback.
 pub fn run_multi_process(
     scene: &LoadedScene,
     opts: &RunOptions,
     exe: &Path,
-    mut on_iteration: impl FnMut(&IterationRecord),
+    on_iteration: impl FnMut(&IterationRecord),
 ) -> anyhow::Result<RunResult> {
+    run_distributed(scene, opts, exe, &Network::default(), on_iteration).map(|(result, _)| result)
+}
+
+/// Runs `scene` with one process per node group on the bus `net` describes; nodes listed in
+/// `net.remote` are left to be started by hand. Returns the result and the bus traffic.
+pub fn run_distributed(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    exe: &Path,
+    net: &Network,
+    mut on_iteration: impl FnMut(&IterationRecord),
+) -> anyhow::Result<(RunResult, Traffic)> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
         // Nothing to distribute: the in-process direct solve.
-        return Ok(crate::runner::run_in_process(scene, opts, on_iteration)?);
+        let result = crate::runner::run_in_process(scene, opts, on_iteration)?;
+        return Ok((result, Traffic::default()));
     }
     if scene.deployment.interface_nodes != 1 {
         bail!(
@@ -82,22 +341,59 @@ pub fn run_multi_process(
         );
     }
     let t0 = Instant::now();
+    let run_id = &opts.run_id;
     let plan = Plan::new(model);
     let groups = plan.groups(scene.deployment.subdomain_nodes);
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port()?);
-    let session = transport::open(transport::config(
-        "router",
-        std::slice::from_ref(&endpoint),
-        &[],
-        false,
-    )?)?;
+    let all_nodes = run_nodes_of(&plan, groups.len());
+    for r in &net.remote {
+        if !all_nodes.contains(r) {
+            bail!(
+                "--remote {r}: this run has no such node (its nodes: {})",
+                all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
+            );
+        }
+    }
+    for l in &net.listen {
+        if l.ends_with(":0") {
+            bail!("--listen {l}: give an explicit port (nodes started elsewhere must know it)");
+        }
+    }
+    if !net.connect.is_empty() && !net.listen.is_empty() {
+        bail!("--listen and --connect exclude each other: the launcher either hosts the router or connects to one");
+    }
+    // The bus: a router hosted here, or a client of the given router.
+    let (session, node_connect, bus) = if net.connect.is_empty() {
+        let listen = if net.listen.is_empty() {
+            vec![format!("tcp/127.0.0.1:{}", free_port()?)]
+        } else {
+            net.listen.clone()
+        };
+        let session = transport::open(transport::config("router", &listen, &[], false)?)
+            .with_context(|| format!("cannot host the Zenoh router on {}", listen.join(", ")))?;
+        let connect = vec![local_endpoint(&listen[0])];
+        (
+            session,
+            connect,
+            format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
+        )
+    } else {
+        let session = transport::open(transport::config("client", &[], &net.connect, false)?)
+            .with_context(|| format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")))?;
+        (
+            session,
+            net.connect.clone(),
+            format!("the Zenoh router at {}", net.connect.join(", ")),
+        )
+    };
+    let _launcher_token = transport::launcher_token(&session, run_id)?;
+    let mut presence = transport::Presence::watch(&session, run_id)?;
     let launcher = NodeId {
         role: Role::Launcher,
         index: 0,
     };
     let scene_msg = Message {
         envelope: RunContext {
-            run_id: opts.run_id.clone(),
+            run_id: run_id.clone(),
             scene_fingerprint: scene.fingerprint,
         }
         .envelope(launcher, 0, Stage::Setup),
@@ -105,102 +401,186 @@ pub fn run_multi_process(
             text: scene.text.clone(),
         },
     };
-    let _queryable = transport::serve_scene(&session, &opts.run_id, encode(&scene_msg))?;
-    let (tx, rx) = mpsc::channel::<Vec<u8>>();
+    let _queryable = transport::serve_scene(&session, run_id, encode(&scene_msg))?;
+    let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
     let _watch = session
-        .declare_subscriber(glissade_messages::run_topics(&opts.run_id))
+        .declare_subscriber(glissade_messages::run_topics(run_id))
         .callback(move |s| {
-            let _ = tx.send(s.payload().to_bytes().into_owned());
+            let _ = tx.send((s.key_expr().as_str().to_string(), s.payload().to_bytes().into_owned()));
         })
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: subscribe to the run: {e}"))?;
 
-    // Spawn the node processes.
-    let mut specs: Vec<(String, Vec<String>, String)> = Vec::new();
-    for (g, group) in groups.iter().enumerate() {
-        let list = group.iter().map(u32::to_string).collect::<Vec<_>>().join(",");
-        specs.push((
-            format!("subdomain:{g}"),
-            vec!["subdomain".into(), "--subdomains".into(), list],
-            transport::alive_key(&opts.run_id, "subdomain", g as u32),
-        ));
-    }
-    specs.push((
-        "interface:0".into(),
-        vec!["interface".into()],
-        transport::alive_key(&opts.run_id, "interface", 0),
-    ));
-    if plan.coarse {
-        specs.push((
-            "coarse:0".into(),
-            vec!["coarse".into()],
-            transport::alive_key(&opts.run_id, "coarse", 0),
-        ));
-    }
+    // Spawn the local node processes; tell how to start the others.
     let mut children = Children(Vec::new());
-    for (name, role_args, _) in &specs {
-        let mut cmd = Command::new(exe);
-        cmd.arg("node")
-            .args(role_args)
-            .args(["--run", &opts.run_id, "--connect", &endpoint]);
-        if role_args[0] == "subdomain" {
-            cmd.arg("--index").arg(name.trim_start_matches("subdomain:"));
-            if opts.interior {
-                cmd.arg("--interior");
+    for &name in all_nodes.iter().filter(|n| !net.remote.contains(n)) {
+        let args = node_args(name, run_id, &node_connect, opts.interior);
+        children.0.push(spawn_node(exe, name, &args)?);
+    }
+    let remote_timeout = net.remote_timeout.unwrap_or(READY_TIMEOUT);
+    if !net.remote.is_empty() {
+        let connect: Vec<String> = if net.connect.is_empty() {
+            net.listen
+                .iter()
+                .map(|l| l.replace("/0.0.0.0:", "/<this machine's address>:"))
+                .collect()
+        } else {
+            net.connect.clone()
+        };
+        eprintln!(
+            "waiting up to {} s for {} node(s) started by hand; on the other machine(s) run:",
+            remote_timeout.as_secs(),
+            net.remote.len()
+        );
+        for &r in &net.remote {
+            eprintln!("  glissade {}", node_args(r, run_id, &connect, opts.interior).join(" "));
+        }
+    }
+    let expected = Expected {
+        run_id: run_id.clone(),
+        scene_fingerprint: scene.fingerprint,
+    };
+    let token_of = |n: NodeName| transport::alive_key(run_id, n.role.key(), n.index);
+    let tokens: BTreeMap<String, NodeName> = all_nodes.iter().map(|&n| (token_of(n), n)).collect();
+
+    // Stops every node, then fails with `error`.
+    let stop_all = |children: &mut Children, reason: &str| {
+        let _ = transport::publish_stop(&session, run_id, reason);
+        children.wait_all(STOP_TIMEOUT);
+    };
+
+    let (mut iterations, mut interfaces, mut displacements) = (Vec::new(), Vec::new(), Vec::new());
+    let mut traffic = Traffic::default();
+    let mut started: Option<Instant> = None;
+    let mut setup_s = 0.0;
+    let mut remote_lost: BTreeMap<NodeName, Instant> = BTreeMap::new();
+    let mut stop_seen = false;
+    let mut ended_at: Option<Instant> = None;
+    let mut last_message = Instant::now();
+    loop {
+        if interrupted() {
+            stop_all(&mut children, "the launcher was interrupted");
+            let verdict = iterations
+                .last()
+                .map(|r: &IterationRecord| r.decision.verdict.clone())
+                .unwrap_or(Verdict::Continue);
+            let (nodes, left_out) = plan.describe(model, groups.len());
+            return Err(Interrupted {
+                partial: RunResult {
+                    setup_s,
+                    solve_s: started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
+                    iterations,
+                    verdict,
+                    interfaces,
+                    displacements,
+                    k0: plan.k0.clone(),
+                    nodes,
+                    left_out,
+                },
+            }
+            .into());
+        }
+        // Which node failed first, if any.
+        for (key, up) in presence.changes() {
+            let Some(&name) = tokens.get(&key) else { continue };
+            if up {
+                continue;
+            }
+            if let Some(p) = children.0.iter_mut().find(|p| p.name == name) {
+                if p.status.is_none() {
+                    p.token_lost = Some(Instant::now());
+                }
+            } else {
+                remote_lost.entry(name).or_insert_with(Instant::now);
             }
         }
-        let mut child = cmd
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
-        let last = Arc::new(Mutex::new(Vec::new()));
-        if let Some(out) = child.stdout.take() {
-            forward(name.clone(), out, last.clone());
-        }
-        if let Some(err) = child.stderr.take() {
-            forward(name.clone(), err, last.clone());
-        }
-        children.0.push(NodeProcess {
-            name: name.clone(),
-            child,
-            last_lines: last,
-        });
-    }
-    let check_children = |children: &mut Children| -> anyhow::Result<()> {
+        let mut child_failure: Option<String> = None;
         for p in &mut children.0 {
+            if p.status.is_some() || child_failure.is_some() {
+                continue;
+            }
             if let Some(status) = p.child.try_wait()? {
+                p.status = Some(status);
                 if !status.success() {
-                    let lines = p.last_lines.lock().map(|l| l.join("\n    ")).unwrap_or_default();
-                    bail!("node {} failed ({status}); its last lines:\n    {lines}", p.name);
+                    child_failure = Some(format!(
+                        "node {} failed ({status}); its last lines:\n    {}",
+                        p.name,
+                        p.last_lines()
+                    ));
+                } else if started.is_none() {
+                    child_failure = Some(format!("node {} exited before the run started", p.name));
+                }
+            } else if p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) {
+                child_failure = Some(format!(
+                    "node {} lost its connection to the bus (its liveliness token disappeared {} s ago, \
+                     the process still runs); its last lines:\n    {}",
+                    p.name,
+                    EXIT_GRACE.as_secs(),
+                    p.last_lines()
+                ));
+            }
+        }
+        // A node started by hand that left before the end is the culprit if it left first (the
+        // others leave after it, DEPARTURE_GRACE later); messages already sent may still bring
+        // the stop decision within that grace.
+        let first_remote_lost = remote_lost.iter().min_by_key(|(_, &t)| t).map(|(&n, &t)| (n, t));
+        let mut failure = match first_remote_lost {
+            Some((name, lost)) if !stop_seen && (lost.elapsed() > DEPARTURE_GRACE || child_failure.is_some()) => {
+                Some(format!(
+                    "node {name} (started by hand elsewhere) left the run before it finished; \
+                     its exit status and log are on its own machine"
+                ))
+            }
+            _ => child_failure,
+        };
+        if started.is_none() && failure.is_none() {
+            let missing: Vec<NodeName> = tokens
+                .iter()
+                .filter(|(k, _)| !presence.is_alive(k))
+                .map(|(_, &n)| n)
+                .collect();
+            if missing.is_empty() {
+                transport::publish_start(&session, run_id)?;
+                setup_s = t0.elapsed().as_secs_f64();
+                started = Some(Instant::now());
+                last_message = Instant::now();
+                eprintln!("run {run_id}: {} node(s) ready, iterating", all_nodes.len());
+            } else {
+                let local_late = missing.iter().any(|n| !net.remote.contains(n)) && t0.elapsed() > READY_TIMEOUT;
+                let remote_late = missing.iter().any(|n| net.remote.contains(n)) && t0.elapsed() > remote_timeout;
+                if local_late || remote_late {
+                    failure = Some(format!(
+                        "nodes not ready within {} s: {} (a node started by hand must use --run {run_id} and \
+                         reach the bus)",
+                        if remote_late { remote_timeout } else { READY_TIMEOUT }.as_secs(),
+                        missing.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
+                    ));
                 }
             }
         }
-        Ok(())
-    };
-    let expected_tokens: Vec<String> = specs.iter().map(|s| s.2.clone()).collect();
-    transport::wait_for_nodes(&session, &opts.run_id, &expected_tokens, READY_TIMEOUT, || {
-        check_children(&mut children).map_err(|e| transport::TransportError::Protocol(format!("{e:#}")))
-    })?;
-    let setup_s = t0.elapsed().as_secs_f64();
-    let t1 = Instant::now();
-
-    // Watch the run until every node process has exited.
-    let expected = Expected {
-        run_id: opts.run_id.clone(),
-        scene_fingerprint: scene.fingerprint,
-    };
-    let (mut iterations, mut interfaces, mut displacements) = (Vec::new(), Vec::new(), Vec::new());
-    let mut last_message = Instant::now();
-    loop {
-        check_children(&mut children)?;
+        if let Some(f) = failure {
+            stop_all(
+                &mut children,
+                &format!("the run failed: {}", f.split("; its last lines").next().unwrap_or("")),
+            );
+            bail!("{f}");
+        }
+        let Some(t1) = started else {
+            if let Ok((key, bytes)) = rx.recv_timeout(Duration::from_millis(50)) {
+                count(&mut traffic, &key, &bytes, run_id);
+            }
+            continue;
+        };
         match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok(bytes) => {
+            Ok((key, bytes)) => {
                 last_message = Instant::now();
+                if !count(&mut traffic, &key, &bytes, run_id) {
+                    continue;
+                }
                 let Ok(m) = decode(&bytes, &expected) else { continue };
                 match m.payload {
                     Payload::Decision(d) => {
+                        stop_seen |= d.verdict.is_stop();
                         let rec = IterationRecord {
                             iteration: m.envelope.iteration,
                             elapsed_s: t1.elapsed().as_secs_f64(),
@@ -215,41 +595,76 @@ pub fn run_multi_process(
                 }
             }
             Err(_) => {
-                let all_done = children.0.iter_mut().all(|p| matches!(p.child.try_wait(), Ok(Some(_))));
-                if all_done {
-                    // Drain what is still queued, then stop.
-                    while let Ok(bytes) = rx.try_recv() {
-                        if let Ok(m) = decode(&bytes, &expected) {
-                            match m.payload {
-                                Payload::InterfaceSolution(s) => interfaces.push(s),
-                                Payload::Displacement { subdomain, u } => displacements.push((subdomain, u)),
-                                _ => {}
-                            }
-                        }
-                    }
+                let locals_done = children.0.iter().all(|p| p.status.is_some());
+                let remotes_gone = net.remote.iter().all(|&r| !presence.is_alive(&token_of(r)));
+                if locals_done && remotes_gone {
                     break;
                 }
+                if locals_done && stop_seen {
+                    let since = *ended_at.get_or_insert_with(Instant::now);
+                    if since.elapsed() > FINISH_TIMEOUT {
+                        let late: Vec<String> = net
+                            .remote
+                            .iter()
+                            .filter(|&&r| presence.is_alive(&token_of(r)))
+                            .map(|r| r.to_string())
+                            .collect();
+                        stop_all(&mut children, "the run is over");
+                        bail!(
+                            "node(s) {} did not leave within {} s after the run ended",
+                            late.join(", "),
+                            FINISH_TIMEOUT.as_secs()
+                        );
+                    }
+                }
                 if last_message.elapsed() > IDLE_TIMEOUT {
-                    bail!("no message on the bus for {IDLE_TIMEOUT:?}: the run stalled");
+                    stop_all(&mut children, "the run stalled");
+                    bail!(
+                        "no message on the bus for {} s: the run stalled",
+                        IDLE_TIMEOUT.as_secs()
+                    );
                 }
             }
         }
     }
-    check_children(&mut children)?;
+    // Messages still queued (sent before their nodes left).
+    while let Ok((key, bytes)) = rx.try_recv() {
+        if !count(&mut traffic, &key, &bytes, run_id) {
+            continue;
+        }
+        if let Ok(m) = decode(&bytes, &expected) {
+            match m.payload {
+                Payload::InterfaceSolution(s) => interfaces.push(s),
+                Payload::Displacement { subdomain, u } => displacements.push((subdomain, u)),
+                _ => {}
+            }
+        }
+    }
+    if interfaces.len() != model.interfaces.len() {
+        bail!(
+            "the run ended with {} of the {} interface solutions on the bus",
+            interfaces.len(),
+            model.interfaces.len()
+        );
+    }
     interfaces.sort_by_key(|s| s.interface);
     displacements.sort_by_key(|d| d.0);
+    traffic.iterations = iterations.len() as u64;
     let verdict = iterations
         .last()
         .map(|r| r.decision.verdict.clone())
         .unwrap_or(Verdict::MaxIterations);
     let (mut names, left_out) = plan.describe(model, groups.len());
-    names.push(format!(
-        "processes: {} (+ this launcher hosting the Zenoh router on {endpoint})",
-        specs.len()
-    ));
-    Ok(RunResult {
+    names.push(format!("processes: {} (+ {bus})", all_nodes.len()));
+    if !net.remote.is_empty() {
+        names.push(format!(
+            "started by hand: {}",
+            net.remote.iter().map(|r| r.to_string()).collect::<Vec<_>>().join(", ")
+        ));
+    }
+    let result = RunResult {
         setup_s,
-        solve_s: t1.elapsed().as_secs_f64(),
+        solve_s: started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
         iterations,
         verdict,
         interfaces,
@@ -257,19 +672,27 @@ pub fn run_multi_process(
         k0: plan.k0.clone(),
         nodes: names,
         left_out,
-    })
+    };
+    Ok((result, traffic))
 }
 
-/// Role of a node process started by hand or by the launcher.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum NodeRole {
-    Subdomain,
-    Interface,
-    Coarse,
+/// Adds a message seen on `key` to the traffic if it belongs to run `run_id` (its envelope says
+/// so); returns whether it does.
+fn count(traffic: &mut Traffic, key: &str, bytes: &[u8], run_id: &str) -> bool {
+    if glissade_messages::peek_envelope(bytes, run_id).is_err() {
+        return false;
+    }
+    // glissade/<run>/<role>/<index>/<field>[/<destination>]
+    let kind = key.split('/').nth(4).unwrap_or("?");
+    let t = traffic.by_kind.entry(kind.to_string()).or_default();
+    t.messages += 1;
+    t.bytes += bytes.len() as u64;
+    true
 }
 
 /// Runs one node process: connects to `connect`, fetches the scene of run `run_id` over the bus,
-/// builds its nodes and runs them until the run ends.
+/// builds its nodes and runs them until the run ends. A subdomain node hosts the subdomains of
+/// group `index` of the scene's deployment; `subdomains`, when given, must name the same ones.
 pub fn run_node_process(
     role: NodeRole,
     run_id: &str,
@@ -278,6 +701,10 @@ pub fn run_node_process(
     index: u32,
     interior: bool,
 ) -> anyhow::Result<()> {
+    let name = NodeName { role, index };
+    if role != NodeRole::Subdomain && index != 0 {
+        bail!("node {name}: this version runs one {} node, index 0", role.key());
+    }
     let session = transport::open(transport::config("client", &[], connect, false)?)?;
     let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
     let fp = transport::scene_fingerprint_of(&bytes, run_id)?;
@@ -299,11 +726,24 @@ pub fn run_node_process(
     let model = Arc::new(scene.model.clone());
     let plan = Plan::new(&model);
     let selection = match role {
-        NodeRole::Subdomain => Selection {
-            subdomains: subdomains.to_vec(),
-            interface: false,
-            coarse: false,
-        },
+        NodeRole::Subdomain => {
+            let groups = plan.groups(scene.deployment.subdomain_nodes);
+            let Some(group) = groups.get(index as usize) else {
+                bail!(
+                    "node {name}: the scene's deployment has {} subdomain node(s), indices 0 to {}",
+                    groups.len(),
+                    groups.len().saturating_sub(1)
+                );
+            };
+            if !subdomains.is_empty() && subdomains != group.as_slice() {
+                bail!("node {name}: --subdomains {subdomains:?} differ from the deployment's group {index}, {group:?}");
+            }
+            Selection {
+                subdomains: group.clone(),
+                interface: false,
+                coarse: false,
+            }
+        }
         NodeRole::Interface => Selection {
             subdomains: Vec::new(),
             interface: true,
@@ -315,25 +755,24 @@ pub fn run_node_process(
             coarse: true,
         },
     };
+    if role == NodeRole::Coarse && !plan.coarse {
+        bail!("node {name}: the scene needs no coarse node (its coarse problem is off)");
+    }
     let ctx = RunContext {
         run_id: run_id.to_string(),
         scene_fingerprint: fp,
     };
     let nodes = build_nodes(&model, &ctx, interior, &plan, &selection)?;
-    let (token_role, token_index) = match role {
-        NodeRole::Subdomain => ("subdomain", index),
-        NodeRole::Interface => ("interface", 0),
-        NodeRole::Coarse => ("coarse", 0),
-    };
     let run = transport::NodeRun {
         run_id: run_id.to_string(),
         expected,
-        token_role: token_role.to_string(),
-        token_index,
+        token_role: role.key().to_string(),
+        token_index: index,
         start_timeout: READY_TIMEOUT,
         idle_timeout: IDLE_TIMEOUT,
+        departure_grace: DEPARTURE_GRACE,
     };
-    transport::run_nodes(&session, &run, nodes, |l| eprintln!("{l}"))?;
+    let outcome = transport::run_nodes(&session, &run, nodes, |l| eprintln!("{l}"));
     let _ = session.close().wait();
-    Ok(())
+    Ok(outcome?)
 }

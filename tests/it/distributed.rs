@@ -2,9 +2,12 @@
 //! off): the same scene run in-process and as processes gives bit-identical results.
 
 use crate::common::scene;
-use glissade::distributed::run_multi_process;
+use glissade::distributed::{run_distributed, run_multi_process, Network};
 use glissade::runner::{run_in_process, RunOptions, RunResult};
+use glissade_zenoh as transport;
 use std::path::Path;
+use std::time::Duration;
+use zenoh::Wait;
 
 fn scene_file(name: &str) -> String {
     std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
@@ -112,4 +115,154 @@ fn stratified_over_three_subdomain_processes() {
         remote.nodes
     );
     assert_identical(&local, &remote);
+}
+
+/// Two runs of the same scene share one Zenoh router (a stand-in for `zenohd`, the launchers
+/// connect to it as clients) while a third session publishes messages of another run on the
+/// first run's own keys: a stop decision, boundary states, local directions, and a decision of
+/// another scene. Each run ignores them and gives the in-process result bit for bit.
+#[test]
+fn messages_of_another_run_are_ignored() {
+    use glissade_messages::{Decision, Envelope, Field, Message, NodeId, Payload, Role, Stage, Verdict};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+
+    let sc = scene(&scene_file("small-three-layer"));
+    let local = run_in_process(
+        &sc,
+        &RunOptions {
+            run_id: "local".into(),
+            interior: false,
+        },
+        |_| {},
+    )
+    .unwrap();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let _router =
+        transport::open(transport::config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+    let intruder =
+        transport::open(transport::config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
+    let net = Network {
+        connect: vec![endpoint.clone()],
+        ..Network::default()
+    };
+    let victim = "shared-bus-a";
+    let stop = Arc::new(AtomicBool::new(false));
+    let publisher = {
+        let stop = stop.clone();
+        let fingerprint = sc.fingerprint;
+        std::thread::spawn(move || {
+            let envelope = |run_id: &str, fingerprint: u64, role: Role, index: u32, stage: Stage| Envelope {
+                schema_version: glissade_messages::SCHEMA_VERSION,
+                run_id: run_id.into(),
+                scene_fingerprint: fingerprint,
+                iteration: 0,
+                stage,
+                sender: NodeId { role, index },
+            };
+            let decision = Payload::Decision(Decision {
+                eta: 0.0,
+                contact_indicator: 0.0,
+                force_error: 0.0,
+                jump_error: 0.0,
+                counts: [0; 3],
+                status_changes: 0,
+                direction_updates: Vec::new(),
+                verdict: Verdict::Converged,
+            });
+            let foreign = [
+                (
+                    envelope("intruder", fingerprint, Role::Interface, 0, Stage::Local),
+                    decision.clone(),
+                ),
+                (
+                    envelope("intruder", fingerprint, Role::Subdomain, 0, Stage::Linear),
+                    Payload::BoundaryState {
+                        subdomain: 0,
+                        w: Field::zeros(4, 11),
+                        f: Field::zeros(4, 11),
+                    },
+                ),
+                (
+                    envelope("intruder", fingerprint, Role::Interface, 0, Stage::Local),
+                    Payload::LocalDirections {
+                        subdomain: 1,
+                        q_hat: Field::zeros(4, 11),
+                    },
+                ),
+                // The victim's run id but another scene.
+                (
+                    envelope(victim, fingerprint ^ 1, Role::Interface, 0, Stage::Local),
+                    decision,
+                ),
+            ];
+            let mut sent = 0u64;
+            while !stop.load(Ordering::SeqCst) {
+                for (envelope, payload) in &foreign {
+                    let msg = Message {
+                        envelope: envelope.clone(),
+                        payload: payload.clone(),
+                    };
+                    // Published on the key the victim's nodes listen to.
+                    let key = glissade_messages::topic(victim, envelope.sender, payload);
+                    intruder.put(key, glissade_messages::encode(&msg)).wait().expect("put");
+                    sent += 1;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            sent
+        })
+    };
+    let (a, b) = std::thread::scope(|s| {
+        let a = s.spawn(|| {
+            run_distributed(
+                &sc,
+                &RunOptions {
+                    run_id: victim.into(),
+                    interior: false,
+                },
+                exe(),
+                &net,
+                |_| {},
+            )
+        });
+        let b = s.spawn(|| {
+            run_distributed(
+                &sc,
+                &RunOptions {
+                    run_id: "shared-bus-b".into(),
+                    interior: false,
+                },
+                exe(),
+                &net,
+                |_| {},
+            )
+        });
+        (a.join().unwrap(), b.join().unwrap())
+    });
+    stop.store(true, Ordering::SeqCst);
+    let sent = publisher.join().unwrap();
+    let (a, traffic) = a.unwrap();
+    let (b, _) = b.unwrap();
+    // The other scene's decisions carry the victim's run id: the launcher counts them, so they
+    // show that foreign messages did reach the victim's keys during its run.
+    let decisions = traffic.by_kind["decision"].messages;
+    println!(
+        "{sent} foreign messages published, {decisions} decisions seen on the victim's keys; runs: {} and {} iterations, in-process {}",
+        a.iterations.len(),
+        b.iterations.len(),
+        local.iterations.len()
+    );
+    assert!(
+        decisions > a.iterations.len() as u64,
+        "{decisions} decisions on the bus for {} iterations: the foreign ones did not arrive",
+        a.iterations.len()
+    );
+    assert_identical(&local, &a);
+    assert_identical(&local, &b);
 }

@@ -6,5 +6,7 @@ mod common;
 mod distributed;
 mod latin_perfect;
 mod monolithic;
+mod node_failures;
 mod reference;
 mod stability;
+mod two_hosts;

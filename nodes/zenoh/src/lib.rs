@@ -1,8 +1,9 @@
 //! The Zenoh transport of glissade (DESIGN §4): runs sans-IO [`Node`]s over a Zenoh session.
 //!
 //! Topology (STACK.md, "topology trap"): the launcher opens a session in `router` mode listening
-//! on an explicit endpoint; every node process opens a `client` session connected to it, with
-//! multicast scouting off. Clients route through the router, so every node reaches every other.
+//! on an explicit endpoint (or connects as a client to a `zenohd` router); every node process
+//! opens a `client` session connected to that router, with multicast scouting off. Clients route
+//! through the router, so every node reaches every other.
 //!
 //! Start-up without lost messages: Zenoh pub/sub is not durable, so
 //! 1. a node process fetches the scene with a query to the launcher's queryable (no race);
@@ -10,16 +11,28 @@
 //! 3. the launcher waits until every expected token is alive, then publishes `start`;
 //! 4. only then do nodes call [`Node::start`] and publish.
 //!
+//! Failure: every node process watches the liveliness tokens of the run (the launcher's and every
+//! other node's: each node's progress depends on all of them). A token that disappears while this
+//! process still has work stops it with an error naming the peer, after a short grace period in
+//! which messages already on their way are still handled (a peer that finished normally leaves
+//! once its last messages are out). The launcher's `stop` message stops every node at once. Link
+//! leases are shortened to [`LEASE`] so a peer that vanishes without closing its connection is
+//! noticed within seconds; a killed process closes its connections at once.
+//!
 //! Every put uses `CongestionControl::Block` (multi-MB fields are never dropped). Every wait is
 //! bounded by a timeout.
 
 use glissade_bus::{Node, NodeError};
 use glissade_messages::{decode, encode, DecodeError, Expected, Message};
+use std::collections::{BTreeSet, VecDeque};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
 use zenoh::{Config, Session, Wait};
+
+/// Link lease: a peer whose link is silent this long is declared gone (Zenoh's default is 10 s).
+pub const LEASE: Duration = Duration::from_secs(4);
 
 /// Errors of the Zenoh transport.
 #[derive(Debug, thiserror::Error)]
@@ -30,6 +43,10 @@ pub enum TransportError {
     Node(#[from] NodeError),
     #[error("no message for {0:?}: the run stalled or a peer died")]
     Timeout(Duration),
+    #[error("peer {peer} left the run (its liveliness token disappeared) while this process still had work")]
+    PeerLeft { peer: String },
+    #[error("stopped by the launcher: {0}")]
+    Stopped(String),
     #[error("{0}")]
     Protocol(String),
 }
@@ -51,13 +68,32 @@ pub fn start_key(run_id: &str) -> String {
     format!("glissade/{run_id}/launcher/0/start")
 }
 
-/// Liveliness token of a node.
+/// Key the launcher publishes on to stop every node of a run (payload: the reason, UTF-8).
+pub fn stop_key(run_id: &str) -> String {
+    format!("glissade/{run_id}/launcher/0/stop")
+}
+
+/// Liveliness token of a node (the launcher's is role `launcher`, index 0).
 pub fn alive_key(run_id: &str, role: &str, index: u32) -> String {
     format!("glissade/{run_id}/alive/{role}/{index}")
 }
 
+/// Every liveliness token of a run.
+pub fn alive_pattern(run_id: &str) -> String {
+    format!("glissade/{run_id}/alive/**")
+}
+
+/// `role:index` of a liveliness key (`glissade/<run>/alive/<role>/<index>`).
+pub fn node_of_alive_key(key: &str) -> String {
+    let mut chunks = key.rsplit('/');
+    match (chunks.next(), chunks.next()) {
+        (Some(index), Some(role)) => format!("{role}:{index}"),
+        _ => key.to_string(),
+    }
+}
+
 /// Session configuration: `mode` ("router", "peer" or "client"), explicit listen and connect
-/// endpoints, multicast scouting off unless asked.
+/// endpoints, multicast scouting off unless asked, link lease [`LEASE`].
 pub fn config(mode: &str, listen: &[String], connect: &[String], multicast: bool) -> Result<Config, TransportError> {
     let mut c = Config::default();
     let json_list = |v: &[String]| {
@@ -74,6 +110,8 @@ pub fn config(mode: &str, listen: &[String], connect: &[String], multicast: bool
         .map_err(|e| zerr("config listen", e))?;
     c.insert_json5("connect/endpoints", &json_list(connect))
         .map_err(|e| zerr("config connect", e))?;
+    c.insert_json5("transport/link/tx/lease", &LEASE.as_millis().to_string())
+        .map_err(|e| zerr("config lease", e))?;
     Ok(c)
 }
 
@@ -125,22 +163,56 @@ pub struct NodeRun {
     pub start_timeout: Duration,
     /// Longest wait for any message once started.
     pub idle_timeout: Duration,
+    /// How long messages are still handled after a peer's token disappeared, before this
+    /// process gives up (a peer that finished leaves right after its last messages).
+    pub departure_grace: Duration,
+}
+
+/// What reaches a node process from the bus.
+enum Event {
+    Data(String, Vec<u8>),
+    Start,
+    Stop(String),
+    /// A liveliness token appeared (true) or disappeared (false).
+    Alive(String, bool),
+}
+
+/// Declares a liveliness subscriber on every token of `run_id` (with the tokens already alive)
+/// that forwards its changes to `tx` through `wrap`.
+fn watch_tokens<T: Send + 'static>(
+    session: &Session,
+    run_id: &str,
+    tx: mpsc::Sender<T>,
+    wrap: impl Fn(String, bool) -> T + Send + Sync + 'static,
+) -> Result<zenoh::pubsub::Subscriber<()>, TransportError> {
+    session
+        .liveliness()
+        .declare_subscriber(alive_pattern(run_id))
+        .history(true)
+        .callback(move |s| {
+            let _ = tx.send(wrap(s.key_expr().as_str().to_string(), s.kind() == SampleKind::Put));
+        })
+        .wait()
+        .map_err(|e| zerr("liveliness subscriber", e))
 }
 
 /// Runs `nodes` (all hosted by this process) on `session` until each is finished.
 ///
 /// Messages that do not decode for this run (other run, other scene, other schema version,
 /// corrupt) are skipped with a reason passed to `log`; a message a node rejects stops the
-/// process with that node's error. `idle_timeout` bounds the wait for any message.
+/// process with that node's error. A peer whose liveliness token disappears while a node here
+/// is unfinished stops the process after `departure_grace` ([`TransportError::PeerLeft`]), so
+/// does the launcher's stop message ([`TransportError::Stopped`]); `idle_timeout` bounds the
+/// wait for any message.
 pub fn run_nodes(
     session: &Session,
     run: &NodeRun,
     mut nodes: Vec<Box<dyn Node>>,
     mut log: impl FnMut(&str),
 ) -> Result<(), TransportError> {
-    let (run_id, expected, start_timeout, idle_timeout) =
-        (&run.run_id, &run.expected, run.start_timeout, run.idle_timeout);
-    let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
+    let (run_id, expected) = (&run.run_id, &run.expected);
+    let own_token = alive_key(run_id, &run.token_role, run.token_index);
+    let (tx, rx) = mpsc::channel::<Event>();
     let subscriptions: Vec<Vec<String>> = nodes.iter().map(|n| n.subscriptions()).collect();
     let mut keys: Vec<String> = subscriptions.iter().flatten().cloned().collect();
     keys.sort();
@@ -151,7 +223,7 @@ pub fn run_nodes(
         let sub = session
             .declare_subscriber(key.as_str())
             .callback(move |sample| {
-                let _ = tx.send((
+                let _ = tx.send(Event::Data(
                     sample.key_expr().as_str().to_string(),
                     sample.payload().to_bytes().into_owned(),
                 ));
@@ -160,36 +232,63 @@ pub fn run_nodes(
             .map_err(|e| zerr(&format!("subscribe {key}"), e))?;
         subscribers.push(sub);
     }
-    let (start_tx, start_rx) = mpsc::channel::<()>();
-    let _start_sub = session
-        .declare_subscriber(start_key(run_id))
-        .callback(move |_| {
-            let _ = start_tx.send(());
-        })
-        .wait()
-        .map_err(|e| zerr("subscribe start", e))?;
+    for (key, is_stop) in [(start_key(run_id), false), (stop_key(run_id), true)] {
+        let tx = tx.clone();
+        let sub = session
+            .declare_subscriber(key.as_str())
+            .callback(move |s| {
+                let _ = tx.send(if is_stop {
+                    Event::Stop(String::from_utf8_lossy(&s.payload().to_bytes()).into_owned())
+                } else {
+                    Event::Start
+                });
+            })
+            .wait()
+            .map_err(|e| zerr(&format!("subscribe {key}"), e))?;
+        subscribers.push(sub);
+    }
+    let _peers = watch_tokens(session, run_id, tx.clone(), Event::Alive)?;
     let _token = session
         .liveliness()
-        .declare_token(alive_key(run_id, &run.token_role, run.token_index))
+        .declare_token(own_token.as_str())
         .wait()
         .map_err(|e| zerr("liveliness token", e))?;
-    start_rx.recv_timeout(start_timeout).map_err(|_| {
-        TransportError::Protocol(format!("the launcher did not start the run within {start_timeout:?}"))
-    })?;
+
+    // Until the launcher's start: keep the data that arrives early (a faster peer may start
+    // first), fail on a departure or a stop.
+    let start_deadline = Instant::now() + run.start_timeout;
+    let mut early = VecDeque::new();
+    loop {
+        let left = start_deadline.saturating_duration_since(Instant::now());
+        match rx.recv_timeout(left) {
+            Ok(Event::Start) => break,
+            Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
+            Ok(Event::Alive(key, false)) if key != own_token => {
+                return Err(TransportError::PeerLeft {
+                    peer: node_of_alive_key(&key),
+                })
+            }
+            Ok(Event::Data(key, bytes)) => early.push_back((key, bytes)),
+            Ok(Event::Alive(..)) => {}
+            Err(_) => {
+                return Err(TransportError::Protocol(format!(
+                    "the launcher did not start the run within {:?}",
+                    run.start_timeout
+                )))
+            }
+        }
+    }
     for node in &mut nodes {
         for m in node.start()? {
             publish(session, &m)?;
         }
     }
-    while !nodes.iter().all(|n| n.is_finished()) {
-        let (key, bytes) = rx
-            .recv_timeout(idle_timeout)
-            .map_err(|_| TransportError::Timeout(idle_timeout))?;
+    let mut handle = |key: String, bytes: Vec<u8>, nodes: &mut Vec<Box<dyn Node>>| -> Result<(), TransportError> {
         let msg = match decode(&bytes, expected) {
             Ok(m) => m,
             Err(e) => {
                 log(&format!("ignored a message on {key}: {e}"));
-                continue;
+                return Ok(());
             }
         };
         if msg.topic() != key {
@@ -197,7 +296,7 @@ pub fn run_nodes(
                 "ignored a message on {key}: its envelope and payload belong on {}",
                 msg.topic()
             ));
-            continue;
+            return Ok(());
         }
         for (node, subs) in nodes.iter_mut().zip(&subscriptions) {
             if subs.iter().any(|s| glissade_messages::key_matches(s, &key)) {
@@ -206,12 +305,47 @@ pub fn run_nodes(
                 }
             }
         }
+        Ok(())
+    };
+    while let Some((key, bytes)) = early.pop_front() {
+        handle(key, bytes, &mut nodes)?;
+    }
+    let mut last_message = Instant::now();
+    // The first peer that left, and when this process gives up on it.
+    let mut departed: Option<(String, Instant)> = None;
+    while !nodes.iter().all(|n| n.is_finished()) {
+        let now = Instant::now();
+        if let Some((peer, deadline)) = &departed {
+            if now >= *deadline {
+                return Err(TransportError::PeerLeft {
+                    peer: node_of_alive_key(peer),
+                });
+            }
+        }
+        if now.duration_since(last_message) >= run.idle_timeout {
+            return Err(TransportError::Timeout(run.idle_timeout));
+        }
+        let mut wait = run.idle_timeout - now.duration_since(last_message);
+        if let Some((_, deadline)) = &departed {
+            wait = wait.min(deadline.saturating_duration_since(now));
+        }
+        match rx.recv_timeout(wait) {
+            Ok(Event::Data(key, bytes)) => {
+                last_message = Instant::now();
+                handle(key, bytes, &mut nodes)?;
+            }
+            Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
+            Ok(Event::Alive(key, false)) if key != own_token && departed.is_none() => {
+                departed = Some((key, Instant::now() + run.departure_grace));
+            }
+            Ok(Event::Alive(..)) | Ok(Event::Start) | Err(_) => {}
+        }
     }
     Ok(())
 }
 
-/// The launcher's side: serves the scene, waits for the expected nodes' liveliness tokens, then
-/// publishes `start`. Returns the queryable (keep it alive for the whole run).
+/// The launcher's side: serves the scene to the node processes' queries. Returns the queryable
+/// (keep it alive for the whole run).
 pub fn serve_scene(
     session: &Session,
     run_id: &str,
@@ -228,49 +362,68 @@ pub fn serve_scene(
         .map_err(|e| zerr("scene queryable", e))
 }
 
-/// Waits until every key of `expected` has a live token (or `timeout` passes); calls
-/// `is_alive()` between polls so a launcher can notice a child that died.
-pub fn wait_for_nodes(
-    session: &Session,
-    run_id: &str,
-    expected: &[String],
-    timeout: Duration,
-    mut still_ok: impl FnMut() -> Result<(), TransportError>,
-) -> Result<(), TransportError> {
-    let (tx, rx) = mpsc::channel::<(String, bool)>();
-    let _watch = session
-        .liveliness()
-        .declare_subscriber(format!("glissade/{run_id}/alive/**"))
-        .history(true)
-        .callback(move |s| {
-            let _ = tx.send((s.key_expr().as_str().to_string(), s.kind() == SampleKind::Put));
+/// The launcher's view of which nodes of a run are alive (their liveliness tokens).
+pub struct Presence {
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+    rx: mpsc::Receiver<(String, bool)>,
+    alive: BTreeSet<String>,
+}
+
+impl Presence {
+    /// Watches every token of `run_id`, including those already alive.
+    pub fn watch(session: &Session, run_id: &str) -> Result<Self, TransportError> {
+        let (tx, rx) = mpsc::channel();
+        let subscriber = watch_tokens(session, run_id, tx, |k, up| (k, up))?;
+        Ok(Self {
+            _subscriber: subscriber,
+            rx,
+            alive: BTreeSet::new(),
         })
-        .wait()
-        .map_err(|e| zerr("liveliness subscriber", e))?;
-    let deadline = Instant::now() + timeout;
-    let mut alive = std::collections::BTreeSet::new();
-    while !expected.iter().all(|k| alive.contains(k)) {
-        still_ok()?;
-        if Instant::now() >= deadline {
-            let missing: Vec<&String> = expected.iter().filter(|k| !alive.contains(*k)).collect();
-            return Err(TransportError::Protocol(format!(
-                "nodes not ready within {timeout:?}: {missing:?}"
-            )));
-        }
-        if let Ok((key, up)) = rx.recv_timeout(Duration::from_millis(100)) {
-            if up {
-                alive.insert(key);
+    }
+
+    /// The changes since the last call: (token key, appeared?), in arrival order.
+    pub fn changes(&mut self) -> Vec<(String, bool)> {
+        let changes: Vec<(String, bool)> = self.rx.try_iter().collect();
+        for (key, up) in &changes {
+            if *up {
+                self.alive.insert(key.clone());
             } else {
-                alive.remove(&key);
+                self.alive.remove(key);
             }
         }
+        changes
     }
+
+    pub fn is_alive(&self, key: &str) -> bool {
+        self.alive.contains(key)
+    }
+}
+
+/// Declares the launcher's liveliness token (nodes stop when it disappears).
+pub fn launcher_token(session: &Session, run_id: &str) -> Result<zenoh::liveliness::LivelinessToken, TransportError> {
     session
-        .put(start_key(run_id), Vec::<u8>::new())
+        .liveliness()
+        .declare_token(alive_key(run_id, "launcher", 0))
+        .wait()
+        .map_err(|e| zerr("liveliness token", e))
+}
+
+fn put_control(session: &Session, key: String, payload: Vec<u8>) -> Result<(), TransportError> {
+    session
+        .put(key.as_str(), payload)
         .congestion_control(CongestionControl::Block)
         .wait()
-        .map_err(|e| zerr("put start", e))?;
-    Ok(())
+        .map_err(|e| zerr(&format!("put {key}"), e))
+}
+
+/// Tells every node of a run to start (once all are ready).
+pub fn publish_start(session: &Session, run_id: &str) -> Result<(), TransportError> {
+    put_control(session, start_key(run_id), Vec::new())
+}
+
+/// Tells every node of a run to stop now, with the reason.
+pub fn publish_stop(session: &Session, run_id: &str, reason: &str) -> Result<(), TransportError> {
+    put_control(session, stop_key(run_id), reason.as_bytes().to_vec())
 }
 
 /// Decodes the envelope only, to learn the scene fingerprint of a scene message.

@@ -1,0 +1,246 @@
+//! A multi-process run stops within 10 s, naming the node, when any one node is killed, and
+//! stops every node when the launcher gets Ctrl-C; no node process of the run remains.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// The bound on how fast a run stops once a node died.
+const STOP_BOUND: Duration = Duration::from_secs(10);
+
+fn exe() -> &'static Path {
+    Path::new(env!("CARGO_BIN_EXE_glissade"))
+}
+
+/// The small three-layer scene with stop rules that never end the run (it runs until stopped).
+fn endless_scene(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(format!(
+        "{}/launch/scenes/small-three-layer.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .expect("scene file");
+    let solver = "[solver]\ntolerance = 1e-4\n";
+    assert!(text.contains(solver), "the scene's solver section changed");
+    let text = text.replace(
+        solver,
+        "[solver]\ntolerance = 1e-300\nmax_iterations = 1000000\nstagnation_window = 1000000\n",
+    );
+    let path = dir.join("endless.toml");
+    std::fs::write(&path, text).expect("write the scene");
+    path
+}
+
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("glissade-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    dir
+}
+
+/// Pids of the processes whose command line contains `needle` and every one of `words`.
+pub fn processes_with(needle: &str, words: &[&str]) -> Vec<i32> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir("/proc").expect("/proc").flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<i32>() else {
+            continue;
+        };
+        let Ok(raw) = std::fs::read(entry.path().join("cmdline")) else {
+            continue;
+        };
+        let args: Vec<String> = raw
+            .split(|&b| b == 0)
+            .map(|a| String::from_utf8_lossy(a).into_owned())
+            .collect();
+        if args.iter().any(|a| a == needle) && words.iter().all(|w| args.iter().any(|a| a == w)) {
+            out.push(pid);
+        }
+    }
+    out
+}
+
+/// A launcher process whose stderr lines arrive on a channel (and are echoed for the log).
+pub struct Launcher {
+    pub child: Child,
+    lines: mpsc::Receiver<String>,
+    pub stderr: Vec<String>,
+}
+
+impl Launcher {
+    pub fn spawn(cmd: &mut Command) -> Self {
+        let mut child = cmd
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start the launcher");
+        let (tx, lines) = mpsc::channel();
+        for stream in [
+            Box::new(child.stderr.take().unwrap()) as Box<dyn std::io::Read + Send>,
+            Box::new(child.stdout.take().unwrap()),
+        ] {
+            let tx = tx.clone();
+            std::thread::spawn(move || {
+                for line in BufReader::new(stream).lines().map_while(Result::ok) {
+                    eprintln!("  | {line}");
+                    let _ = tx.send(line);
+                }
+            });
+        }
+        Self {
+            child,
+            lines,
+            stderr: Vec::new(),
+        }
+    }
+
+    /// Waits (bounded) for an output line containing `text`.
+    pub fn wait_for_line(&mut self, text: &str, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            if let Ok(l) = self.lines.recv_timeout(Duration::from_millis(100)) {
+                let hit = l.contains(text);
+                self.stderr.push(l);
+                if hit {
+                    return;
+                }
+            }
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        panic!("no line with `{text}` within {timeout:?}");
+    }
+
+    /// Waits (bounded) for the launcher to exit; collects the rest of its output.
+    pub fn wait_exit(&mut self, timeout: Duration) -> ExitStatus {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(status) = self.child.try_wait().expect("try_wait") {
+                // The output threads end with the pipes.
+                while let Ok(l) = self.lines.recv_timeout(Duration::from_millis(500)) {
+                    self.stderr.push(l);
+                }
+                return status;
+            }
+            if Instant::now() > deadline {
+                let _ = self.child.kill();
+                let _ = self.child.wait();
+                panic!("the launcher did not exit within {timeout:?}");
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    pub fn output(&self) -> String {
+        self.stderr.join("\n")
+    }
+}
+
+fn launch_endless(name: &str) -> (Launcher, String, PathBuf) {
+    let dir = scratch(name);
+    let scene = endless_scene(&dir);
+    let run_id = format!("{name}-{}", std::process::id());
+    let mut cmd = Command::new(exe());
+    cmd.arg("run")
+        .arg(&scene)
+        .args(["--quiet", "--run-id", &run_id, "--out"])
+        .arg(&dir);
+    let mut launcher = Launcher::spawn(&mut cmd);
+    launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
+    // Let the iteration run for a while: the kill lands mid-run.
+    std::thread::sleep(Duration::from_millis(1500));
+    (launcher, run_id, dir)
+}
+
+fn assert_no_process_left(run_id: &str) {
+    let left = processes_with(run_id, &[]);
+    assert!(left.is_empty(), "processes of run {run_id} remain: {left:?}");
+}
+
+/// Kills node `role` (`--index` `index` for subdomain nodes) with SIGKILL mid-run.
+fn kill_one(role: &str, index: Option<&str>) {
+    let name = format!("kill-{role}");
+    let (mut launcher, run_id, _dir) = launch_endless(&name);
+    let mut words = vec!["node", role];
+    if let Some(i) = index {
+        words.push(i);
+    }
+    let pids = processes_with(&run_id, &words);
+    assert_eq!(pids.len(), 1, "one process of node {role}: {pids:?}");
+    assert!(
+        launcher.child.try_wait().unwrap().is_none(),
+        "the run was still going when the node was killed"
+    );
+    let t = Instant::now();
+    // SAFETY: a plain kill(2) of a process this test found by its command line.
+    assert_eq!(unsafe { libc::kill(pids[0], libc::SIGKILL) }, 0);
+    let status = launcher.wait_exit(Duration::from_secs(60));
+    let took = t.elapsed();
+    let out = launcher.output();
+    let node = format!("{role}:{}", index.unwrap_or("0"));
+    println!("killed {node}: the launcher exited with {status} after {took:?}");
+    assert!(took < STOP_BOUND, "the run took {took:?} to stop");
+    assert_eq!(status.code(), Some(2), "{out}");
+    let error = out
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .unwrap_or_else(|| panic!("no error line in:\n{out}"));
+    assert!(
+        error.contains(&format!("node {node} failed")) && error.contains("SIGKILL"),
+        "the error names the killed node and its exit status: {error}"
+    );
+    assert_no_process_left(&run_id);
+}
+
+#[test]
+fn killing_a_subdomain_node_stops_the_run() {
+    kill_one("subdomain", Some("1"));
+}
+
+#[test]
+fn killing_the_interface_node_stops_the_run() {
+    kill_one("interface", None);
+}
+
+#[test]
+fn killing_the_coarse_node_stops_the_run() {
+    kill_one("coarse", None);
+}
+
+#[test]
+fn ctrl_c_stops_every_node() {
+    let (mut launcher, run_id, dir) = launch_endless("interrupt");
+    let t = Instant::now();
+    // SAFETY: a plain kill(2) of the launcher this test started.
+    assert_eq!(unsafe { libc::kill(launcher.child.id() as i32, libc::SIGINT) }, 0);
+    let status = launcher.wait_exit(Duration::from_secs(60));
+    let took = t.elapsed();
+    let out = launcher.output();
+    println!("SIGINT: the launcher exited with {status} after {took:?}");
+    assert!(took < STOP_BOUND, "the run took {took:?} to stop");
+    assert_eq!(status.code(), Some(130), "{out}");
+    assert!(out.contains("interrupted after"), "{out}");
+    // Every node left on the launcher's stop message rather than being killed.
+    assert!(out.contains("stopped by the launcher"), "{out}");
+    let summary = std::fs::read_to_string(dir.join(format!("small-three-layer-{run_id}.summary.json")))
+        .expect("the summary of the interrupted run");
+    let summary: serde_json::Value = serde_json::from_str(&summary).unwrap();
+    assert_eq!(summary["interrupted"], serde_json::json!(true));
+    assert!(summary["iterations"].as_u64().unwrap() > 0, "{summary}");
+    assert_no_process_left(&run_id);
+}
+
+/// A launcher killed with SIGKILL takes its node processes with it (they get the parent-death
+/// signal, and would otherwise see the launcher's liveliness token disappear).
+#[test]
+fn killing_the_launcher_leaves_no_node() {
+    let (mut launcher, run_id, _dir) = launch_endless("kill-launcher");
+    assert!(!processes_with(&run_id, &["node"]).is_empty(), "the nodes run");
+    launcher.child.kill().expect("SIGKILL the launcher");
+    launcher.wait_exit(Duration::from_secs(60));
+    let deadline = Instant::now() + STOP_BOUND;
+    while !processes_with(&run_id, &[]).is_empty() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_no_process_left(&run_id);
+}
