@@ -3,6 +3,7 @@
 
 pub mod distributed;
 pub mod output;
+pub mod recording;
 pub mod report;
 pub mod runner;
 pub mod stability;

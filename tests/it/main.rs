@@ -6,7 +6,6 @@ mod common;
 mod distributed;
 mod latin_perfect;
 mod monolithic;
-mod node_failures;
+mod recording;
 mod reference;
 mod stability;
-mod two_hosts;

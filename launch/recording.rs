@@ -1,0 +1,426 @@
+//! Recording runs to MCAP (DESIGN §4, "recorder").
+//!
+//! - In-process runs: the launcher records every message the in-process bus delivers, encoded as
+//!   on the wire and on the key expression it would have over Zenoh.
+//! - Multi-process runs: a recorder process (`glissade node recorder`) subscribes to
+//!   `glissade/<run>/**` through the launcher's router and writes the file; its own process, so a
+//!   recorder that dies leaves the solver running and a file readable up to its last chunk. The
+//!   launcher counts the messages of the run it saw and, once every node process has exited,
+//!   tells the recorder that count on `glissade/<run>/launcher/0/end`; the recorder finishes once
+//!   it has received as many (or fails, naming how many are missing). On the launcher's `stop`
+//!   (a failed run), SIGINT/SIGTERM, or the launcher's death (parent-death signal SIGTERM) the
+//!   recorder finalises the file with what it has.
+//!
+//! A scene with `[recording] enabled = false` starts no recorder. The recording file is created
+//! before anything is solved, so an unwritable folder fails the run at once, naming the path.
+
+use crate::runner::{run_in_process_observed, IterationRecord, RunOptions, RunResult};
+use anyhow::{bail, Context};
+use glissade_mechanics::scene::{fingerprint, load_str, LoadedScene};
+use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
+use glissade_recorder::{log_time_now, recording_file_name, Recorder, RecorderOptions, RecordingStats, RunInfo};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::qos::CongestionControl;
+use zenoh::Wait;
+
+/// How long the recorder may take, after the stop, to receive the messages still in flight.
+const DRAIN_TIMEOUT: Duration = Duration::from_secs(60);
+/// Longest silence on the bus the recorder accepts before it gives up on the run.
+const IDLE_TIMEOUT: Duration = Duration::from_secs(900);
+
+/// `glissade <version> (<profile>)`.
+pub fn software() -> String {
+    format!(
+        "glissade {} ({})",
+        env!("CARGO_PKG_VERSION"),
+        if cfg!(debug_assertions) { "debug" } else { "release" }
+    )
+}
+
+/// Key on which the launcher tells the recorder that the run is over, with the number of
+/// messages of the run it saw (u64, little-endian).
+pub fn end_key(run_id: &str) -> String {
+    format!("glissade/{run_id}/launcher/0/end")
+}
+
+/// Key of the launcher's `stop` (a failed or interrupted run; payload: the reason).
+fn launcher_stop_key(run_id: &str) -> String {
+    format!("glissade/{run_id}/launcher/0/stop")
+}
+
+/// Liveliness token of the recorder process. Not under the nodes' `alive/**`: the recorder is
+/// an observer, and a recorder that dies must not stop the nodes.
+pub fn recorder_alive_key(run_id: &str) -> String {
+    format!("glissade/{run_id}/recording/alive")
+}
+
+/// Where a run's recording goes, or None when the scene switches recording off.
+pub fn recording_path(scene: &LoadedScene, run_id: &str, out: &Path) -> Option<PathBuf> {
+    scene
+        .recording
+        .enabled
+        .then(|| out.join(recording_file_name(&scene.model.name, run_id)))
+}
+
+fn recorder_options(scene: &LoadedScene) -> RecorderOptions {
+    RecorderOptions {
+        topics: scene.recording.topics.clone(),
+        full_fields_every: scene.recording.full_fields_every.min(u32::MAX as usize) as u32,
+        ..RecorderOptions::default()
+    }
+}
+
+fn run_info(scene: &LoadedScene, run_id: &str) -> RunInfo {
+    RunInfo {
+        run_id: run_id.to_string(),
+        scene_name: scene.model.name.clone(),
+        scene_fingerprint: scene.fingerprint,
+        scene_text: scene.text.clone(),
+        software: software(),
+    }
+}
+
+/// Creates the recorder of a run (the file exists and holds the scene when this returns).
+pub fn create_recorder(scene: &LoadedScene, run_id: &str, path: &Path) -> anyhow::Result<Recorder> {
+    Ok(Recorder::create(
+        path,
+        &run_info(scene, run_id),
+        &recorder_options(scene),
+    )?)
+}
+
+/// What a recording holds once finished.
+#[derive(Debug, Clone)]
+pub struct RecordingOutcome {
+    pub path: PathBuf,
+    pub stats: Option<RecordingStats>,
+}
+
+/// An in-process run whose messages are recorded to `path` (when given). The recorder's time is
+/// part of the run's wall time.
+pub fn run_in_process_recorded(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    path: Option<&Path>,
+    on_iteration: impl FnMut(&IterationRecord),
+) -> anyhow::Result<(RunResult, Option<RecordingOutcome>)> {
+    let Some(path) = path else {
+        return Ok((crate::runner::run_in_process(scene, opts, on_iteration)?, None));
+    };
+    let mut recorder = create_recorder(scene, &opts.run_id, path)?;
+    let mut failure = None;
+    let result = run_in_process_observed(scene, opts, on_iteration, |m| {
+        if failure.is_none() {
+            if let Err(e) = recorder.record(&m.topic(), log_time_now(), &glissade_messages::encode(m)) {
+                failure = Some(e);
+            }
+        }
+        Duration::ZERO
+    })?;
+    if let Some(e) = failure {
+        return Err(e.into());
+    }
+    let stats = recorder.finish()?;
+    Ok((
+        result,
+        Some(RecordingOutcome {
+            path: path.to_path_buf(),
+            stats: Some(stats),
+        }),
+    ))
+}
+
+/// The recorder process of a multi-process run, seen from the launcher. Killed when dropped.
+pub struct RecorderProcess {
+    child: Child,
+    /// The recorder's liveliness token is up (it subscribed to the run).
+    ready: Arc<AtomicBool>,
+    _watch: zenoh::pubsub::Subscriber<()>,
+    path: PathBuf,
+    last_lines: Arc<Mutex<Vec<String>>>,
+}
+
+impl Drop for RecorderProcess {
+    /// SIGTERM (the recorder finalises its file), then SIGKILL if it is still there 5 s later.
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            // SAFETY: plain kill(2) on our own child's pid.
+            unsafe {
+                libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM);
+            }
+            let deadline = Instant::now() + Duration::from_secs(5);
+            while matches!(self.child.try_wait(), Ok(None)) && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// Starts `exe node recorder` for run `run_id`, connected to `endpoint` (the bus of `session`),
+/// writing `path`.
+pub fn spawn_recorder_process(
+    exe: &Path,
+    session: &zenoh::Session,
+    run_id: &str,
+    endpoint: &str,
+    path: &Path,
+) -> anyhow::Result<RecorderProcess> {
+    let ready = Arc::new(AtomicBool::new(false));
+    let flag = ready.clone();
+    let watch = session
+        .liveliness()
+        .declare_subscriber(recorder_alive_key(run_id))
+        .history(true)
+        .callback(move |s| flag.store(s.kind() == zenoh::sample::SampleKind::Put, Ordering::SeqCst))
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: watch the recorder's liveliness: {e}"))?;
+    let mut cmd = Command::new(exe);
+    cmd.args(["node", "recorder", "--run", run_id, "--connect", endpoint, "--file"])
+        .arg(path);
+    // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+    unsafe {
+        use std::os::unix::process::CommandExt;
+        cmd.pre_exec(|| {
+            // The recorder finalises its file if the launcher dies.
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            Ok(())
+        });
+    }
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("cannot start the recorder process ({})", exe.display()))?;
+    let last_lines = Arc::new(Mutex::new(Vec::new()));
+    for stream in [
+        child
+            .stdout
+            .take()
+            .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+        child
+            .stderr
+            .take()
+            .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        let last = last_lines.clone();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stream).lines().map_while(Result::ok) {
+                eprintln!("[recorder:0] {line}");
+                if let Ok(mut l) = last.lock() {
+                    l.push(line);
+                    let n = l.len();
+                    if n > 10 {
+                        l.drain(..n - 10);
+                    }
+                }
+            }
+        });
+    }
+    Ok(RecorderProcess {
+        child,
+        ready,
+        _watch: watch,
+        path: path.to_path_buf(),
+        last_lines,
+    })
+}
+
+impl RecorderProcess {
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// The recorder has subscribed to the run (its liveliness token is up).
+    pub fn is_ready(&self) -> bool {
+        self.ready.load(Ordering::SeqCst)
+    }
+
+    fn failure(&mut self) -> Option<String> {
+        match self.child.try_wait() {
+            Ok(Some(status)) if !status.success() => {
+                let lines = self.last_lines.lock().map(|l| l.join("\n    ")).unwrap_or_default();
+                Some(format!(
+                    "the recorder process failed ({status}); its last lines:\n    {lines}"
+                ))
+            }
+            _ => None,
+        }
+    }
+
+    /// Fails when the recorder process has exited with an error (e.g. before the run starts,
+    /// when it cannot create the file).
+    pub fn check(&mut self) -> anyhow::Result<()> {
+        match self.failure() {
+            Some(f) => bail!("{f}"),
+            None => Ok(()),
+        }
+    }
+
+    /// Tells the recorder the run is over (`seen` messages on the run's key expressions) and waits
+    /// for it to finalise the file. Returns what went wrong with the recording, if anything
+    /// (the run's results do not depend on it).
+    pub fn finish(mut self, session: &zenoh::Session, run_id: &str, seen: u64) -> Option<String> {
+        if let Some(f) = self.failure() {
+            return Some(format!("{f}; {} holds the chunks written before", self.path.display()));
+        }
+        if let Err(e) = session
+            .put(end_key(run_id), seen.to_le_bytes().to_vec())
+            .congestion_control(CongestionControl::Block)
+            .wait()
+        {
+            return Some(format!("cannot tell the recorder to stop: {e}"));
+        }
+        let deadline = Instant::now() + DRAIN_TIMEOUT + Duration::from_secs(30);
+        loop {
+            match self.child.try_wait() {
+                Ok(Some(status)) if status.success() => return None,
+                Ok(Some(_)) => {
+                    return self
+                        .failure()
+                        .map(|f| format!("{f}; {} holds the chunks written before", self.path.display()))
+                }
+                Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
+                Ok(None) => return Some("the recorder did not finish within its drain timeout".into()),
+                Err(e) => return Some(format!("cannot wait for the recorder: {e}")),
+            }
+        }
+    }
+}
+
+static SIGNALLED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    SIGNALLED.store(true, Ordering::SeqCst);
+}
+
+/// The `glissade node recorder` process: fetches the scene, creates the file, subscribes to the
+/// run, declares its liveliness token, and records until the launcher's stop (or SIGINT/SIGTERM,
+/// which finalise the file too).
+pub fn run_recorder_process(run_id: &str, connect: &[String], path: &Path) -> anyhow::Result<()> {
+    // SAFETY: the handler only stores to an atomic.
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+    let session = glissade_zenoh::open(glissade_zenoh::config("client", &[], connect, false)?)?;
+    let bytes = glissade_zenoh::fetch_scene(&session, run_id, Duration::from_secs(60))?;
+    let fp = glissade_zenoh::scene_fingerprint_of(&bytes, run_id)?;
+    let expected = Expected {
+        run_id: run_id.to_string(),
+        scene_fingerprint: fp,
+    };
+    let Payload::Scene { text } = decode(&bytes, &expected)?.payload else {
+        bail!("the launcher's scene query returned another payload");
+    };
+    if fingerprint(&text) != fp {
+        bail!("the scene received from the bus does not match its fingerprint {fp:016x}");
+    }
+    let scene = load_str(&text, "<scene from the bus>")?;
+    let mut recorder = create_recorder(&scene, run_id, path)?;
+    eprintln!("recording to {} (pid {})", path.display(), std::process::id());
+    let (tx, rx) = mpsc::channel::<(String, Vec<u8>, u64)>();
+    let _sub = session
+        .declare_subscriber(run_topics(run_id))
+        .callback(move |s| {
+            let _ = tx.send((
+                s.key_expr().as_str().to_string(),
+                s.payload().to_bytes().into_owned(),
+                log_time_now(),
+            ));
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: subscribe to the run: {e}"))?;
+    let _token = session
+        .liveliness()
+        .declare_token(recorder_alive_key(run_id))
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: liveliness token: {e}"))?;
+    let (end, stop) = (end_key(run_id), launcher_stop_key(run_id));
+    let mut seen: u64 = 0;
+    let mut target: Option<(u64, Instant)> = None;
+    let mut last = Instant::now();
+    loop {
+        if SIGNALLED.load(Ordering::SeqCst) {
+            let stats = recorder.finish()?;
+            eprintln!(
+                "interrupted: recording finalised with {} messages: {}",
+                stats.messages,
+                path.display()
+            );
+            return Ok(());
+        }
+        if let Some((n, since)) = target {
+            if seen >= n {
+                break;
+            }
+            if since.elapsed() > DRAIN_TIMEOUT {
+                recorder.finish()?;
+                bail!(
+                    "received {seen} of the {n} messages the launcher saw within {DRAIN_TIMEOUT:?} after the stop; {} is finalised without the rest",
+                    path.display()
+                );
+            }
+        }
+        match rx.recv_timeout(Duration::from_millis(100)) {
+            Ok((key, bytes, t)) => {
+                last = Instant::now();
+                if key == end {
+                    let n = <[u8; 8]>::try_from(bytes.as_slice())
+                        .map(u64::from_le_bytes)
+                        .map_err(|_| anyhow::anyhow!("malformed end message ({} bytes)", bytes.len()))?;
+                    target = Some((n, Instant::now()));
+                    continue;
+                }
+                if key == stop {
+                    let stats = recorder.finish()?;
+                    eprintln!(
+                        "the run was stopped ({}): recording finalised with {} messages: {}",
+                        String::from_utf8_lossy(&bytes),
+                        stats.messages,
+                        path.display()
+                    );
+                    return Ok(());
+                }
+                // Control messages (start, …) carry no envelope: not part of the run's traffic.
+                if peek_envelope(&bytes, run_id).is_ok() {
+                    seen += 1;
+                    recorder.record(&key, t, &bytes)?;
+                }
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) if last.elapsed() > IDLE_TIMEOUT => {
+                recorder.finish()?;
+                bail!(
+                    "no message on the bus for {IDLE_TIMEOUT:?}; {} is finalised",
+                    path.display()
+                );
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the subscriber closed"),
+        }
+    }
+    let stats = recorder.finish()?;
+    eprintln!(
+        "recorded {} messages on {} channels, {} bytes: {}",
+        stats.messages,
+        stats.channels,
+        stats.file_bytes,
+        path.display()
+    );
+    let _ = session.close().wait();
+    Ok(())
+}

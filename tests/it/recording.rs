@@ -1,0 +1,220 @@
+//! Recordings (MCAP): what the recorder writes is every message of the run, byte for byte, read
+//! back by the project's reader and by an independent one (the Python `mcap` package).
+
+use crate::common::scene;
+use glissade::recording::run_in_process_recorded;
+use glissade::runner::{run_in_process_observed, RunOptions};
+use glissade_recorder::Recording;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+fn scene_text(name: &str) -> String {
+    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
+}
+
+/// A fresh empty folder under the system's temporary folder.
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("glissade-recording-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// (topic, wire bytes) of every message of an in-process run, in publication order.
+fn bus_messages(text: &str, run_id: &str) -> Vec<(String, Vec<u8>)> {
+    let sc = scene(text);
+    let mut out = Vec::new();
+    run_in_process_observed(
+        &sc,
+        &RunOptions {
+            run_id: run_id.into(),
+            interior: false,
+        },
+        |_| {},
+        |m| {
+            out.push((m.topic(), glissade_messages::encode(m)));
+            Duration::ZERO
+        },
+    )
+    .unwrap();
+    out
+}
+
+/// Messages per topic, in order.
+fn by_topic(messages: impl IntoIterator<Item = (String, Vec<u8>)>) -> BTreeMap<String, Vec<Vec<u8>>> {
+    let mut map: BTreeMap<String, Vec<Vec<u8>>> = BTreeMap::new();
+    for (t, b) in messages {
+        map.entry(t).or_default().push(b);
+    }
+    map
+}
+
+fn read_back(path: &Path) -> (Recording, Vec<(String, Vec<u8>)>) {
+    let r = Recording::open(path).unwrap();
+    let msgs = r
+        .messages()
+        .map(|m| (m.topic.to_string(), m.data.into_owned()))
+        .collect();
+    (r, msgs)
+}
+
+/// Reads a recording with the Python `mcap` package; None (with the reason printed) when Python
+/// or the package is missing. Returns (topic, bytes) in file order and the summary's per-topic counts.
+fn python_read(path: &Path) -> Option<(Vec<(String, Vec<u8>)>, BTreeMap<String, u64>)> {
+    const SCRIPT: &str = r#"
+import sys, struct
+from mcap.reader import make_reader
+out = open(sys.argv[2], "wb")
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f)
+    summary = reader.get_summary()
+    counts = summary.statistics.channel_message_counts
+    for cid, ch in summary.channels.items():
+        t = ch.topic.encode()
+        out.write(b"C" + struct.pack("<H", len(t)) + t + struct.pack("<Q", counts.get(cid, 0)))
+    for schema, channel, message in reader.iter_messages(log_time_order=False):
+        t = channel.topic.encode()
+        out.write(b"M" + struct.pack("<H", len(t)) + t + struct.pack("<Q", len(message.data)) + message.data)
+out.close()
+"#;
+    let python = ["python3", "python"].into_iter().find(|p| {
+        Command::new(p)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    let Some(python) = python else {
+        println!("skipped the Python reader: no python3 on PATH");
+        return None;
+    };
+    let probe = Command::new(python).args(["-c", "import mcap"]).output().unwrap();
+    if !probe.status.success() {
+        println!(
+            "skipped the Python reader: the `mcap` package is not installed (pip install mcap): {}",
+            String::from_utf8_lossy(&probe.stderr).trim()
+        );
+        return None;
+    }
+    let dump = path.with_extension("python-dump");
+    let o = Command::new(python)
+        .args(["-c", SCRIPT])
+        .arg(path)
+        .arg(&dump)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "python mcap reader failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let bytes = std::fs::read(&dump).unwrap();
+    let (mut messages, mut counts, mut k) = (Vec::new(), BTreeMap::new(), 0);
+    let u16_at = |k: usize| u16::from_le_bytes([bytes[k], bytes[k + 1]]) as usize;
+    let u64_at = |k: usize| u64::from_le_bytes(bytes[k..k + 8].try_into().unwrap());
+    while k < bytes.len() {
+        let tag = bytes[k];
+        let tl = u16_at(k + 1);
+        let topic = String::from_utf8(bytes[k + 3..k + 3 + tl].to_vec()).unwrap();
+        let n = u64_at(k + 3 + tl);
+        k += 3 + tl + 8;
+        if tag == b'C' {
+            counts.insert(topic, n);
+        } else {
+            messages.push((topic, bytes[k..k + n as usize].to_vec()));
+            k += n as usize;
+        }
+    }
+    Some((messages, counts))
+}
+
+/// An in-process run's recording holds every message of the bus with its topic, in order,
+/// byte for byte: read back by our reader and by the Python `mcap` package.
+#[test]
+fn in_process_recording_reads_back_with_both_readers() {
+    let text = scene_text("small-three-layer");
+    let sc = scene(&text);
+    let dir = temp_dir("in-process");
+    let path = dir.join("small.mcap");
+    let opts = RunOptions {
+        run_id: "rec-1".into(),
+        interior: false,
+    };
+    let (result, outcome) = run_in_process_recorded(&sc, &opts, Some(&path), |_| {}).unwrap();
+    let stats = outcome.unwrap().stats.unwrap();
+    let bus = bus_messages(&text, "rec-1");
+    assert!(result.iterations.len() > 5, "{} iterations", result.iterations.len());
+    assert_eq!(stats.messages, bus.len() as u64);
+
+    let (r, ours) = read_back(&path);
+    assert!(r.is_finished() && r.truncated().is_none());
+    assert_eq!(r.scene_text(), Some(text.as_str()));
+    assert_eq!(r.metadata()["scene"], "small-three-layer");
+    assert!(r.metadata()["software"].starts_with("glissade "));
+    assert_eq!(ours, bus, "our reader: every message, in order, byte for byte");
+    let topics = by_topic(bus.clone());
+    assert_eq!(r.channels().len(), topics.len(), "one channel per key expression");
+    for c in r.channels() {
+        assert_eq!(c.messages, topics[&c.topic].len() as u64, "{}", c.topic);
+        assert!(c.schema_name.starts_with("glissade."), "{}", c.schema_name);
+        assert_eq!(c.message_encoding, "bincode2");
+    }
+    for m in r.messages() {
+        r.decode(&m).unwrap();
+    }
+
+    if let Some((theirs, counts)) = python_read(&path) {
+        assert_eq!(theirs, bus, "the Python reader: every message, in order, byte for byte");
+        let expected: BTreeMap<String, u64> = topics.iter().map(|(t, v)| (t.clone(), v.len() as u64)).collect();
+        assert_eq!(counts, expected, "per-channel counts of the summary section");
+        println!(
+            "the Python mcap reader read {} messages on {} channels",
+            theirs.len(),
+            counts.len()
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Recording off: no file; topic restriction: only the selected channels; an unwritable folder:
+/// an error naming the path, before anything is solved.
+#[test]
+fn recording_off_restricted_and_unwritable() {
+    let dir = temp_dir("options");
+    let text = scene_text("small-three-layer");
+    let opts = RunOptions {
+        run_id: "rec-2".into(),
+        interior: false,
+    };
+    let off = scene(&format!("{text}\n[recording]\nenabled = false\n"));
+    assert_eq!(glissade::recording::recording_path(&off, "rec-2", &dir), None);
+
+    let only = scene(&format!(
+        "{text}\n[recording]\ntopics = [\"interface/*/decision\", \"interface/*/interface_solution\"]\n"
+    ));
+    let path = glissade::recording::recording_path(&only, "rec-2", &dir).unwrap();
+    assert_eq!(path, dir.join("small-three-layer-rec-2.mcap"));
+    let (result, _) = run_in_process_recorded(&only, &opts, Some(&path), |_| {}).unwrap();
+    let (r, msgs) = read_back(&path);
+    let topics: Vec<&str> = r.channels().iter().map(|c| c.topic.as_str()).collect();
+    assert_eq!(
+        topics,
+        [
+            "glissade/rec-2/interface/0/decision",
+            "glissade/rec-2/interface/0/interface_solution"
+        ]
+    );
+    assert_eq!(r.channels()[0].messages, result.iterations.len() as u64);
+    assert_eq!(r.channels()[1].messages, only.model.interfaces.len() as u64);
+    assert_eq!(msgs.len(), result.iterations.len() + only.model.interfaces.len());
+
+    let blocker = dir.join("a-file");
+    std::fs::write(&blocker, b"x").unwrap();
+    let bad = blocker.join("sub").join("r.mcap");
+    let mut solved = false;
+    let e = run_in_process_recorded(&only, &opts, Some(&bad), |_| solved = true).unwrap_err();
+    assert!(format!("{e:#}").contains(&bad.display().to_string()), "{e:#}");
+    assert!(!solved, "the error comes before any iteration");
+    let _ = std::fs::remove_dir_all(&dir);
+}
