@@ -3,7 +3,9 @@
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
-use glissade::distributed::{run_multi_process, run_node_process, NodeRole};
+use glissade::distributed::{
+    install_interrupt_handler, run_distributed, run_node_process, Interrupted, Network, NodeName, NodeRole,
+};
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
 use glissade::report::{build_report, plot_svg};
@@ -96,10 +98,11 @@ struct NodeArgs {
     /// Zenoh endpoint(s) to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
     #[arg(long, required = true)]
     connect: Vec<String>,
-    /// Subdomains hosted (subdomain role), e.g. 0,1,2.
+    /// Subdomains hosted (subdomain role), e.g. 0,1,2; default: group `--index` of the scene's
+    /// deployment (given, they must be that group).
     #[arg(long, value_delimiter = ',')]
     subdomains: Vec<u32>,
-    /// Index of this subdomain node process.
+    /// Index of this node process among those of its role (subdomain nodes: 0, 1, …).
     #[arg(long, default_value_t = 0)]
     index: u32,
     /// Send the full displacement fields at the end (subdomain role).
@@ -130,10 +133,26 @@ struct RunArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+    /// Zenoh endpoint(s) the launcher's router listens on, e.g. tcp/0.0.0.0:7447, for nodes
+    /// started on other machines (default: a free loopback port). Repeatable.
+    #[arg(long, conflicts_with_all = ["in_process", "connect"])]
+    listen: Vec<String>,
+    /// Connect to this Zenoh router (e.g. zenohd) instead of hosting one. Repeatable.
+    #[arg(long, conflicts_with = "in_process")]
+    connect: Vec<String>,
+    /// Nodes the launcher does not start, to be started by hand with `glissade node`, e.g.
+    /// subdomain:1,interface (role[:index]).
+    #[arg(long, value_delimiter = ',', conflicts_with = "in_process")]
+    remote: Vec<NodeName>,
+    /// Longest wait for the nodes of --remote to be ready (s).
+    #[arg(long, default_value_t = 300)]
+    remote_timeout: u64,
 }
 
 /// Exit code of a run that ended without converging (outputs are still written).
 const NOT_CONVERGED: u8 = 3;
+/// Exit code of a run stopped by Ctrl-C or SIGTERM (128 + SIGINT, as shells report it).
+const INTERRUPTED: u8 = 130;
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -185,9 +204,6 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     return Ok(ExitCode::SUCCESS);
                 }
             };
-            if matches!(role, NodeRole::Subdomain) && args.subdomains.is_empty() {
-                anyhow::bail!("a subdomain node needs --subdomains (e.g. --subdomains 0,1,2)");
-            }
             run_node_process(
                 role,
                 &args.run,
@@ -286,7 +302,45 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         result
     } else {
         let exe = std::env::current_exe().context("cannot locate the glissade executable to spawn nodes")?;
-        run_multi_process(&sc, &opts, &exe, progress)?
+        install_interrupt_handler()?;
+        let net = Network {
+            listen: args.listen.clone(),
+            connect: args.connect.clone(),
+            remote: args.remote.clone(),
+            remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
+        };
+        match run_distributed(&sc, &opts, &exe, &net, progress) {
+            Ok((result, traffic)) => {
+                bar.finish_and_clear();
+                let per = traffic.iterations.max(1) as f64;
+                for (kind, t) in &traffic.by_kind {
+                    println!(
+                        "bus: {kind}: {} message(s), {} bytes ({:.0} bytes per iteration)",
+                        t.messages,
+                        t.bytes,
+                        t.bytes as f64 / per
+                    );
+                }
+                result
+            }
+            Err(e) => {
+                bar.finish_and_clear();
+                let Some(Interrupted { partial }) = e.downcast_ref::<Interrupted>() else {
+                    return Err(e);
+                };
+                let mut s = summary(&sc, partial, &run_id);
+                s["verdict"] = serde_json::json!("Interrupted");
+                s["interrupted"] = serde_json::json!(true);
+                let p = write_json(&args.out, &format!("{}-{run_id}.summary.json", sc.model.name), &s)?;
+                println!(
+                    "scene `{}`: interrupted after {} iterations; every node was stopped\nsummary: {}",
+                    sc.model.name,
+                    partial.iterations.len(),
+                    p.display()
+                );
+                return Ok(ExitCode::from(INTERRUPTED));
+            }
+        }
     };
     bar.finish_and_clear();
     for l in &result.left_out {

@@ -7,5 +7,7 @@ mod distributed;
 mod latin_perfect;
 mod monolithic;
 mod recording;
+mod node_failures;
 mod reference;
 mod stability;
+mod two_hosts;
