@@ -133,6 +133,8 @@ pub struct Network {
     pub remote: Vec<NodeName>,
     /// Longest wait for the nodes started by hand to be ready (default: 300 s).
     pub remote_timeout: Option<Duration>,
+    /// MCAP file a recorder process writes every message of the run to; None: no recorder.
+    pub recording: Option<std::path::PathBuf>,
 }
 
 /// Messages and bytes of one kind seen on the bus.
@@ -417,6 +419,16 @@ pub fn run_distributed(
         let args = node_args(name, run_id, &node_connect, opts.interior);
         children.0.push(spawn_node(exe, name, &args)?);
     }
+    let mut recorder = match &net.recording {
+        Some(path) => Some(crate::recording::spawn_recorder_process(
+            exe,
+            &session,
+            run_id,
+            &node_connect[0],
+            path,
+        )?),
+        None => None,
+    };
     let remote_timeout = net.remote_timeout.unwrap_or(READY_TIMEOUT);
     if !net.remote.is_empty() {
         let connect: Vec<String> = if net.connect.is_empty() {
@@ -534,12 +546,19 @@ pub fn run_distributed(
             _ => child_failure,
         };
         if started.is_none() && failure.is_none() {
+            failure = recorder
+                .as_mut()
+                .and_then(|r| r.check().err())
+                .map(|e| format!("{e:#}"));
+        }
+        let recorder_ready = recorder.as_ref().is_none_or(|r| r.is_ready());
+        if started.is_none() && failure.is_none() {
             let missing: Vec<NodeName> = tokens
                 .iter()
                 .filter(|(k, _)| !presence.is_alive(k))
                 .map(|(_, &n)| n)
                 .collect();
-            if missing.is_empty() {
+            if missing.is_empty() && recorder_ready {
                 transport::publish_start(&session, run_id)?;
                 setup_s = t0.elapsed().as_secs_f64();
                 started = Some(Instant::now());
@@ -654,8 +673,15 @@ pub fn run_distributed(
         .last()
         .map(|r| r.decision.verdict.clone())
         .unwrap_or(Verdict::MaxIterations);
-    let (mut names, left_out) = plan.describe(model, groups.len());
+    let (mut names, mut left_out) = plan.describe(model, groups.len());
     names.push(format!("processes: {} (+ {bus})", all_nodes.len()));
+    if let Some(r) = recorder {
+        let seen = traffic.by_kind.values().map(|t| t.messages).sum();
+        if let Some(problem) = r.finish(&session, run_id, seen) {
+            eprintln!("warning: recording: {problem}");
+            left_out.push(format!("recording: {problem}"));
+        }
+    }
     if !net.remote.is_empty() {
         names.push(format!(
             "started by hand: {}",

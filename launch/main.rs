@@ -308,6 +308,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             connect: args.connect.clone(),
             remote: args.remote.clone(),
             remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
+            recording: recording.clone(),
         };
         match run_distributed(&sc, &opts, &exe, &net, progress) {
             Ok((result, traffic)) => {

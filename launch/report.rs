@@ -6,6 +6,7 @@ use crate::runner::{run_in_process_observed, RunOptions, RunResult};
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::linear::default_k0;
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
 use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::Payload;
@@ -42,6 +43,10 @@ pub struct Report {
     pub latin_setup_s: f64,
     pub latin_solve_s: f64,
     pub latin_verdict: String,
+    /// The scene's acceleration (`none`, or `anderson(m)`).
+    pub acceleration: String,
+    /// Anderson steps of the run: mixed, plain (the safeguard), restarts.
+    pub anderson_steps: [u32; 3],
     pub points: Vec<ReportPoint>,
     /// (threshold, LATIN wall time incl. setup to reach traction error ≤ threshold, iterations).
     pub time_to_accuracy: Vec<(f64, Option<f64>, Option<u32>)>,
@@ -69,6 +74,7 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
         .collect();
     let mut seen = BTreeSet::new();
     let mut errors: Vec<(u32, f64, f64)> = Vec::new();
+    let mut anderson_steps = [0u32; 3];
     let opts = RunOptions {
         run_id: run_id.to_string(),
         interior: false,
@@ -79,6 +85,15 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
         |_| {},
         |m| {
             let t = Instant::now();
+            if let Payload::AndersonStep { gamma, restart } = &m.payload {
+                anderson_steps[if *restart {
+                    2
+                } else if gamma.is_empty() {
+                    1
+                } else {
+                    0
+                }] += 1;
+            }
             if let Payload::BoundaryState { subdomain, w, f } = &m.payload {
                 for slot in &layouts[*subdomain as usize].slots {
                     fields[slot.interface].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
@@ -128,6 +143,11 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
         latin_setup_s: result.setup_s,
         latin_solve_s: result.solve_s,
         latin_verdict: format!("{:?}", result.verdict),
+        acceleration: match model.solver.acceleration {
+            Acceleration::None => "none".into(),
+            Acceleration::Anderson { window } => format!("anderson({window})"),
+        },
+        anderson_steps,
         points,
         time_to_accuracy,
     };

@@ -171,6 +171,7 @@ pub fn build_nodes(
         coarse: plan.coarse,
         relaxation: model.solver.relaxation,
         send_displacement: interior,
+        acceleration: model.solver.acceleration,
     };
     let mut nodes: Vec<Box<dyn Node>> = Vec::new();
     for solver in solvers {

@@ -231,6 +231,22 @@ pub enum Payload {
         subdomain: u32,
         q_hat: Field,
     },
+    /// A subdomain's share of the Anderson least-squares problem after its linear stage (DESIGN §3
+    /// "Acceleration"), over its k stored residual differences Δr_i (oldest first), forces only:
+    /// `gram` Δr_iᵀΔr_j (k × k), `projection` Δr_iᵀ r (k × 1), `residual2` ‖r‖².
+    AndersonGram {
+        subdomain: u32,
+        gram: Field,
+        projection: Field,
+        residual2: f64,
+    },
+    /// The mixing step every subdomain takes (summed Gram matrix solved by the interface node):
+    /// coefficients γ (oldest difference first), or empty for a plain relaxation step; `restart`
+    /// tells the subdomains to forget their differences.
+    AndersonStep {
+        gamma: Vec<f64>,
+        restart: bool,
+    },
     Decision(Decision),
     InterfaceSolution(InterfaceSolution),
     /// Full displacement field of a subdomain (n_dofs × (N+1)), on request at the end.
@@ -250,6 +266,8 @@ impl Payload {
             Payload::MacroDisplacements { .. } => "macro_displacements",
             Payload::BoundaryState { .. } => "boundary_state",
             Payload::LocalDirections { .. } => "local_directions",
+            Payload::AndersonGram { .. } => "anderson_gram",
+            Payload::AndersonStep { .. } => "anderson_step",
             Payload::Decision(_) => "decision",
             Payload::InterfaceSolution(_) => "interface_solution",
             Payload::Displacement { .. } => "displacement",
@@ -286,6 +304,20 @@ impl Payload {
                 Ok(())
             }
             Payload::LocalDirections { q_hat, .. } => q_hat.check("q_hat"),
+            Payload::AndersonGram { gram, projection, .. } => {
+                gram.check("gram")?;
+                projection.check("projection")?;
+                if gram.rows != gram.cols || (projection.rows, projection.cols) != (gram.rows, 1) {
+                    return Err(DecodeError::WrongSize {
+                        field: format!("projection (gram is {} × {})", gram.rows, gram.cols),
+                        rows: projection.rows,
+                        cols: projection.cols,
+                        len: projection.data.len(),
+                    });
+                }
+                Ok(())
+            }
+            Payload::AndersonStep { .. } => Ok(()),
             Payload::Decision(_) => Ok(()),
             Payload::InterfaceSolution(s) => {
                 for (name, f) in [

@@ -1,6 +1,7 @@
 //! Integration tests of glissade: in-process LATIN runs against monolithic solutions and
 //! analytic references, and the `glissade` binary end to end. One test binary.
 
+mod acceleration;
 mod analytic;
 mod common;
 mod distributed;

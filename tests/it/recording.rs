@@ -1,14 +1,17 @@
 //! Recordings (MCAP): what the recorder writes is every message of the run, byte for byte, read
-//! back by the project's reader and by an independent one (the Python `mcap` package).
+//! back by the project's reader and by an independent one (the Python `mcap` package); the
+//! multi-process recorder records the same messages as the in-process one; a recorder killed with
+//! SIGKILL leaves every chunk it wrote readable.
 
 use crate::common::scene;
 use glissade::recording::run_in_process_recorded;
 use glissade::runner::{run_in_process_observed, RunOptions};
 use glissade_recorder::Recording;
 use std::collections::BTreeMap;
+use std::io::BufRead;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::time::Duration;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 fn scene_text(name: &str) -> String {
     std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
@@ -216,5 +219,134 @@ fn recording_off_restricted_and_unwritable() {
     let e = run_in_process_recorded(&only, &opts, Some(&bad), |_| solved = true).unwrap_err();
     assert!(format!("{e:#}").contains(&bad.display().to_string()), "{e:#}");
     assert!(!solved, "the error comes before any iteration");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Runs `glissade run` as processes with recording into `dir`; returns the child.
+fn spawn_run(scene_path: &Path, dir: &Path, run_id: &str) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["run", "--quiet", "--run-id", run_id, "--out"])
+        .arg(dir)
+        .arg(scene_path)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+/// Waits for a child with a bound; kills it on timeout.
+fn wait_bounded(child: &mut std::process::Child, timeout: Duration) -> std::process::ExitStatus {
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the run did not end within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The recorder process of a multi-process run records exactly the messages of the in-process
+/// run (per channel, in order, byte for byte: the runs are bit-identical).
+#[test]
+fn multi_process_recording_matches_in_process() {
+    let dir = temp_dir("multi");
+    let text = scene_text("small-three-layer");
+    let scene_path = dir.join("small-three-layer.toml");
+    std::fs::write(&scene_path, &text).unwrap();
+    let mut child = spawn_run(&scene_path, &dir, "rec-3");
+    let status = wait_bounded(&mut child, Duration::from_secs(300));
+    let mut err = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+    assert!(status.success(), "{status}: {err}");
+    let (r, msgs) = read_back(&dir.join("small-three-layer-rec-3.mcap"));
+    assert!(r.is_finished(), "{err}");
+    assert_eq!(by_topic(msgs), by_topic(bus_messages(&text, "rec-3")));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// SIGKILL of the recorder process mid-run: the run goes on and says what happened; the file
+/// holds every chunk written before the kill (at least everything a copy taken just before the
+/// kill holds), and what it holds is the run's messages, per channel a prefix of the full run's.
+#[test]
+fn recording_survives_sigkill_of_the_recorder() {
+    let dir = temp_dir("sigkill");
+    // Enough iterations for the kill to land mid-run.
+    let text = scene_text("small-three-layer").replace(
+        "tolerance = 1e-4",
+        "tolerance = 1e-300\nmax_iterations = 400\nstagnation_window = 1000",
+    );
+    let scene_path = dir.join("long.toml");
+    std::fs::write(&scene_path, &text).unwrap();
+    let mut child = spawn_run(&scene_path, &dir, "rec-4");
+    let path = dir.join("small-three-layer-rec-4.mcap");
+    // The recorder announces its pid; forward the rest of stderr to a buffer.
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let deadline = Instant::now() + Duration::from_secs(300);
+    let mut pid = None;
+    let mut log = Vec::new();
+    while pid.is_none() && Instant::now() < deadline {
+        if let Ok(line) = rx.recv_timeout(Duration::from_millis(100)) {
+            if let Some(rest) = line.split("(pid ").nth(1) {
+                pid = rest.trim_end_matches(')').parse::<i32>().ok();
+            }
+            log.push(line);
+        }
+    }
+    let pid = pid.unwrap_or_else(|| panic!("the recorder did not announce itself: {log:?}"));
+    // Wait until a few chunks are on disk, copy the file, kill.
+    let before = loop {
+        assert!(Instant::now() < deadline, "the recording did not grow: {log:?}");
+        let n = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+        if n > 200_000 {
+            break std::fs::read(&path).unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    // SAFETY: kill(2) of the recorder process this test's child started.
+    let killed = unsafe { libc::kill(pid, libc::SIGKILL) };
+    assert_eq!(killed, 0);
+    let status = wait_bounded(&mut child, Duration::from_secs(300));
+    while let Ok(line) = rx.recv_timeout(Duration::from_millis(200)) {
+        log.push(line);
+    }
+    let mut out = String::new();
+    std::io::Read::read_to_string(child.stdout.as_mut().unwrap(), &mut out).unwrap();
+    assert_eq!(
+        status.code(),
+        Some(3),
+        "max iterations, not a failure of the run: {log:?}"
+    );
+    assert!(
+        out.contains("left out: recording: the recorder process failed"),
+        "{out}"
+    );
+
+    let snapshot = Recording::from_bytes(&path, before).unwrap();
+    let n_before = snapshot.messages().count();
+    let (r, msgs) = read_back(&path);
+    assert!(!r.is_finished());
+    assert!(msgs.len() >= n_before && n_before > 0, "{} < {n_before}", msgs.len());
+    let full = by_topic(bus_messages(&text, "rec-4"));
+    let total: usize = full.values().map(Vec::len).sum();
+    assert!(
+        msgs.len() < total,
+        "the kill landed after the run: {} of {total}",
+        msgs.len()
+    );
+    for (topic, list) in by_topic(msgs) {
+        assert_eq!(list[..], full[&topic][..list.len()], "{topic}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,18 +2,25 @@
 //! interface (DESIGN §3), computes the indicators, updates search directions when asked, decides
 //! whether to continue, and sends each subdomain q̂ = F̂ + k⁻Ŵ for its next linear stage. At the
 //! stop it publishes every interface's s and ŝ.
+//!
+//! With Anderson acceleration it also hosts the mixing's global step (DESIGN §3 "Acceleration"):
+//! it sums the subdomains' `AndersonGram` partials in subdomain order (so the sum does not depend
+//! on arrival order), solves the small least-squares problem and sends one `AndersonStep` to
+//! every subdomain. A search-direction update changes the fixed-point map: the next step restarts
+//! the histories.
 
 use faer::Mat;
 use glissade_bus::convert::field_of;
 use glissade_bus::{expect_shape, Node, NodeError, RunContext};
+use glissade_mechanics::anderson::{AndersonCoordinator, AndersonStep, GramPartials, MAX_CONDITION};
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
-use glissade_mechanics::model::{Model, Side};
+use glissade_mechanics::model::{Acceleration, Model, Side};
 use glissade_messages::{
     role_field_topic, Decision, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
 };
 use rayon::prelude::*;
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 /// The stop rules of DESIGN §3: tolerance, max iterations, stagnation, divergence.
@@ -100,6 +107,11 @@ pub struct InterfaceNode {
     iteration: u32,
     time_weights: Vec<f64>,
     rule: StopRule,
+    /// Anderson mixing's global step (acceleration on), the partials of this iteration by
+    /// subdomain, and whether search directions changed since the last step.
+    anderson: Option<AndersonCoordinator>,
+    grams: BTreeMap<u32, GramPartials>,
+    directions_changed: bool,
     finished: bool,
 }
 
@@ -107,6 +119,7 @@ impl InterfaceNode {
     /// An interface node owning every interface of `model`, with k⁻ = k₀ = `k0[i]`.
     pub fn new(ctx: RunContext, model: Arc<Model>, k0: &[f64]) -> Self {
         let nt = model.time.n_points();
+        let model_acceleration = model.solver.acceleration;
         let layouts: Vec<Option<BoundaryLayout>> = (0..model.subdomains.len())
             .map(|s| {
                 let l = BoundaryLayout::new(&model, s, k0);
@@ -145,6 +158,12 @@ impl InterfaceNode {
             fields,
             received: BTreeSet::new(),
             iteration: 0,
+            anderson: match model_acceleration {
+                Acceleration::None => None,
+                Acceleration::Anderson { .. } => Some(AndersonCoordinator::new(MAX_CONDITION)),
+            },
+            grams: BTreeMap::new(),
+            directions_changed: false,
             finished: false,
         }
     }
@@ -222,6 +241,7 @@ impl InterfaceNode {
 
     fn finish_iteration(&mut self, sums: IndicatorSums, updates: Vec<u32>, verdict: Verdict) -> Vec<Message> {
         let n = self.iteration;
+        self.directions_changed |= !updates.is_empty();
         let stop = verdict.is_stop();
         let decision = Decision {
             eta: sums.eta(),
@@ -280,18 +300,105 @@ impl InterfaceNode {
     }
 }
 
+impl InterfaceNode {
+    /// Stores one subdomain's Anderson partials; with every participant's, sums them in subdomain
+    /// order, decides the step and sends it.
+    fn anderson_gram(
+        &mut self,
+        iteration: u32,
+        s: u32,
+        gram: &glissade_messages::Field,
+        projection: &glissade_messages::Field,
+        residual2: f64,
+    ) -> Result<Vec<Message>, NodeError> {
+        if self.anderson.is_none() {
+            return Ok(Vec::new());
+        }
+        if !self.participants.contains(&s) {
+            return Err(NodeError::new(
+                self.id,
+                format!("Anderson partials from subdomain {s}, which has no interface"),
+            ));
+        }
+        if iteration != self.iteration {
+            return Err(NodeError::new(
+                self.id,
+                format!(
+                    "Anderson partials of iteration {iteration} from subdomain {s} while at iteration {}",
+                    self.iteration
+                ),
+            ));
+        }
+        let k = gram.rows();
+        expect_shape(self.id, "gram", gram, k, k)?;
+        expect_shape(self.id, "projection", projection, k, 1)?;
+        if let Some((other, p)) = self.grams.iter().next() {
+            if p.k != k {
+                return Err(NodeError::new(
+                    self.id,
+                    format!(
+                        "Anderson partials of iteration {iteration}: subdomain {s} holds {k} differences, subdomain {other} {}",
+                        p.k
+                    ),
+                ));
+            }
+        }
+        let partials = GramPartials {
+            k,
+            gram: gram.data.clone(),
+            projection: projection.data.clone(),
+            residual2,
+        };
+        if self.grams.insert(s, partials).is_some() {
+            return Err(NodeError::new(
+                self.id,
+                format!("second Anderson partials of iteration {iteration} from subdomain {s}"),
+            ));
+        }
+        if self.grams.len() < self.participants.len() {
+            return Ok(Vec::new());
+        }
+        let mut sum = GramPartials::zeros(k);
+        for p in self.grams.values() {
+            sum.add(p);
+        }
+        self.grams.clear();
+        let changed = std::mem::take(&mut self.directions_changed);
+        let step = self.anderson.as_mut().expect("checked").decide(&sum, changed);
+        let (gamma, restart) = match step {
+            AndersonStep::Mix(g) => (g, false),
+            AndersonStep::Plain => (Vec::new(), false),
+            AndersonStep::Restart => (Vec::new(), true),
+        };
+        Ok(vec![self.msg(
+            Stage::Linear,
+            self.iteration,
+            Payload::AndersonStep { gamma, restart },
+        )])
+    }
+}
+
 impl Node for InterfaceNode {
     fn id(&self) -> NodeId {
         self.id
     }
 
     fn subscriptions(&self) -> Vec<String> {
-        vec![role_field_topic(
+        let mut subs = vec![role_field_topic(
             &self.ctx.run_id,
             Role::Subdomain,
             "boundary_state",
             None,
-        )]
+        )];
+        if self.anderson.is_some() {
+            subs.push(role_field_topic(
+                &self.ctx.run_id,
+                Role::Subdomain,
+                "anderson_gram",
+                None,
+            ));
+        }
+        subs
     }
 
     fn start(&mut self) -> Result<Vec<Message>, NodeError> {
@@ -301,6 +408,15 @@ impl Node for InterfaceNode {
     fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError> {
         if self.finished {
             return Ok(Vec::new());
+        }
+        if let Payload::AndersonGram {
+            subdomain,
+            gram,
+            projection,
+            residual2,
+        } = &msg.payload
+        {
+            return self.anderson_gram(msg.envelope.iteration, *subdomain, gram, projection, *residual2);
         }
         let Payload::BoundaryState { subdomain, w, f } = &msg.payload else {
             return Ok(Vec::new());

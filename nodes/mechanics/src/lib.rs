@@ -4,6 +4,7 @@
 //!
 //! Units: mm, N, MPa, s. Plane strain unless a scene says plane stress; unit thickness.
 
+pub mod anderson;
 pub mod assembly;
 pub mod coarse;
 pub mod condensed;

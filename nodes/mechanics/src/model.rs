@@ -200,6 +200,8 @@ pub struct SolverParams {
     pub search_direction_update: bool,
     pub alpha: f64,
     pub i0: f64,
+    /// Acceleration of the fixed point (DESIGN §3 "Acceleration").
+    pub acceleration: Acceleration,
 }
 
 impl Default for SolverParams {
@@ -216,8 +218,19 @@ impl Default for SolverParams {
             search_direction_update: false,
             alpha: 1.0 / 3.0,
             i0: 0.1,
+            acceleration: Acceleration::default(),
         }
     }
+}
+
+/// How the LATIN fixed point s ← G(s) is iterated ([`crate::anderson`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Acceleration {
+    /// Plain relaxation s ← μ G(s) + (1 − μ) s.
+    #[default]
+    None,
+    /// Anderson mixing (type II, damping μ) over the last `window` iterates.
+    Anderson { window: usize },
 }
 
 /// A validated problem.

@@ -69,6 +69,9 @@
 //! search_direction_update = false
 //! alpha = 0.3333333333333333 # in [0, 1)
 //! i0 = 0.1                   # > 0
+//! acceleration = "none"      # "none" (plain relaxation) | "anderson" (Anderson mixing, damping
+//!                            # = relaxation; same limit, fewer iterations on contact scenes)
+//! anderson_window = 5        # 1..=50: iterates mixed (only with acceleration = "anderson")
 //!
 //! [solver.pgd]
 //! enabled = false
@@ -118,11 +121,16 @@ use crate::element::{edge_load, edge_lumped_mass};
 use crate::expr::Expr;
 use crate::mesh::{BlockSide, Mesh};
 use crate::model::{
-    interpolate, Interface, InterfaceKind, LoadCase, Material, Model, Plane, SolverParams, Subdomain, TimeFunction,
-    TimeGrid,
+    interpolate, Acceleration, Interface, InterfaceKind, LoadCase, Material, Model, Plane, SolverParams, Subdomain,
+    TimeFunction, TimeGrid,
 };
 use serde::Deserialize;
 use std::collections::BTreeMap;
+
+/// `solver.anderson_window` when a scene turns Anderson acceleration on without one.
+pub const DEFAULT_ANDERSON_WINDOW: usize = 5;
+/// Largest `solver.anderson_window` accepted (each iterate kept costs three boundary fields).
+pub const MAX_ANDERSON_WINDOW: usize = 50;
 
 /// A scene loaded from its text: the validated model plus the settings used by the runtime.
 #[derive(Debug, Clone)]
@@ -367,7 +375,16 @@ struct RawSolver {
     search_direction_update: Option<bool>,
     alpha: Option<f64>,
     i0: Option<f64>,
+    acceleration: Option<RawAcceleration>,
+    anderson_window: Option<usize>,
     pgd: Option<RawPgd>,
+}
+
+#[derive(Deserialize, Clone, Copy, PartialEq)]
+#[serde(rename_all = "kebab-case")]
+enum RawAcceleration {
+    None,
+    Anderson,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -732,6 +749,7 @@ impl Ctx<'_> {
             search_direction_update: r.search_direction_update.unwrap_or(d.search_direction_update),
             alpha: r.alpha.unwrap_or(d.alpha),
             i0: r.i0.unwrap_or(d.i0),
+            acceleration: self.acceleration(r, d.acceleration)?,
         };
         let positive = |v: f64| v > 0.0 && v.is_finite();
         self.check(positive(s.k0_factor), "solver.k0_factor", || {
@@ -762,6 +780,32 @@ impl Ctx<'_> {
         })?;
         self.check(positive(s.i0), "solver.i0", || format!("{} must be > 0", s.i0))?;
         Ok(s)
+    }
+
+    fn acceleration(&self, r: &RawSolver, default: Acceleration) -> Result<Acceleration, SceneError> {
+        let anderson = match r.acceleration {
+            Some(a) => a == RawAcceleration::Anderson,
+            None => matches!(default, Acceleration::Anderson { .. }),
+        };
+        if !anderson {
+            if let Some(m) = r.anderson_window {
+                return Err(self.err(
+                    "solver.anderson_window",
+                    format!("{m} is set but solver.acceleration is \"none\" (set acceleration = \"anderson\")"),
+                ));
+            }
+            return Ok(Acceleration::None);
+        }
+        let window = r.anderson_window.unwrap_or(match default {
+            Acceleration::Anderson { window } => window,
+            Acceleration::None => DEFAULT_ANDERSON_WINDOW,
+        });
+        self.check(
+            (1..=MAX_ANDERSON_WINDOW).contains(&window),
+            "solver.anderson_window",
+            || format!("{window} is outside 1..={MAX_ANDERSON_WINDOW}"),
+        )?;
+        Ok(Acceleration::Anderson { window })
     }
 
     fn pgd(&self, r: Option<&RawPgd>) -> Result<PgdParams, SceneError> {
@@ -2246,6 +2290,43 @@ uy = -0.01
             &replaced("[[boundary]]\ny = 0.0", "[[boundary]]\nside = \"middle\""),
             "boundary[0].side",
             "middle",
+        );
+    }
+
+    #[test]
+    fn acceleration_keys() {
+        let with = |s: &str| format!("{TWO_BLOCKS}[solver]\n{s}\n");
+        let a = |s: &str| load(&with(s)).unwrap().model.solver.acceleration;
+        assert_eq!(a("acceleration = \"none\""), Acceleration::None);
+        assert_eq!(
+            a("acceleration = \"anderson\""),
+            Acceleration::Anderson {
+                window: DEFAULT_ANDERSON_WINDOW
+            }
+        );
+        assert_eq!(
+            a("acceleration = \"anderson\"\nanderson_window = 8"),
+            Acceleration::Anderson { window: 8 }
+        );
+        expect_err(
+            &with("acceleration = \"anderson\"\nanderson_window = 0"),
+            "solver.anderson_window",
+            "0 is outside 1..=50",
+        );
+        expect_err(
+            &with("acceleration = \"anderson\"\nanderson_window = 51"),
+            "solver.anderson_window",
+            "51 is outside 1..=50",
+        );
+        expect_err(
+            &with("acceleration = \"none\"\nanderson_window = 4"),
+            "solver.anderson_window",
+            "4 is set but solver.acceleration is \"none\"",
+        );
+        let e = load(&with("acceleration = \"broyden\"")).unwrap_err();
+        assert!(
+            e.to_string().contains("broyden") && e.to_string().contains("anderson"),
+            "{e}"
         );
     }
 }

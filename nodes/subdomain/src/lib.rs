@@ -5,13 +5,19 @@
 //! `MacroDisplacements` (w̃) → micro problem 2, relaxation → `BoundaryState` (s = (W, F)). Without
 //! the coarse problem micro 2 is skipped (w̃ = 0). A stop `Decision` ends the node, after sending
 //! the full displacement field when asked.
+//!
+//! With Anderson acceleration (DESIGN §3 "Acceleration"), from iteration 2 on the end of the
+//! linear stage is a reduction: the node records s and G(s) = s₁ + s₂, sends its `AndersonGram`
+//! partials, and takes the `AndersonStep` the interface node returns (mixed, plain or restart)
+//! before it sends `BoundaryState`. Without acceleration no such message exists.
 
 use faer::Mat;
 use glissade_bus::convert::{copy_into, field_of};
 use glissade_bus::{expect_shape, Node, NodeError, RunContext};
+use glissade_mechanics::anderson::{AndersonHistory, AndersonStep};
 use glissade_mechanics::linear::SubdomainSolver;
-use glissade_mechanics::model::Model;
-use glissade_messages::{role_field_topic, Message, NodeId, Payload, Role, Stage};
+use glissade_mechanics::model::{Acceleration, Model};
+use glissade_messages::{role_field_topic, Field, Message, NodeId, Payload, Role, Stage};
 use std::sync::Arc;
 
 /// Options of a subdomain node.
@@ -23,6 +29,8 @@ pub struct SubdomainOptions {
     pub relaxation: f64,
     /// Send the full displacement field at the end.
     pub send_displacement: bool,
+    /// Plain relaxation or Anderson mixing (damping = `relaxation`).
+    pub acceleration: Acceleration,
 }
 
 pub struct SubdomainNode {
@@ -41,6 +49,9 @@ pub struct SubdomainNode {
     f: Mat<f64>,
     w_tilde: Mat<f64>,
     macro_forces: Mat<f64>,
+    /// Anderson history (acceleration on) and whether the node waits for its step.
+    anderson: Option<AndersonHistory>,
+    awaiting_step: bool,
     finished: bool,
 }
 
@@ -68,6 +79,11 @@ impl SubdomainNode {
             f: z(n_b),
             w_tilde: z(n_m),
             macro_forces: z(n_m),
+            anderson: match options.acceleration {
+                Acceleration::None => None,
+                Acceleration::Anderson { window } => Some(AndersonHistory::new(window, options.relaxation, n_b, nt)),
+            },
+            awaiting_step: false,
             finished: false,
         }
     }
@@ -105,7 +121,9 @@ impl SubdomainNode {
         }
     }
 
-    /// s_new = s₁ + s₂, relaxed: s ← μ s_new + (1 − μ) s (μ = 1 for iterations 0 and 1).
+    /// s_new = s₁ + s₂, relaxed: s ← μ s_new + (1 − μ) s (μ = 1 for iterations 0 and 1). With
+    /// Anderson acceleration from iteration 2 on: records (s, s_new) and returns the Gram
+    /// partials instead; the step comes with `AndersonStep`.
     fn finish_linear_stage(&mut self) -> Message {
         let mu = if self.iteration <= 1 {
             1.0
@@ -115,12 +133,38 @@ impl SubdomainNode {
         let (n_b, nt) = (self.w.nrows(), self.w.ncols());
         for j in 0..nt {
             for r in 0..n_b {
-                let w_new = self.w1[(r, j)] + self.w2[(r, j)];
-                let f_new = self.f1[(r, j)] + self.f2[(r, j)];
-                self.w[(r, j)] = mu * w_new + (1.0 - mu) * self.w[(r, j)];
-                self.f[(r, j)] = mu * f_new + (1.0 - mu) * self.f[(r, j)];
+                self.w1[(r, j)] += self.w2[(r, j)];
+                self.f1[(r, j)] += self.f2[(r, j)];
             }
         }
+        if let Some(history) = self.anderson.as_mut() {
+            if self.iteration >= 1 {
+                history.record(&self.w, &self.f, &self.w1, &self.f1);
+            }
+            if self.iteration >= 2 {
+                let p = history.partials();
+                self.awaiting_step = true;
+                return self.msg(
+                    Stage::Linear,
+                    Payload::AndersonGram {
+                        subdomain: self.subdomain(),
+                        gram: Field::from_fn(p.k, p.k, |i, j| p.gram[j * p.k + i]),
+                        projection: Field::from_fn(p.k, 1, |i, _| p.projection[i]),
+                        residual2: p.residual2,
+                    },
+                );
+            }
+        }
+        for j in 0..nt {
+            for r in 0..n_b {
+                self.w[(r, j)] = mu * self.w1[(r, j)] + (1.0 - mu) * self.w[(r, j)];
+                self.f[(r, j)] = mu * self.f1[(r, j)] + (1.0 - mu) * self.f[(r, j)];
+            }
+        }
+        self.boundary_state()
+    }
+
+    fn boundary_state(&self) -> Message {
         self.msg(
             Stage::Linear,
             Payload::BoundaryState {
@@ -164,11 +208,15 @@ impl Node for SubdomainNode {
     fn subscriptions(&self) -> Vec<String> {
         let run = &self.ctx.run_id;
         let s = Some(self.subdomain());
-        vec![
+        let mut subs = vec![
             role_field_topic(run, Role::Interface, "local_directions", s),
             role_field_topic(run, Role::Coarse, "macro_displacements", s),
             role_field_topic(run, Role::Interface, "decision", None),
-        ]
+        ];
+        if self.anderson.is_some() {
+            subs.push(role_field_topic(run, Role::Interface, "anderson_step", None));
+        }
+        subs
     }
 
     fn start(&mut self) -> Result<Vec<Message>, NodeError> {
@@ -231,6 +279,41 @@ impl Node for SubdomainNode {
                 self.solver
                     .micro2_into(self.w_tilde.as_ref(), self.w2.as_mut(), self.f2.as_mut());
                 Ok(vec![self.finish_linear_stage()])
+            }
+            Payload::AndersonStep { gamma, restart } if self.anderson.is_some() => {
+                if !self.awaiting_step || it != self.iteration {
+                    return Err(NodeError::new(
+                        self.id,
+                        format!(
+                            "Anderson step of iteration {it} while at iteration {}{}",
+                            self.iteration,
+                            if self.awaiting_step {
+                                ""
+                            } else {
+                                " without partials sent"
+                            }
+                        ),
+                    ));
+                }
+                let history = self.anderson.as_mut().expect("checked");
+                let step = match (restart, gamma.is_empty()) {
+                    (true, _) => AndersonStep::Restart,
+                    (false, true) => AndersonStep::Plain,
+                    (false, false) if gamma.len() == history.len() => AndersonStep::Mix(gamma.clone()),
+                    (false, false) => {
+                        return Err(NodeError::new(
+                            self.id,
+                            format!(
+                                "Anderson step with {} coefficients for {} stored differences",
+                                gamma.len(),
+                                history.len()
+                            ),
+                        ))
+                    }
+                };
+                history.apply(&step, &mut self.w, &mut self.f);
+                self.awaiting_step = false;
+                Ok(vec![self.boundary_state()])
             }
             Payload::Decision(d) if d.verdict.is_stop() => {
                 self.finished = true;
