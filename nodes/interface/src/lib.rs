@@ -86,13 +86,40 @@ impl StopRule {
             let recent = self.history[k - w..].iter().cloned().fold(f64::INFINITY, f64::min);
             let before = self.history[..k - w].iter().cloned().fold(f64::INFINITY, f64::min);
             if recent > self.stagnation_ratio * before {
-                return Verdict::Stagnated {
-                    detail: format!("min η over the last {w} iterations is {recent:.3e}, not below {} × the earlier minimum {before:.3e}", self.stagnation_ratio),
-                };
+                let mut detail = format!(
+                    "min η over the last {w} iterations is {recent:.3e}, not below {} × the earlier minimum {before:.3e}",
+                    self.stagnation_ratio
+                );
+                if let Some((a, b)) = period_two(&self.history[k - w..]) {
+                    detail.push_str(&format!(
+                        "; η alternates between {a:.3e} and {b:.3e}: the iteration has a mode at −1 \
+                         (an undamped cycle; lower solver.relaxation below 1)"
+                    ));
+                }
+                return Verdict::Stagnated { detail };
             }
         }
         Verdict::Continue
     }
+}
+
+/// The two values η alternates between when the window is a period-2 cycle: its even and odd
+/// terms each constant to 1e-3 relative while the two differ by more than that.
+fn period_two(window: &[f64]) -> Option<(f64, f64)> {
+    if window.len() < 4 {
+        return None;
+    }
+    let spread = |parity: usize| {
+        let v: Vec<f64> = window.iter().skip(parity).step_by(2).copied().collect();
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
+        (lo, hi)
+    };
+    let ((lo0, hi0), (lo1, hi1)) = (spread(0), spread(1));
+    let tight = |lo: f64, hi: f64| hi - lo <= 1e-3 * hi;
+    let apart = (lo0 - lo1).abs() > 1e-3 * hi0.max(hi1);
+    (tight(lo0, hi0) && tight(lo1, hi1) && apart).then_some((hi0, hi1))
 }
 
 pub struct InterfaceNode {
@@ -514,7 +541,24 @@ mod tests {
                 break;
             }
         }
-        assert!(matches!(v, Verdict::Stagnated { .. }), "{v:?}");
+        assert!(
+            matches!(&v, Verdict::Stagnated { detail } if !detail.contains("alternates")),
+            "{v:?}"
+        );
+
+        // A period-2 cycle (η = 0.4, 0.3, 0.4, …) is named as such.
+        let mut r = StopRule::new(&p);
+        let mut v = Verdict::Continue;
+        for n in 0..20 {
+            v = r.decide(n, &sums(if n % 2 == 0 { 0.4 } else { 0.3 }, 1.0));
+            if v.is_stop() {
+                break;
+            }
+        }
+        assert!(
+            matches!(&v, Verdict::Stagnated { detail } if detail.contains("alternates between")),
+            "{v:?}"
+        );
 
         let mut r = StopRule::new(&p);
         r.decide(0, &sums(0.5, 1.0));
