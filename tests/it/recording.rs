@@ -26,7 +26,7 @@ fn temp_dir(tag: &str) -> PathBuf {
 }
 
 /// (topic, wire bytes) of every message of an in-process run, in publication order.
-fn bus_messages(text: &str, run_id: &str) -> Vec<(String, Vec<u8>)> {
+fn bus_messages(text: &str, run_id: &str) -> Messages {
     let sc = scene(text);
     let mut out = Vec::new();
     run_in_process_observed(
@@ -54,7 +54,7 @@ fn by_topic(messages: impl IntoIterator<Item = (String, Vec<u8>)>) -> BTreeMap<S
     map
 }
 
-fn read_back(path: &Path) -> (Recording, Vec<(String, Vec<u8>)>) {
+fn read_back(path: &Path) -> (Recording, Messages) {
     let r = Recording::open(path).unwrap();
     let msgs = r
         .messages()
@@ -63,9 +63,12 @@ fn read_back(path: &Path) -> (Recording, Vec<(String, Vec<u8>)>) {
     (r, msgs)
 }
 
+/// (topic, wire bytes) of messages in order.
+type Messages = Vec<(String, Vec<u8>)>;
+
 /// Reads a recording with the Python `mcap` package; None (with the reason printed) when Python
 /// or the package is missing. Returns (topic, bytes) in file order and the summary's per-topic counts.
-fn python_read(path: &Path) -> Option<(Vec<(String, Vec<u8>)>, BTreeMap<String, u64>)> {
+fn python_read(path: &Path) -> Option<(Messages, BTreeMap<String, u64>)> {
     const SCRIPT: &str = r#"
 import sys, struct
 from mcap.reader import make_reader
