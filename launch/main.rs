@@ -462,6 +462,11 @@ fn report(
         report.points.len(),
         report.latin_verdict
     );
+    let [mixed, plain, restarts] = report.anderson_steps;
+    println!(
+        "acceleration: {} ({mixed} mixed steps, {plain} safeguarded plain steps, {restarts} restarts)",
+        report.acceleration
+    );
     println!("| contact traction error | LATIN wall time (s) | iterations | / reference time |");
     println!("|---|---|---|---|");
     for (th, t, it) in &report.time_to_accuracy {
