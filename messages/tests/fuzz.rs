@@ -39,7 +39,11 @@ fn payload() -> impl Strategy<Value = Payload> {
     ];
     prop_oneof![
         ".{0,40}".prop_map(|text| Payload::Scene { text }),
-        (any::<u32>(), proptest::collection::vec((any::<u32>(), any::<u32>()), 0..4), field())
+        (
+            any::<u32>(),
+            proptest::collection::vec((any::<u32>(), any::<u32>()), 0..4),
+            field()
+        )
             .prop_map(|(subdomain, slots, l_e)| Payload::HomogenizedOperator { subdomain, slots, l_e }),
         (any::<u32>(), field()).prop_map(|(subdomain, forces)| Payload::MacroForces { subdomain, forces }),
         (any::<u32>(), field()).prop_map(|(subdomain, w_tilde)| Payload::MacroDisplacements { subdomain, w_tilde }),
@@ -90,8 +94,8 @@ fn payload() -> impl Strategy<Value = Payload> {
 }
 
 fn message() -> impl Strategy<Value = Message> {
-    (any::<u32>(), 0usize..6, 0usize..5, any::<u32>(), payload()).prop_map(|(iteration, stage, role, index, payload)| {
-        Message {
+    (any::<u32>(), 0usize..6, 0usize..5, any::<u32>(), payload()).prop_map(
+        |(iteration, stage, role, index, payload)| Message {
             envelope: Envelope {
                 schema_version: SCHEMA_VERSION,
                 run_id: RUN.into(),
@@ -106,13 +110,19 @@ fn message() -> impl Strategy<Value = Message> {
                     Stage::Final,
                 ][stage],
                 sender: NodeId {
-                    role: [Role::Subdomain, Role::Interface, Role::Coarse, Role::Launcher, Role::Recorder][role],
+                    role: [
+                        Role::Subdomain,
+                        Role::Interface,
+                        Role::Coarse,
+                        Role::Launcher,
+                        Role::Recorder,
+                    ][role],
                     index,
                 },
             },
             payload,
-        }
-    })
+        },
+    )
 }
 
 /// A way bytes get damaged.
@@ -171,7 +181,11 @@ fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
         prop_assert_eq!(&m.envelope.run_id, RUN);
         prop_assert_eq!(m.envelope.scene_fingerprint, SCENE);
         prop_assert_eq!(m.envelope.schema_version, SCHEMA_VERSION);
-        prop_assert_eq!(encode(&m), bytes, "accepted bytes are not the encoding of the decoded message");
+        prop_assert_eq!(
+            encode(&m),
+            bytes,
+            "accepted bytes are not the encoding of the decoded message"
+        );
     }
     Ok(())
 }

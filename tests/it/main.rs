@@ -3,6 +3,7 @@
 
 mod acceleration;
 mod analytic;
+mod bad_input;
 mod common;
 mod distributed;
 mod latin_perfect;

@@ -1,0 +1,240 @@
+//! Bad scenes and command lines (issue 9): each of the table's inputs makes the `glissade`
+//! binary exit with status 2, print an error that names the problem and where it is (the exact
+//! text below), and write nothing into the output folder.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The scene every bad scene is derived from (two blocks in contact, the GetFEM reference).
+const GOOD: &str = include_str!("../../launch/scenes/two-blocks.toml");
+
+/// How a case changes the good scene: replace `from` by `to` (each `from` must occur).
+type Edit = (&'static str, &'static str);
+
+struct Case {
+    name: &'static str,
+    /// Arguments; `{scene}` is the (edited) scene file, `{out}` the output folder.
+    args: &'static [&'static str],
+    edits: &'static [Edit],
+    /// Text the error message must contain: the problem and where it is (`{dir}` as in `args`).
+    error: &'static str,
+}
+
+const RUN: &[&str] = &["run", "--in-process", "--quiet", "--out", "{out}", "{scene}"];
+
+const CASES: &[Case] = &[
+    Case {
+        name: "scene file missing",
+        args: &["run", "--in-process", "--out", "{out}", "{dir}/no-such-scene.toml"],
+        edits: &[],
+        error: "cannot read scene file {dir}/no-such-scene.toml: No such file or directory",
+    },
+    Case {
+        name: "not TOML",
+        args: RUN,
+        edits: &[("name = \"two-blocks\"", "name = ")],
+        error: "bad.toml: (syntax): line 5, column 8: string values must be quoted",
+    },
+    Case {
+        name: "unknown top-level key",
+        args: RUN,
+        edits: &[("plane = \"strain\"", "plane = \"strain\"\ncolour = \"red\"")],
+        error: "bad.toml: colour: line 7, column 1: unknown field `colour`, expected one of `name`",
+    },
+    Case {
+        name: "wrong type",
+        args: RUN,
+        edits: &[("N = 40", "N = \"forty\"")],
+        error: "bad.toml: time.N: line 10, column 5: invalid type: string \"forty\", expected usize",
+    },
+    Case {
+        name: "zero time steps",
+        args: RUN,
+        edits: &[("N = 40", "N = 0")],
+        error: "bad.toml: time.N: N = 0: need at least one time step (N ≥ 1)",
+    },
+    Case {
+        name: "incompressible material",
+        args: RUN,
+        edits: &[("nu = 0.3", "nu = 0.5")],
+        error: "bad.toml: materials.steel.nu: ν = 0.5 is outside (−1, 0.5)",
+    },
+    Case {
+        name: "negative Young's modulus",
+        args: RUN,
+        edits: &[("E = 210000.0", "E = -210000.0")],
+        error: "bad.toml: materials.steel.E: E = -210000 must be > 0 (MPa)",
+    },
+    Case {
+        name: "unknown material",
+        args: RUN,
+        edits: &[(
+            "name = \"upper\"\nmaterial = \"steel\"",
+            "name = \"upper\"\nmaterial = \"stele\"",
+        )],
+        error: "bad.toml: block[1].material: unknown material `stele` (defined: steel)",
+    },
+    Case {
+        name: "overlapping blocks",
+        args: RUN,
+        edits: &[("y = [20.0, 40.0]", "y = [10.0, 40.0]")],
+        error: "bad.toml: block[1]: block `upper` overlaps block `lower`",
+    },
+    Case {
+        name: "no elements",
+        args: RUN,
+        edits: &[("nx = 16\nny = 8\n\n[[block]]", "nx = 0\nny = 8\n\n[[block]]")],
+        error: "bad.toml: block[0].nx: nx = 0: need at least one element",
+    },
+    Case {
+        name: "negative friction",
+        args: RUN,
+        edits: &[("friction = 0.2", "friction = -0.2")],
+        error: "bad.toml: interface[0].friction: friction coefficient -0.2 must be ≥ 0",
+    },
+    Case {
+        name: "interface rule naming an unknown block",
+        args: RUN,
+        edits: &[("between = [\"lower\", \"upper\"]", "between = [\"lower\", \"uper\"]")],
+        error: "bad.toml: interface[0].between: unknown block or subdomain `uper`",
+    },
+    Case {
+        name: "gap formula that does not parse",
+        args: RUN,
+        edits: &[("friction = 0.2", "friction = 0.2\ngap = \"x^^2\"")],
+        error: "bad.toml: interface[0].gap: formula `x^^2`: unexpected character at position 2",
+    },
+    Case {
+        name: "time function that does not parse",
+        args: RUN,
+        edits: &[("ux = \"0.004*sin(2*pi*t/1)\"", "ux = \"0.004*sin(2*pi*t/1\"")],
+        error: "bad.toml: boundary[1].ux: formula `0.004*sin(2*pi*t/1`: expected `)` at position 18",
+    },
+    Case {
+        name: "relaxation above 1",
+        args: RUN,
+        edits: &[("uy = -0.01\n", "uy = -0.01\n\n[solver]\nrelaxation = 1.5\n")],
+        error: "bad.toml: solver.relaxation: 1.5 is outside (0, 1]",
+    },
+    Case {
+        name: "search-direction update with α above the stability limit",
+        args: RUN,
+        edits: &[(
+            "uy = -0.01\n",
+            "uy = -0.01\n\n[solver]\nsearch_direction_update = true\nalpha = 0.5\n",
+        )],
+        error: "bad.toml: solver.alpha: 0.5 is above 0.3333 = 2(1 − μ)/(2 − μ) for relaxation μ = 0.8",
+    },
+    Case {
+        name: "macro degree out of range",
+        args: RUN,
+        edits: &[("uy = -0.01\n", "uy = -0.01\n\n[solver]\nmacro_degree = 9\n")],
+        error: "bad.toml: solver.macro_degree: 9 is neither \"auto\" nor a degree in 1..=5",
+    },
+    Case {
+        name: "more subdomain nodes than subdomains",
+        args: RUN,
+        edits: &[("uy = -0.01\n", "uy = -0.01\n\n[deployment]\nsubdomain_nodes = 5\n")],
+        error: "bad.toml: deployment.subdomain_nodes: 5 nodes for 2 subdomain(s): some nodes would host nothing",
+    },
+    Case {
+        name: "unknown solver key",
+        args: RUN,
+        edits: &[("uy = -0.01\n", "uy = -0.01\n\n[solver]\ntolerence = 1e-6\n")],
+        error: "bad.toml: solver.tolerence: line 50, column 1: unknown field `tolerence`, expected one of `k0_factor`",
+    },
+    Case {
+        name: "output folder is a file",
+        args: &["run", "--in-process", "--out", "{dir}/a-file", "{scene}"],
+        edits: &[],
+        error: "cannot create output folder {dir}/a-file: File exists",
+    },
+    Case {
+        name: "run without a scene",
+        args: &["run", "--in-process"],
+        edits: &[],
+        error: "error: the following required arguments were not provided:\n  <SCENE>",
+    },
+    Case {
+        name: "report tolerance not a number",
+        args: &["report", "--out", "{out}", "--tolerance", "tiny", "{scene}"],
+        edits: &[],
+        error: "error: invalid value 'tiny' for '--tolerance <TOLERANCE>': invalid float literal",
+    },
+    Case {
+        name: "unknown stability case",
+        args: &["stability", "--out", "{out}", "--case", "no-such-case"],
+        edits: &[],
+        error: "error: --case no-such-case: no such case (`glissade stability --list` names them)",
+    },
+    Case {
+        name: "unknown node role",
+        args: &["node", "janitor", "--run", "r", "--connect", "tcp/127.0.0.1:9"],
+        edits: &[],
+        error: "error: invalid value 'janitor' for '<ROLE>'",
+    },
+    Case {
+        name: "unknown command",
+        args: &["frobnicate"],
+        edits: &[],
+        error: "error: unrecognized subcommand 'frobnicate'",
+    },
+];
+
+fn files_in(dir: &Path) -> Vec<PathBuf> {
+    match std::fs::read_dir(dir) {
+        Ok(rd) => rd.filter_map(|e| e.ok().map(|e| e.path())).collect(),
+        Err(_) => Vec::new(),
+    }
+}
+
+#[test]
+fn bad_inputs_exit_2_with_a_clear_error_and_write_nothing() {
+    assert!(
+        CASES.len() >= 20,
+        "the issue asks for a table of at least 20 bad inputs"
+    );
+    let root = std::env::temp_dir().join(format!("glissade-bad-input-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let mut failures = Vec::new();
+    for (i, case) in CASES.iter().enumerate() {
+        let dir = root.join(format!("case-{i}"));
+        let out = dir.join("out");
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        std::fs::write(dir.join("a-file"), b"not a folder").expect("temp file");
+        let mut text = GOOD.to_string();
+        for (from, to) in case.edits {
+            assert!(text.contains(from), "{}: `{from}` not in the scene", case.name);
+            text = text.replacen(from, to, 1);
+        }
+        let scene = dir.join("bad.toml");
+        std::fs::write(&scene, &text).expect("scene file");
+        let args: Vec<String> = case
+            .args
+            .iter()
+            .map(|a| {
+                a.replace("{scene}", &scene.to_string_lossy())
+                    .replace("{out}", &out.to_string_lossy())
+                    .replace("{dir}", &dir.to_string_lossy())
+            })
+            .collect();
+        let output = Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .args(&args)
+            .output()
+            .expect("spawn glissade");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let written = files_in(&out);
+        let error = case.error.replace("{dir}", &dir.to_string_lossy());
+        let ok = output.status.code() == Some(2) && stderr.contains(&error) && written.is_empty();
+        if !ok {
+            failures.push(format!(
+                "{}: status {:?}, files written {written:?}, stderr:\n{stderr}\n(expected: `{}`)",
+                case.name,
+                output.status.code(),
+                error
+            ));
+        }
+    }
+    let _ = std::fs::remove_dir_all(&root);
+    assert!(failures.is_empty(), "{}", failures.join("\n---\n"));
+}
