@@ -321,12 +321,12 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 bar.finish_and_clear();
                 let per = traffic.iterations.max(1) as f64;
                 for (kind, t) in &traffic.by_kind {
-                    println!(
-                        "bus: {kind}: {} message(s), {} bytes ({:.0} bytes per iteration)",
-                        t.messages,
-                        t.bytes,
-                        t.bytes as f64 / per
-                    );
+                    let rate = if t.messages >= traffic.iterations {
+                        format!("{:.0} bytes per iteration", t.bytes as f64 / per)
+                    } else {
+                        "set-up or final, not per iteration".to_string()
+                    };
+                    println!("bus: {kind}: {} message(s), {} bytes ({rate})", t.messages, t.bytes);
                 }
                 result
             }

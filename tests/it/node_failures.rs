@@ -244,3 +244,89 @@ fn killing_the_launcher_leaves_no_node() {
     }
     assert_no_process_left(&run_id);
 }
+
+/// A launcher on a given loopback port that leaves subdomain node 1 to be started by hand, and
+/// that node, started here as a separate process (not a child of the launcher).
+fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String) {
+    let dir = scratch(name);
+    let scene = endless_scene(&dir);
+    let run_id = format!("{name}-{}", std::process::id());
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let mut cmd = Command::new(exe());
+    cmd.arg("run")
+        .arg(&scene)
+        .args([
+            "--quiet",
+            "--run-id",
+            &run_id,
+            "--listen",
+            &endpoint,
+            "--remote",
+            "subdomain:1",
+            "--out",
+        ])
+        .arg(&dir);
+    let mut launcher = Launcher::spawn(&mut cmd);
+    launcher.wait_for_line("on the other machine", Duration::from_secs(120));
+    let node = Launcher::spawn(Command::new(exe()).args([
+        "node",
+        "subdomain",
+        "--run",
+        &run_id,
+        "--connect",
+        &endpoint,
+        "--index",
+        "1",
+    ]));
+    launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
+    std::thread::sleep(Duration::from_millis(1500));
+    (launcher, node, run_id)
+}
+
+/// A node started by hand notices on its own, through the launcher's liveliness token, that
+/// the launcher died, and stops within 10 s naming it.
+#[test]
+fn a_hand_started_node_stops_when_the_launcher_dies() {
+    let (mut launcher, mut node, run_id) = launch_with_hand_started_node("lost-launcher");
+    let t = Instant::now();
+    launcher.child.kill().expect("SIGKILL the launcher");
+    launcher.wait_exit(Duration::from_secs(60));
+    let status = node.wait_exit(Duration::from_secs(60));
+    let took = t.elapsed();
+    println!("the hand-started node exited with {status} after {took:?}");
+    assert!(took < STOP_BOUND, "the node took {took:?} to stop");
+    assert!(!status.success());
+    // Every token goes with the router; the node names the launcher's.
+    assert!(
+        node.output().contains("error: peer launcher:0 left the run"),
+        "{}",
+        node.output()
+    );
+    assert_no_process_left(&run_id);
+}
+
+/// The launcher names a node started by hand that died, and stops the others.
+#[test]
+fn the_launcher_names_a_dead_hand_started_node() {
+    let (mut launcher, mut node, run_id) = launch_with_hand_started_node("lost-remote");
+    let t = Instant::now();
+    node.child.kill().expect("SIGKILL the node");
+    node.wait_exit(Duration::from_secs(60));
+    let status = launcher.wait_exit(Duration::from_secs(60));
+    let took = t.elapsed();
+    let out = launcher.output();
+    println!("the launcher exited with {status} after {took:?}");
+    assert!(took < STOP_BOUND, "the run took {took:?} to stop");
+    assert_eq!(status.code(), Some(2), "{out}");
+    let error = out.lines().find(|l| l.starts_with("error:")).expect("an error line");
+    assert!(
+        error.contains("node subdomain:1 (started by hand elsewhere) left the run"),
+        "{error}"
+    );
+    assert_no_process_left(&run_id);
+}

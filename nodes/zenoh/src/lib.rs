@@ -43,12 +43,23 @@ pub enum TransportError {
     Node(#[from] NodeError),
     #[error("no message for {0:?}: the run stalled or a peer died")]
     Timeout(Duration),
-    #[error("peer {peer} left the run (its liveliness token disappeared) while this process still had work")]
-    PeerLeft { peer: String },
+    #[error(
+        "peer {peer} left the run (its liveliness token disappeared) while this process still had work{}",
+        also_gone(.others)
+    )]
+    PeerLeft { peer: String, others: Vec<String> },
     #[error("stopped by the launcher: {0}")]
     Stopped(String),
     #[error("{0}")]
     Protocol(String),
+}
+
+fn also_gone(others: &[String]) -> String {
+    if others.is_empty() {
+        String::new()
+    } else {
+        format!("; also gone: {}", others.join(", "))
+    }
 }
 
 fn zerr(what: &str, e: impl std::fmt::Display) -> TransportError {
@@ -266,6 +277,7 @@ pub fn run_nodes(
             Ok(Event::Alive(key, false)) if key != own_token => {
                 return Err(TransportError::PeerLeft {
                     peer: node_of_alive_key(&key),
+                    others: Vec::new(),
                 })
             }
             Ok(Event::Data(key, bytes)) => early.push_back((key, bytes)),
@@ -311,23 +323,27 @@ pub fn run_nodes(
         handle(key, bytes, &mut nodes)?;
     }
     let mut last_message = Instant::now();
-    // The first peer that left, and when this process gives up on it.
-    let mut departed: Option<(String, Instant)> = None;
+    // The peers that left (first first), and when this process gives up on them.
+    let mut departed: Vec<String> = Vec::new();
+    let mut give_up: Option<Instant> = None;
     while !nodes.iter().all(|n| n.is_finished()) {
         let now = Instant::now();
-        if let Some((peer, deadline)) = &departed {
-            if now >= *deadline {
-                return Err(TransportError::PeerLeft {
-                    peer: node_of_alive_key(peer),
-                });
-            }
+        if give_up.is_some_and(|t| now >= t) {
+            // The launcher's token going with the others means the bus itself went away: name it.
+            let launcher = alive_key(run_id, "launcher", 0);
+            let first = departed.iter().position(|k| *k == launcher).unwrap_or(0);
+            let peer = node_of_alive_key(&departed.remove(first));
+            return Err(TransportError::PeerLeft {
+                peer,
+                others: departed.iter().map(|k| node_of_alive_key(k)).collect(),
+            });
         }
         if now.duration_since(last_message) >= run.idle_timeout {
             return Err(TransportError::Timeout(run.idle_timeout));
         }
         let mut wait = run.idle_timeout - now.duration_since(last_message);
-        if let Some((_, deadline)) = &departed {
-            wait = wait.min(deadline.saturating_duration_since(now));
+        if let Some(t) = give_up {
+            wait = wait.min(t.saturating_duration_since(now));
         }
         match rx.recv_timeout(wait) {
             Ok(Event::Data(key, bytes)) => {
@@ -335,8 +351,9 @@ pub fn run_nodes(
                 handle(key, bytes, &mut nodes)?;
             }
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
-            Ok(Event::Alive(key, false)) if key != own_token && departed.is_none() => {
-                departed = Some((key, Instant::now() + run.departure_grace));
+            Ok(Event::Alive(key, false)) if key != own_token => {
+                give_up.get_or_insert_with(|| Instant::now() + run.departure_grace);
+                departed.push(key);
             }
             Ok(Event::Alive(..)) | Ok(Event::Start) | Err(_) => {}
         }
