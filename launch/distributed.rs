@@ -344,7 +344,7 @@ pub fn run_distributed(
     }
     let t0 = Instant::now();
     let run_id = &opts.run_id;
-    let plan = Plan::new(model);
+    let plan = Plan::new(model).with_scene(scene);
     let groups = plan.groups(scene.deployment.subdomain_nodes);
     let all_nodes = run_nodes_of(&plan, groups.len());
     for r in &net.remote {
@@ -750,7 +750,7 @@ pub fn run_node_process(
     }
     let scene = load_str(&text, "<scene from the bus>")?;
     let model = Arc::new(scene.model.clone());
-    let plan = Plan::new(&model);
+    let plan = Plan::new(&model).with_scene(&scene);
     let selection = match role {
         NodeRole::Subdomain => {
             let groups = plan.groups(scene.deployment.subdomain_nodes);

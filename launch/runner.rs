@@ -6,12 +6,14 @@ use glissade_bus::{BusError, InProcessBus, Node, RunContext};
 use glissade_coarse::CoarseNode;
 use glissade_interface::InterfaceNode;
 use glissade_mechanics::assembly::AssemblyError;
-use glissade_mechanics::linear::{default_k0, macro_basis, SubdomainSolver};
+use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::linear::{default_k0, macro_basis, macro_degree, SubdomainSolver};
 use glissade_mechanics::model::Model;
 use glissade_mechanics::monolithic::solve_glued;
-use glissade_mechanics::scene::LoadedScene;
+use glissade_mechanics::pgd::PgdSettings;
+use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdParams};
 use glissade_messages::{Decision, Field, InterfaceSolution, Message, Payload, Verdict};
-use glissade_subdomain::{SubdomainNode, SubdomainOptions};
+use glissade_subdomain::{LinearStageLog, LinearStageRecord, SubdomainNode, SubdomainOptions};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -73,12 +75,21 @@ pub struct Plan {
     pub bases: Vec<Vec<Vec<f64>>>,
     pub participants: Vec<u32>,
     pub coarse: bool,
+    /// The scene's linear stage (resolved per subdomain when `Auto`) and PGD settings.
+    pub linear_stage: LinearStage,
+    pub pgd: PgdParams,
+    /// Where subdomain nodes log their linear stages, when asked.
+    pub log: Option<LinearStageLog>,
 }
 
 impl Plan {
     pub fn new(model: &Model) -> Self {
         let k0 = default_k0(model);
-        let bases = model.interfaces.iter().map(macro_basis).collect();
+        let bases = model
+            .interfaces
+            .iter()
+            .map(|itf| macro_basis(itf, macro_degree(model, itf)))
+            .collect();
         let participants = (0..model.subdomains.len())
             .filter(|&s| model.interfaces.iter().any(|i| i.a == s || i.b == s))
             .map(|s| s as u32)
@@ -88,6 +99,24 @@ impl Plan {
             bases,
             participants,
             coarse: model.solver.coarse && !model.interfaces.is_empty(),
+            linear_stage: LinearStage::Condensed,
+            pgd: PgdParams::default(),
+            log: None,
+        }
+    }
+
+    /// The plan with the scene's linear-stage settings.
+    pub fn with_scene(mut self, scene: &LoadedScene) -> Self {
+        self.linear_stage = scene.linear_stage;
+        self.pgd = scene.pgd.clone();
+        self
+    }
+
+    /// The linear stage subdomain `s` uses (`Auto` resolved from its boundary size).
+    pub fn stage_of(&self, model: &Model, s: usize) -> LinearStage {
+        match self.linear_stage {
+            LinearStage::Auto => self.linear_stage.resolve(BoundaryLayout::new(model, s, &self.k0).len()),
+            other => other,
         }
     }
 
@@ -161,9 +190,13 @@ pub fn build_nodes(
         .subdomains
         .par_iter()
         .map(|&s| {
-            SubdomainSolver::new(model, s as usize, &plan.k0, &plan.bases).map_err(|source| RunError::Operator {
-                name: model.subdomains[s as usize].name.clone(),
-                source,
+            // A_E only for the condensed stage; the sparse and PGD stages use the sparse factors.
+            let dense = plan.stage_of(model, s as usize) == LinearStage::Condensed;
+            SubdomainSolver::with_dense(model, s as usize, &plan.k0, &plan.bases, dense).map_err(|source| {
+                RunError::Operator {
+                    name: model.subdomains[s as usize].name.clone(),
+                    source,
+                }
             })
         })
         .collect::<Result<_, _>>()?;
@@ -175,12 +208,21 @@ pub fn build_nodes(
     };
     let mut nodes: Vec<Box<dyn Node>> = Vec::new();
     for solver in solvers {
-        nodes.push(Box::new(SubdomainNode::new(
-            ctx.clone(),
-            model.clone(),
-            solver,
-            options,
-        )));
+        let stage = plan.stage_of(model, solver.subdomain);
+        let mut node = SubdomainNode::new(ctx.clone(), model.clone(), solver, options);
+        if stage == LinearStage::Pgd {
+            node = node.with_pgd(PgdSettings {
+                criterion: plan.pgd.criterion,
+                xi1: plan.pgd.xi1,
+                xi2: plan.pgd.xi2,
+                macro_modes: plan.pgd.macro_modes,
+                max_new_modes: plan.pgd.max_new_modes,
+            });
+        }
+        if let Some(log) = &plan.log {
+            node = node.with_log(log.clone());
+        }
+        nodes.push(Box::new(node));
     }
     if selection.interface {
         nodes.push(Box::new(InterfaceNode::new(ctx.clone(), model.clone(), &plan.k0)));
@@ -212,8 +254,33 @@ pub fn run_in_process(
 pub fn run_in_process_observed(
     scene: &LoadedScene,
     opts: &RunOptions,
+    on_iteration: impl FnMut(&IterationRecord),
+    observe: impl FnMut(&Message) -> Duration,
+) -> Result<RunResult, RunError> {
+    run_logged(scene, opts, on_iteration, observe, None)
+}
+
+/// As [`run_in_process_observed`], and returns every subdomain's linear-stage records (wall
+/// time, PGD basis size and criteria per iteration), sorted by (iteration, subdomain).
+pub fn run_in_process_logged(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    on_iteration: impl FnMut(&IterationRecord),
+    observe: impl FnMut(&Message) -> Duration,
+) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
+    let log = LinearStageLog::default();
+    let result = run_logged(scene, opts, on_iteration, observe, Some(log.clone()))?;
+    let mut records = log.lock().map(|v| v.clone()).unwrap_or_default();
+    records.sort_by_key(|r| (r.iteration, r.subdomain));
+    Ok((result, records))
+}
+
+fn run_logged(
+    scene: &LoadedScene,
+    opts: &RunOptions,
     mut on_iteration: impl FnMut(&IterationRecord),
     mut observe: impl FnMut(&Message) -> Duration,
+    log: Option<LinearStageLog>,
 ) -> Result<RunResult, RunError> {
     let model = Arc::new(scene.model.clone());
     let t0 = Instant::now();
@@ -244,7 +311,8 @@ pub fn run_in_process_observed(
         run_id: opts.run_id.clone(),
         scene_fingerprint: scene.fingerprint,
     };
-    let plan = Plan::new(&model);
+    let mut plan = Plan::new(&model).with_scene(scene);
+    plan.log = log;
     let nodes = build_nodes(&model, &ctx, opts.interior, &plan, &Selection::everything(&plan))?;
     let (names, left_out) = plan.describe(&model, 1);
     let k0 = plan.k0.clone();

@@ -17,8 +17,31 @@ use glissade_bus::{expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonHistory, AndersonStep};
 use glissade_mechanics::linear::SubdomainSolver;
 use glissade_mechanics::model::{Acceleration, Model};
+use glissade_mechanics::pgd::{PgdSettings, PgdStage};
+use glissade_mechanics::scene::PgdCriterion;
 use glissade_messages::{role_field_topic, Field, Message, NodeId, Payload, Role, Stage};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// What one linear stage of one subdomain did: its wall time (micro 1 + micro 2, kept out of the
+/// numerics and messages: only the log sees it) and, with PGD, the basis size and criteria.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LinearStageRecord {
+    pub subdomain: u32,
+    pub iteration: u32,
+    pub seconds: f64,
+    /// PGD basis size after the stage (0 without PGD), frozen macro modes included.
+    pub modes: usize,
+    /// Modes added in this stage (micro 1 + micro 2) and dropped by compression.
+    pub new_modes: usize,
+    pub dropped_modes: usize,
+    /// ξ at the end of micro 1 and micro 2.
+    pub xi1: f64,
+    pub xi2: f64,
+}
+
+/// Where subdomain nodes append their [`LinearStageRecord`]s (one per iteration).
+pub type LinearStageLog = Arc<Mutex<Vec<LinearStageRecord>>>;
 
 /// Options of a subdomain node.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,6 +76,10 @@ pub struct SubdomainNode {
     anderson: Option<AndersonHistory>,
     awaiting_step: bool,
     finished: bool,
+    /// PGD linear stage (DESIGN §3), when the scene asks for it.
+    pgd: Option<PgdStage>,
+    log: Option<LinearStageLog>,
+    record: LinearStageRecord,
 }
 
 impl SubdomainNode {
@@ -85,6 +112,89 @@ impl SubdomainNode {
             },
             awaiting_step: false,
             finished: false,
+            pgd: None,
+            log: None,
+            record: LinearStageRecord::default(),
+        }
+    }
+
+    /// Runs micro problems 1 and 2 through a PGD basis ([`PgdStage`]): the state stays
+    /// W = W_d + Σ Z_k λ_k, F = −k⁻W_d + Σ G_k λ_k, expanded to full fields for the messages.
+    pub fn with_pgd(mut self, settings: PgdSettings) -> Self {
+        let tw = self.model.time.trapezoid_weights();
+        self.pgd = Some(PgdStage::new(&mut self.solver, &tw, settings));
+        self
+    }
+
+    /// Appends a [`LinearStageRecord`] per iteration to `log`.
+    pub fn with_log(mut self, log: LinearStageLog) -> Self {
+        self.log = Some(log);
+        self
+    }
+
+    /// Micro problem 1 into (w1, f1) or, with PGD, into the basis' time functions (expanded
+    /// here only without the coarse problem) and the macro forces when the coarse problem is on.
+    fn solve_micro1(&mut self, coarse: bool) {
+        let t0 = Instant::now();
+        self.record = LinearStageRecord {
+            subdomain: self.subdomain(),
+            iteration: self.iteration,
+            ..LinearStageRecord::default()
+        };
+        match self.pgd.as_mut() {
+            None => {
+                self.solver
+                    .micro1_into(self.q_hat.as_ref(), self.w1.as_mut(), self.f1.as_mut());
+                if coarse {
+                    self.solver
+                        .macro_forces_into(self.f1.as_ref(), self.macro_forces.as_mut());
+                }
+            }
+            Some(pgd) => {
+                if self.iteration >= 1 && pgd.settings.criterion == PgdCriterion::IncrementSvd {
+                    self.record.dropped_modes = pgd.compress(self.w.as_mut(), self.f.as_mut());
+                }
+                let report = pgd.micro1(&mut self.solver, self.q_hat.as_ref());
+                self.record.new_modes = report.new_modes;
+                self.record.xi1 = report.xi;
+                if coarse {
+                    pgd.macro_forces_into(self.macro_forces.as_mut());
+                } else {
+                    pgd.expand_into(self.solver.w_d.as_ref(), self.w1.as_mut(), self.f1.as_mut(), false);
+                }
+                self.record.modes = pgd.n_modes();
+            }
+        }
+        self.record.seconds = t0.elapsed().as_secs_f64();
+    }
+
+    /// Micro problem 2 into (w2, f2); with PGD, (w1, f1) = s₁ + s₂ expanded from the basis and
+    /// (w2, f2) = 0. Then the linear stage's record goes to the log.
+    fn solve_micro2(&mut self) {
+        let t0 = Instant::now();
+        match self.pgd.as_mut() {
+            None => self
+                .solver
+                .micro2_into(self.w_tilde.as_ref(), self.w2.as_mut(), self.f2.as_mut()),
+            Some(pgd) => {
+                let report = pgd.micro2(&mut self.solver, self.w_tilde.as_ref());
+                pgd.expand_into(self.solver.w_d.as_ref(), self.w1.as_mut(), self.f1.as_mut(), true);
+                self.w2.fill(0.0);
+                self.f2.fill(0.0);
+                self.record.new_modes += report.new_modes;
+                self.record.xi2 = report.xi;
+                self.record.modes = pgd.n_modes();
+            }
+        }
+        self.record.seconds += t0.elapsed().as_secs_f64();
+        self.log_record();
+    }
+
+    fn log_record(&self) {
+        if let Some(log) = &self.log {
+            if let Ok(mut v) = log.lock() {
+                v.push(self.record);
+            }
         }
     }
 
@@ -102,11 +212,9 @@ impl SubdomainNode {
     /// Micro problem 1 from the stored q̂; returns the macro forces message or, without the coarse
     /// problem, finishes the linear stage at once.
     fn micro1(&mut self) -> Vec<Message> {
-        self.solver
-            .micro1_into(self.q_hat.as_ref(), self.w1.as_mut(), self.f1.as_mut());
-        if self.options.coarse && self.solver.n_macro() > 0 {
-            self.solver
-                .macro_forces_into(self.f1.as_ref(), self.macro_forces.as_mut());
+        let coarse = self.options.coarse && self.solver.n_macro() > 0;
+        self.solve_micro1(coarse);
+        if coarse {
             vec![self.msg(
                 Stage::Micro1,
                 Payload::MacroForces {
@@ -117,6 +225,7 @@ impl SubdomainNode {
         } else {
             self.w2.fill(0.0);
             self.f2.fill(0.0);
+            self.log_record();
             vec![self.finish_linear_stage()]
         }
     }
@@ -276,8 +385,7 @@ impl Node for SubdomainNode {
                 }
                 expect_shape(self.id, "w_tilde", w_tilde, self.w_tilde.nrows(), self.w_tilde.ncols())?;
                 copy_into(w_tilde, &mut self.w_tilde);
-                self.solver
-                    .micro2_into(self.w_tilde.as_ref(), self.w2.as_mut(), self.f2.as_mut());
+                self.solve_micro2();
                 Ok(vec![self.finish_linear_stage()])
             }
             Payload::AndersonStep { gamma, restart } if self.anderson.is_some() => {
