@@ -215,7 +215,8 @@ fn local_endpoint(listen: &str) -> String {
     listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 }
 
-fn forward(prefix: String, stream: impl std::io::Read + Send + 'static, last: Arc<Mutex<Vec<String>>>) {
+/// Forwards a child's output lines to stderr with a `[prefix]`, keeping its last 10 lines in `last`.
+pub(crate) fn forward(prefix: String, stream: impl std::io::Read + Send + 'static, last: Arc<Mutex<Vec<String>>>) {
     std::thread::spawn(move || {
         for line in BufReader::new(stream).lines().map_while(Result::ok) {
             eprintln!("[{prefix}] {line}");

@@ -19,7 +19,6 @@ use anyhow::{bail, Context};
 use glissade_mechanics::scene::{fingerprint, load_str, LoadedScene};
 use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
 use glissade_recorder::{log_time_now, recording_file_name, Recorder, RecorderOptions, RecordingStats, RunInfo};
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -200,32 +199,11 @@ pub fn spawn_recorder_process(
         .spawn()
         .with_context(|| format!("cannot start the recorder process ({})", exe.display()))?;
     let last_lines = Arc::new(Mutex::new(Vec::new()));
-    for stream in [
-        child
-            .stdout
-            .take()
-            .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
-        child
-            .stderr
-            .take()
-            .map(|s| Box::new(s) as Box<dyn std::io::Read + Send>),
-    ]
-    .into_iter()
-    .flatten()
-    {
-        let last = last_lines.clone();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stream).lines().map_while(Result::ok) {
-                eprintln!("[recorder:0] {line}");
-                if let Ok(mut l) = last.lock() {
-                    l.push(line);
-                    let n = l.len();
-                    if n > 10 {
-                        l.drain(..n - 10);
-                    }
-                }
-            }
-        });
+    if let Some(out) = child.stdout.take() {
+        crate::distributed::forward("recorder:0".into(), out, last_lines.clone());
+    }
+    if let Some(err) = child.stderr.take() {
+        crate::distributed::forward("recorder:0".into(), err, last_lines.clone());
     }
     Ok(RecorderProcess {
         child,
