@@ -32,10 +32,27 @@ fn endless_scene(dir: &Path) -> PathBuf {
     path
 }
 
-pub fn scratch(name: &str) -> PathBuf {
+/// A scratch folder, removed when dropped.
+pub struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+pub fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("glissade-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("scratch folder");
-    dir
+    Scratch(dir)
 }
 
 /// Pids of the processes whose command line contains `needle` and every one of `words`.
@@ -136,7 +153,7 @@ impl Launcher {
     }
 }
 
-fn launch_endless(name: &str) -> (Launcher, String, PathBuf) {
+fn launch_endless(name: &str) -> (Launcher, String, Scratch) {
     let dir = scratch(name);
     let scene = endless_scene(&dir);
     let run_id = format!("{name}-{}", std::process::id());
@@ -144,7 +161,7 @@ fn launch_endless(name: &str) -> (Launcher, String, PathBuf) {
     cmd.arg("run")
         .arg(&scene)
         .args(["--quiet", "--run-id", &run_id, "--out"])
-        .arg(&dir);
+        .arg(&*dir);
     let mut launcher = Launcher::spawn(&mut cmd);
     launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
     // Let the iteration run for a while: the kill lands mid-run.
@@ -247,7 +264,7 @@ fn killing_the_launcher_leaves_no_node() {
 
 /// A launcher on a given loopback port that leaves subdomain node 1 to be started by hand, and
 /// that node, started here as a separate process (not a child of the launcher).
-fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String) {
+fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String, Scratch) {
     let dir = scratch(name);
     let scene = endless_scene(&dir);
     let run_id = format!("{name}-{}", std::process::id());
@@ -270,7 +287,7 @@ fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String) {
             "subdomain:1",
             "--out",
         ])
-        .arg(&dir);
+        .arg(&*dir);
     let mut launcher = Launcher::spawn(&mut cmd);
     launcher.wait_for_line("on the other machine", Duration::from_secs(120));
     let node = Launcher::spawn(Command::new(exe()).args([
@@ -285,14 +302,14 @@ fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String) {
     ]));
     launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
     std::thread::sleep(Duration::from_millis(1500));
-    (launcher, node, run_id)
+    (launcher, node, run_id, dir)
 }
 
 /// A node started by hand notices on its own, through the launcher's liveliness token, that
 /// the launcher died, and stops within 10 s naming it.
 #[test]
 fn a_hand_started_node_stops_when_the_launcher_dies() {
-    let (mut launcher, mut node, run_id) = launch_with_hand_started_node("lost-launcher");
+    let (mut launcher, mut node, run_id, _dir) = launch_with_hand_started_node("lost-launcher");
     let t = Instant::now();
     launcher.child.kill().expect("SIGKILL the launcher");
     launcher.wait_exit(Duration::from_secs(60));
@@ -313,7 +330,7 @@ fn a_hand_started_node_stops_when_the_launcher_dies() {
 /// The launcher names a node started by hand that died, and stops the others.
 #[test]
 fn the_launcher_names_a_dead_hand_started_node() {
-    let (mut launcher, mut node, run_id) = launch_with_hand_started_node("lost-remote");
+    let (mut launcher, mut node, run_id, _dir) = launch_with_hand_started_node("lost-remote");
     let t = Instant::now();
     node.child.kill().expect("SIGKILL the node");
     node.wait_exit(Duration::from_secs(60));
