@@ -290,9 +290,7 @@ impl AndersonCoordinator {
         let grew = self.last_mixed && self.last_residual2.is_some_and(|r| p.residual2 > r);
         let step = if map_changed || !p.residual2.is_finite() {
             AndersonStep::Restart
-        } else if grew {
-            AndersonStep::Plain
-        } else if p.k == 0 {
+        } else if grew || p.k == 0 {
             AndersonStep::Plain
         } else {
             match solve_least_squares(p, self.max_condition) {
