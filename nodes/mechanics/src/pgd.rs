@@ -426,7 +426,8 @@ impl PgdStage {
             .map(|r| self.mass[r] * self.fit_l[r].powi(2))
             .sum::<f64>()
             .sqrt();
-        if !(norm > 1e-10 * norm0) {
+        // In the span to round-off (or not a number): no new mode.
+        if norm.is_nan() || norm <= 1e-10 * norm0 {
             return false;
         }
         for r in 0..n_b {
