@@ -72,7 +72,7 @@
 //! macro_degree = "auto"      # or 1..=5: macro modes per interface = polynomials of this degree
 //!                            # in the abscissa, both components (1 = rigid + extension); "auto":
 //!                            # 5 on slender interfaces (length ≥ 10 × a side's thickness), else 1
-//! acceleration = "none"      # "none" (plain relaxation) | "anderson" (Anderson mixing, damping
+//! acceleration = "anderson"  # "none" (plain relaxation, the default) | "anderson" (Anderson mixing, damping
 //!                            # = relaxation; same limit, fewer iterations on contact scenes)
 //! anderson_window = 5        # 1..=50: iterates mixed (only with acceleration = "anderson")
 //! linear_stage = "condensed" # "condensed" (dense A_E) | "sparse" (sparse factors, all time points
