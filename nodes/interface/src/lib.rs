@@ -103,23 +103,19 @@ impl StopRule {
     }
 }
 
-/// The two values η alternates between when the window is a period-2 cycle: its even and odd
-/// terms each constant to 1e-3 relative while the two differ by more than that.
+/// The two values η alternates between when the window is a period-2 cycle: its successive
+/// differences alternate in sign throughout, and every two-step change |η_k − η_{k−2}| is below a
+/// tenth of the smallest one-step change (the cycle may drift slowly, it does not converge).
 fn period_two(window: &[f64]) -> Option<(f64, f64)> {
     if window.len() < 4 {
         return None;
     }
-    let spread = |parity: usize| {
-        let v: Vec<f64> = window.iter().skip(parity).step_by(2).copied().collect();
-        let (lo, hi) = v
-            .iter()
-            .fold((f64::INFINITY, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
-        (lo, hi)
-    };
-    let ((lo0, hi0), (lo1, hi1)) = (spread(0), spread(1));
-    let tight = |lo: f64, hi: f64| hi - lo <= 1e-3 * hi;
-    let apart = (lo0 - lo1).abs() > 1e-3 * hi0.max(hi1);
-    (tight(lo0, hi0) && tight(lo1, hi1) && apart).then_some((hi0, hi1))
+    let steps: Vec<f64> = window.windows(2).map(|p| p[1] - p[0]).collect();
+    let alternating = steps.windows(2).all(|d| d[0] * d[1] < 0.0);
+    let smallest_step = steps.iter().fold(f64::INFINITY, |m, d| m.min(d.abs()));
+    let largest_drift = window.windows(3).fold(0.0f64, |m, p| m.max((p[2] - p[0]).abs()));
+    let k = window.len();
+    (alternating && largest_drift <= 0.1 * smallest_step).then_some((window[k - 2], window[k - 1]))
 }
 
 pub struct InterfaceNode {
