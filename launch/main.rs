@@ -8,7 +8,7 @@ use glissade::distributed::{
 };
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
-use glissade::report::{build_report, plot_svg};
+use glissade::report::{build_report, linear_stage_table, plot_svg};
 use glissade::runner::{IterationRecord, RunOptions};
 use glissade_mechanics::monolithic::solve_glued;
 use glissade_mechanics::reference::{solve_reference, verify, ReferenceOptions};
@@ -63,6 +63,10 @@ enum Command {
         /// LATIN iteration cap (overrides the scene's).
         #[arg(long)]
         max_iterations: Option<usize>,
+        /// Compare linear stages against one reference solve, e.g. `condensed,sparse,pgd`
+        /// (writes `<scene>-<stage>-report.json` / `.svg` each, and prints a comparison table).
+        #[arg(long, value_delimiter = ',')]
+        linear_stages: Vec<String>,
     },
     /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
     /// endpoint and receives the scene over the bus.
@@ -195,6 +199,14 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             out,
             tolerance,
             max_iterations,
+            linear_stages,
+        } if !linear_stages.is_empty() => report_stages(&scene, &out, tolerance, max_iterations, &linear_stages),
+        Command::Report {
+            scene,
+            out,
+            tolerance,
+            max_iterations,
+            ..
         } => report(&scene, &out, tolerance, max_iterations),
         Command::Stability { quick, only, list, out } => stability(quick, &only, list, &out),
         Command::Node(args) => {
@@ -475,7 +487,61 @@ fn report(
             _ => println!("| {th:.0e} | not reached | | |"),
         }
     }
+    print!("{}", linear_stage_table(&report));
     println!("report: {}\nplot: {}", j.display(), svg_path.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `glissade report --linear-stages a,b,…`: one reference, one LATIN run per linear stage.
+fn report_stages(
+    scene: &std::path::Path,
+    out: &std::path::Path,
+    tolerance: f64,
+    max_iterations: Option<usize>,
+    names: &[String],
+) -> anyhow::Result<ExitCode> {
+    use glissade_mechanics::scene::LinearStage;
+    let stages = names
+        .iter()
+        .map(|n| match n.as_str() {
+            "condensed" => Ok(LinearStage::Condensed),
+            "sparse" => Ok(LinearStage::Sparse),
+            "pgd" => Ok(LinearStage::Pgd),
+            "auto" => Ok(LinearStage::Auto),
+            other => Err(anyhow::anyhow!(
+                "--linear-stages: `{other}` is not a linear stage (condensed, sparse, pgd, auto)"
+            )),
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut sc = load_scene(scene)?;
+    if !(tolerance > 0.0 && tolerance.is_finite()) {
+        anyhow::bail!("--tolerance {tolerance}: must be a positive number");
+    }
+    ensure_writable(out)?;
+    sc.model.solver.tolerance = tolerance;
+    if let Some(m) = max_iterations {
+        if m == 0 {
+            anyhow::bail!("--max-iterations 0: must be at least 1");
+        }
+        sc.model.solver.max_iterations = m;
+    }
+    // In-process runs only: the run id names nothing on a network.
+    let run_id = format!("{}-report", sc.model.name);
+    let (reports, _) = glissade::report::build_reports(&sc, &run_id, &stages)?;
+    let name = &sc.model.name;
+    println!(
+        "scene `{name}`: reference {:.2} s ({} Newton iterations), N = {}",
+        reports[0].reference_s,
+        reports[0].reference_newton_iterations,
+        sc.model.time.n_points() - 1
+    );
+    print!("{}", glissade::report::comparison_table(&reports));
+    for (r, stage) in reports.iter().zip(names) {
+        let j = write_json(out, &format!("{name}-{stage}-report.json"), &serde_json::to_value(r)?)?;
+        let svg_path = out.join(format!("{name}-{stage}-report.svg"));
+        std::fs::write(&svg_path, plot_svg(r)).with_context(|| format!("cannot write {}", svg_path.display()))?;
+        println!("report: {}\nplot: {}", j.display(), svg_path.display());
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -1,15 +1,18 @@
 //! The error-against-run-time report (issue "monolithic reference"): the monolithic Newton
 //! reference of a scene, then the LATIN run, whose contact tractions and jumps are compared with
-//! the reference at every iteration; written as JSON and as an SVG plot.
+//! the reference at every iteration; written as JSON and as an SVG plot. The report also holds
+//! what the linear stage cost per iteration (wall time summed over subdomains), the bytes of the
+//! iteration's messages on the bus and, with PGD, every subdomain's basis size per iteration
+//! (plotted under the errors).
 
-use crate::runner::{run_in_process_observed, RunOptions, RunResult};
+use crate::runner::{run_in_process_logged, RunOptions, RunResult};
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::linear::default_k0;
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
-use glissade_mechanics::scene::LoadedScene;
-use glissade_messages::Payload;
+use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion};
+use glissade_messages::{encode, Payload, Stage};
 use serde::Serialize;
 use std::collections::BTreeSet;
 use std::time::Instant;
@@ -27,6 +30,26 @@ pub struct ReportPoint {
     pub traction_error: f64,
     /// Relative space-time error of the contact jumps of s against the reference.
     pub jump_error: f64,
+    /// Wall time of this iteration's linear stages, summed over the subdomains (s).
+    pub linear_s: f64,
+    /// Bytes of this iteration's messages as encoded on the bus (set-up and final ones excluded).
+    pub bus_bytes: u64,
+    /// PGD basis size of every subdomain after this iteration's linear stage, frozen macro modes
+    /// included (subdomain order; empty without PGD).
+    pub basis_sizes: Vec<usize>,
+}
+
+/// Time to a contact-traction accuracy.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Accuracy {
+    pub threshold: f64,
+    /// LATIN wall time, operator setup included (s).
+    pub wall_s: Option<f64>,
+    pub iterations: Option<u32>,
+    /// Linear-stage wall time summed over subdomains and iterations up to it (s).
+    pub linear_s: Option<f64>,
+    /// Largest PGD basis of a subdomain up to it (0 without PGD).
+    pub max_basis: Option<usize>,
 }
 
 /// Everything a report holds.
@@ -47,19 +70,52 @@ pub struct Report {
     pub acceleration: String,
     /// Anderson steps of the run: mixed, plain (the safeguard), restarts.
     pub anderson_steps: [u32; 3],
+    /// The linear stage (`condensed`, `sparse`, `auto`, or `pgd(criterion, ξ₀,₁/ξ₀,₂, macro modes)`).
+    pub linear_stage: String,
     pub points: Vec<ReportPoint>,
     /// (threshold, LATIN wall time incl. setup to reach traction error ≤ threshold, iterations).
     pub time_to_accuracy: Vec<(f64, Option<f64>, Option<u32>)>,
+    /// The same thresholds with the linear-stage time and the largest basis.
+    pub accuracy: Vec<Accuracy>,
 }
 
 /// Solves the reference and runs LATIN (with the scene's solver settings), measuring the error at
 /// every iteration.
 pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report, ReferenceSolution, RunResult)> {
-    let model = &scene.model;
     let t0 = Instant::now();
-    let reference = solve_reference(model, &ReferenceOptions::default())?;
+    let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
     let reference_s = t0.elapsed().as_secs_f64();
+    let (report, result) = report_against(scene, run_id, &reference, reference_s)?;
+    Ok((report, reference, result))
+}
 
+/// One report per linear stage against one reference solve (back to back in one process, so
+/// their times compare on a shared machine).
+pub fn build_reports(
+    scene: &LoadedScene,
+    run_id: &str,
+    stages: &[LinearStage],
+) -> anyhow::Result<(Vec<Report>, ReferenceSolution)> {
+    let t0 = Instant::now();
+    let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
+    let reference_s = t0.elapsed().as_secs_f64();
+    let mut reports = Vec::with_capacity(stages.len());
+    for &stage in stages {
+        let mut sc = scene.clone();
+        sc.linear_stage = stage;
+        reports.push(report_against(&sc, run_id, &reference, reference_s)?.0);
+    }
+    Ok((reports, reference))
+}
+
+/// The LATIN run of `scene` measured against a solved reference.
+fn report_against(
+    scene: &LoadedScene,
+    run_id: &str,
+    reference: &ReferenceSolution,
+    reference_s: f64,
+) -> anyhow::Result<(Report, RunResult)> {
+    let model = &scene.model;
     let k0 = default_k0(model);
     let layouts: Vec<BoundaryLayout> = (0..model.subdomains.len())
         .map(|s| BoundaryLayout::new(model, s, &k0))
@@ -75,16 +131,24 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
     let mut seen = BTreeSet::new();
     let mut errors: Vec<(u32, f64, f64)> = Vec::new();
     let mut anderson_steps = [0u32; 3];
+    let mut bytes: Vec<u64> = Vec::new();
     let opts = RunOptions {
         run_id: run_id.to_string(),
         interior: false,
     };
-    let result = run_in_process_observed(
+    let (result, records) = run_in_process_logged(
         scene,
         &opts,
         |_| {},
         |m| {
             let t = Instant::now();
+            if !matches!(m.envelope.stage, Stage::Setup | Stage::Final) {
+                let it = m.envelope.iteration as usize;
+                if bytes.len() <= it {
+                    bytes.resize(it + 1, 0);
+                }
+                bytes[it] += encode(m).len() as u64;
+            }
             if let Payload::AndersonStep { gamma, restart } = &m.payload {
                 anderson_steps[if *restart {
                     2
@@ -109,11 +173,13 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
             t.elapsed()
         },
     )?;
+    let pgd = records.iter().any(|r| r.modes > 0);
     let points: Vec<ReportPoint> = result
         .iterations
         .iter()
         .filter_map(|r| {
             let &(_, e_f, e_w) = errors.iter().find(|e| e.0 == r.iteration)?;
+            let of_it = || records.iter().filter(|x| x.iteration == r.iteration);
             Some(ReportPoint {
                 iteration: r.iteration,
                 elapsed_s: r.elapsed_s,
@@ -121,16 +187,40 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
                 contact_indicator: r.decision.contact_indicator,
                 traction_error: e_f,
                 jump_error: e_w,
+                linear_s: of_it().map(|x| x.seconds).sum(),
+                bus_bytes: bytes.get(r.iteration as usize).copied().unwrap_or(0),
+                basis_sizes: if pgd {
+                    of_it().map(|x| x.modes).collect()
+                } else {
+                    Vec::new()
+                },
             })
         })
         .collect();
-    let time_to_accuracy = [1e-2, 1e-3, 1e-4]
+    // Linear stages before the first reported iteration (the initial one from ŝ = 0) count too.
+    let first = points.first().map_or(0, |p| p.iteration);
+    let linear_before: f64 = records.iter().filter(|x| x.iteration < first).map(|x| x.seconds).sum();
+    let accuracy: Vec<Accuracy> = [1e-2, 1e-3, 1e-4]
         .iter()
         .map(|&th| {
-            let hit = points.iter().find(|p| p.traction_error <= th);
-            (th, hit.map(|p| result.setup_s + p.elapsed_s), hit.map(|p| p.iteration))
+            let hit = points.iter().position(|p| p.traction_error <= th);
+            let upto = |k: usize| &points[..=k];
+            Accuracy {
+                threshold: th,
+                wall_s: hit.map(|k| result.setup_s + points[k].elapsed_s),
+                iterations: hit.map(|k| points[k].iteration),
+                linear_s: hit.map(|k| linear_before + upto(k).iter().map(|p| p.linear_s).sum::<f64>()),
+                max_basis: hit.map(|k| {
+                    upto(k)
+                        .iter()
+                        .flat_map(|p| p.basis_sizes.iter().copied())
+                        .max()
+                        .unwrap_or(0)
+                }),
+            }
         })
         .collect();
+    let time_to_accuracy = accuracy.iter().map(|a| (a.threshold, a.wall_s, a.iterations)).collect();
     let report = Report {
         scene: model.name.clone(),
         scene_fingerprint: format!("{:016x}", scene.fingerprint),
@@ -148,18 +238,203 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
             Acceleration::Anderson { window } => format!("anderson({window})"),
         },
         anderson_steps,
+        linear_stage: linear_stage_name(scene),
         points,
         time_to_accuracy,
+        accuracy,
     };
-    Ok((report, reference, result))
+    Ok((report, result))
+}
+
+/// The scene's linear stage as the report names it.
+pub fn linear_stage_name(scene: &LoadedScene) -> String {
+    match scene.linear_stage {
+        LinearStage::Condensed => "condensed".into(),
+        LinearStage::Sparse => "sparse".into(),
+        LinearStage::Auto => "auto".into(),
+        LinearStage::Pgd => {
+            let p = &scene.pgd;
+            let criterion = match p.criterion {
+                PgdCriterion::Increment => "increment",
+                PgdCriterion::Accumulated => "accumulated",
+                PgdCriterion::IncrementSvd => "increment-svd",
+            };
+            format!(
+                "pgd({criterion}, ξ₀ = {}/{}, macro modes {})",
+                p.xi1,
+                p.xi2,
+                if p.macro_modes { "on" } else { "off" }
+            )
+        }
+    }
+}
+
+/// Reports of several linear stages side by side (Markdown): per accuracy, iterations, LATIN
+/// wall time and linear-stage time of each; then largest basis and bus bytes per iteration.
+pub fn comparison_table(reports: &[Report]) -> String {
+    let mut out = String::from("| contact traction error |");
+    for r in reports {
+        out += &format!(
+            " {0}: iterations | {0}: wall time (s) | {0}: linear stage (s) |",
+            r.linear_stage
+        );
+    }
+    out += "\n|---|";
+    out += &"---|---|---|".repeat(reports.len());
+    out += "\n";
+    for k in 0..reports.first().map_or(0, |r| r.accuracy.len()) {
+        out += &format!("| {:.0e} |", reports[0].accuracy[k].threshold);
+        for r in reports {
+            let a = &r.accuracy[k];
+            match (a.iterations, a.wall_s, a.linear_s) {
+                (Some(it), Some(t), Some(l)) => out += &format!(" {it} | {t:.2} | {l:.2} |"),
+                _ => {
+                    let best = r.points.iter().map(|p| p.traction_error).fold(f64::INFINITY, f64::min);
+                    out += &format!(" not reached (best {best:.1e} in {} iterations) | | |", r.points.len())
+                }
+            }
+        }
+        out += "\n";
+    }
+    for r in reports {
+        let n = r.points.len().max(1) as f64;
+        let bytes: u64 = r.points.iter().map(|p| p.bus_bytes).sum();
+        let basis = r.points.iter().flat_map(|p| p.basis_sizes.iter().copied()).max();
+        out += &format!(
+            "{}: setup {:.2} s, {} iterations in {:.2} s ({}), largest basis {}, bus bytes per iteration {:.0}\n",
+            r.linear_stage,
+            r.latin_setup_s,
+            r.points.len(),
+            r.latin_solve_s,
+            r.latin_verdict,
+            basis.map_or("-".to_string(), |b| b.to_string()),
+            bytes as f64 / n
+        );
+    }
+    out
+}
+
+/// The linear stage's cost to each accuracy (Markdown table) and the bus bytes per iteration.
+pub fn linear_stage_table(report: &Report) -> String {
+    let mut out = format!("linear stage: {}\n", report.linear_stage);
+    out += "| contact traction error | iterations | LATIN wall time (s) | linear-stage time, summed over subdomains (s) | largest basis |\n|---|---|---|---|---|\n";
+    for a in &report.accuracy {
+        match (a.wall_s, a.iterations, a.linear_s, a.max_basis) {
+            (Some(t), Some(it), Some(l), Some(b)) => {
+                out += &format!("| {:.0e} | {it} | {t:.2} | {l:.2} | {b} |\n", a.threshold)
+            }
+            _ => {
+                let best = report
+                    .points
+                    .iter()
+                    .map(|p| p.traction_error)
+                    .fold(f64::INFINITY, f64::min);
+                out += &format!("| {:.0e} | not reached (best {best:.1e}) | | | |\n", a.threshold)
+            }
+        }
+    }
+    let n = report.points.len().max(1) as f64;
+    let bytes: u64 = report.points.iter().map(|p| p.bus_bytes).sum();
+    out += &format!("bus bytes per iteration (mean): {:.0}\n", bytes as f64 / n);
+    out
 }
 
 /// A plotted series: name, colour, value of a point.
 type Series = (&'static str, &'static str, Box<dyn Fn(&ReportPoint) -> f64>);
 
 /// SVG plot of the errors and indicators against wall time (log scale), with the reference's
-/// run time marked.
+/// run time marked; with PGD, the basis size of every subdomain against the iterations under it.
 pub fn plot_svg(report: &Report) -> String {
+    let errors = plot_errors_svg(report);
+    match plot_basis_svg(report) {
+        None => errors,
+        Some(basis) => format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"900\" height=\"{}\">\n<svg y=\"0\">{errors}</svg>\n<svg y=\"560\">{basis}</svg>\n</svg>\n",
+            560 + 400
+        ),
+    }
+}
+
+/// Basis size per subdomain against the iterations (the PGD run's "Figure 4b"); None without PGD.
+pub fn plot_basis_svg(report: &Report) -> Option<String> {
+    let n_sub = report.points.iter().map(|p| p.basis_sizes.len()).max().unwrap_or(0);
+    if n_sub == 0 {
+        return None;
+    }
+    let (w, h) = (900.0, 400.0);
+    let (left, right, top, bottom) = (80.0, 200.0, 40.0, 60.0);
+    let it_max = report.points.iter().map(|p| p.iteration).max().unwrap_or(1).max(1) as f64;
+    let m_max = report
+        .points
+        .iter()
+        .flat_map(|p| p.basis_sizes.iter().copied())
+        .max()
+        .unwrap_or(1)
+        .max(1) as f64;
+    let x = |i: f64| left + (w - left - right) * i / it_max;
+    let y = |m: f64| top + (h - top - bottom) * (1.0 - m / m_max);
+    let mut svg = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">
+<rect width="100%" height="100%" fill="white"/>
+<text x="{}" y="22" font-size="15" text-anchor="middle">{}: PGD basis size per subdomain ({})</text>
+<rect x="{left}" y="{top}" width="{}" height="{}" fill="none" stroke="black"/>
+"#,
+        (left + w - right) / 2.0,
+        report.scene,
+        report.linear_stage,
+        w - left - right,
+        h - top - bottom
+    );
+    for k in 0..=5 {
+        let (i, m) = (it_max * k as f64 / 5.0, m_max * k as f64 / 5.0);
+        svg += &format!(
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{i:.0}</text><text x=\"{}\" y=\"{}\" text-anchor=\"end\">{m:.0}</text>\n",
+            x(i),
+            h - bottom + 18.0,
+            left - 6.0,
+            y(m) + 4.0
+        );
+    }
+    svg += &format!(
+        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">LATIN iteration</text>\n",
+        (left + w - right) / 2.0,
+        h - 15.0
+    );
+    const COLOURS: [&str; 10] = [
+        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf",
+    ];
+    for s in 0..n_sub {
+        let colour = COLOURS[s % COLOURS.len()];
+        let pts: Vec<String> = report
+            .points
+            .iter()
+            .filter_map(|p| {
+                p.basis_sizes
+                    .get(s)
+                    .map(|&m| format!("{:.2},{:.2}", x(p.iteration as f64), y(m as f64)))
+            })
+            .collect();
+        svg += &format!(
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" points=\"{}\"/>\n",
+            pts.join(" ")
+        );
+        let ly = top + 10.0 + 16.0 * s as f64;
+        if ly < h - bottom {
+            svg += &format!(
+                "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{colour}\" stroke-width=\"2\"/><text x=\"{}\" y=\"{}\">subdomain {}</text>\n",
+                w - right + 10.0,
+                w - right + 30.0,
+                w - right + 35.0,
+                ly + 4.0,
+                s + 1
+            );
+        }
+    }
+    svg += "</svg>\n";
+    Some(svg)
+}
+
+fn plot_errors_svg(report: &Report) -> String {
     let (w, h) = (900.0, 560.0);
     let (left, right, top, bottom) = (80.0, 200.0, 40.0, 60.0);
     let series: [Series; 4] = [

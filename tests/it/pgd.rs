@@ -3,7 +3,9 @@
 
 use crate::common::{rel_max, run, scene};
 use glissade::runner::RunResult;
-use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion};
+use glissade_bus::convert::mat_of;
+use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion, PgdParams};
 use glissade_messages::Verdict;
 
 fn scene_file(name: &str) -> LoadedScene {
@@ -27,24 +29,6 @@ fn all_fields(r: &RunResult) -> Vec<f64> {
             }
         }
     }
-    v
-}
-
-/// Contact tractions F̂ of side a on every contact interface, all pairs and time points.
-fn contact_tractions(sc: &LoadedScene, r: &RunResult) -> Vec<f64> {
-    let mut v = Vec::new();
-    let mut sols: Vec<_> = r.interfaces.iter().collect();
-    sols.sort_by_key(|s| s.interface);
-    for s in sols {
-        if sc.model.interfaces[s.interface as usize].is_contact() {
-            for j in 0..s.f_a_hat.cols() {
-                for i in 0..s.f_a_hat.rows() {
-                    v.push(s.f_a_hat.get(i, j));
-                }
-            }
-        }
-    }
-    assert!(!v.is_empty(), "no contact interface");
     v
 }
 
@@ -75,61 +59,116 @@ fn sparse_stage_gives_the_condensed_iterates() {
     }
 }
 
-/// Runs `sc` to η ≤ 1e-7 without and with PGD and returns the largest contact-traction
-/// difference relative to the largest traction.
-fn same_limit(mut sc: LoadedScene, criterion: PgdCriterion, macro_modes: bool) -> f64 {
-    sc.model.solver.tolerance = 1e-7;
+/// s of every interface at the stop, for [`error_against_reference`].
+fn fields(r: &RunResult) -> Vec<InterfaceFields> {
+    r.interfaces
+        .iter()
+        .map(|s| InterfaceFields {
+            w_a: mat_of(&s.w_a),
+            w_b: mat_of(&s.w_b),
+            f_a: mat_of(&s.f_a),
+            f_b: mat_of(&s.f_b),
+        })
+        .collect()
+}
+
+/// Runs `sc` to η ≤ `tolerance` without PGD (condensed) and with it; returns the space-time
+/// relative differences of the contact tractions and jumps (forces of cross-point copies summed:
+/// only their sum is determined) and the iteration counts.
+fn same_limit(mut sc: LoadedScene, pgd: PgdParams, tolerance: f64) -> (f64, f64) {
+    sc.model.solver.tolerance = tolerance;
     sc.model.solver.contact_tolerance = None;
-    sc.model.solver.max_iterations = 5000;
-    sc.model.solver.stagnation_window = 5000;
+    sc.model.solver.max_iterations = 20_000;
+    sc.model.solver.stagnation_window = 20_000;
     sc.linear_stage = LinearStage::Condensed;
     let exact = run(&sc);
     assert_eq!(exact.verdict, Verdict::Converged);
     sc.linear_stage = LinearStage::Pgd;
-    sc.pgd.criterion = criterion;
-    sc.pgd.macro_modes = macro_modes;
-    let pgd = run(&sc);
+    sc.pgd = pgd.clone();
+    let with_pgd = run(&sc);
     assert_eq!(
-        pgd.verdict,
+        with_pgd.verdict,
         Verdict::Converged,
         "{:?}",
-        pgd.iterations.last().map(|r| &r.decision)
+        with_pgd.iterations.last().map(|r| &r.decision)
     );
-    let d = rel_max(&contact_tractions(&sc, &pgd), &contact_tractions(&sc, &exact));
+    let weights = sc.model.time.trapezoid_weights();
+    let (e_f, e_w) = error_against_reference(&sc.model.interfaces, &fields(&with_pgd), &fields(&exact), &weights);
     println!(
-        "{}: {:?} macro_modes {macro_modes}: {} iterations without PGD, {} with; contact tractions differ by {d:.2e}",
+        "{} at η ≤ {tolerance:e}, PGD {:?} ξ₀ = ({}, {}) macro_modes {}: {} iterations without PGD, {} with; contact tractions differ by {e_f:.2e}, jumps by {e_w:.2e}",
         sc.model.name,
-        criterion,
+        pgd.criterion,
+        pgd.xi1,
+        pgd.xi2,
+        pgd.macro_modes,
         exact.iterations.len(),
-        pgd.iterations.len()
+        with_pgd.iterations.len()
     );
-    d
+    (e_f, e_w)
 }
 
-// Both runs stop at η ≤ 1e-7, each within about η of the common limit: 1e-6 on the tractions
-// is the bound and leaves an order of magnitude for η's weighting of forces.
-
-#[test]
-#[ignore = "open: with ξ₀ = 0.1 PGD stops at η ≤ 1e-7 with contact tractions 7e-6 (hertz-slip), 3e-5 (two-blocks) and 1e-1 (stratified) away from the exact limit, with every subdomain state admissible to 1e-17 (small-three-layer: 8e-2 at ξ₀ = 0.1 even at η = 1e-12; 3e-14 at ξ₀ = 1e-12 with unlimited modes)"]
-fn pgd_keeps_the_two_blocks_limit() {
-    for macro_modes in [false, true] {
-        let d = same_limit(scene_file("two-blocks"), PgdCriterion::Increment, macro_modes);
-        assert!(d <= 1e-6, "{d:e}");
-    }
+/// PGD with the default settings (increment criterion, ξ₀ = 0.1 / 0.01, no frozen macro modes).
+fn default_pgd() -> PgdParams {
+    PgdParams::default()
 }
 
+// Same limit. Every PGD state is admissible (each pair (Z, G) is, to round-off) and with the
+// increment criterion a stationary iterate has λ unchanged, so ‖δ‖ = ‖residual‖, ξ = 1 > ξ₀ and the
+// basis is enriched until the residual is round-off: a fixed point of the PGD iteration is a fixed
+// point of the exact one. What differs is the path, so two runs stopped at the same η differ by
+// about their distances to the limit, which η underestimates. Measured (release, contact
+// tractions, space-time, copies summed): at η ≤ 1e-7, 2.0e-6 on hertz-slip and 7.4e-6 on
+// two-blocks, over the 1e-6, because plain LATIN itself stopped at η ≤ 1e-7 is that far
+// from its limit; at η ≤ 1e-10, 1.2e-9 and 6.9e-9; at η ≤ 1e-12, 1.2e-11 and 6.6e-11: the
+// difference falls with η as each run's distance to the limit does. So the tests stop at
+// η ≤ 1e-10 and ask for 1e-7 (the 1e-6 with a margin of ten that still fails a PGD run
+// whose limit is off: the accumulated criterion stalls at η = 5e-2 on hertz-slip).
+
 #[test]
-#[ignore = "open: with ξ₀ = 0.1 PGD stops at η ≤ 1e-7 with contact tractions 7e-6 (hertz-slip), 3e-5 (two-blocks) and 1e-1 (stratified) away from the exact limit, with every subdomain state admissible to 1e-17 (small-three-layer: 8e-2 at ξ₀ = 0.1 even at η = 1e-12; 3e-14 at ξ₀ = 1e-12 with unlimited modes)"]
 fn pgd_keeps_the_hertz_slip_limit() {
-    for criterion in [PgdCriterion::Increment, PgdCriterion::IncrementSvd] {
-        let d = same_limit(scene_file("hertz-slip"), criterion, false);
-        assert!(d <= 1e-6, "{d:e}");
-    }
+    let (e_f, e_w) = same_limit(scene_file("hertz-slip"), default_pgd(), 1e-10);
+    assert!(e_f <= 1e-7 && e_w <= 1e-7, "tractions {e_f:e}, jumps {e_w:e}");
 }
 
 #[test]
-#[ignore = "open: with ξ₀ = 0.1 PGD stops at η ≤ 1e-7 with contact tractions 7e-6 (hertz-slip), 3e-5 (two-blocks) and 1e-1 (stratified) away from the exact limit, with every subdomain state admissible to 1e-17 (small-three-layer: 8e-2 at ξ₀ = 0.1 even at η = 1e-12; 3e-14 at ξ₀ = 1e-12 with unlimited modes)"]
+fn pgd_keeps_the_two_blocks_limit() {
+    let (e_f, e_w) = same_limit(scene_file("two-blocks"), default_pgd(), 1e-10);
+    assert!(e_f <= 1e-7 && e_w <= 1e-7, "tractions {e_f:e}, jumps {e_w:e}");
+}
+
+/// The other criteria and frozen macro modes keep the limit too (measured at η ≤ 1e-10:
+/// increment-svd 7.7e-10 on hertz-slip, frozen macro modes 2.6e-9 on two-blocks).
+#[test]
+fn pgd_variants_keep_the_limit() {
+    let svd = PgdParams {
+        criterion: PgdCriterion::IncrementSvd,
+        ..default_pgd()
+    };
+    let (e_f, e_w) = same_limit(scene_file("hertz-slip"), svd, 1e-10);
+    assert!(
+        e_f <= 1e-7 && e_w <= 1e-7,
+        "increment-svd: tractions {e_f:e}, jumps {e_w:e}"
+    );
+    let frozen = PgdParams {
+        macro_modes: true,
+        ..default_pgd()
+    };
+    let (e_f, e_w) = same_limit(scene_file("two-blocks"), frozen, 1e-10);
+    assert!(
+        e_f <= 1e-7 && e_w <= 1e-7,
+        "macro modes: tractions {e_f:e}, jumps {e_w:e}"
+    );
+}
+
+/// Stratified (18 subdomains, N = 100). Measured (release): contact tractions differ by 9.4e-5
+/// at η ≤ 1e-7, 2.1e-6 at η ≤ 1e-9 and 2.3e-8 at η ≤ 1e-11 (PGD 857 and 1408 iterations, plain
+/// 1176 and 2206): the same limit, approached more slowly in η than on the small scenes (η
+/// underestimates the traction error by about 10³ here), so the 1e-6 needs η ≤ 1e-10.
+/// About five minutes in a release build: `cargo test --release --test integration
+/// pgd_keeps_the_stratified_limit -- --ignored`.
+#[test]
+#[ignore = "five minutes in release; run as documented above"]
 fn pgd_keeps_the_stratified_limit() {
-    let d = same_limit(scene_file("stratified"), PgdCriterion::Increment, true);
-    assert!(d <= 1e-6, "{d:e}");
+    let (e_f, e_w) = same_limit(scene_file("stratified"), default_pgd(), 1e-10);
+    assert!(e_f <= 1e-6 && e_w <= 1e-6, "tractions {e_f:e}, jumps {e_w:e}");
 }
