@@ -1,0 +1,147 @@
+//! A recording of the two-blocks scene's shape (boundary states, decisions, interface solutions of
+//! the sizes the scene gives) replays into an .rrd that the Rerun CLI of the pinned version
+//! accepts (`rerun rrd verify`; skipped with the reason printed when the CLI is absent).
+
+use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::linear::default_k0;
+use glissade_mechanics::scene::load_str;
+use glissade_messages::{
+    encode, Decision, Envelope, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
+    SCHEMA_VERSION,
+};
+use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
+use glissade_replay::{replay, ColorBy, ReplayOptions, Sink};
+use std::process::Command;
+
+#[test]
+fn replay_writes_an_rrd_the_rerun_cli_accepts() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../launch/scenes/two-blocks.toml"
+    ))
+    .expect("scene file");
+    let scene = load_str(&text, "two-blocks.toml").unwrap();
+    let model = &scene.model;
+    let nt = model.time.n_points();
+    let k0 = default_k0(model);
+    let dir = std::env::temp_dir().join(format!("glissade-replay-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mcap = dir.join("two-blocks-r.mcap");
+    let run = RunInfo {
+        run_id: "r".into(),
+        scene_name: model.name.clone(),
+        scene_fingerprint: scene.fingerprint,
+        scene_text: text.clone(),
+        software: "test".into(),
+    };
+    let mut rec = Recorder::create(&mcap, &run, &RecorderOptions::default()).unwrap();
+    let envelope = |iteration: u32, stage: Stage, role: Role, index: u32| Envelope {
+        schema_version: SCHEMA_VERSION,
+        run_id: "r".into(),
+        scene_fingerprint: scene.fingerprint,
+        iteration,
+        stage,
+        sender: NodeId { role, index },
+    };
+    let mut put = |m: Message| rec.record(&m.topic(), 0, &encode(&m)).unwrap();
+    let iterations = 3;
+    for n in 0..iterations {
+        for s in 0..model.subdomains.len() {
+            let n_b = BoundaryLayout::new(model, s, &k0).len();
+            // A boundary displacement growing with time and iteration, and a traction.
+            let w = Field::from_fn(n_b, nt, |r, i| {
+                1e-3 * (r % 2) as f64 * i as f64 / nt as f64 * (n + 1) as f64
+            });
+            let f = Field::from_fn(n_b, nt, |r, i| -10.0 * ((r + 1) % 2) as f64 * i as f64 / nt as f64);
+            put(Message {
+                envelope: envelope(n, Stage::Linear, Role::Subdomain, s as u32),
+                payload: Payload::BoundaryState {
+                    subdomain: s as u32,
+                    w,
+                    f,
+                },
+            });
+        }
+        put(Message {
+            envelope: envelope(n, Stage::Local, Role::Interface, 0),
+            payload: Payload::Decision(Decision {
+                eta: 0.1f64.powi(n as i32 + 1),
+                contact_indicator: 0.2f64.powi(n as i32 + 1),
+                force_error: 0.0,
+                jump_error: 0.0,
+                counts: [1, 2, 3],
+                status_changes: 0,
+                direction_updates: vec![],
+                verdict: if n + 1 == iterations {
+                    Verdict::Converged
+                } else {
+                    Verdict::Continue
+                },
+            }),
+        });
+    }
+    for (i, itf) in model.interfaces.iter().enumerate() {
+        let np = itf.n_pairs();
+        let field = |scale: f64| Field::from_fn(2 * np, nt, |r, t| scale * (r + t) as f64);
+        put(Message {
+            envelope: envelope(iterations - 1, Stage::Final, Role::Interface, 0),
+            payload: Payload::InterfaceSolution(InterfaceSolution {
+                interface: i as u32,
+                w_a: field(1e-5),
+                w_b: field(1e-5),
+                f_a: field(-1.0),
+                f_b: field(1.0),
+                w_a_hat: field(1e-5),
+                w_b_hat: field(1e-5),
+                f_a_hat: field(-1.0),
+                f_b_hat: field(1.0),
+                status: (0..np * nt).map(|k| (k % 3) as u8).collect(),
+            }),
+        });
+    }
+    rec.finish().unwrap();
+
+    let recording = Recording::open(&mcap).unwrap();
+    let rrd = dir.join("two-blocks-r.rrd");
+    let summary = replay(
+        &recording,
+        &ReplayOptions {
+            sink: Sink::Save(rrd.clone()),
+            color_by: ColorBy::VonMises,
+            amplification: None,
+            time_point: None,
+        },
+    )
+    .unwrap();
+    let n_sub = model.subdomains.len();
+    assert_eq!(summary.iterations, iterations as usize);
+    // One mesh per subdomain and iteration, and per subdomain and time point at the end.
+    assert_eq!(summary.meshes, n_sub * iterations as usize + n_sub * nt);
+    assert!(!summary.interior_recorded);
+    assert!(
+        summary.color_range.1 > summary.color_range.0,
+        "{:?}",
+        summary.color_range
+    );
+    assert!(std::fs::metadata(&rrd).unwrap().len() > 10_000);
+
+    match Command::new("rerun").arg("--version").output() {
+        Ok(o) if o.status.success() => {
+            let version = String::from_utf8_lossy(&o.stdout).to_string();
+            let v = Command::new("rerun")
+                .args(["rrd", "verify"])
+                .arg(&rrd)
+                .output()
+                .unwrap();
+            assert!(
+                v.status.success(),
+                "`rerun rrd verify` ({version}) rejected the file: {}{}",
+                String::from_utf8_lossy(&v.stdout),
+                String::from_utf8_lossy(&v.stderr)
+            );
+            println!("`rerun rrd verify` accepted the .rrd ({})", version.trim());
+        }
+        _ => println!("skipped `rerun rrd verify`: no `rerun` CLI on PATH (pip install rerun-sdk==0.36.3)"),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
