@@ -2,6 +2,7 @@
 //! gives the condensed stage's iterates, and PGD converges to the same limit.
 
 use crate::common::{rel_max, run, scene};
+use glissade::report::{build_reports, plot_svg};
 use glissade::runner::RunResult;
 use glissade_bus::convert::mat_of;
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
@@ -171,4 +172,36 @@ fn pgd_variants_keep_the_limit() {
 fn pgd_keeps_the_stratified_limit() {
     let (e_f, e_w) = same_limit(scene_file("stratified"), default_pgd(), 1e-10);
     assert!(e_f <= 1e-6 && e_w <= 1e-6, "tractions {e_f:e}, jumps {e_w:e}");
+}
+
+/// `glissade report --linear-stages`: one reference, one report per stage, with the PGD basis
+/// size per subdomain and iteration and the bus bytes per iteration.
+#[test]
+fn reports_compare_linear_stages() {
+    let mut sc = scene_file("two-blocks");
+    sc.model.solver.max_iterations = 30;
+    let stages = [LinearStage::Condensed, LinearStage::Pgd];
+    let (reports, _) = build_reports(&sc, "pgd-report", &stages).expect("reports");
+    let (c, p) = (&reports[0], &reports[1]);
+    assert_eq!(c.linear_stage, "condensed");
+    assert!(p.linear_stage.starts_with("pgd(increment"), "{}", p.linear_stage);
+    assert_eq!(c.points.len(), 30);
+    assert!(c.points.iter().all(|x| x.basis_sizes.is_empty()));
+    assert!(c.points.iter().all(|x| x.linear_s >= 0.0 && x.linear_s.is_finite()));
+    // Both blocks take part; without compression a basis only grows, by at most one mode per
+    // micro problem (max_new_modes = 1, micro 1 and 2).
+    assert!(p.points.iter().all(|x| x.basis_sizes.len() == 2));
+    for w in p.points.windows(2) {
+        for (a, b) in w[0].basis_sizes.iter().zip(&w[1].basis_sizes) {
+            assert!(b >= a && b - a <= 2, "{:?} → {:?}", w[0].basis_sizes, w[1].basis_sizes);
+        }
+    }
+    assert!(p.points.last().unwrap().basis_sizes.iter().all(|&m| m > 2));
+    // Subdomain messages are full fields with either stage: the same bytes per iteration.
+    for (x, y) in c.points.iter().zip(&p.points) {
+        assert!(x.bus_bytes > 0);
+        assert_eq!(x.bus_bytes, y.bus_bytes, "iteration {}", x.iteration);
+    }
+    assert!(plot_svg(p).contains("PGD basis size per subdomain"));
+    assert!(!plot_svg(c).contains("PGD basis size per subdomain"));
 }
