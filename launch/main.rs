@@ -68,6 +68,18 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         linear_stages: Vec<String>,
     },
+    /// Run a scene in-process and split an iteration's time by stage, against the machine's
+    /// measured dense-product rate and memory bandwidth (`<scene>-bench.json`; use a release build).
+    Bench {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+        /// LATIN iteration cap (overrides the scene's).
+        #[arg(long)]
+        max_iterations: Option<usize>,
+    },
     /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
     /// endpoint and receives the scene over the bus.
     Node(NodeArgs),
@@ -134,7 +146,8 @@ struct RunArgs {
     /// Folder for the outputs.
     #[arg(long, default_value = "recordings")]
     out: PathBuf,
-    /// Run id (namespaces the run's messages and output files); default: generated.
+    /// Run id (namespaces the run's messages and output files); default: 128 random bits in hex,
+    /// so that nobody on a shared router can guess the run's key expressions.
     #[arg(long)]
     run_id: Option<String>,
     /// Also write every subdomain's displacement field.
@@ -209,6 +222,11 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             ..
         } => report(&scene, &out, tolerance, max_iterations),
         Command::Stability { quick, only, list, out } => stability(quick, &only, list, &out),
+        Command::Bench {
+            scene,
+            out,
+            max_iterations,
+        } => bench(&scene, &out, max_iterations),
         Command::Node(args) => {
             let role = match args.role {
                 RoleArg::Subdomain => NodeRole::Subdomain,
@@ -248,22 +266,22 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
     }
 }
 
-fn default_run_id(scene: &str) -> String {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in format!("{scene}{nanos}{}", std::process::id()).bytes() {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    format!("{h:016x}")
+/// A run id nobody can guess: 128 bits from the operating system's random source, in hex. The
+/// run's key expressions (`glissade/<run id>/…`) are namespaced by it, so runs on a shared router
+/// cannot collide and a client cannot publish into a run by naming it without being told the id.
+fn default_run_id() -> anyhow::Result<String> {
+    let mut bytes = [0u8; 16];
+    getrandom::fill(&mut bytes)
+        .map_err(|e| anyhow::anyhow!("cannot draw a random run id from the operating system: {e}"))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let sc = load_scene(&args.scene)?;
-    let run_id = args.run_id.clone().unwrap_or_else(|| default_run_id(&sc.model.name));
+    let run_id = match args.run_id.clone() {
+        Some(id) => id,
+        None => default_run_id()?,
+    };
     if !run_id
         .chars()
         .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
@@ -441,6 +459,27 @@ fn reference(scene: &std::path::Path, out: &std::path::Path) -> anyhow::Result<E
     Ok(ExitCode::SUCCESS)
 }
 
+fn bench(scene: &std::path::Path, out: &std::path::Path, max_iterations: Option<usize>) -> anyhow::Result<ExitCode> {
+    let mut sc = load_scene(scene)?;
+    ensure_writable(out)?;
+    if let Some(m) = max_iterations {
+        if m == 0 {
+            anyhow::bail!("--max-iterations 0: must be at least 1");
+        }
+        sc.model.solver.max_iterations = m;
+    }
+    let run_id = default_run_id()?;
+    let report = glissade::bench::bench(&sc, &run_id)?;
+    print!("{}", glissade::bench::render(&report));
+    let j = write_json(
+        out,
+        &format!("{}-bench.json", sc.model.name),
+        &serde_json::to_value(&report)?,
+    )?;
+    println!("bench: {}", j.display());
+    Ok(ExitCode::SUCCESS)
+}
+
 fn report(
     scene: &std::path::Path,
     out: &std::path::Path,
@@ -459,7 +498,7 @@ fn report(
         }
         sc.model.solver.max_iterations = m;
     }
-    let run_id = default_run_id(&sc.model.name);
+    let run_id = default_run_id()?;
     let (report, _, _) = build_report(&sc, &run_id)?;
     let name = &sc.model.name;
     let j = write_json(out, &format!("{name}-report.json"), &serde_json::to_value(&report)?)?;

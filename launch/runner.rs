@@ -2,11 +2,13 @@
 //! node per subdomain, one interface node, one coarse node when the scene needs one, on the
 //! in-process bus; subdomain work within a round runs in parallel on all cores.
 
-use glissade_bus::{BusError, InProcessBus, Node, RunContext};
+use glissade_bus::convert::mat_of;
+use glissade_bus::{BusError, HandleTime, InProcessBus, Node, RunContext};
 use glissade_coarse::CoarseNode;
 use glissade_interface::InterfaceNode;
 use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::linear::{default_k0, macro_basis, macro_degree, SubdomainSolver};
 use glissade_mechanics::model::Model;
 use glissade_mechanics::monolithic::solve_glued;
@@ -52,6 +54,23 @@ pub struct RunResult {
     /// Nodes the run used: (role, count), and what it left out and why.
     pub nodes: Vec<String>,
     pub left_out: Vec<String>,
+}
+
+impl RunResult {
+    /// The stopped state of every interface as matrices, in interface order (the form the
+    /// reference comparisons of `glissade_mechanics::local` take).
+    pub fn interface_fields(&self) -> Vec<InterfaceFields> {
+        let mut sols: Vec<&InterfaceSolution> = self.interfaces.iter().collect();
+        sols.sort_by_key(|s| s.interface);
+        sols.into_iter()
+            .map(|s| InterfaceFields {
+                w_a: mat_of(&s.w_a),
+                w_b: mat_of(&s.w_b),
+                f_a: mat_of(&s.f_a),
+                f_b: mat_of(&s.f_b),
+            })
+            .collect()
+    }
 }
 
 /// Errors of a run.
@@ -257,7 +276,7 @@ pub fn run_in_process_observed(
     on_iteration: impl FnMut(&IterationRecord),
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<RunResult, RunError> {
-    run_logged(scene, opts, on_iteration, observe, None)
+    run_logged(scene, opts, on_iteration, observe, None, None)
 }
 
 /// As [`run_in_process_observed`], and returns every subdomain's linear-stage records (wall
@@ -269,10 +288,18 @@ pub fn run_in_process_logged(
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
     let log = LinearStageLog::default();
-    let result = run_logged(scene, opts, on_iteration, observe, Some(log.clone()))?;
+    let result = run_logged(scene, opts, on_iteration, observe, Some(log.clone()), None)?;
     let mut records = log.lock().map(|v| v.clone()).unwrap_or_default();
     records.sort_by_key(|r| (r.iteration, r.subdomain));
     Ok((result, records))
+}
+
+/// As [`run_in_process`], with every node's handling time summed per (role, message field)
+/// (what `glissade bench` splits an iteration by).
+pub fn run_in_process_timed(scene: &LoadedScene, opts: &RunOptions) -> Result<(RunResult, Vec<HandleTime>), RunError> {
+    let mut times = Vec::new();
+    let result = run_logged(scene, opts, |_| {}, |_| Duration::ZERO, None, Some(&mut times))?;
+    Ok((result, times))
 }
 
 fn run_logged(
@@ -281,6 +308,7 @@ fn run_logged(
     mut on_iteration: impl FnMut(&IterationRecord),
     mut observe: impl FnMut(&Message) -> Duration,
     log: Option<LinearStageLog>,
+    timing: Option<&mut Vec<HandleTime>>,
 ) -> Result<RunResult, RunError> {
     let model = Arc::new(scene.model.clone());
     let t0 = Instant::now();
@@ -321,7 +349,7 @@ fn run_logged(
     let mut iterations = Vec::new();
     let mut interfaces = Vec::new();
     let mut displacements = Vec::new();
-    let mut bus = InProcessBus::new(nodes);
+    let mut bus = InProcessBus::new(nodes).with_timing(timing.is_some());
     let mut observer_time = Duration::ZERO;
     bus.run(|m| {
         observer_time += observe(m);
@@ -341,6 +369,9 @@ fn run_logged(
         }
         true
     })?;
+    if let Some(times) = timing {
+        *times = bus.handle_times();
+    }
     let verdict = iterations
         .last()
         .map(|r| r.decision.verdict.clone())

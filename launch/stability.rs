@@ -15,8 +15,7 @@
 //! steps-10000 and the thin layers); `--quick` leaves out the [`SLOW`] cases (about 13 s in the
 //! debug test profile) and is what `tests/it/stability.rs` runs.
 
-use crate::runner::{run_in_process, RunOptions, RunResult};
-use glissade_bus::convert::mat_of;
+use crate::runner::{run_in_process, RunOptions};
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
 use glissade_mechanics::scene::load_str;
@@ -644,26 +643,6 @@ fn panic_text(e: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "panic".into())
 }
 
-fn fields_of(result: &RunResult) -> Vec<InterfaceFields> {
-    let mut out: Vec<(u32, InterfaceFields)> = result
-        .interfaces
-        .iter()
-        .map(|sol| {
-            (
-                sol.interface,
-                InterfaceFields {
-                    w_a: mat_of(&sol.w_a),
-                    w_b: mat_of(&sol.w_b),
-                    f_a: mat_of(&sol.f_a),
-                    f_b: mat_of(&sol.f_b),
-                },
-            )
-        })
-        .collect();
-    out.sort_by_key(|(i, _)| *i);
-    out.into_iter().map(|(_, f)| f).collect()
-}
-
 fn fields_finite(f: &[InterfaceFields]) -> bool {
     f.iter().all(|x| {
         [&x.w_a, &x.w_b, &x.f_a, &x.f_b]
@@ -795,7 +774,7 @@ fn fill(case: &Case, row: &mut CaseResult) {
         }
     }
     row.final_counts = Some(counts);
-    let fields = fields_of(&result);
+    let fields = result.interface_fields();
     row.fields_finite &= fields_finite(&fields);
     let Some(opts) = &case.reference else {
         row.reference_note = Some("reference not computed for this case".into());

@@ -5,8 +5,7 @@
 use crate::common::scene;
 use glissade::distributed::run_multi_process;
 use glissade::runner::{run_in_process, run_in_process_observed, RunOptions, RunResult};
-use glissade_bus::convert::mat_of;
-use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::local::error_against_reference;
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::{InterfaceSolution, Payload, Verdict};
@@ -58,18 +57,6 @@ fn solve(sc: &LoadedScene, acceleration: Acceleration, tolerance: f64, k0_factor
 }
 
 /// s of every interface at the stop.
-fn fields(r: &RunResult) -> Vec<InterfaceFields> {
-    r.interfaces
-        .iter()
-        .map(|s| InterfaceFields {
-            w_a: mat_of(&s.w_a),
-            w_b: mat_of(&s.w_b),
-            f_a: mat_of(&s.f_a),
-            f_b: mat_of(&s.f_b),
-        })
-        .collect()
-}
-
 /// Both runs stop at η ≤ 1e-12 (which is ≤ 1e-10), and the contact tractions of the Anderson run
 /// must be within 1e-8 of the plain run's, relative, in the space-time norm of the error against
 /// a reference (forces of cross-point copies summed: only their sum is determined; individual
@@ -85,7 +72,12 @@ fn anderson_reaches_the_plain_limit() {
         let (plain, plain_grams, plain_steps) = solve(&sc, Acceleration::None, 1e-12, k0);
         let (mixed, grams, steps) = solve(&sc, Acceleration::Anderson { window: 5 }, 1e-12, k0);
         let weights = sc.model.time.trapezoid_weights();
-        let (e_f, e_w) = error_against_reference(&sc.model.interfaces, &fields(&mixed), &fields(&plain), &weights);
+        let (e_f, e_w) = error_against_reference(
+            &sc.model.interfaces,
+            &mixed.interface_fields(),
+            &plain.interface_fields(),
+            &weights,
+        );
         println!(
             "{name}: {} iterations plain, {} with Anderson (m = 5); contact tractions differ by {e_f:.2e}, jumps by {e_w:.2e}",
             plain.iterations.len(),

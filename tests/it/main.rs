@@ -3,6 +3,7 @@
 
 mod acceleration;
 mod analytic;
+mod bench;
 mod bad_input;
 mod common;
 mod distributed;
@@ -12,5 +13,6 @@ mod node_failures;
 mod pgd;
 mod recording;
 mod reference;
+mod run_id;
 mod stability;
 mod two_hosts;

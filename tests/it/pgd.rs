@@ -4,8 +4,7 @@
 use crate::common::{rel_max, run, scene};
 use glissade::report::{build_reports, plot_svg};
 use glissade::runner::RunResult;
-use glissade_bus::convert::mat_of;
-use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::local::error_against_reference;
 use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion, PgdParams};
 use glissade_messages::Verdict;
 
@@ -60,19 +59,6 @@ fn sparse_stage_gives_the_condensed_iterates() {
     }
 }
 
-/// s of every interface at the stop, for [`error_against_reference`].
-fn fields(r: &RunResult) -> Vec<InterfaceFields> {
-    r.interfaces
-        .iter()
-        .map(|s| InterfaceFields {
-            w_a: mat_of(&s.w_a),
-            w_b: mat_of(&s.w_b),
-            f_a: mat_of(&s.f_a),
-            f_b: mat_of(&s.f_b),
-        })
-        .collect()
-}
-
 /// Runs `sc` to η ≤ `tolerance` without PGD (condensed) and with it; returns the space-time
 /// relative differences of the contact tractions and jumps (forces of cross-point copies summed:
 /// only their sum is determined) and the iteration counts.
@@ -94,7 +80,12 @@ fn same_limit(mut sc: LoadedScene, pgd: PgdParams, tolerance: f64) -> (f64, f64)
         with_pgd.iterations.last().map(|r| &r.decision)
     );
     let weights = sc.model.time.trapezoid_weights();
-    let (e_f, e_w) = error_against_reference(&sc.model.interfaces, &fields(&with_pgd), &fields(&exact), &weights);
+    let (e_f, e_w) = error_against_reference(
+        &sc.model.interfaces,
+        &with_pgd.interface_fields(),
+        &exact.interface_fields(),
+        &weights,
+    );
     println!(
         "{} at η ≤ {tolerance:e}, PGD {:?} ξ₀ = ({}, {}) macro_modes {}: {} iterations without PGD, {} with; contact tractions differ by {e_f:.2e}, jumps by {e_w:.2e}",
         sc.model.name,

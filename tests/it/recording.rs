@@ -353,3 +353,52 @@ fn recording_survives_sigkill_of_the_recorder() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// SIGTERM to the launcher mid-run: every node stops, the launcher exits 130, and the recording is
+/// finalised (summary section written): the project's reader and the Python `mcap` package both
+/// open it, agree per channel on counts and bytes, and what it holds is a prefix of the run.
+#[test]
+fn sigterm_leaves_a_finalised_recording_both_readers_open() {
+    let dir = temp_dir("sigterm");
+    // Enough iterations for the signal to land mid-run.
+    let text = scene_text("small-three-layer").replace(
+        "tolerance = 1e-4",
+        "tolerance = 1e-300\nmax_iterations = 400\nstagnation_window = 1000",
+    );
+    let scene_path = dir.join("long.toml");
+    std::fs::write(&scene_path, &text).unwrap();
+    let mut child = spawn_run(&scene_path, &dir, "rec-5");
+    let path = dir.join("small-three-layer-rec-5.mcap");
+    let deadline = Instant::now() + Duration::from_secs(300);
+    while std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0) < 200_000 {
+        assert!(Instant::now() < deadline, "the recording did not grow");
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before the signal");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // SAFETY: kill(2) of the launcher this test started.
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
+    let status = wait_bounded(&mut child, Duration::from_secs(60));
+    let mut err = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+    assert_eq!(status.code(), Some(130), "interrupted: {err}");
+
+    let (r, msgs) = read_back(&path);
+    assert!(r.is_finished(), "no summary section after SIGTERM: {err}");
+    let full = by_topic(bus_messages(&text, "rec-5"));
+    let total: usize = full.values().map(Vec::len).sum();
+    assert!(
+        msgs.len() < total,
+        "the signal landed after the run: {} of {total}",
+        msgs.len()
+    );
+    let ours = by_topic(msgs);
+    for (topic, list) in &ours {
+        assert_eq!(list[..], full[topic][..list.len()], "{topic}");
+    }
+    if let Some((theirs, counts)) = python_read(&path) {
+        assert_eq!(by_topic(theirs), ours, "the Python reader reads other messages");
+        let our_counts: BTreeMap<String, u64> = ours.iter().map(|(t, l)| (t.clone(), l.len() as u64)).collect();
+        assert_eq!(counts, our_counts, "summary statistics of the Python reader");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

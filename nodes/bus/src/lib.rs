@@ -4,8 +4,10 @@
 //! (all messages of a round are handled, nodes in parallel on a rayon pool, outputs collected in
 //! node order), so a run is deterministic whatever the thread count.
 
-use glissade_messages::{key_matches, Envelope, Field, Message, NodeId, Stage, SCHEMA_VERSION};
+use glissade_messages::{key_matches, Envelope, Field, Message, NodeId, Role, Stage, SCHEMA_VERSION};
 use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
 
 pub mod convert;
 
@@ -68,16 +70,59 @@ pub enum BusError {
     Stalled(String),
 }
 
+/// Time nodes spent in [`Node::handle`], summed per kind of work: the receiving node's role and
+/// the field of the message it handled (the last key-expression chunk before any destination,
+/// e.g. `local_directions` for a subdomain's micro problem 1).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HandleTime {
+    pub role: Role,
+    pub field: String,
+    pub calls: u64,
+    /// Summed over nodes: on several threads this is CPU time, not wall time.
+    pub seconds: f64,
+}
+
 /// Runs nodes in one process.
 pub struct InProcessBus {
     nodes: Vec<Box<dyn Node>>,
     subscriptions: Vec<Vec<String>>,
+    /// (role, field) → (calls, time), when timing is on.
+    timing: Option<BTreeMap<(Role, String), (u64, Duration)>>,
+}
+
+/// The field chunk of a topic `glissade/<run>/<role>/<id>/<field>[/<destination>]`.
+fn topic_field(topic: &str) -> &str {
+    topic.split('/').nth(4).unwrap_or(topic)
 }
 
 impl InProcessBus {
     pub fn new(nodes: Vec<Box<dyn Node>>) -> Self {
         let subscriptions = nodes.iter().map(|n| n.subscriptions()).collect();
-        Self { nodes, subscriptions }
+        Self {
+            nodes,
+            subscriptions,
+            timing: None,
+        }
+    }
+
+    /// Times every [`Node::handle`] call (two clock reads per call; off by default).
+    pub fn with_timing(mut self, on: bool) -> Self {
+        self.timing = on.then(BTreeMap::new);
+        self
+    }
+
+    /// The handling times gathered so far (empty when timing is off), ordered by role and field.
+    pub fn handle_times(&self) -> Vec<HandleTime> {
+        self.timing
+            .iter()
+            .flatten()
+            .map(|((role, field), (calls, d))| HandleTime {
+                role: *role,
+                field: field.clone(),
+                calls: *calls,
+                seconds: d.as_secs_f64(),
+            })
+            .collect()
     }
 
     /// Runs until no message is in flight. `observe` sees every message once, in publication order
@@ -95,23 +140,38 @@ impl InProcessBus {
             }
             let topics: Vec<String> = queue.iter().map(Message::topic).collect();
             let queue_ref = &queue;
-            let results: Vec<Result<Vec<Message>, NodeError>> = self
+            let timed = self.timing.is_some();
+            type Timed = Vec<(usize, Duration)>;
+            let results: Vec<Result<(Vec<Message>, Timed), NodeError>> = self
                 .nodes
                 .par_iter_mut()
                 .zip(self.subscriptions.par_iter())
                 .map(|(node, subs)| {
-                    let mut out = Vec::new();
-                    for (m, topic) in queue_ref.iter().zip(&topics) {
+                    let (mut out, mut times) = (Vec::new(), Vec::new());
+                    for (k, (m, topic)) in queue_ref.iter().zip(&topics).enumerate() {
                         if subs.iter().any(|s| key_matches(s, topic)) {
+                            let t0 = timed.then(Instant::now);
                             out.extend(node.handle(m)?);
+                            if let Some(t0) = t0 {
+                                times.push((k, t0.elapsed()));
+                            }
                         }
                     }
-                    Ok(out)
+                    Ok((out, times))
                 })
                 .collect();
             let mut next = Vec::new();
-            for r in results {
-                next.extend(r?);
+            for (node, r) in self.nodes.iter().zip(results) {
+                let (out, times) = r?;
+                next.extend(out);
+                if let Some(timing) = &mut self.timing {
+                    let role = node.id().role;
+                    for (k, d) in times {
+                        let e = timing.entry((role, topic_field(&topics[k]).to_string())).or_default();
+                        e.0 += 1;
+                        e.1 += d;
+                    }
+                }
             }
             queue = next;
         }

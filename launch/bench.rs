@@ -1,0 +1,317 @@
+//! `glissade bench <scene>`: where an iteration's time goes, against what the machine can do.
+//!
+//! Three measurements in one process, one after the other:
+//! - the machine: the dense-product rate of faer on the shape of the linear stage (A_E times the
+//!   n_b × (N+1) block of the largest subdomain, one thread, then both threads on independent
+//!   products as the in-process run does) and the memory bandwidth (a 512 MiB buffer read by all
+//!   threads);
+//! - the run: the scene in-process with every node's handling time summed per (role, message
+//!   field), i.e. per stage of the iteration;
+//! - two models of one iteration: the flops of the condensed linear stage (counted from the
+//!   products it makes) and the bytes it must move at least (every operator read once, every
+//!   boundary field read or written once per pass listed in [`FIELD_PASSES`]). Their ratios to the
+//!   measured rates give the compute and memory-traffic bounds the iteration time is compared to.
+
+use crate::runner::{run_in_process_timed, Plan, RunOptions, RunResult};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, Par};
+use glissade_bus::HandleTime;
+use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::scene::{LinearStage, LoadedScene};
+use glissade_messages::Role;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::time::Instant;
+
+/// Full boundary fields (n_b × (N+1)) one iteration reads or writes per subdomain, pass by pass,
+/// in the condensed linear stage with the coarse problem and the local stage: micro 1 reads q̂,
+/// writes M q̂, reads it in the product, writes W₁ (after copying W_d: one read), writes F₁;
+/// micro 2 writes 𝔼w̃ and W₂, reads them, writes F₂; the relaxation reads W₁, F₁, W₂, F₂ and the
+/// previous s (2) and writes s (2); the macro forces read F₁ (M F₁ written and read: 2); the
+/// local stage reads W and F and writes q̂ (its Ŵ and F̂ are combined on the fly). A lower count
+/// would need fusing passes the code does not fuse; a higher one would count cache hits.
+pub const FIELD_PASSES: usize = 5 + 3 + 8 + 3 + 3;
+
+/// What the machine does, measured.
+#[derive(Debug, Clone, Serialize)]
+pub struct MachineRates {
+    pub threads: usize,
+    /// The product measured: rows × inner × columns.
+    pub product_shape: [usize; 3],
+    pub gflops_one_thread: f64,
+    pub gflops_all_threads: f64,
+    /// Read bandwidth of a buffer far larger than the caches, all threads (GB/s, 1e9 bytes).
+    pub read_gb_s: f64,
+}
+
+/// One stage of the split.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageTime {
+    pub role: String,
+    pub field: String,
+    pub what: String,
+    pub calls: u64,
+    /// Per iteration, summed over the nodes doing it (CPU time when they run in parallel).
+    pub ms_per_iteration: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    pub scene: String,
+    pub subdomains: usize,
+    pub largest_boundary: usize,
+    pub time_points: usize,
+    pub linear_stage: String,
+    pub iterations: usize,
+    pub setup_s: f64,
+    pub solve_s: f64,
+    pub wall_ms_per_iteration: f64,
+    pub stages: Vec<StageTime>,
+    pub machine: MachineRates,
+    /// Flops of the condensed linear stage per iteration (None for the sparse and PGD stages,
+    /// whose work is not a fixed count of dense products).
+    pub linear_flops_per_iteration: Option<f64>,
+    /// Linear-stage rate: its flops over the CPU time of micro 1 and micro 2 (GFLOP/s), and that
+    /// rate over the one-thread product rate.
+    pub linear_gflops: Option<f64>,
+    pub linear_fraction_of_peak: Option<f64>,
+    /// Bytes one iteration must move at least, and that over the read bandwidth (ms).
+    pub bytes_per_iteration: f64,
+    pub memory_bound_ms: f64,
+    /// Measured wall time per iteration over the memory-traffic bound.
+    pub wall_over_memory_bound: f64,
+}
+
+/// What a (role, field) handling is, in the method's words.
+fn stage_name(role: Role, field: &str) -> &'static str {
+    match (role, field) {
+        (Role::Subdomain, "local_directions") => "micro problem 1 (and macro forces)",
+        (Role::Subdomain, "macro_displacements") => "micro problem 2 and relaxation",
+        (Role::Subdomain, "homogenized_operator") => "setup: macro operator received",
+        (Role::Subdomain, "anderson_step") => "Anderson mixing",
+        (Role::Subdomain, "decision") => "stop decision",
+        (Role::Coarse, "macro_forces") => "macro problem",
+        (Role::Coarse, "homogenized_operator") => "setup: macro operator assembly",
+        (Role::Interface, "boundary_state") => "local stage and indicators",
+        (Role::Interface, "anderson_gram") => "Anderson least-squares",
+        (Role::Interface, "indicator_partials") => "indicator reduction",
+        _ => "other",
+    }
+}
+
+/// GFLOP/s of `C = A B` (A m × m, B m × n) on `threads` independent products at once.
+fn product_rate(m: usize, n: usize, threads: usize) -> f64 {
+    let a = Mat::<f64>::from_fn(m, m, |i, j| 1.0 / (1.0 + (i + 2 * j) as f64));
+    let b = Mat::<f64>::from_fn(m, n, |i, j| ((i * 7 + j * 3) % 11) as f64 - 5.0);
+    let mut cs: Vec<Mat<f64>> = (0..threads).map(|_| Mat::zeros(m, n)).collect();
+    let flops = 2.0 * (m * m * n) as f64;
+    let mut reps = 1usize;
+    loop {
+        let t = Instant::now();
+        cs.par_iter_mut().for_each(|c| {
+            for _ in 0..reps {
+                matmul(c.as_mut(), Accum::Replace, a.as_ref(), b.as_ref(), 1.0, Par::Seq);
+            }
+        });
+        let s = t.elapsed().as_secs_f64();
+        if s > 0.3 {
+            std::hint::black_box(&cs);
+            return flops * (reps * threads) as f64 / s / 1e9;
+        }
+        reps *= 2;
+    }
+}
+
+/// Read bandwidth (GB/s) of a 512 MiB buffer summed by all threads; best of three passes.
+fn read_bandwidth() -> f64 {
+    let n: usize = 64 << 20; // f64s
+    let buf: Vec<f64> = (0..n).map(|i| (i % 13) as f64).collect();
+    let chunk = n.div_ceil(rayon::current_num_threads().max(1));
+    let mut best = 0.0f64;
+    for _ in 0..3 {
+        let t = Instant::now();
+        let sum: f64 = buf.par_chunks(chunk).map(|c| c.iter().sum::<f64>()).sum();
+        let s = t.elapsed().as_secs_f64();
+        std::hint::black_box(sum);
+        best = best.max((n * 8) as f64 / s / 1e9);
+    }
+    best
+}
+
+/// Measures the machine on the product shape (m × m) · (m × n).
+pub fn machine_rates(m: usize, n: usize) -> MachineRates {
+    let threads = rayon::current_num_threads().max(1);
+    MachineRates {
+        threads,
+        product_shape: [m, m, n],
+        gflops_one_thread: product_rate(m, n, 1),
+        gflops_all_threads: product_rate(m, n, threads),
+        read_gb_s: read_bandwidth(),
+    }
+}
+
+/// Runs the benchmark of `scene`.
+pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
+    let model = &scene.model;
+    anyhow::ensure!(
+        !model.interfaces.is_empty(),
+        "scene `{}` has no interface: there is no iteration to benchmark",
+        model.name
+    );
+    let plan = Plan::new(model).with_scene(scene);
+    let nt = model.time.n_points();
+    // Boundary sizes and macro sizes of the subdomains that iterate.
+    let sizes: Vec<(usize, usize, LinearStage)> = plan
+        .participants
+        .iter()
+        .map(|&s| {
+            let s = s as usize;
+            let n_b = BoundaryLayout::new(model, s, &plan.k0).len();
+            let n_m: usize = model
+                .interfaces
+                .iter()
+                .enumerate()
+                .filter(|(_, itf)| itf.a == s || itf.b == s)
+                .map(|(i, _)| plan.bases[i].len())
+                .sum();
+            (n_b, n_m, plan.stage_of(model, s))
+        })
+        .collect();
+    let largest = sizes.iter().map(|x| x.0).max().unwrap_or(0);
+    let (result, times): (RunResult, Vec<HandleTime>) = run_in_process_timed(
+        scene,
+        &RunOptions {
+            run_id: run_id.into(),
+            interior: false,
+        },
+    )?;
+    let machine = machine_rates(largest, nt);
+    let iterations = result.iterations.len().max(1);
+    let per_it = |s: f64| 1e3 * s / iterations as f64;
+    let stages: Vec<StageTime> = times
+        .iter()
+        .map(|t| StageTime {
+            role: t.role.key().into(),
+            field: t.field.clone(),
+            what: stage_name(t.role, &t.field).into(),
+            calls: t.calls,
+            ms_per_iteration: per_it(t.seconds),
+        })
+        .collect();
+    let all_condensed = sizes.iter().all(|x| x.2 == LinearStage::Condensed);
+    let coarse = plan.coarse;
+    let linear_flops = all_condensed.then(|| {
+        sizes
+            .iter()
+            .map(|&(n_b, n_m, _)| {
+                let (b, m, t) = (n_b as f64, n_m as f64, nt as f64);
+                // micro 1: A_E (M q̂); with the coarse problem also 𝔼ᵀ M F₁ and, in micro 2,
+                // (A_E M k⁻ 𝔼) w̃ and 𝔼 w̃.
+                2.0 * b * b * t + if coarse { 3.0 * 2.0 * b * m * t } else { 0.0 }
+            })
+            .sum::<f64>()
+    });
+    let linear_cpu_s: f64 = times
+        .iter()
+        .filter(|t| t.role == Role::Subdomain && matches!(t.field.as_str(), "local_directions" | "macro_displacements"))
+        .map(|t| t.seconds)
+        .sum();
+    let linear_gflops = linear_flops.map(|f| f * iterations as f64 / linear_cpu_s.max(1e-12) / 1e9);
+    let bytes: f64 = sizes
+        .iter()
+        .map(|&(n_b, n_m, stage)| {
+            let operator = if stage == LinearStage::Condensed { n_b * n_b } else { 0 };
+            8.0 * (operator + 2 * n_b * n_m + FIELD_PASSES * n_b * nt) as f64
+        })
+        .sum();
+    let memory_bound_ms = 1e3 * bytes / (machine.read_gb_s * 1e9);
+    let wall_ms = per_it(result.solve_s);
+    Ok(BenchReport {
+        scene: model.name.clone(),
+        subdomains: sizes.len(),
+        largest_boundary: largest,
+        time_points: nt,
+        linear_stage: format!("{:?}", scene.linear_stage).to_lowercase(),
+        iterations: result.iterations.len(),
+        setup_s: result.setup_s,
+        solve_s: result.solve_s,
+        wall_ms_per_iteration: wall_ms,
+        stages,
+        linear_flops_per_iteration: linear_flops,
+        linear_gflops,
+        linear_fraction_of_peak: linear_gflops.map(|g| g / machine.gflops_one_thread),
+        bytes_per_iteration: bytes,
+        memory_bound_ms,
+        wall_over_memory_bound: wall_ms / memory_bound_ms,
+        machine,
+    })
+}
+
+/// The report as text.
+pub fn render(r: &BenchReport) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "scene {}: {} subdomains (largest boundary {} dofs), N + 1 = {} time points, linear stage {}",
+        r.scene, r.subdomains, r.largest_boundary, r.time_points, r.linear_stage
+    );
+    let _ = writeln!(
+        s,
+        "machine: {} threads; dense product {}×{} · {}×{}: {:.1} GFLOP/s on one thread, {:.1} on all; read bandwidth {:.1} GB/s",
+        r.machine.threads,
+        r.machine.product_shape[0],
+        r.machine.product_shape[1],
+        r.machine.product_shape[1],
+        r.machine.product_shape[2],
+        r.machine.gflops_one_thread,
+        r.machine.gflops_all_threads,
+        r.machine.read_gb_s
+    );
+    let _ = writeln!(
+        s,
+        "run: setup {:.3} s, {} iterations in {:.3} s: {:.2} ms per iteration (wall)",
+        r.setup_s, r.iterations, r.solve_s, r.wall_ms_per_iteration
+    );
+    let _ = writeln!(
+        s,
+        "\n| node ← message | stage | calls | ms per iteration (summed over nodes) |"
+    );
+    let _ = writeln!(s, "|---|---|---:|---:|");
+    for st in &r.stages {
+        let _ = writeln!(
+            s,
+            "| {} ← {} | {} | {} | {:.3} |",
+            st.role, st.field, st.what, st.calls, st.ms_per_iteration
+        );
+    }
+    let _ = writeln!(s);
+    match (r.linear_flops_per_iteration, r.linear_gflops, r.linear_fraction_of_peak) {
+        (Some(f), Some(g), Some(p)) => {
+            let _ = writeln!(
+                s,
+                "linear stage: {:.3e} flop per iteration at {:.1} GFLOP/s = {:.0} % of the one-thread product rate",
+                f,
+                g,
+                100.0 * p
+            );
+        }
+        _ => {
+            let _ = writeln!(
+                s,
+                "linear stage: no flop count (only the condensed stage is a fixed set of products)"
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "memory traffic: at least {:.1} MB per iteration ({} boundary-field passes + operators), {:.2} ms at {:.1} GB/s; \
+         measured iteration = {:.1} × that bound",
+        r.bytes_per_iteration / 1e6,
+        FIELD_PASSES,
+        r.memory_bound_ms,
+        r.machine.read_gb_s,
+        r.wall_over_memory_bound
+    );
+    s
+}

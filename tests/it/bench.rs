@@ -1,0 +1,63 @@
+//! `glissade bench`: timing the nodes does not change the run, and the stage split accounts for
+//! every message the nodes handled.
+
+use crate::common::{run, scene};
+use glissade::bench::{bench, render};
+
+#[test]
+fn bench_splits_an_unchanged_run_by_stage() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/launch/scenes/small-three-layer.toml"
+    ))
+    .expect("scene file");
+    let sc = scene(&text);
+    let plain = run(&sc);
+    let report = bench(&sc, "test").expect("bench");
+    // Timing only reads clocks around the handlers: the run is the same run.
+    assert_eq!(report.iterations, plain.iterations.len());
+    let n = report.iterations as u64;
+    let subdomains = report.subdomains as u64;
+    let calls = |role: &str, field: &str| {
+        report
+            .stages
+            .iter()
+            .find(|s| s.role == role && s.field == field)
+            .map_or(0, |s| s.calls)
+    };
+    // Every iteration: each subdomain handles its macro displacements, the coarse node the macro
+    // forces of every subdomain, the interface node every subdomain's boundary state; local
+    // directions arrive from the second iteration on (the first linear stage starts from zero
+    // directions, when the subdomain node starts).
+    assert_eq!(
+        calls("subdomain", "local_directions"),
+        (n - 1) * subdomains,
+        "{}",
+        render(&report)
+    );
+    assert_eq!(
+        calls("subdomain", "macro_displacements"),
+        n * subdomains,
+        "{}",
+        render(&report)
+    );
+    assert_eq!(calls("coarse", "macro_forces"), n * subdomains, "{}", render(&report));
+    assert_eq!(
+        calls("interface", "boundary_state"),
+        n * subdomains,
+        "{}",
+        render(&report)
+    );
+    for s in &report.stages {
+        assert!(s.ms_per_iteration.is_finite() && s.ms_per_iteration >= 0.0, "{s:?}");
+    }
+    let m = &report.machine;
+    assert!(
+        m.gflops_one_thread > 0.0 && m.gflops_all_threads > 0.0 && m.read_gb_s > 0.0,
+        "{m:?}"
+    );
+    // The condensed stage's flops: 2 n_b² (N+1) per subdomain for A_E M q̂ at least.
+    let flops = report.linear_flops_per_iteration.expect("condensed stage");
+    assert!(flops >= 2.0 * (report.largest_boundary.pow(2) * report.time_points) as f64);
+    assert!(report.memory_bound_ms > 0.0 && report.wall_over_memory_bound.is_finite());
+}
