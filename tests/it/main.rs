@@ -3,8 +3,8 @@
 
 mod acceleration;
 mod analytic;
-mod bench;
 mod bad_input;
+mod bench;
 mod common;
 mod distributed;
 mod latin_perfect;
