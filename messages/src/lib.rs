@@ -6,8 +6,9 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Version of the wire schema; decoding rejects any other.
-pub const SCHEMA_VERSION: u32 = 1;
+/// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
+/// interfaces it covers (several interface nodes), `IndicatorPartials` added.
+pub const SCHEMA_VERSION: u32 = 2;
 
 /// Role of a node on the bus.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -181,6 +182,22 @@ pub struct Decision {
     pub verdict: Verdict,
 }
 
+/// One interface's indicator sums after a local stage (the terms of η, e_F, e_W and the contact
+/// counts, DESIGN §3) and whether its search direction was updated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InterfaceIndicators {
+    pub interface: u32,
+    pub eta_num: f64,
+    pub eta_den: f64,
+    pub force_num: f64,
+    pub force_den: f64,
+    pub jump_num: f64,
+    pub jump_den: f64,
+    pub counts: [u64; 3],
+    pub status_changes: u64,
+    pub direction_updated: bool,
+}
+
 /// One interface's fields at the end of a run: s (last linear stage) and ŝ (last local stage),
 /// and the contact status per (pair, time) at index p + n_pairs·i (0 separated, 1 stick, 2 slip).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -227,8 +244,12 @@ pub enum Payload {
         f: Field,
     },
     /// q̂ = F̂ + k⁻Ŵ on a subdomain's boundary: all the linear stage needs from the local stage.
+    /// One interface node sends the rows of the interfaces it owns: `interfaces` in the order of
+    /// the subdomain's boundary layout, `q_hat` their rows one after the other. The subdomain
+    /// starts its linear stage once every interface of its boundary is covered.
     LocalDirections {
         subdomain: u32,
+        interfaces: Vec<u32>,
         q_hat: Field,
     },
     /// A subdomain's share of the Anderson least-squares problem after its linear stage (DESIGN §3
@@ -254,6 +275,13 @@ pub enum Payload {
         subdomain: u32,
         u: Field,
     },
+    /// An interface node's share of an iteration's indicators, sent to the deciding interface
+    /// node (index 0) when the run has several: one entry per interface it owns, in interface
+    /// order, or the reason the iteration diverged (a non-finite value received).
+    IndicatorPartials {
+        interfaces: Vec<InterfaceIndicators>,
+        diverged: Option<String>,
+    },
 }
 
 impl Payload {
@@ -271,6 +299,7 @@ impl Payload {
             Payload::Decision(_) => "decision",
             Payload::InterfaceSolution(_) => "interface_solution",
             Payload::Displacement { .. } => "displacement",
+            Payload::IndicatorPartials { .. } => "indicator_partials",
         }
     }
 
@@ -304,6 +333,7 @@ impl Payload {
                 Ok(())
             }
             Payload::LocalDirections { q_hat, .. } => q_hat.check("q_hat"),
+            Payload::IndicatorPartials { .. } => Ok(()),
             Payload::AndersonGram { gram, projection, .. } => {
                 gram.check("gram")?;
                 projection.check("projection")?;

@@ -8,8 +8,8 @@
 //! of two messages), and plain random bytes.
 
 use glissade_messages::{
-    decode, encode, Decision, Envelope, Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage,
-    Verdict, SCHEMA_VERSION,
+    decode, encode, Decision, Envelope, Expected, Field, InterfaceIndicators, InterfaceSolution, Message, NodeId,
+    Payload, Role, Stage, Verdict, SCHEMA_VERSION,
 };
 use proptest::prelude::*;
 
@@ -55,7 +55,13 @@ fn payload() -> impl Strategy<Value = Payload> {
             },
             w,
         }),
-        (any::<u32>(), field()).prop_map(|(subdomain, q_hat)| Payload::LocalDirections { subdomain, q_hat }),
+        (any::<u32>(), proptest::collection::vec(any::<u32>(), 0..4), field()).prop_map(
+            |(subdomain, interfaces, q_hat)| Payload::LocalDirections {
+                subdomain,
+                interfaces,
+                q_hat
+            }
+        ),
         (
             any::<f64>(),
             any::<f64>(),
@@ -90,6 +96,39 @@ fn payload() -> impl Strategy<Value = Payload> {
             })
         }),
         (any::<u32>(), field()).prop_map(|(subdomain, u)| Payload::Displacement { subdomain, u }),
+        (
+            proptest::collection::vec(
+                (
+                    any::<u32>(),
+                    any::<[f64; 6]>(),
+                    any::<[u64; 3]>(),
+                    any::<u64>(),
+                    any::<bool>()
+                ),
+                0..4
+            ),
+            proptest::option::of(".{0,12}")
+        )
+            .prop_map(|(entries, diverged)| Payload::IndicatorPartials {
+                interfaces: entries
+                    .into_iter()
+                    .map(
+                        |(interface, v, counts, status_changes, direction_updated)| InterfaceIndicators {
+                            interface,
+                            eta_num: v[0],
+                            eta_den: v[1],
+                            force_num: v[2],
+                            force_den: v[3],
+                            jump_num: v[4],
+                            jump_den: v[5],
+                            counts,
+                            status_changes,
+                            direction_updated,
+                        }
+                    )
+                    .collect(),
+                diverged,
+            }),
     ]
 }
 

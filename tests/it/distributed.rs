@@ -192,6 +192,7 @@ fn messages_of_another_run_are_ignored() {
                     envelope("intruder", fingerprint, Role::Interface, 0, Stage::Local),
                     Payload::LocalDirections {
                         subdomain: 1,
+                        interfaces: vec![0],
                         q_hat: Field::zeros(4, 11),
                     },
                 ),

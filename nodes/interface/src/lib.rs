@@ -3,7 +3,14 @@
 //! whether to continue, and sends each subdomain q̂ = F̂ + k⁻Ŵ for its next linear stage. At the
 //! stop it publishes every interface's s and ŝ.
 //!
-//! With Anderson acceleration it also hosts the mixing's global step (DESIGN §3 "Acceleration"):
+//! A run may have several interface nodes, each owning a set of interfaces (the scene's
+//! deployment): each runs the local stage of its interfaces and sends q̂ for their rows only.
+//! Node 0 decides: the others send it their per-interface indicator sums (`IndicatorPartials`),
+//! it adds every interface's in interface order (the additions of a one-node run, so the
+//! decision is bit for bit the same), applies the stop rule and publishes the `Decision` the
+//! others wait for before they send q̂ or, at the stop, their interfaces' solutions.
+//!
+//! With Anderson acceleration node 0 also hosts the mixing's global step (DESIGN §3 "Acceleration"):
 //! it sums the subdomains' `AndersonGram` partials in subdomain order (so the sum does not depend
 //! on arrival order), solves the small least-squares problem and sends one `AndersonStep` to
 //! every subdomain. A search-direction update changes the fixed-point map: the next step restarts
@@ -17,7 +24,7 @@ use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
 use glissade_mechanics::model::{Acceleration, Model, Side};
 use glissade_messages::{
-    role_field_topic, Decision, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
+    role_field_topic, Decision, InterfaceIndicators, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
 };
 use rayon::prelude::*;
 use std::collections::{BTreeMap, BTreeSet};
@@ -118,82 +125,159 @@ fn period_two(window: &[f64]) -> Option<(f64, f64)> {
     (alternating && largest_drift <= 0.1 * smallest_step).then_some((window[k - 2], window[k - 1]))
 }
 
+/// What the deciding interface node (index 0) holds: the stop rule, the shares of the current
+/// iteration by interface node, and the Anderson mixing's global step.
+struct Decider {
+    rule: StopRule,
+    n_nodes: u32,
+    /// Each interface node's per-interface indicators of the current iteration, by node index.
+    shares: BTreeMap<u32, Vec<InterfaceIndicators>>,
+    /// Why the current iteration diverged, when a node saw a non-finite value.
+    diverged: Option<String>,
+    /// Anderson mixing's global step (acceleration on), the partials of this iteration by
+    /// subdomain, the subdomains that send them (every one with an interface), and whether search
+    /// directions changed since the last step.
+    anderson: Option<AndersonCoordinator>,
+    grams: BTreeMap<u32, GramPartials>,
+    anderson_participants: Vec<u32>,
+    directions_changed: bool,
+}
+
 pub struct InterfaceNode {
     id: NodeId,
     ctx: RunContext,
     model: Arc<Model>,
     layouts: Vec<Option<BoundaryLayout>>,
+    /// The interfaces this node owns (ascending) and, per model interface, its position there.
+    owned: Vec<usize>,
+    position: Vec<Option<usize>>,
+    /// Subdomains with a side on an owned interface.
     participants: Vec<u32>,
     locals: Vec<InterfaceLocal>,
     fields: Vec<InterfaceFields>,
     received: BTreeSet<u32>,
     iteration: u32,
     time_weights: Vec<f64>,
-    rule: StopRule,
-    /// Anderson mixing's global step (acceleration on), the partials of this iteration by
-    /// subdomain, and whether search directions changed since the last step.
-    anderson: Option<AndersonCoordinator>,
-    grams: BTreeMap<u32, GramPartials>,
-    directions_changed: bool,
+    /// This node's share of the current iteration went to the decider; it waits for the decision.
+    reported: bool,
+    decider: Option<Decider>,
     finished: bool,
 }
 
+/// One interface's sums as they travel to the decider.
+fn indicators_of(interface: usize, s: &IndicatorSums, direction_updated: bool) -> InterfaceIndicators {
+    InterfaceIndicators {
+        interface: interface as u32,
+        eta_num: s.eta_num,
+        eta_den: s.eta_den,
+        force_num: s.force_num,
+        force_den: s.force_den,
+        jump_num: s.jump_num,
+        jump_den: s.jump_den,
+        counts: s.counts,
+        status_changes: s.status_changes,
+        direction_updated,
+    }
+}
+
+fn sums_of(i: &InterfaceIndicators) -> IndicatorSums {
+    IndicatorSums {
+        eta_num: i.eta_num,
+        eta_den: i.eta_den,
+        force_num: i.force_num,
+        force_den: i.force_den,
+        jump_num: i.jump_num,
+        jump_den: i.jump_den,
+        counts: i.counts,
+        status_changes: i.status_changes,
+    }
+}
+
 impl InterfaceNode {
-    /// An interface node owning every interface of `model`, with k⁻ = k₀ = `k0[i]`.
+    /// The only interface node of a run: it owns every interface of `model`, with
+    /// k⁻ = k₀ = `k0[i]`.
     pub fn new(ctx: RunContext, model: Arc<Model>, k0: &[f64]) -> Self {
+        let all = vec![(0..model.interfaces.len()).collect()];
+        Self::owning(ctx, model, k0, &all, 0)
+    }
+
+    /// Interface node `index` of `groups.len()`, owning the interfaces `groups[index]` (the groups
+    /// partition the model's interfaces). Node 0 also decides: it sums every node's indicators in
+    /// interface order, applies the stop rule, sends the decision and hosts the Anderson step.
+    pub fn owning(ctx: RunContext, model: Arc<Model>, k0: &[f64], groups: &[Vec<usize>], index: usize) -> Self {
         let nt = model.time.n_points();
-        let model_acceleration = model.solver.acceleration;
+        let mut owned = groups[index].clone();
+        owned.sort_unstable();
+        let mut position = vec![None; model.interfaces.len()];
+        for (p, &i) in owned.iter().enumerate() {
+            position[i] = Some(p);
+        }
         let layouts: Vec<Option<BoundaryLayout>> = (0..model.subdomains.len())
             .map(|s| {
                 let l = BoundaryLayout::new(&model, s, k0);
                 (!l.is_empty()).then_some(l)
             })
             .collect();
-        let participants = layouts
+        let with_slot = |pred: &dyn Fn(usize) -> bool| -> Vec<u32> {
+            layouts
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| l.as_ref().is_some_and(|l| l.slots.iter().any(|sl| pred(sl.interface))))
+                .map(|(s, _)| s as u32)
+                .collect()
+        };
+        let participants = with_slot(&|i| position[i].is_some());
+        let decider = (index == 0).then(|| Decider {
+            rule: StopRule::new(&model.solver),
+            n_nodes: groups.len() as u32,
+            shares: BTreeMap::new(),
+            diverged: None,
+            anderson: match model.solver.acceleration {
+                Acceleration::None => None,
+                Acceleration::Anderson { .. } => Some(AndersonCoordinator::new(MAX_CONDITION)),
+            },
+            grams: BTreeMap::new(),
+            anderson_participants: with_slot(&|_| true),
+            directions_changed: false,
+        });
+        let locals = owned
             .iter()
-            .enumerate()
-            .filter(|(_, l)| l.is_some())
-            .map(|(s, _)| s as u32)
+            .map(|&i| InterfaceLocal::new(i, &model.interfaces[i], k0[i], nt))
             .collect();
-        let locals = model
-            .interfaces
+        let fields = owned
             .iter()
-            .enumerate()
-            .map(|(i, itf)| InterfaceLocal::new(i, itf, k0[i], nt))
-            .collect();
-        let fields = model
-            .interfaces
-            .iter()
-            .map(|itf| InterfaceFields::zeros(itf.n_pairs(), nt))
+            .map(|&i| InterfaceFields::zeros(model.interfaces[i].n_pairs(), nt))
             .collect();
         Self {
             id: NodeId {
                 role: Role::Interface,
-                index: 0,
+                index: index as u32,
             },
             ctx,
             time_weights: model.time.trapezoid_weights(),
-            rule: StopRule::new(&model.solver),
             model,
             layouts,
+            owned,
+            position,
             participants,
             locals,
             fields,
             received: BTreeSet::new(),
             iteration: 0,
-            anderson: match model_acceleration {
-                Acceleration::None => None,
-                Acceleration::Anderson { .. } => Some(AndersonCoordinator::new(MAX_CONDITION)),
-            },
-            grams: BTreeMap::new(),
-            directions_changed: false,
+            reported: false,
+            decider,
             finished: false,
         }
     }
 
-    /// Subdomains that take part in the iteration.
+    /// Subdomains whose boundary state this node needs (a side on an interface it owns).
     pub fn participants(&self) -> &[u32] {
         &self.participants
+    }
+
+    /// The interfaces this node owns.
+    pub fn owned(&self) -> &[usize] {
+        &self.owned
     }
 
     fn msg(&self, stage: Stage, iteration: u32, payload: Payload) -> Message {
@@ -227,45 +311,91 @@ impl InterfaceNode {
     fn store(&mut self, s: u32, w: &glissade_messages::Field, f: &glissade_messages::Field) {
         let layout = self.layouts[s as usize].as_ref().expect("participant");
         for slot in &layout.slots {
-            self.fields[slot.interface].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
+            if let Some(p) = self.position[slot.interface] {
+                self.fields[p].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
+            }
         }
     }
 
+    /// The local stage on the owned interfaces and their indicators, in interface order.
     fn local_stage(&mut self) -> Vec<Message> {
         let n = self.iteration;
-        // Interfaces are independent: run them in parallel, then combine in interface order so
-        // the sums are the same whatever the thread count.
+        // Interfaces are independent: run them in parallel; the decider sums them in interface
+        // order, so the sums are the same whatever the thread and node count.
         let model = &self.model;
         let weights = &self.time_weights;
-        let per_interface: Vec<(IndicatorSums, bool)> = self
+        let share: Vec<InterfaceIndicators> = self
             .locals
             .par_iter_mut()
             .zip(self.fields.par_iter())
-            .zip(model.interfaces.par_iter())
-            .map(|((local, fields), itf)| {
+            .zip(self.owned.par_iter())
+            .map(|((local, fields), &i)| {
+                let itf = &model.interfaces[i];
                 local.local_stage(itf, fields);
                 let sums = local.indicator_sums(itf, weights, fields, n == 0);
                 let updated = model.solver.search_direction_update
                     && local.update_directions(itf, model.solver.alpha, model.solver.i0);
-                (sums, updated)
+                indicators_of(i, &sums, updated)
             })
             .collect();
-        let mut sums = IndicatorSums::default();
-        let mut updates = Vec::new();
-        for (i, (s, updated)) in per_interface.iter().enumerate() {
-            sums.add(s);
-            if *updated {
-                updates.push(i as u32);
-            }
-        }
-        let verdict = self.rule.decide(n, &sums);
-        self.finish_iteration(sums, updates, verdict)
+        self.report(share, None)
     }
 
-    fn finish_iteration(&mut self, sums: IndicatorSums, updates: Vec<u32>, verdict: Verdict) -> Vec<Message> {
+    /// Hands this node's share of the iteration to the decider: itself (node 0) or node 0 over
+    /// the bus.
+    fn report(&mut self, share: Vec<InterfaceIndicators>, diverged: Option<String>) -> Vec<Message> {
+        self.reported = true;
+        if self.decider.is_some() {
+            self.take_share(0, share, diverged)
+        } else {
+            vec![self.msg(
+                Stage::Local,
+                self.iteration,
+                Payload::IndicatorPartials {
+                    interfaces: share,
+                    diverged,
+                },
+            )]
+        }
+    }
+
+    /// The decider stores node `from`'s share; with every node's (or a divergence), it decides.
+    fn take_share(&mut self, from: u32, share: Vec<InterfaceIndicators>, diverged: Option<String>) -> Vec<Message> {
+        let d = self.decider.as_mut().expect("decider");
+        d.shares.insert(from, share);
+        if d.diverged.is_none() {
+            d.diverged = diverged;
+        }
+        if d.diverged.is_none() && d.shares.len() < d.n_nodes as usize {
+            return Vec::new();
+        }
+        self.decide()
+    }
+
+    /// Sums the shares in interface order (the one-node order of additions), applies the stop
+    /// rule and acts on the decision.
+    fn decide(&mut self) -> Vec<Message> {
         let n = self.iteration;
-        self.directions_changed |= !updates.is_empty();
-        let stop = verdict.is_stop();
+        let d = self.decider.as_mut().expect("decider");
+        let shares = std::mem::take(&mut d.shares);
+        let (sums, updates, verdict) = match d.diverged.take() {
+            Some(detail) => (IndicatorSums::default(), Vec::new(), Verdict::Diverged { detail }),
+            None => {
+                let mut all: Vec<&InterfaceIndicators> = shares.values().flatten().collect();
+                all.sort_by_key(|i| i.interface);
+                let mut sums = IndicatorSums::default();
+                let mut updates = Vec::new();
+                for i in all {
+                    sums.add(&sums_of(i));
+                    if i.direction_updated {
+                        updates.push(i.interface);
+                    }
+                }
+                let verdict = d.rule.decide(n, &sums);
+                (sums, updates, verdict)
+            }
+        };
+        d.directions_changed |= !updates.is_empty();
         let decision = Decision {
             eta: sums.eta(),
             contact_indicator: sums.contact_indicator(),
@@ -276,17 +406,27 @@ impl InterfaceNode {
             direction_updates: updates,
             verdict,
         };
+        let stop = decision.verdict.is_stop();
         let mut out = vec![self.msg(Stage::Local, n, Payload::Decision(decision))];
+        out.extend(self.after_decision(stop));
+        out
+    }
+
+    /// After the decision of the current iteration: the owned interfaces' s and ŝ at a stop,
+    /// else q̂ to every participant for the next linear stage.
+    fn after_decision(&mut self, stop: bool) -> Vec<Message> {
+        let n = self.iteration;
+        let mut out = Vec::new();
         if stop {
             self.finished = true;
-            for (i, local) in self.locals.iter().enumerate() {
-                let s = &self.fields[i];
+            for (p, local) in self.locals.iter().enumerate() {
+                let s = &self.fields[p];
                 let h = &local.hat;
                 out.push(self.msg(
                     Stage::Final,
                     n,
                     Payload::InterfaceSolution(InterfaceSolution {
-                        interface: i as u32,
+                        interface: self.owned[p] as u32,
                         w_a: field_of(s.w_a.as_ref()),
                         w_b: field_of(s.w_b.as_ref()),
                         f_a: field_of(s.f_a.as_ref()),
@@ -303,15 +443,24 @@ impl InterfaceNode {
             let nt = self.model.time.n_points();
             for &s in &self.participants {
                 let layout = self.layouts[s as usize].as_ref().expect("participant");
-                let mut q = Mat::<f64>::zeros(layout.len(), nt);
-                for slot in &layout.slots {
-                    self.locals[slot.interface].q_hat_into(slot.side == Side::A, q.as_mut(), slot.offset);
+                let mine: Vec<_> = layout
+                    .slots
+                    .iter()
+                    .filter_map(|sl| self.position[sl.interface].map(|p| (p, sl)))
+                    .collect();
+                let rows = mine.iter().map(|(_, sl)| 2 * sl.n_pairs).sum();
+                let mut q = Mat::<f64>::zeros(rows, nt);
+                let mut offset = 0;
+                for (p, sl) in &mine {
+                    self.locals[*p].q_hat_into(sl.side == Side::A, q.as_mut(), offset);
+                    offset += 2 * sl.n_pairs;
                 }
                 out.push(self.msg(
                     Stage::Local,
                     n + 1,
                     Payload::LocalDirections {
                         subdomain: s,
+                        interfaces: mine.iter().map(|(_, sl)| sl.interface as u32).collect(),
                         q_hat: field_of(q.as_ref()),
                     },
                 ));
@@ -319,7 +468,87 @@ impl InterfaceNode {
         }
         self.iteration += 1;
         self.received.clear();
+        self.reported = false;
         out
+    }
+
+    /// The decider takes another interface node's share of the current iteration.
+    fn indicator_partials(
+        &mut self,
+        msg: &Message,
+        share: &[InterfaceIndicators],
+        diverged: &Option<String>,
+    ) -> Result<Vec<Message>, NodeError> {
+        let Some(d) = self.decider.as_ref() else {
+            return Ok(Vec::new());
+        };
+        let (from, it) = (msg.envelope.sender.index, msg.envelope.iteration);
+        if from == 0 || from >= d.n_nodes {
+            return Err(NodeError::new(
+                self.id,
+                format!(
+                    "indicators from interface node {from}; this run has interface nodes 0 to {}",
+                    d.n_nodes - 1
+                ),
+            ));
+        }
+        if it != self.iteration {
+            return Err(NodeError::new(
+                self.id,
+                format!(
+                    "indicators of iteration {it} from interface node {from} while at iteration {}",
+                    self.iteration
+                ),
+            ));
+        }
+        if d.shares.contains_key(&from) {
+            return Err(NodeError::new(
+                self.id,
+                format!("second indicators of iteration {it} from interface node {from}"),
+            ));
+        }
+        let n_itf = self.model.interfaces.len() as u32;
+        if let Some(bad) = share.iter().find(|i| i.interface >= n_itf) {
+            return Err(NodeError::new(
+                self.id,
+                format!(
+                    "indicators of interface {} from interface node {from}: the scene has {n_itf}",
+                    bad.interface
+                ),
+            ));
+        }
+        let held: BTreeSet<u32> = d.shares.values().flatten().map(|i| i.interface).collect();
+        if let Some(dup) = share.iter().find(|i| held.contains(&i.interface)) {
+            return Err(NodeError::new(
+                self.id,
+                format!(
+                    "indicators of interface {} from interface node {from}, which another node owns",
+                    dup.interface
+                ),
+            ));
+        }
+        Ok(self.take_share(from, share.to_vec(), diverged.clone()))
+    }
+
+    /// A non-deciding node acts on the decider's decision.
+    fn decision(&mut self, msg: &Message, d: &Decision) -> Result<Vec<Message>, NodeError> {
+        if self.decider.is_some() || msg.envelope.sender == self.id {
+            return Ok(Vec::new());
+        }
+        let it = msg.envelope.iteration;
+        if it != self.iteration {
+            return Err(NodeError::new(
+                self.id,
+                format!("decision of iteration {it} while at iteration {}", self.iteration),
+            ));
+        }
+        if !self.reported && !d.verdict.is_stop() {
+            return Err(NodeError::new(
+                self.id,
+                format!("decision to continue at iteration {it} before this node's indicators"),
+            ));
+        }
+        Ok(self.after_decision(d.verdict.is_stop()))
     }
 }
 
@@ -334,31 +563,30 @@ impl InterfaceNode {
         projection: &glissade_messages::Field,
         residual2: f64,
     ) -> Result<Vec<Message>, NodeError> {
-        if self.anderson.is_none() {
+        let id = self.id;
+        let at = self.iteration;
+        let Some(d) = self.decider.as_mut().filter(|d| d.anderson.is_some()) else {
             return Ok(Vec::new());
-        }
-        if !self.participants.contains(&s) {
+        };
+        if !d.anderson_participants.contains(&s) {
             return Err(NodeError::new(
-                self.id,
+                id,
                 format!("Anderson partials from subdomain {s}, which has no interface"),
             ));
         }
-        if iteration != self.iteration {
+        if iteration != at {
             return Err(NodeError::new(
-                self.id,
-                format!(
-                    "Anderson partials of iteration {iteration} from subdomain {s} while at iteration {}",
-                    self.iteration
-                ),
+                id,
+                format!("Anderson partials of iteration {iteration} from subdomain {s} while at iteration {at}"),
             ));
         }
         let k = gram.rows();
-        expect_shape(self.id, "gram", gram, k, k)?;
-        expect_shape(self.id, "projection", projection, k, 1)?;
-        if let Some((other, p)) = self.grams.iter().next() {
+        expect_shape(id, "gram", gram, k, k)?;
+        expect_shape(id, "projection", projection, k, 1)?;
+        if let Some((other, p)) = d.grams.iter().next() {
             if p.k != k {
                 return Err(NodeError::new(
-                    self.id,
+                    id,
                     format!(
                         "Anderson partials of iteration {iteration}: subdomain {s} holds {k} differences, subdomain {other} {}",
                         p.k
@@ -372,22 +600,22 @@ impl InterfaceNode {
             projection: projection.data.clone(),
             residual2,
         };
-        if self.grams.insert(s, partials).is_some() {
+        if d.grams.insert(s, partials).is_some() {
             return Err(NodeError::new(
-                self.id,
+                id,
                 format!("second Anderson partials of iteration {iteration} from subdomain {s}"),
             ));
         }
-        if self.grams.len() < self.participants.len() {
+        if d.grams.len() < d.anderson_participants.len() {
             return Ok(Vec::new());
         }
         let mut sum = GramPartials::zeros(k);
-        for p in self.grams.values() {
+        for p in d.grams.values() {
             sum.add(p);
         }
-        self.grams.clear();
-        let changed = std::mem::take(&mut self.directions_changed);
-        let step = self.anderson.as_mut().expect("checked").decide(&sum, changed);
+        d.grams.clear();
+        let changed = std::mem::take(&mut d.directions_changed);
+        let step = d.anderson.as_mut().expect("checked").decide(&sum, changed);
         let (gamma, restart) = match step {
             AndersonStep::Mix(g) => (g, false),
             AndersonStep::Plain => (Vec::new(), false),
@@ -395,7 +623,7 @@ impl InterfaceNode {
         };
         Ok(vec![self.msg(
             Stage::Linear,
-            self.iteration,
+            at,
             Payload::AndersonStep { gamma, restart },
         )])
     }
@@ -407,19 +635,18 @@ impl Node for InterfaceNode {
     }
 
     fn subscriptions(&self) -> Vec<String> {
-        let mut subs = vec![role_field_topic(
-            &self.ctx.run_id,
-            Role::Subdomain,
-            "boundary_state",
-            None,
-        )];
-        if self.anderson.is_some() {
-            subs.push(role_field_topic(
-                &self.ctx.run_id,
-                Role::Subdomain,
-                "anderson_gram",
-                None,
-            ));
+        let run = &self.ctx.run_id;
+        let mut subs = vec![role_field_topic(run, Role::Subdomain, "boundary_state", None)];
+        match &self.decider {
+            Some(d) => {
+                if d.n_nodes > 1 {
+                    subs.push(role_field_topic(run, Role::Interface, "indicator_partials", None));
+                }
+                if d.anderson.is_some() {
+                    subs.push(role_field_topic(run, Role::Subdomain, "anderson_gram", None));
+                }
+            }
+            None => subs.push(role_field_topic(run, Role::Interface, "decision", None)),
         }
         subs
     }
@@ -432,24 +659,29 @@ impl Node for InterfaceNode {
         if self.finished {
             return Ok(Vec::new());
         }
-        if let Payload::AndersonGram {
-            subdomain,
-            gram,
-            projection,
-            residual2,
-        } = &msg.payload
-        {
-            return self.anderson_gram(msg.envelope.iteration, *subdomain, gram, projection, *residual2);
-        }
-        let Payload::BoundaryState { subdomain, w, f } = &msg.payload else {
-            return Ok(Vec::new());
+        let (s, w, f) = match &msg.payload {
+            Payload::AndersonGram {
+                subdomain,
+                gram,
+                projection,
+                residual2,
+            } => return self.anderson_gram(msg.envelope.iteration, *subdomain, gram, projection, *residual2),
+            Payload::IndicatorPartials { interfaces, diverged } => {
+                return self.indicator_partials(msg, interfaces, diverged)
+            }
+            Payload::Decision(d) => return self.decision(msg, d),
+            Payload::BoundaryState { subdomain, w, f } => (*subdomain, w, f),
+            _ => return Ok(Vec::new()),
         };
-        let s = *subdomain;
-        if !self.participants.contains(&s) {
+        if self.layouts.get(s as usize).is_none_or(Option::is_none) {
             return Err(NodeError::new(
                 self.id,
                 format!("boundary state from subdomain {s}, which has no interface"),
             ));
+        }
+        if !self.participants.contains(&s) {
+            // A side on interfaces other nodes own only.
+            return Ok(Vec::new());
         }
         if msg.envelope.iteration != self.iteration {
             return Err(NodeError::new(
@@ -459,6 +691,10 @@ impl Node for InterfaceNode {
                     msg.envelope.iteration, self.iteration
                 ),
             ));
+        }
+        if self.reported {
+            // This iteration already diverged here: the decision is on its way.
+            return Ok(Vec::new());
         }
         if !self.received.insert(s) {
             return Err(NodeError::new(
@@ -483,7 +719,7 @@ impl Node for InterfaceNode {
                     self.model.time.t(c),
                     self.iteration
                 );
-                return Ok(self.finish_iteration(IndicatorSums::default(), Vec::new(), Verdict::Diverged { detail }));
+                return Ok(self.report(Vec::new(), Some(detail)));
             }
         }
         self.store(s, w, f);
@@ -571,34 +807,138 @@ mod tests {
         assert_eq!(r.decide(2, &sums(0.3, 1.0)), Verdict::MaxIterations);
     }
 
-    #[test]
-    fn nan_stops_the_run_and_names_where() {
-        let text = r#"
-[time]
-T = 1.0
-N = 2
-[materials.m]
-E = 1000.0
-nu = 0.3
-[[block]]
-name = "b"
-material = "m"
-x = [0.0, 2.0]
-y = [0.0, 1.0]
-nx = 2
-ny = 1
-split = [2, 1]
-[[boundary]]
-x = 0.0
-ux = 0.0
-uy = 0.0
-"#;
-        let sc = load_str(text, "nan.toml").unwrap();
-        let model = Arc::new(sc.model);
+    /// A block of `n` unit subdomains in a row, clamped at x = 0: interfaces 0 (b.1 | b.2),
+    /// 1 (b.2 | b.3), …
+    fn in_a_row(n: usize) -> (Arc<Model>, RunContext) {
+        let text = format!(
+            "[time]\nT = 1.0\nN = 2\n[materials.m]\nE = 1000.0\nnu = 0.3\n[[block]]\nname = \"b\"\n\
+             material = \"m\"\nx = [0.0, {n}.0]\ny = [0.0, 1.0]\nnx = {n}\nny = 1\nsplit = [{n}, 1]\n\
+             [[boundary]]\nx = 0.0\nux = 0.0\nuy = 0.0\n"
+        );
+        let sc = load_str(&text, "row.toml").unwrap();
         let ctx = RunContext {
             run_id: "r".into(),
             scene_fingerprint: sc.fingerprint,
         };
+        (Arc::new(sc.model), ctx)
+    }
+
+    fn message(ctx: &RunContext, sender: NodeId, iteration: u32, payload: Payload) -> Message {
+        Message {
+            envelope: ctx.envelope(sender, iteration, Stage::Linear),
+            payload,
+        }
+    }
+
+    /// Boundary states of iteration 0 with distinct values per entry, subdomains 0 to 2.
+    fn states(model: &Model, ctx: &RunContext, k0: &[f64]) -> Vec<Message> {
+        (0..3u32)
+            .map(|s| {
+                let n_b = BoundaryLayout::new(model, s as usize, k0).len();
+                let w = Field::from_fn(n_b, 3, |r, c| 1e-3 * ((7 * r + 3 * c + s as usize) % 11) as f64);
+                let f = Field::from_fn(n_b, 3, |r, c| ((5 * r + c + 2 * s as usize) % 13) as f64 - 6.0);
+                let sender = NodeId {
+                    role: Role::Subdomain,
+                    index: s,
+                };
+                message(ctx, sender, 0, Payload::BoundaryState { subdomain: s, w, f })
+            })
+            .collect()
+    }
+
+    #[test]
+    fn two_interface_nodes_decide_as_one() {
+        let (model, ctx) = in_a_row(3);
+        assert_eq!(model.interfaces.len(), 2);
+        let k0 = vec![1000.0; 2];
+        let mut one = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+        let groups = [vec![1], vec![0]];
+        let mut n0 = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0);
+        let mut n1 = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 1);
+        assert_eq!((n0.participants(), n1.participants()), (&[1, 2][..], &[0, 1][..]));
+        let (mut single, mut from0, mut from1) = (Vec::new(), Vec::new(), Vec::new());
+        for m in states(&model, &ctx, &k0) {
+            single.extend(one.handle(&m).unwrap());
+            from0.extend(n0.handle(&m).unwrap());
+            from1.extend(n1.handle(&m).unwrap());
+        }
+        assert!(from0.is_empty(), "node 0 waits for node 1's indicators");
+        let [partials] = &from1[..] else {
+            panic!("node 1 sends its indicators only: {from1:?}")
+        };
+        assert!(
+            matches!(&partials.payload, Payload::IndicatorPartials { interfaces, diverged: None }
+            if interfaces.len() == 1 && interfaces[0].interface == 0)
+        );
+        // A share that names node 0's interface is refused, naming it.
+        let mut wrong = partials.clone();
+        if let Payload::IndicatorPartials { interfaces, .. } = &mut wrong.payload {
+            interfaces[0].interface = 1;
+        }
+        let mut n0_copy = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0);
+        for m in states(&model, &ctx, &k0) {
+            n0_copy.handle(&m).unwrap();
+        }
+        let err = n0_copy.handle(&wrong).unwrap_err();
+        assert!(
+            err.detail
+                .contains("interface 1 from interface node 1, which another node owns"),
+            "{err}"
+        );
+
+        from0.extend(n0.handle(partials).unwrap());
+        let decision = |out: &[Message]| {
+            out.iter()
+                .find_map(|m| match &m.payload {
+                    Payload::Decision(d) => Some(d.clone()),
+                    _ => None,
+                })
+                .expect("a decision")
+        };
+        assert_eq!(decision(&single), decision(&from0));
+        assert_eq!(decision(&single).verdict, Verdict::Continue);
+        let err = n0.handle(partials).unwrap_err();
+        assert!(
+            err.detail
+                .contains("indicators of iteration 0 from interface node 1 while at iteration 1"),
+            "{err}"
+        );
+        // Node 1 sends its q̂ rows once it has the decision; with node 0's they make the one-node q̂.
+        let d = from0
+            .iter()
+            .find(|m| matches!(m.payload, Payload::Decision(_)))
+            .unwrap();
+        from1 = n1.handle(d).unwrap();
+        let q_of = |out: &[Message], s: u32| -> Vec<(Vec<u32>, Field)> {
+            out.iter()
+                .filter_map(|m| match &m.payload {
+                    Payload::LocalDirections {
+                        subdomain,
+                        interfaces,
+                        q_hat,
+                    } if *subdomain == s => Some((interfaces.clone(), q_hat.clone())),
+                    _ => None,
+                })
+                .collect()
+        };
+        // Subdomain 1 has interface 0 (side b) then interface 1 (side a).
+        let [(all, q)] = &q_of(&single, 1)[..] else { panic!() };
+        assert_eq!(all, &[0, 1]);
+        let [(i0, q0)] = &q_of(&from1, 1)[..] else { panic!() };
+        let [(i1, q1)] = &q_of(&from0, 1)[..] else { panic!() };
+        assert_eq!((i0, i1), (&vec![0], &vec![1]));
+        assert_eq!(q0.rows() + q1.rows(), q.rows());
+        let mut joined = Vec::new();
+        for c in 0..q.cols() {
+            joined.extend((0..q0.rows()).map(|r| q0.get(r, c)));
+            joined.extend((0..q1.rows()).map(|r| q1.get(r, c)));
+        }
+        assert_eq!(joined, q.data, "the pieces are the one-node q̂, bit for bit");
+    }
+
+    #[test]
+    fn nan_stops_the_run_and_names_where() {
+        let (model, ctx) = in_a_row(2);
         let k0 = vec![1000.0; model.interfaces.len()];
         let mut node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
         let n_b = BoundaryLayout::new(&model, 1, &k0).len();
@@ -608,7 +948,7 @@ uy = 0.0
             envelope: Envelope {
                 schema_version: SCHEMA_VERSION,
                 run_id: "r".into(),
-                scene_fingerprint: sc.fingerprint,
+                scene_fingerprint: ctx.scene_fingerprint,
                 iteration: 0,
                 stage: Stage::Linear,
                 sender: NodeId {

@@ -89,7 +89,13 @@
 //!
 //! [deployment]
 //! subdomain_nodes = 1        # 1 ≤ n ≤ number of subdomains
-//! interface_nodes = 1        # ≥ 1
+//! interface_nodes = 1        # 1 ≤ n ≤ number of interfaces; without interface_groups each node
+//!                            # owns a run of consecutive interfaces, balanced by pair count
+//! interface_groups = [["lower|upper"]]  # optional: the interfaces each node owns, one list
+//!                            # per node (its length is interface_nodes), e.g. [[0, 2], ["a|b"]];
+//!                            # an entry is an interface index (model order, as `glissade check`
+//!                            # counts them) or "A|B": every interface between block or subdomain
+//!                            # A and block or subdomain B. Every interface in exactly one group.
 //!
 //! [recording]
 //! enabled = true
@@ -231,6 +237,9 @@ impl LinearStage {
 pub struct Deployment {
     pub subdomain_nodes: usize,
     pub interface_nodes: usize,
+    /// The interfaces each interface node owns (model interface indices, ascending), when the
+    /// scene assigns them; None: [`balanced_interface_groups`].
+    pub interface_groups: Option<Vec<Vec<usize>>>,
 }
 
 impl Default for Deployment {
@@ -238,8 +247,49 @@ impl Default for Deployment {
         Self {
             subdomain_nodes: 1,
             interface_nodes: 1,
+            interface_groups: None,
         }
     }
+}
+
+impl Deployment {
+    /// The interfaces each of the `interface_nodes` interface nodes owns: the scene's assignment,
+    /// or contiguous groups balanced by pair count. A model without interfaces: one empty group.
+    pub fn interface_groups(&self, model: &Model) -> Vec<Vec<usize>> {
+        match &self.interface_groups {
+            Some(g) => g.clone(),
+            None => balanced_interface_groups(model, self.interface_nodes),
+        }
+    }
+}
+
+/// `n` groups of consecutive interfaces (in model order) whose pair counts are as even as a
+/// greedy cut can make them: group g ends where the running pair count comes closest to
+/// (g + 1)/n of the total; every group gets at least one interface (`n` is clamped to
+/// 1..=number of interfaces).
+pub fn balanced_interface_groups(model: &Model, n: usize) -> Vec<Vec<usize>> {
+    let weights: Vec<f64> = model.interfaces.iter().map(|i| i.n_pairs() as f64).collect();
+    let m = weights.len();
+    let n = n.clamp(1, m.max(1));
+    let total: f64 = weights.iter().sum();
+    let mut groups = Vec::with_capacity(n);
+    let (mut i, mut sum) = (0, 0.0);
+    for g in 0..n {
+        let target = total * (g + 1) as f64 / n as f64;
+        let later = n - g - 1;
+        let mut group = Vec::new();
+        while i + later < m {
+            let next = sum + weights[i];
+            if !group.is_empty() && later > 0 && (next - target).abs() > (sum - target).abs() {
+                break;
+            }
+            group.push(i);
+            sum = next;
+            i += 1;
+        }
+        groups.push(group);
+    }
+    groups
 }
 
 /// What the recorder writes.
@@ -479,6 +529,16 @@ struct RawPgd {
 struct RawDeployment {
     subdomain_nodes: Option<usize>,
     interface_nodes: Option<usize>,
+    interface_groups: Option<Vec<Vec<RawInterfaceRef>>>,
+}
+
+/// An interface in `deployment.interface_groups`: its index, or `"A|B"` (every interface between
+/// a subdomain of block or subdomain A and one of B).
+#[derive(Deserialize, Clone)]
+#[serde(untagged)]
+enum RawInterfaceRef {
+    Index(usize),
+    Between(String),
 }
 
 #[derive(Deserialize, Default)]
@@ -751,7 +811,7 @@ impl Ctx<'_> {
         self.blocks(raw, &materials)?;
         let subs = self.subdomains(raw, &materials);
         let names = self.names(raw, &subs)?;
-        let deployment = self.deployment(&raw.deployment, subs.len())?;
+        let mut deployment = self.deployment(&raw.deployment, subs.len())?;
 
         let mut geo = Vec::new();
         for i in 0..subs.len() {
@@ -766,6 +826,7 @@ impl Ctx<'_> {
         let sub_loads = self.boundaries(raw, &names, &subs, time)?;
         let interfaces = self.finish_interfaces(raw, geo, &kinds, &gaps, &sub_loads)?;
         self.check_rigid_modes(&subs, &interfaces, &sub_loads)?;
+        self.interface_groups(&raw.deployment, &mut deployment, &names, &subs, &interfaces)?;
 
         let subdomains = subs
             .into_iter()
@@ -973,7 +1034,11 @@ impl Ctx<'_> {
         let d = Deployment::default();
         let dep = Deployment {
             subdomain_nodes: r.subdomain_nodes.unwrap_or(d.subdomain_nodes),
-            interface_nodes: r.interface_nodes.unwrap_or(d.interface_nodes),
+            interface_nodes: r
+                .interface_nodes
+                .or(r.interface_groups.as_ref().map(Vec::len))
+                .unwrap_or(d.interface_nodes),
+            interface_groups: None,
         };
         self.check(dep.subdomain_nodes >= 1, "deployment.subdomain_nodes", || {
             "must be ≥ 1".to_string()
@@ -992,6 +1057,110 @@ impl Ctx<'_> {
             "must be ≥ 1".to_string()
         })?;
         Ok(dep)
+    }
+
+    /// Checks `interface_nodes` against the interfaces and resolves `interface_groups`: each
+    /// group non-empty, every interface in exactly one group.
+    fn interface_groups(
+        &self,
+        r: &RawDeployment,
+        dep: &mut Deployment,
+        names: &BTreeMap<String, NameRef>,
+        subs: &[Sub],
+        interfaces: &[Interface],
+    ) -> Result<(), SceneError> {
+        let n = interfaces.len();
+        let Some(raw_groups) = &r.interface_groups else {
+            return self.check(
+                dep.interface_nodes == 1 || dep.interface_nodes <= n,
+                "deployment.interface_nodes",
+                || {
+                    format!(
+                        "{} nodes for {n} interface(s): some nodes would own nothing",
+                        dep.interface_nodes
+                    )
+                },
+            );
+        };
+        self.check(
+            raw_groups.len() == dep.interface_nodes,
+            "deployment.interface_groups",
+            || {
+                format!(
+                    "{} group(s) for interface_nodes = {}: give one group per interface node",
+                    raw_groups.len(),
+                    dep.interface_nodes
+                )
+            },
+        )?;
+        let mut owner: Vec<Option<usize>> = vec![None; n];
+        let mut groups = Vec::with_capacity(raw_groups.len());
+        for (g, raw) in raw_groups.iter().enumerate() {
+            let key = format!("deployment.interface_groups[{g}]");
+            self.check(!raw.is_empty(), &key, || {
+                "is empty: every interface node must own an interface".into()
+            })?;
+            let mut group = Vec::new();
+            for (e, entry) in raw.iter().enumerate() {
+                let key = format!("{key}[{e}]");
+                let hits: Vec<usize> = match entry {
+                    RawInterfaceRef::Index(i) => {
+                        self.check(*i < n, &key, || {
+                            format!(
+                                "interface {i} does not exist (the scene has {n}, indices 0 to {})",
+                                n.saturating_sub(1)
+                            )
+                        })?;
+                        vec![*i]
+                    }
+                    RawInterfaceRef::Between(text) => {
+                        let Some((x, y)) = text.split_once('|') else {
+                            return Err(self.err(
+                                key,
+                                format!(
+                                    "`{text}`: name an interface as \"A|B\" (blocks or subdomains) or by its index"
+                                ),
+                            ));
+                        };
+                        let (sx, _) = self.resolve(names, subs, x.trim(), &key)?;
+                        let (sy, _) = self.resolve(names, subs, y.trim(), &key)?;
+                        let hits: Vec<usize> = (0..n)
+                            .filter(|&i| {
+                                let (a, b) = (interfaces[i].a, interfaces[i].b);
+                                (sx.contains(&a) && sy.contains(&b)) || (sx.contains(&b) && sy.contains(&a))
+                            })
+                            .collect();
+                        self.check(!hits.is_empty(), &key, || format!("`{text}` matches no interface"))?;
+                        hits
+                    }
+                };
+                for i in hits {
+                    if let Some(other) = owner[i] {
+                        let itf = &interfaces[i];
+                        return Err(self.err(
+                            key,
+                            format!(
+                                "interface {i} ({}|{}) is already in group {other}",
+                                subs[itf.a].name, subs[itf.b].name
+                            ),
+                        ));
+                    }
+                    owner[i] = Some(g);
+                    group.push(i);
+                }
+            }
+            group.sort_unstable();
+            groups.push(group);
+        }
+        let unowned: Vec<String> = (0..n)
+            .filter(|&i| owner[i].is_none())
+            .map(|i| format!("{i} ({}|{})", subs[interfaces[i].a].name, subs[interfaces[i].b].name))
+            .collect();
+        self.check(unowned.is_empty(), "deployment.interface_groups", || {
+            format!("interface(s) {} are in no group", unowned.join(", "))
+        })?;
+        dep.interface_groups = Some(groups);
+        Ok(())
     }
 
     fn materials(&self, raw: &BTreeMap<String, RawMaterial>) -> Result<BTreeMap<String, Material>, SceneError> {
@@ -2013,6 +2182,102 @@ uy = -0.01
         let contact: Vec<&Interface> = small.interfaces.iter().filter(|i| i.is_contact()).collect();
         assert_eq!(contact.len(), 4);
         assert_eq!((contact[0].a, contact[0].b, contact[0].n_pairs()), (0, 2, 8));
+    }
+
+    /// The small three-layer scene's interfaces, in model order: 0 bottom.1|bottom.2 (5 pairs),
+    /// 1 bottom.1|core.1 (8), 2 bottom.2|core.2 (9), 3 core.1|core.2 (5), 4 core.1|top.1 (9),
+    /// 5 core.2|top.2 (9), 6 top.1|top.2 (5).
+    fn three_layers(deployment: &str) -> Result<LoadedScene, SceneError> {
+        let text = include_str!("../../../launch/scenes/small-three-layer.toml");
+        assert!(text.contains("[deployment]\nsubdomain_nodes = 2\n"));
+        let text = text.replace("[deployment]\n", &format!("[deployment]\n{deployment}\n"));
+        load(&text)
+    }
+
+    #[test]
+    fn interface_nodes_own_balanced_or_assigned_groups() {
+        let s = three_layers("").unwrap();
+        let pairs: Vec<usize> = s.model.interfaces.iter().map(Interface::n_pairs).collect();
+        assert_eq!(pairs, [5, 8, 9, 5, 8, 9, 5]);
+        assert_eq!(s.deployment.interface_groups(&s.model), [vec![0, 1, 2, 3, 4, 5, 6]]);
+        // 49 pairs over 3 nodes: cuts nearest to 16.3 and 32.7 pairs (13 and 35).
+        let s = three_layers("interface_nodes = 3").unwrap();
+        assert_eq!(s.deployment.interface_groups, None);
+        assert_eq!(
+            s.deployment.interface_groups(&s.model),
+            [vec![0, 1], vec![2, 3, 4], vec![5, 6]]
+        );
+        assert_eq!(
+            balanced_interface_groups(&s.model, 7),
+            (0..7).map(|i| vec![i]).collect::<Vec<_>>()
+        );
+        let s = three_layers(
+            "interface_groups = [[\"bottom|core\", \"bottom|bottom\"], [\"top|core\", \"core.1|core.2\", 6]]",
+        )
+        .unwrap();
+        assert_eq!(s.deployment.interface_nodes, 2);
+        assert_eq!(
+            s.deployment.interface_groups(&s.model),
+            [vec![0, 1, 2], vec![3, 4, 5, 6]]
+        );
+    }
+
+    #[test]
+    fn rejects_bad_interface_deployments() {
+        let key = "deployment.interface_groups";
+        let e = three_layers("interface_nodes = 8").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "scenes/test.toml: deployment.interface_nodes: 8 nodes for 7 interface(s): some nodes would own nothing"
+        );
+        let bad = [
+            ("interface_nodes = 0", "deployment.interface_nodes", "must be ≥ 1"),
+            (
+                "interface_nodes = 3\ninterface_groups = [[0, 1, 2], [3, 4, 5, 6]]",
+                key,
+                "2 group(s) for interface_nodes = 3",
+            ),
+            (
+                "interface_groups = [[0, 1, 2, 3, 4, 5, 6], []]",
+                "deployment.interface_groups[1]",
+                "is empty",
+            ),
+            (
+                "interface_groups = [[0, 1, 2, 3, 4, 5, 7]]",
+                "deployment.interface_groups[0][6]",
+                "interface 7 does not exist (the scene has 7, indices 0 to 6)",
+            ),
+            (
+                "interface_groups = [[0, 1, 2], [3, 4, 5, 6, \"bottom\"]]",
+                "deployment.interface_groups[1][4]",
+                "`bottom`: name an interface as \"A|B\"",
+            ),
+            (
+                "interface_groups = [[0, 1, 2], [3, \"core|tops\"]]",
+                "deployment.interface_groups[1][1]",
+                "unknown block or subdomain `tops`",
+            ),
+            (
+                "interface_groups = [[0, 1, 2], [3, \"bottom|top\"]]",
+                "deployment.interface_groups[1][1]",
+                "`bottom|top` matches no interface",
+            ),
+            (
+                "interface_groups = [[0, \"bottom|core\"], [2, 3, 4, 5, 6]]",
+                "deployment.interface_groups[1][0]",
+                "interface 2 (bottom.2|core.2) is already in group 0",
+            ),
+            (
+                "interface_groups = [[0, 1, 2], [3, 6]]",
+                key,
+                "interface(s) 4 (core.1|top.1), 5 (core.2|top.2) are in no group",
+            ),
+        ];
+        for (deployment, k, part) in bad {
+            let e = three_layers(deployment).expect_err(deployment);
+            assert_eq!(e.key, k, "{deployment}: {e}");
+            assert!(e.problem.contains(part), "{deployment}: `{part}` not in {e}");
+        }
     }
 
     #[test]

@@ -3,7 +3,7 @@
 use glissade_messages::SCHEMA_VERSION;
 
 /// (field chunk of the key expression, schema name `glissade.<Payload type>`, payload layout).
-pub const PAYLOAD_FIELDS: [(&str, &str, &str); 9] = [
+pub const PAYLOAD_FIELDS: [(&str, &str, &str); 12] = [
     ("scene", "glissade.Scene", "{ text: String }"),
     (
         "homogenized_operator",
@@ -28,7 +28,17 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 9] = [
     (
         "local_directions",
         "glissade.LocalDirections",
-        "{ subdomain: u32, q_hat: Field }",
+        "{ subdomain: u32, interfaces: Vec<u32>, q_hat: Field }",
+    ),
+    (
+        "anderson_gram",
+        "glissade.AndersonGram",
+        "{ subdomain: u32, gram: Field, projection: Field, residual2: f64 }",
+    ),
+    (
+        "anderson_step",
+        "glissade.AndersonStep",
+        "{ gamma: Vec<f64>, restart: bool }",
     ),
     (
         "decision",
@@ -43,6 +53,13 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 9] = [
          w_b_hat: Field, f_a_hat: Field, f_b_hat: Field, status: Vec<u8> })",
     ),
     ("displacement", "glissade.Displacement", "{ subdomain: u32, u: Field }"),
+    (
+        "indicator_partials",
+        "glissade.IndicatorPartials",
+        "{ interfaces: Vec<InterfaceIndicators { interface: u32, eta_num: f64, eta_den: f64, force_num: f64, \
+         force_den: f64, jump_num: f64, jump_den: f64, counts: [u64; 3], status_changes: u64, direction_updated: bool }>, \
+         diverged: Option<String> }",
+    ),
 ];
 
 /// Schema name (`glissade.<Payload>`) and schema text of the payload published on key-expression

@@ -62,6 +62,7 @@ fn iteration(n: u32) -> Vec<Message> {
             INTERFACE,
             Payload::LocalDirections {
                 subdomain: s,
+                interfaces: vec![0],
                 q_hat: Field::from_fn(6, 3, |r, c| (r * c) as f64 / (n + 1) as f64),
             },
         ));

@@ -1,7 +1,8 @@
 //! The subdomain node: hosts one subdomain's linear stage (DESIGN §3–4).
 //!
 //! Setup: builds A_E and sends L_E (when the coarse problem is on), then runs the first linear
-//! stage from ŝ = 0. Each iteration: `LocalDirections` (q̂) → micro problem 1 → `MacroForces`;
+//! stage from ŝ = 0. Each iteration: `LocalDirections` (q̂, from every interface node owning one
+//! of its interfaces) → micro problem 1 → `MacroForces`;
 //! `MacroDisplacements` (w̃) → micro problem 2, relaxation → `BoundaryState` (s = (W, F)). Without
 //! the coarse problem micro 2 is skipped (w̃ = 0). A stop `Decision` ends the node, after sending
 //! the full displacement field when asked.
@@ -75,6 +76,9 @@ pub struct SubdomainNode {
     /// Anderson history (acceleration on) and whether the node waits for its step.
     anderson: Option<AndersonHistory>,
     awaiting_step: bool,
+    /// Per boundary slot (interface), whether this iteration's q̂ rows arrived (several interface
+    /// nodes each send the rows of their interfaces).
+    directions_in: Vec<bool>,
     finished: bool,
     /// PGD linear stage (DESIGN §3), when the scene asks for it.
     pgd: Option<PgdStage>,
@@ -86,6 +90,7 @@ impl SubdomainNode {
     pub fn new(ctx: RunContext, model: Arc<Model>, solver: SubdomainSolver, options: SubdomainOptions) -> Self {
         let s = solver.subdomain;
         let (n_b, n_m, nt) = (solver.n_boundary(), solver.n_macro(), model.time.n_points());
+        let n_slots = solver.op.layout.slots.len();
         let z = |r: usize| Mat::<f64>::zeros(r, nt);
         Self {
             id: NodeId {
@@ -111,6 +116,7 @@ impl SubdomainNode {
                 Acceleration::Anderson { window } => Some(AndersonHistory::new(window, options.relaxation, n_b, nt)),
             },
             awaiting_step: false,
+            directions_in: vec![false; n_slots],
             finished: false,
             pgd: None,
             log: None,
@@ -358,7 +364,11 @@ impl Node for SubdomainNode {
         }
         let it = msg.envelope.iteration;
         match &msg.payload {
-            Payload::LocalDirections { subdomain, q_hat } if *subdomain == self.subdomain() => {
+            Payload::LocalDirections {
+                subdomain,
+                interfaces,
+                q_hat,
+            } if *subdomain == self.subdomain() => {
                 if it != self.iteration + 1 {
                     return Err(NodeError::new(
                         self.id,
@@ -368,9 +378,42 @@ impl Node for SubdomainNode {
                         ),
                     ));
                 }
-                expect_shape(self.id, "q_hat", q_hat, self.q_hat.nrows(), self.q_hat.ncols())?;
+                // One interface node's rows: its interfaces' slots, one after the other.
+                let slots = &self.solver.op.layout.slots;
+                let mut at = Vec::with_capacity(interfaces.len());
+                for &i in interfaces {
+                    let Some(k) = slots.iter().position(|sl| sl.interface == i as usize) else {
+                        return Err(NodeError::new(
+                            self.id,
+                            format!("local directions of interface {i}, which is not on this subdomain's boundary"),
+                        ));
+                    };
+                    if self.directions_in[k] || at.contains(&k) {
+                        return Err(NodeError::new(
+                            self.id,
+                            format!("second local directions of interface {i} at iteration {it}"),
+                        ));
+                    }
+                    at.push(k);
+                }
+                let rows = at.iter().map(|&k| 2 * slots[k].n_pairs).sum();
+                expect_shape(self.id, "q_hat", q_hat, rows, self.q_hat.ncols())?;
+                let mut r0 = 0;
+                for &k in &at {
+                    let (offset, n) = (slots[k].offset, 2 * slots[k].n_pairs);
+                    for j in 0..q_hat.cols() {
+                        for r in 0..n {
+                            self.q_hat[(offset + r, j)] = q_hat.get(r0 + r, j);
+                        }
+                    }
+                    r0 += n;
+                    self.directions_in[k] = true;
+                }
+                if !self.directions_in.iter().all(|&b| b) {
+                    return Ok(Vec::new());
+                }
+                self.directions_in.fill(false);
                 self.iteration = it;
-                copy_into(q_hat, &mut self.q_hat);
                 Ok(self.micro1())
             }
             Payload::MacroDisplacements { subdomain, w_tilde } if *subdomain == self.subdomain() => {
