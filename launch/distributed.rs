@@ -1,5 +1,5 @@
 //! Multi-process runs (DESIGN §4): the launcher spawns one OS process per node group as the
-//! scene's deployment section says, hosts the Zenoh router they connect to (or connects to a
+//! scene's deployment section says (subdomain groups, interface nodes, the coarse node), hosts the Zenoh router they connect to (or connects to a
 //! `zenohd` router), serves them the scene over the bus, forwards their logs with a prefix,
 //! watches the run's messages for progress and results, and stops every node when one fails or
 //! when it is interrupted (Ctrl-C, SIGTERM). Nodes may also be started by hand on other machines
@@ -12,11 +12,13 @@
 //! what is left. Every node also watches the others' tokens and the launcher's, so a run stops
 //! even if the launcher itself is killed (local children also die with it: parent-death signal).
 
-use crate::runner::{build_nodes, IterationRecord, Plan, RunOptions, RunResult, Selection};
+use crate::runner::{build_interface_node, build_nodes, IterationRecord, Plan, RunOptions, RunResult, Selection};
 use anyhow::{bail, Context};
 use glissade_bus::RunContext;
 use glissade_mechanics::scene::{fingerprint, load_str, LoadedScene};
-use glissade_messages::{decode, encode, Expected, Message, NodeId, Payload, Role, Stage, Verdict};
+use glissade_messages::{
+    decode, encode, Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
+};
 use glissade_zenoh as transport;
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
@@ -242,11 +244,11 @@ fn node_args(name: NodeName, run_id: &str, connect: &[String], interior: bool) -
     for c in connect {
         args.extend(["--connect".to_string(), c.clone()]);
     }
-    if name.role == NodeRole::Subdomain {
+    if name.role != NodeRole::Coarse {
         args.extend(["--index".to_string(), name.index.to_string()]);
-        if interior {
-            args.push("--interior".into());
-        }
+    }
+    if name.role == NodeRole::Subdomain && interior {
+        args.push("--interior".into());
     }
     args
 }
@@ -291,7 +293,8 @@ fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<Nod
     })
 }
 
-/// The node processes a run needs: one per subdomain group, the interface node, the coarse node.
+/// The node processes a run needs: one per subdomain group, one per interface group, the coarse
+/// node.
 fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
     let mut names: Vec<NodeName> = (0..groups as u32)
         .map(|index| NodeName {
@@ -299,10 +302,10 @@ fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
             index,
         })
         .collect();
-    names.push(NodeName {
+    names.extend((0..plan.interface_groups.len() as u32).map(|index| NodeName {
         role: NodeRole::Interface,
-        index: 0,
-    });
+        index,
+    }));
     if plan.coarse {
         names.push(NodeName {
             role: NodeRole::Coarse,
@@ -336,12 +339,6 @@ pub fn run_distributed(
         // Nothing to distribute: the in-process direct solve.
         let result = crate::runner::run_in_process(scene, opts, on_iteration)?;
         return Ok((result, Traffic::default()));
-    }
-    if scene.deployment.interface_nodes != 1 {
-        bail!(
-            "deployment.interface_nodes = {}: this version runs exactly one interface node",
-            scene.deployment.interface_nodes
-        );
     }
     let t0 = Instant::now();
     let run_id = &opts.run_id;
@@ -462,10 +459,8 @@ pub fn run_distributed(
         children.wait_all(STOP_TIMEOUT);
     };
 
-    let (mut iterations, mut interfaces, mut displacements) = (Vec::new(), Vec::new(), Vec::new());
+    let mut got = Collected::default();
     let mut traffic = Traffic::default();
-    let mut started: Option<Instant> = None;
-    let mut setup_s = 0.0;
     let mut remote_lost: BTreeMap<NodeName, Instant> = BTreeMap::new();
     let mut stop_seen = false;
     let mut ended_at: Option<Instant> = None;
@@ -473,23 +468,9 @@ pub fn run_distributed(
     loop {
         if interrupted() {
             stop_all(&mut children, "the launcher was interrupted");
-            let verdict = iterations
-                .last()
-                .map(|r: &IterationRecord| r.decision.verdict.clone())
-                .unwrap_or(Verdict::Continue);
             let (nodes, left_out) = plan.describe(model, groups.len());
             return Err(Interrupted {
-                partial: RunResult {
-                    setup_s,
-                    solve_s: started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
-                    iterations,
-                    verdict,
-                    interfaces,
-                    displacements,
-                    k0: plan.k0.clone(),
-                    nodes,
-                    left_out,
-                },
+                partial: got.into_result(&plan, Verdict::Continue, nodes, left_out),
             }
             .into());
         }
@@ -520,7 +501,7 @@ pub fn run_distributed(
                         p.name,
                         p.last_lines()
                     ));
-                } else if started.is_none() {
+                } else if got.started.is_none() {
                     child_failure = Some(format!("node {} exited before the run started", p.name));
                 }
             } else if p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) {
@@ -546,14 +527,14 @@ pub fn run_distributed(
             }
             _ => child_failure,
         };
-        if started.is_none() && failure.is_none() {
+        if got.started.is_none() && failure.is_none() {
             failure = recorder
                 .as_mut()
                 .and_then(|r| r.check().err())
                 .map(|e| format!("{e:#}"));
         }
         let recorder_ready = recorder.as_ref().is_none_or(|r| r.is_ready());
-        if started.is_none() && failure.is_none() {
+        if got.started.is_none() && failure.is_none() {
             let missing: Vec<NodeName> = tokens
                 .iter()
                 .filter(|(k, _)| !presence.is_alive(k))
@@ -561,8 +542,8 @@ pub fn run_distributed(
                 .collect();
             if missing.is_empty() && recorder_ready {
                 transport::publish_start(&session, run_id)?;
-                setup_s = t0.elapsed().as_secs_f64();
-                started = Some(Instant::now());
+                got.setup_s = t0.elapsed().as_secs_f64();
+                got.started = Some(Instant::now());
                 last_message = Instant::now();
                 eprintln!("run {run_id}: {} node(s) ready, iterating", all_nodes.len());
             } else {
@@ -585,12 +566,12 @@ pub fn run_distributed(
             );
             bail!("{f}");
         }
-        let Some(t1) = started else {
+        if got.started.is_none() {
             if let Ok((key, bytes)) = rx.recv_timeout(Duration::from_millis(50)) {
                 count(&mut traffic, &key, &bytes, run_id);
             }
             continue;
-        };
+        }
         match rx.recv_timeout(Duration::from_millis(50)) {
             Ok((key, bytes)) => {
                 last_message = Instant::now();
@@ -598,20 +579,9 @@ pub fn run_distributed(
                     continue;
                 }
                 let Ok(m) = decode(&bytes, &expected) else { continue };
-                match m.payload {
-                    Payload::Decision(d) => {
-                        stop_seen |= d.verdict.is_stop();
-                        let rec = IterationRecord {
-                            iteration: m.envelope.iteration,
-                            elapsed_s: t1.elapsed().as_secs_f64(),
-                            decision: d,
-                        };
-                        on_iteration(&rec);
-                        iterations.push(rec);
-                    }
-                    Payload::InterfaceSolution(s) => interfaces.push(s),
-                    Payload::Displacement { subdomain, u } => displacements.push((subdomain, u)),
-                    _ => {}
+                if let Some(rec) = got.take(m) {
+                    stop_seen |= rec.decision.verdict.is_stop();
+                    on_iteration(rec);
                 }
             }
             Err(_) => {
@@ -653,27 +623,19 @@ pub fn run_distributed(
             continue;
         }
         if let Ok(m) = decode(&bytes, &expected) {
-            match m.payload {
-                Payload::InterfaceSolution(s) => interfaces.push(s),
-                Payload::Displacement { subdomain, u } => displacements.push((subdomain, u)),
-                _ => {}
+            if let Some(rec) = got.take(m) {
+                on_iteration(rec);
             }
         }
     }
-    if interfaces.len() != model.interfaces.len() {
+    if got.interfaces.len() != model.interfaces.len() {
         bail!(
             "the run ended with {} of the {} interface solutions on the bus",
-            interfaces.len(),
+            got.interfaces.len(),
             model.interfaces.len()
         );
     }
-    interfaces.sort_by_key(|s| s.interface);
-    displacements.sort_by_key(|d| d.0);
-    traffic.iterations = iterations.len() as u64;
-    let verdict = iterations
-        .last()
-        .map(|r| r.decision.verdict.clone())
-        .unwrap_or(Verdict::MaxIterations);
+    traffic.iterations = got.iterations.len() as u64;
     let (mut names, mut left_out) = plan.describe(model, groups.len());
     names.push(format!("processes: {} (+ {bus})", all_nodes.len()));
     if let Some(r) = recorder {
@@ -689,18 +651,56 @@ pub fn run_distributed(
             net.remote.iter().map(|r| r.to_string()).collect::<Vec<_>>().join(", ")
         ));
     }
-    let result = RunResult {
-        setup_s,
-        solve_s: started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
-        iterations,
-        verdict,
-        interfaces,
-        displacements,
-        k0: plan.k0.clone(),
-        nodes: names,
-        left_out,
-    };
-    Ok((result, traffic))
+    Ok((got.into_result(&plan, Verdict::MaxIterations, names, left_out), traffic))
+}
+
+/// What the launcher gathers from the bus: the decisions, the interfaces' and subdomains' final
+/// fields, the set-up time and when the iterations started.
+#[derive(Default)]
+struct Collected {
+    iterations: Vec<IterationRecord>,
+    interfaces: Vec<InterfaceSolution>,
+    displacements: Vec<(u32, Field)>,
+    setup_s: f64,
+    started: Option<Instant>,
+}
+
+impl Collected {
+    /// Keeps the results of message `m`; a decision's record is returned.
+    fn take(&mut self, m: Message) -> Option<&IterationRecord> {
+        match m.payload {
+            Payload::Decision(decision) => {
+                self.iterations.push(IterationRecord {
+                    iteration: m.envelope.iteration,
+                    elapsed_s: self.started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
+                    decision,
+                });
+                return self.iterations.last();
+            }
+            Payload::InterfaceSolution(s) => self.interfaces.push(s),
+            Payload::Displacement { subdomain, u } => self.displacements.push((subdomain, u)),
+            _ => {}
+        }
+        None
+    }
+
+    /// The run's result (complete, or what there is after an interruption); `verdict` when no
+    /// decision came.
+    fn into_result(mut self, plan: &Plan, verdict: Verdict, nodes: Vec<String>, left_out: Vec<String>) -> RunResult {
+        self.interfaces.sort_by_key(|s| s.interface);
+        self.displacements.sort_by_key(|d| d.0);
+        RunResult {
+            setup_s: self.setup_s,
+            solve_s: self.started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
+            verdict: self.iterations.last().map_or(verdict, |r| r.decision.verdict.clone()),
+            iterations: self.iterations,
+            interfaces: self.interfaces,
+            displacements: self.displacements,
+            k0: plan.k0.clone(),
+            nodes,
+            left_out,
+        }
+    }
 }
 
 /// Adds a message seen on `key` to the traffic if it belongs to run `run_id` (its envelope says
@@ -729,8 +729,8 @@ pub fn run_node_process(
     interior: bool,
 ) -> anyhow::Result<()> {
     let name = NodeName { role, index };
-    if role != NodeRole::Subdomain && index != 0 {
-        bail!("node {name}: this version runs one {} node, index 0", role.key());
+    if role == NodeRole::Coarse && index != 0 {
+        bail!("node {name}: a run has one coarse node, index 0");
     }
     let session = transport::open(transport::config("client", &[], connect, false)?)?;
     let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
@@ -773,7 +773,7 @@ pub fn run_node_process(
         }
         NodeRole::Interface => Selection {
             subdomains: Vec::new(),
-            interface: true,
+            interface: false,
             coarse: false,
         },
         NodeRole::Coarse => Selection {
@@ -789,7 +789,13 @@ pub fn run_node_process(
         run_id: run_id.to_string(),
         scene_fingerprint: fp,
     };
-    let nodes = build_nodes(&model, &ctx, interior, &plan, &selection)?;
+    let mut nodes = build_nodes(&model, &ctx, interior, &plan, &selection)?;
+    if role == NodeRole::Interface {
+        nodes.push(
+            build_interface_node(&model, &ctx, &plan, index as usize)
+                .map_err(|e| anyhow::anyhow!("node {name}: {e}"))?,
+        );
+    }
     let run = transport::NodeRun {
         run_id: run_id.to_string(),
         expected,

@@ -5,6 +5,7 @@ pub mod bench;
 pub mod distributed;
 pub mod output;
 pub mod recording;
+pub mod reexecute;
 pub mod report;
 pub mod runner;
 pub mod stability;

@@ -80,6 +80,9 @@ enum Command {
         #[arg(long)]
         max_iterations: Option<usize>,
     },
+    /// Load a recording into Rerun (an .rrd file by default, or a live viewer), or re-execute
+    /// nodes from their recorded inputs and check their outputs bit for bit (`--node`).
+    Replay(ReplayArgs),
     /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
     /// endpoint and receives the scene over the bus.
     Node(NodeArgs),
@@ -135,6 +138,44 @@ struct NodeArgs {
     file: Option<PathBuf>,
 }
 
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ColorByArg {
+    /// Von Mises stress (MPa).
+    VonMises,
+    /// Displacement magnitude |u| (mm).
+    Displacement,
+}
+
+#[derive(clap::Args)]
+struct ReplayArgs {
+    /// Recording (MCAP) of a run.
+    recording: PathBuf,
+    /// Write the Rerun data to this .rrd file (the default: the recording's name with .rrd).
+    #[arg(long, conflicts_with_all = ["spawn", "connect", "node"])]
+    save: Option<PathBuf>,
+    /// Start a Rerun viewer (the `rerun` executable on PATH) and stream to it.
+    #[arg(long, conflicts_with_all = ["connect", "node"])]
+    spawn: bool,
+    /// Stream to a running Rerun viewer (default address rerun+http://127.0.0.1:9876/proxy).
+    #[arg(long, num_args = 0..=1, default_missing_value = glissade_replay::DEFAULT_VIEWER, value_name = "URL", conflicts_with = "node")]
+    connect: Option<String>,
+    /// Field the meshes are coloured by.
+    #[arg(long, value_enum, default_value = "von-mises")]
+    color_by: ColorByArg,
+    /// Displacement amplification of the drawn meshes (default: the largest displacement drawn
+    /// as 5 % of the model's size).
+    #[arg(long)]
+    amplification: Option<f64>,
+    /// Time point of the per-iteration meshes (default: the one with the largest boundary
+    /// displacement).
+    #[arg(long)]
+    time_point: Option<usize>,
+    /// Re-execute this node (`subdomain:<i>`, `interface:0`, `coarse:0`, or `all`) from its
+    /// recorded inputs and check that its outputs are bit-identical (repeatable).
+    #[arg(long, value_name = "ROLE:ID")]
+    node: Vec<String>,
+}
+
 #[derive(clap::Args)]
 struct RunArgs {
     /// Scene file (TOML).
@@ -170,6 +211,10 @@ struct RunArgs {
     /// Longest wait for the nodes of --remote to be ready (s).
     #[arg(long, default_value_t = 300)]
     remote_timeout: u64,
+    /// Stream the run's Rerun view as it goes (in-process runs): to a spawned viewer (`spawn`,
+    /// the default), a running one (`connect` or its rerun+http://… address), or an .rrd file.
+    #[arg(long, num_args = 0..=1, default_missing_value = "spawn", value_name = "SINK", requires = "in_process")]
+    rerun: Option<String>,
 }
 
 /// Exit code of a run that ended without converging (outputs are still written).
@@ -227,6 +272,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             out,
             max_iterations,
         } => bench(&scene, &out, max_iterations),
+        Command::Replay(args) => replay(args),
         Command::Node(args) => {
             let role = match args.role {
                 RoleArg::Subdomain => NodeRole::Subdomain,
@@ -322,8 +368,38 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
     let result = if args.in_process {
+        let mut view = match &args.rerun {
+            Some(sink) => {
+                let sink = glissade_replay::Sink::parse(sink).map_err(|e| anyhow::anyhow!("--rerun {e}"))?;
+                let opts = glissade_replay::ReplayOptions {
+                    sink,
+                    color_by: glissade_replay::ColorBy::VonMises,
+                    amplification: None,
+                    time_point: None,
+                };
+                let origin = args.scene.display().to_string();
+                Some(glissade_replay::View::new(&sc.text, &origin, &run_id, &opts, None)?)
+            }
+            None => None,
+        };
+        let mut view_failure = None;
         let (result, outcome) =
-            glissade::recording::run_in_process_recorded(&sc, &opts, recording.as_deref(), progress)?;
+            glissade::recording::run_in_process_recorded_observed(&sc, &opts, recording.as_deref(), progress, |m| {
+                let t0 = std::time::Instant::now();
+                if let (Some(v), None) = (view.as_mut(), &view_failure) {
+                    if let Err(e) = v.message(m) {
+                        view_failure = Some(e);
+                    }
+                }
+                t0.elapsed()
+            })?;
+        if let Some(e) = view_failure {
+            anyhow::bail!("--rerun: {e}");
+        }
+        if let Some(v) = view {
+            let s = v.finish()?;
+            println!("rerun: {} iterations, {} meshes streamed", s.iterations, s.meshes);
+        }
         if let Some(o) = outcome {
             if let Some(st) = &o.stats {
                 println!(
@@ -412,6 +488,80 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         Verdict::Converged => ExitCode::SUCCESS,
         _ => ExitCode::from(NOT_CONVERGED),
     })
+}
+
+fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
+    let recording = glissade_recorder::Recording::open(&args.recording)?;
+    if let Some(why) = recording.truncated() {
+        eprintln!(
+            "warning: {}: {why}; replaying what was written",
+            args.recording.display()
+        );
+    }
+    if !args.node.is_empty() {
+        use glissade::reexecute::{parse_node, recorded_nodes, reexecute};
+        let mut nodes = Vec::new();
+        for n in &args.node {
+            if n == "all" {
+                nodes.extend(recorded_nodes(&recording)?);
+            } else {
+                nodes.push(parse_node(n)?);
+            }
+        }
+        let mut differing = 0;
+        for id in nodes {
+            let r = reexecute(&recording, id)?;
+            match &r.mismatch {
+                None => println!(
+                    "node {id}: {} outputs bit-identical to the recording ({} bytes; {} recorded inputs)",
+                    r.outputs, r.bytes, r.inputs
+                ),
+                Some(m) => {
+                    differing += 1;
+                    println!("node {id}: differs from the recording: {m}");
+                }
+            }
+        }
+        return Ok(if differing == 0 {
+            ExitCode::SUCCESS
+        } else {
+            ExitCode::from(NOT_CONVERGED)
+        });
+    }
+    let sink = if args.spawn {
+        glissade_replay::Sink::Spawn
+    } else if let Some(url) = args.connect {
+        glissade_replay::Sink::Connect(url)
+    } else {
+        let p = args.save.unwrap_or_else(|| args.recording.with_extension("rrd"));
+        glissade_replay::Sink::Save(p)
+    };
+    let opts = glissade_replay::ReplayOptions {
+        sink: sink.clone(),
+        color_by: match args.color_by {
+            ColorByArg::VonMises => glissade_replay::ColorBy::VonMises,
+            ColorByArg::Displacement => glissade_replay::ColorBy::Displacement,
+        },
+        amplification: args.amplification,
+        time_point: args.time_point,
+    };
+    let t0 = std::time::Instant::now();
+    let s = glissade_replay::replay(&recording, &opts)?;
+    println!(
+        "replayed {} messages: {} iterations, {} meshes (time point {}, displacements × {:.3e}, colour range {:.4e} – {:.4e}) in {:.2} s",
+        s.messages,
+        s.iterations,
+        s.meshes,
+        s.time_point,
+        s.amplification,
+        s.color_range.0,
+        s.color_range.1,
+        t0.elapsed().as_secs_f64()
+    );
+    if let glissade_replay::Sink::Save(p) = sink {
+        println!("rerun: {} (open with `rerun {}`)", p.display(), p.display());
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {

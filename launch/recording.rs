@@ -108,18 +108,31 @@ pub fn run_in_process_recorded(
     path: Option<&Path>,
     on_iteration: impl FnMut(&IterationRecord),
 ) -> anyhow::Result<(RunResult, Option<RecordingOutcome>)> {
+    run_in_process_recorded_observed(scene, opts, path, on_iteration, |_| Duration::ZERO)
+}
+
+/// As [`run_in_process_recorded`], and `observe` sees every message of the run (e.g. a live
+/// view); the wall time it returns is left out of the run's times.
+pub fn run_in_process_recorded_observed(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    path: Option<&Path>,
+    on_iteration: impl FnMut(&IterationRecord),
+    mut observe: impl FnMut(&glissade_messages::Message) -> Duration,
+) -> anyhow::Result<(RunResult, Option<RecordingOutcome>)> {
     let Some(path) = path else {
-        return Ok((crate::runner::run_in_process(scene, opts, on_iteration)?, None));
+        return Ok((run_in_process_observed(scene, opts, on_iteration, observe)?, None));
     };
     let mut recorder = create_recorder(scene, &opts.run_id, path)?;
     let mut failure = None;
     let result = run_in_process_observed(scene, opts, on_iteration, |m| {
+        let spent = observe(m);
         if failure.is_none() {
             if let Err(e) = recorder.record(&m.topic(), log_time_now(), &glissade_messages::encode(m)) {
                 failure = Some(e);
             }
         }
-        Duration::ZERO
+        spent
     })?;
     if let Some(e) = failure {
         return Err(e.into());

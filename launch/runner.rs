@@ -1,5 +1,5 @@
 //! Runs a scene's LATIN iteration with every node in this process (DESIGN §4): one subdomain
-//! node per subdomain, one interface node, one coarse node when the scene needs one, on the
+//! node per subdomain, the deployment's interface nodes, one coarse node when the scene needs one, on the
 //! in-process bus; subdomain work within a round runs in parallel on all cores.
 
 use glissade_bus::convert::mat_of;
@@ -8,8 +8,8 @@ use glissade_coarse::CoarseNode;
 use glissade_interface::InterfaceNode;
 use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::linear::{default_k0, macro_basis, macro_degree, SubdomainSolver};
+use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::Model;
 use glissade_mechanics::monolithic::solve_glued;
 use glissade_mechanics::pgd::PgdSettings;
@@ -99,6 +99,9 @@ pub struct Plan {
     pub pgd: PgdParams,
     /// Where subdomain nodes log their linear stages, when asked.
     pub log: Option<LinearStageLog>,
+    /// The interfaces each interface node owns (the scene's deployment; one node owning every
+    /// interface by default).
+    pub interface_groups: Vec<Vec<usize>>,
 }
 
 impl Plan {
@@ -121,6 +124,7 @@ impl Plan {
             linear_stage: LinearStage::Condensed,
             pgd: PgdParams::default(),
             log: None,
+            interface_groups: vec![(0..model.interfaces.len()).collect()],
         }
     }
 
@@ -128,6 +132,7 @@ impl Plan {
     pub fn with_scene(mut self, scene: &LoadedScene) -> Self {
         self.linear_stage = scene.linear_stage;
         self.pgd = scene.pgd.clone();
+        self.interface_groups = scene.deployment.interface_groups(&scene.model);
         self
     }
 
@@ -154,7 +159,7 @@ impl Plan {
                 self.participants.len(),
                 subdomain_processes
             ),
-            "interface × 1".to_string(),
+            format!("interface × {}", self.interface_groups.len()),
         ];
         let mut left_out = Vec::new();
         if self.coarse {
@@ -176,8 +181,32 @@ impl Plan {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Selection {
     pub subdomains: Vec<u32>,
+    /// Every interface node of the plan (see [`build_interface_node`] for one of several).
     pub interface: bool,
     pub coarse: bool,
+}
+
+/// Interface node `index` of the plan's deployment.
+pub fn build_interface_node(
+    model: &Arc<Model>,
+    ctx: &RunContext,
+    plan: &Plan,
+    index: usize,
+) -> Result<Box<dyn Node>, RunError> {
+    if index >= plan.interface_groups.len() {
+        return Err(RunError::Selection(format!(
+            "interface node {index}: the deployment has {} interface node(s), indices 0 to {}",
+            plan.interface_groups.len(),
+            plan.interface_groups.len() - 1
+        )));
+    }
+    Ok(Box::new(InterfaceNode::owning(
+        ctx.clone(),
+        model.clone(),
+        &plan.k0,
+        &plan.interface_groups,
+        index,
+    )))
 }
 
 impl Selection {
@@ -244,7 +273,9 @@ pub fn build_nodes(
         nodes.push(Box::new(node));
     }
     if selection.interface {
-        nodes.push(Box::new(InterfaceNode::new(ctx.clone(), model.clone(), &plan.k0)));
+        for index in 0..plan.interface_groups.len() {
+            nodes.push(build_interface_node(model, ctx, plan, index)?);
+        }
     }
     if selection.coarse {
         let n_modes = plan.bases.iter().map(Vec::len).collect();
@@ -372,6 +403,8 @@ fn run_logged(
     if let Some(times) = timing {
         *times = bus.handle_times();
     }
+    // Several interface nodes publish their interfaces' solutions in node order.
+    interfaces.sort_by_key(|s| s.interface);
     let verdict = iterations
         .last()
         .map(|r| r.decision.verdict.clone())

@@ -138,6 +138,30 @@ const CASES: &[Case] = &[
         error: "bad.toml: deployment.subdomain_nodes: 5 nodes for 2 subdomain(s): some nodes would host nothing",
     },
     Case {
+        name: "more interface nodes than interfaces",
+        args: RUN,
+        edits: &[("uy = -0.01\n", "uy = -0.01\n\n[deployment]\ninterface_nodes = 2\n")],
+        error: "bad.toml: deployment.interface_nodes: 2 nodes for 1 interface(s): some nodes would own nothing",
+    },
+    Case {
+        name: "interface owned by two interface nodes",
+        args: RUN,
+        edits: &[(
+            "uy = -0.01\n",
+            "uy = -0.01\n\n[deployment]\ninterface_groups = [[\"lower|upper\"], [0]]\n",
+        )],
+        error: "bad.toml: deployment.interface_groups[1][0]: interface 0 (lower|upper) is already in group 0",
+    },
+    Case {
+        name: "interface named without its two sides",
+        args: RUN,
+        edits: &[(
+            "uy = -0.01\n",
+            "uy = -0.01\n\n[deployment]\ninterface_groups = [[\"lower-upper\"]]\n",
+        )],
+        error: "bad.toml: deployment.interface_groups[0][0]: `lower-upper`: name an interface as \"A|B\" (blocks or subdomains) or by its index",
+    },
+    Case {
         name: "unknown solver key",
         args: RUN,
         edits: &[("uy = -0.01\n", "uy = -0.01\n\n[solver]\ntolerence = 1e-6\n")],

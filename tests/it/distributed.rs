@@ -28,9 +28,13 @@ fn assert_identical(a: &RunResult, b: &RunResult) {
         assert_eq!(x.interface, y.interface);
         for (f, g) in [
             (&x.w_a, &y.w_a),
+            (&x.w_b, &y.w_b),
             (&x.f_a, &y.f_a),
+            (&x.f_b, &y.f_b),
+            (&x.w_a_hat, &y.w_a_hat),
             (&x.w_b_hat, &y.w_b_hat),
             (&x.f_a_hat, &y.f_a_hat),
+            (&x.f_b_hat, &y.f_b_hat),
         ] {
             let same = f.data.iter().zip(&g.data).all(|(p, q)| p.to_bits() == q.to_bits());
             assert!(
@@ -41,6 +45,138 @@ fn assert_identical(a: &RunResult, b: &RunResult) {
         }
         assert_eq!(x.status, y.status);
     }
+}
+
+/// `text` with `lines` added at the top of its `[deployment]` section.
+fn with_deployment(text: &str, lines: &str) -> String {
+    assert!(text.contains("\n[deployment]\n"), "the scene has a deployment section");
+    text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{lines}\n"), 1)
+}
+
+/// An in-process run of `sc` and how many `indicator_partials` messages crossed its bus.
+fn in_process_with_partials(sc: &glissade_mechanics::scene::LoadedScene) -> (RunResult, usize) {
+    let mut partials = 0;
+    let result = glissade::runner::run_in_process_observed(
+        sc,
+        &RunOptions {
+            run_id: "local".into(),
+            interior: false,
+        },
+        |_| {},
+        |m| {
+            if matches!(m.payload, glissade_messages::Payload::IndicatorPartials { .. }) {
+                partials += 1;
+            }
+            Duration::ZERO
+        },
+    )
+    .unwrap();
+    (result, partials)
+}
+
+/// Several interface nodes, each running the local stage of the interfaces it owns and sending
+/// its per-interface indicator sums to node 0, give the one-node run bit for bit: node 0 adds
+/// the sums in interface order, the additions one node makes, and the subdomains take each
+/// interface's q̂ rows from its owner. In-process, with the automatic split and with an explicit
+/// assignment that interleaves the contact interfaces, with plain relaxation and with Anderson
+/// acceleration plus search-direction updates (node 0's Anderson step, the updates in the
+/// decision); then as processes.
+#[test]
+fn several_interface_nodes_match_one_bit_for_bit() {
+    let base = scene_file("small-three-layer");
+    let anderson = base.replace(
+        "[solver]\n",
+        "[solver]\nacceleration = \"anderson\"\nsearch_direction_update = true\n",
+    );
+    assert_ne!(anderson, base);
+    let split =
+        "interface_groups = [[\"bottom|core\", \"top|top\"], [\"core|top\", \"bottom|bottom\"], [\"core|core\"]]";
+    for (what, text) in [("relaxation", &base), ("Anderson + direction updates", &anderson)] {
+        let (one, none) = in_process_with_partials(&scene(text));
+        assert_eq!(none, 0, "one interface node sends no partials");
+        assert!(one.iterations.len() > 2 && one.verdict.is_stop());
+        for deployment in ["interface_nodes = 3", split] {
+            let sc = scene(&with_deployment(text, deployment));
+            assert_eq!(sc.deployment.interface_nodes, 3);
+            let (several, partials) = in_process_with_partials(&sc);
+            println!(
+                "{what}, {deployment}: {} iterations, {partials} partials; nodes {:?}",
+                several.iterations.len(),
+                several.nodes
+            );
+            assert!(
+                several.nodes.contains(&"interface × 3".to_string()),
+                "{:?}",
+                several.nodes
+            );
+            // Nodes 1 and 2 report every iteration.
+            assert_eq!(partials, 2 * several.iterations.len(), "{what}, {deployment}");
+            assert_identical(&one, &several);
+            if what != "relaxation" {
+                assert!(
+                    several
+                        .iterations
+                        .iter()
+                        .any(|r| !r.decision.direction_updates.is_empty()),
+                    "the search directions were updated"
+                );
+            }
+        }
+    }
+    let sc = scene(&with_deployment(&base, "interface_nodes = 3"));
+    let one = crate::common::run(&scene(&base));
+    let remote = run_multi_process(
+        &sc,
+        &RunOptions {
+            run_id: "distributed-test-3".into(),
+            interior: false,
+        },
+        exe(),
+        |_| {},
+    )
+    .unwrap();
+    println!(
+        "processes: {} iterations; nodes {:?}",
+        remote.iterations.len(),
+        remote.nodes
+    );
+    assert!(
+        remote.nodes.iter().any(|n| n.starts_with("processes: 6 ")),
+        "2 subdomain + 3 interface + 1 coarse processes: {:?}",
+        remote.nodes
+    );
+    assert_identical(&one, &remote);
+}
+
+/// The stratified scene (N = 10) over 3 subdomain processes and 3 interface-node processes gives
+/// the in-process one-interface-node run bit for bit.
+#[test]
+fn stratified_over_three_interface_processes() {
+    let text = scene_file("stratified").replace("N = 100", "N = 10");
+    let one = crate::common::run(&scene(&text));
+    let sc = scene(&with_deployment(&text, "interface_nodes = 3"));
+    let groups = sc.deployment.interface_groups(&sc.model);
+    println!(
+        "interfaces per node: {:?}",
+        groups.iter().map(Vec::len).collect::<Vec<_>>()
+    );
+    let remote = run_multi_process(
+        &sc,
+        &RunOptions {
+            run_id: "distributed-test-4".into(),
+            interior: false,
+        },
+        exe(),
+        |_| {},
+    )
+    .unwrap();
+    println!(
+        "stratified N = 10, 3 interface nodes: {} iterations; nodes {:?}",
+        remote.iterations.len(),
+        remote.nodes
+    );
+    assert!(remote.nodes.iter().any(|n| n == "interface × 3"), "{:?}", remote.nodes);
+    assert_identical(&one, &remote);
 }
 
 #[test]

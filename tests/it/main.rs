@@ -13,6 +13,7 @@ mod node_failures;
 mod pgd;
 mod recording;
 mod reference;
+mod replay;
 mod run_id;
 mod stability;
 mod two_hosts;

@@ -154,8 +154,19 @@ impl Launcher {
 }
 
 fn launch_endless(name: &str) -> (Launcher, String, Scratch) {
+    launch_endless_with(name, "")
+}
+
+/// As [`launch_endless`], with `deployment` lines added to the scene's deployment section.
+fn launch_endless_with(name: &str, deployment: &str) -> (Launcher, String, Scratch) {
     let dir = scratch(name);
     let scene = endless_scene(&dir);
+    if !deployment.is_empty() {
+        let text = std::fs::read_to_string(&scene).expect("read the scene");
+        assert!(text.contains("\n[deployment]\n"), "the scene has a deployment section");
+        let text = text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{deployment}\n"), 1);
+        std::fs::write(&scene, text).expect("write the scene");
+    }
     let run_id = format!("{name}-{}", std::process::id());
     let mut cmd = Command::new(exe());
     cmd.arg("run")
@@ -174,13 +185,19 @@ fn assert_no_process_left(run_id: &str) {
     assert!(left.is_empty(), "processes of run {run_id} remain: {left:?}");
 }
 
-/// Kills node `role` (`--index` `index` for subdomain nodes) with SIGKILL mid-run.
+/// Kills node `role` (`--index` `index`, if given) with SIGKILL mid-run.
 fn kill_one(role: &str, index: Option<&str>) {
-    let name = format!("kill-{role}");
-    let (mut launcher, run_id, _dir) = launch_endless(&name);
+    kill_one_of(role, index, "");
+}
+
+/// As [`kill_one`], with `deployment` lines added to the scene's deployment section.
+fn kill_one_of(role: &str, index: Option<&str>, deployment: &str) {
+    let several = if deployment.is_empty() { "" } else { "-of-several" };
+    let name = format!("kill-{role}-{}{several}", index.unwrap_or("0"));
+    let (mut launcher, run_id, _dir) = launch_endless_with(&name, deployment);
     let mut words = vec!["node", role];
     if let Some(i) = index {
-        words.push(i);
+        words.extend(["--index", i]);
     }
     let pids = processes_with(&run_id, &words);
     assert_eq!(pids.len(), 1, "one process of node {role}: {pids:?}");
@@ -217,6 +234,14 @@ fn killing_a_subdomain_node_stops_the_run() {
 #[test]
 fn killing_the_interface_node_stops_the_run() {
     kill_one("interface", None);
+}
+
+/// With three interface nodes, killing one that does not decide (node 1 only sends its
+/// indicators to node 0) stops the run naming it; so does killing the deciding node 0.
+#[test]
+fn killing_one_of_several_interface_nodes_stops_the_run() {
+    kill_one_of("interface", Some("1"), "interface_nodes = 3");
+    kill_one_of("interface", Some("0"), "interface_nodes = 3");
 }
 
 #[test]

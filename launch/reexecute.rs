@@ -1,0 +1,384 @@
+//! Re-executing one node of a recorded run (`glissade replay --node <role>:<id>`): the node is
+//! rebuilt from the recording's scene, fed every recorded message it subscribes to, in recorded
+//! order, and its outputs are compared byte for byte with the messages the recording holds from
+//! it, topic by topic. A mismatch names the first differing recorded message (key, iteration,
+//! stage) and the first differing field in it.
+
+use crate::runner::{build_nodes, Plan, Selection};
+use anyhow::{bail, Context};
+use glissade_bus::{Node, RunContext};
+use glissade_mechanics::scene::load_str;
+use glissade_messages::{encode, key_matches, Message, NodeId, Role};
+use glissade_recorder::Recording;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// Full fields a recorder may thin out (`recording.full_fields_every`).
+const THINNED_FIELDS: [&str; 2] = ["boundary_state", "local_directions"];
+
+/// The first difference between a re-executed node's outputs and the recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mismatch {
+    /// Position of the recorded message in the recording (file order), when there is one.
+    pub index: Option<usize>,
+    pub topic: String,
+    pub iteration: u32,
+    pub stage: String,
+    /// What differs: a field path with both values, or a missing or extra message.
+    pub detail: String,
+}
+
+impl std::fmt::Display for Mismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.index {
+            Some(i) => write!(f, "recorded message #{i} "),
+            None => write!(f, "message "),
+        }?;
+        write!(
+            f,
+            "`{}` (iteration {}, stage {}): {}",
+            self.topic, self.iteration, self.stage, self.detail
+        )
+    }
+}
+
+/// What a re-execution found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reexecution {
+    pub node: NodeId,
+    /// Recorded messages fed to the node.
+    pub inputs: usize,
+    /// Messages the node published.
+    pub outputs: usize,
+    /// Messages the recording holds from the node.
+    pub recorded_outputs: usize,
+    /// Output bytes compared.
+    pub bytes: u64,
+    /// None: every output is bit-identical to the recorded one.
+    pub mismatch: Option<Mismatch>,
+}
+
+/// Parses `role:id` (`subdomain:3`, `interface:0`, `coarse:0`).
+pub fn parse_node(text: &str) -> anyhow::Result<NodeId> {
+    let (role, id) = text
+        .split_once(':')
+        .with_context(|| format!("--node `{text}`: expected <role>:<id>, e.g. subdomain:0"))?;
+    let role = match role {
+        "subdomain" => Role::Subdomain,
+        "interface" => Role::Interface,
+        "coarse" => Role::Coarse,
+        other => bail!("--node `{text}`: unknown role `{other}` (subdomain, interface or coarse)"),
+    };
+    let index = id
+        .parse::<u32>()
+        .with_context(|| format!("--node `{text}`: `{id}` is not a node index"))?;
+    Ok(NodeId { role, index })
+}
+
+/// The nodes whose outputs a recording holds (sender of at least one message), in order.
+pub fn recorded_nodes(recording: &Recording) -> anyhow::Result<Vec<NodeId>> {
+    let mut nodes = std::collections::BTreeSet::new();
+    for m in recording.messages() {
+        let msg = recording
+            .decode(&m)
+            .with_context(|| format!("{}: message on `{}`", recording.path().display(), m.topic))?;
+        if matches!(
+            msg.envelope.sender.role,
+            Role::Subdomain | Role::Interface | Role::Coarse
+        ) {
+            nodes.insert(msg.envelope.sender);
+        }
+    }
+    Ok(nodes.into_iter().collect())
+}
+
+/// Re-executes node `id` of `recording` and compares its outputs with the recorded ones.
+pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecution> {
+    let path = recording.path().display().to_string();
+    if !recording.is_finished() {
+        bail!(
+            "{path}: the recording is not finished ({}): re-execution needs every input of the run",
+            recording.truncated().unwrap_or("no summary section")
+        );
+    }
+    let text = recording
+        .scene_text()
+        .with_context(|| format!("{path}: the recording holds no scene"))?;
+    let scene = load_str(text, &format!("{path} (scene.toml)"))?;
+    if scene.fingerprint != recording.scene_fingerprint() {
+        bail!(
+            "{path}: the recorded scene's fingerprint {:016x} differs from the recording's {:016x}",
+            scene.fingerprint,
+            recording.scene_fingerprint()
+        );
+    }
+    let meta = recording.metadata();
+    if let Some(topics) = meta.get("topics").filter(|t| t.as_str() != "**") {
+        bail!("{path}: the recording keeps only the topics `{topics}`; re-execution needs every message of the run (recording.topics = [\"**\"])");
+    }
+    let thinning: u32 = match meta.get("full_fields_every") {
+        Some(k) => k
+            .parse::<u32>()
+            .with_context(|| format!("{path}: metadata full_fields_every = `{k}` is not a number"))?,
+        None => 1,
+    };
+    let model = Arc::new(scene.model.clone());
+    let ctx = RunContext {
+        run_id: recording.run_id().to_string(),
+        scene_fingerprint: scene.fingerprint,
+    };
+    let plan = Plan::new(&model).with_scene(&scene);
+    let interior = recording.channels().iter().any(|c| c.topic.ends_with("/displacement"));
+    let selection = match id.role {
+        Role::Subdomain => Selection {
+            subdomains: vec![id.index],
+            interface: false,
+            coarse: false,
+        },
+        Role::Interface => Selection {
+            subdomains: vec![],
+            interface: true,
+            coarse: false,
+        },
+        Role::Coarse if id.index == 0 && plan.coarse => Selection {
+            subdomains: vec![],
+            interface: false,
+            coarse: true,
+        },
+        _ => bail!("{path}: the run has no node {id}"),
+    };
+    // Every interface node is built when one is asked for: keep the one asked for.
+    let mut node: Box<dyn Node> = build_nodes(&model, &ctx, interior, &plan, &selection)?
+        .into_iter()
+        .find(|n| n.id() == id)
+        .with_context(|| format!("{path}: the run has no node {id}"))?;
+    let subs = node.subscriptions();
+    if thinning > 1 {
+        let needs: Vec<&str> = THINNED_FIELDS
+            .iter()
+            .copied()
+            .filter(|f| {
+                subs.iter()
+                    .any(|s| s.ends_with(&format!("/{f}")) || s.contains(&format!("/{f}/")))
+            })
+            .collect();
+        if !needs.is_empty() {
+            bail!(
+                "{path}: the recording keeps {} only every {thinning} iterations (recording.full_fields_every = {thinning}); node {id} needs every one of them: record with full_fields_every = 1",
+                needs.join(" and ")
+            );
+        }
+    }
+
+    // The recording in file order: inputs of the node, and its own outputs per topic.
+    let mut inputs: Vec<(usize, Message)> = Vec::new();
+    let mut recorded: BTreeMap<String, Vec<(usize, Vec<u8>, Message)>> = BTreeMap::new();
+    let mut recorded_outputs = 0;
+    for (i, m) in recording.messages().enumerate() {
+        let msg = recording
+            .decode(&m)
+            .with_context(|| format!("{path}: recorded message #{i} on `{}`", m.topic))?;
+        if msg.envelope.sender == id {
+            recorded_outputs += 1;
+            recorded
+                .entry(m.topic.to_string())
+                .or_default()
+                .push((i, m.data.to_vec(), msg.clone()));
+        }
+        if subs.iter().any(|s| key_matches(s, m.topic)) {
+            inputs.push((i, msg));
+        }
+    }
+
+    // Drive the node.
+    let mut produced: BTreeMap<String, Vec<Message>> = BTreeMap::new();
+    let mut outputs = 0;
+    let mut keep = |out: Vec<Message>| {
+        for o in out {
+            outputs += 1;
+            produced.entry(o.topic()).or_default().push(o);
+        }
+    };
+    keep(node.start().with_context(|| format!("node {id}: start"))?);
+    for (i, msg) in &inputs {
+        let out = node.handle(msg).with_context(|| {
+            format!(
+                "node {id} failed on recorded message #{i} `{}` (iteration {}, stage {:?})",
+                msg.topic(),
+                msg.envelope.iteration,
+                msg.envelope.stage
+            )
+        })?;
+        keep(out);
+    }
+
+    // Compare, topic by topic, in order; keep the mismatch of the earliest recorded message.
+    let mut first: Option<Mismatch> = None;
+    let mut bytes = 0u64;
+    let empty = Vec::new();
+    let topics: std::collections::BTreeSet<&String> = recorded.keys().chain(produced.keys()).collect();
+    for topic in topics {
+        let rec = recorded.get(topic).unwrap_or(&empty);
+        let got = produced.get(topic).map(Vec::as_slice).unwrap_or(&[]);
+        for (k, (index, data, rmsg)) in rec.iter().enumerate() {
+            let Some(g) = got.get(k) else {
+                note(
+                    Mismatch {
+                        index: Some(*index),
+                        topic: topic.clone(),
+                        iteration: rmsg.envelope.iteration,
+                        stage: format!("{:?}", rmsg.envelope.stage),
+                        detail: format!(
+                            "the re-executed node published only {} message(s) on this key, the recording has {}",
+                            got.len(),
+                            rec.len()
+                        ),
+                    },
+                    &mut first,
+                );
+                break;
+            };
+            let g_bytes = encode(g);
+            bytes += g_bytes.len() as u64;
+            if &g_bytes != data {
+                note(
+                    Mismatch {
+                        index: Some(*index),
+                        topic: topic.clone(),
+                        iteration: rmsg.envelope.iteration,
+                        stage: format!("{:?}", rmsg.envelope.stage),
+                        detail: field_difference(rmsg, g, data, &g_bytes),
+                    },
+                    &mut first,
+                );
+                break;
+            }
+        }
+        if got.len() > rec.len() {
+            let g = &got[rec.len()];
+            note(
+                Mismatch {
+                    index: None,
+                    topic: topic.clone(),
+                    iteration: g.envelope.iteration,
+                    stage: format!("{:?}", g.envelope.stage),
+                    detail: format!(
+                        "the re-executed node published {} message(s) on this key, the recording has {}",
+                        got.len(),
+                        rec.len()
+                    ),
+                },
+                &mut first,
+            );
+        }
+    }
+    Ok(Reexecution {
+        node: id,
+        inputs: inputs.len(),
+        outputs,
+        recorded_outputs,
+        bytes,
+        mismatch: first,
+    })
+}
+
+/// Keeps `m` if it is about an earlier recorded message than `first`.
+fn note(m: Mismatch, first: &mut Option<Mismatch>) {
+    let earlier = match (&first, m.index) {
+        (None, _) => true,
+        (Some(f), Some(i)) => f.index.is_none_or(|j| i < j),
+        (Some(_), None) => false,
+    };
+    if earlier {
+        *first = Some(m);
+    }
+}
+
+/// Names the first field where `replayed` differs from `recorded` (a path such as
+/// `payload.BoundaryState.w[row 3, column 7]` with both values), or the first differing byte.
+fn field_difference(recorded: &Message, replayed: &Message, recorded_bytes: &[u8], replayed_bytes: &[u8]) -> String {
+    let as_value = |m: &Message| {
+        serde_json::json!({
+            "envelope": serde_json::to_value(&m.envelope).unwrap_or_default(),
+            "payload": serde_json::to_value(&m.payload).unwrap_or_default(),
+        })
+    };
+    if let Some(d) = value_difference(&as_value(recorded), &as_value(replayed), "") {
+        return d;
+    }
+    let at = recorded_bytes
+        .iter()
+        .zip(replayed_bytes)
+        .position(|(a, b)| a != b)
+        .unwrap_or(recorded_bytes.len().min(replayed_bytes.len()));
+    format!(
+        "byte {at} differs ({} recorded bytes, {} re-executed)",
+        recorded_bytes.len(),
+        replayed_bytes.len()
+    )
+}
+
+fn value_difference(a: &serde_json::Value, b: &serde_json::Value, path: &str) -> Option<String> {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            // A Field: name the entry by (row, column).
+            if let (Some(Value::Array(dx)), Some(Value::Array(dy)), Some(rows)) =
+                (x.get("data"), y.get("data"), x.get("rows").and_then(Value::as_u64))
+            {
+                if x.get("rows") == y.get("rows") && x.get("cols") == y.get("cols") && dx.len() == dy.len() {
+                    let rows = rows.max(1) as usize;
+                    return dx.iter().zip(dy).enumerate().find_map(|(k, (u, v))| {
+                        (!same_number(u, v)).then(|| {
+                            format!(
+                                "field {path}[row {}, column {}]: recorded {u}, re-executed {v}",
+                                k % rows,
+                                k / rows
+                            )
+                        })
+                    });
+                }
+            }
+            let keys: std::collections::BTreeSet<&String> = x.keys().chain(y.keys()).collect();
+            keys.into_iter().find_map(|k| {
+                let p = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                match (x.get(k), y.get(k)) {
+                    (Some(u), Some(v)) => value_difference(u, v, &p),
+                    (u, v) => Some(format!(
+                        "field {p}: recorded {}, re-executed {}",
+                        u.map_or("absent".into(), Value::to_string),
+                        v.map_or("absent".into(), Value::to_string)
+                    )),
+                }
+            })
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => x
+            .iter()
+            .zip(y)
+            .enumerate()
+            .find_map(|(k, (u, v))| value_difference(u, v, &format!("{path}[{k}]"))),
+        _ if same_number(a, b) => None,
+        _ => Some(format!("field {path}: recorded {}, re-executed {}", short(a), short(b))),
+    }
+}
+
+/// Equal values; numbers compared bit for bit.
+fn same_number(a: &serde_json::Value, b: &serde_json::Value) -> bool {
+    match (a.as_f64(), b.as_f64()) {
+        (Some(x), Some(y)) if a.is_f64() || b.is_f64() => x.to_bits() == y.to_bits(),
+        _ => a == b,
+    }
+}
+
+fn short(v: &serde_json::Value) -> String {
+    let s = v.to_string();
+    if s.len() > 80 {
+        format!("{}…", &s[..s.char_indices().nth(77).map_or(s.len(), |(i, _)| i)])
+    } else {
+        s
+    }
+}

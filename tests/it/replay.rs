@@ -1,0 +1,251 @@
+//! Replay of recordings: every node of a small recorded run, re-executed from its recorded inputs,
+//! publishes bit-identical outputs; a recording tampered with by one bit is caught, naming the
+//! message and field; a recording thinned by `full_fields_every` still replays into Rerun but
+//! refuses to re-execute the nodes that need the thinned fields; `glissade replay` writes an .rrd
+//! the pinned Rerun CLI accepts, and `glissade run --rerun <file.rrd>` streams a live run's view.
+
+use crate::common::scene;
+use glissade::recording::run_in_process_recorded;
+use glissade::reexecute::{parse_node, recorded_nodes, reexecute};
+use glissade::runner::RunOptions;
+use glissade_messages::{encode, Payload, Role, Stage};
+use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn scene_text(name: &str) -> String {
+    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("glissade-replay-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Records an in-process run of `text` into `dir`; returns the file.
+fn record(text: &str, dir: &Path, run_id: &str) -> PathBuf {
+    let sc = scene(text);
+    let path = dir.join(format!("{}-{run_id}.mcap", sc.model.name));
+    let opts = RunOptions {
+        run_id: run_id.into(),
+        interior: false,
+    };
+    let (result, outcome) = run_in_process_recorded(&sc, &opts, Some(path.as_path()), |_| {}).unwrap();
+    assert!(result.iterations.len() > 2, "{} iterations", result.iterations.len());
+    assert!(outcome.is_some());
+    path
+}
+
+#[test]
+fn every_node_of_a_recorded_run_reexecutes_bit_identically() {
+    let dir = temp_dir("reexec");
+    let path = record(&scene_text("small-three-layer"), &dir, "rx-1");
+    let recording = Recording::open(&path).unwrap();
+    let nodes = recorded_nodes(&recording).unwrap();
+    // 6 subdomains, the interface node and the coarse node.
+    let roles: Vec<Role> = nodes.iter().map(|n| n.role).collect();
+    assert_eq!(roles.iter().filter(|r| **r == Role::Subdomain).count(), 6, "{nodes:?}");
+    assert!(
+        roles.contains(&Role::Interface) && roles.contains(&Role::Coarse),
+        "{nodes:?}"
+    );
+    for id in nodes {
+        let r = reexecute(&recording, id).unwrap();
+        assert_eq!(r.mismatch, None, "node {id}");
+        assert_eq!(r.outputs, r.recorded_outputs, "node {id}");
+        assert!(r.inputs > 0 && r.outputs > 0, "node {id}: {r:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_tampered_recording_names_the_first_differing_message_and_field() {
+    let dir = temp_dir("tamper");
+    let text = scene_text("small-three-layer");
+    let path = record(&text, &dir, "rx-2");
+    let original = Recording::open(&path).unwrap();
+    let sc = scene(&text);
+    // Copy the recording, changing one entry of subdomain 1's boundary state at iteration 2 by a
+    // relative 1e-9 (plus 1e-12 mm, should it be zero): small, yet large enough to reach the
+    // interface node's outputs through its local stage.
+    let tampered_path = dir.join("tampered.mcap");
+    let run = RunInfo {
+        run_id: "rx-2".into(),
+        scene_name: sc.model.name.clone(),
+        scene_fingerprint: sc.fingerprint,
+        scene_text: text.clone(),
+        software: "test".into(),
+    };
+    let mut rec = Recorder::create(&tampered_path, &run, &RecorderOptions::default()).unwrap();
+    let (row, col) = (5usize, 3usize);
+    let mut changed = false;
+    for m in original.messages() {
+        let mut msg = original.decode(&m).unwrap();
+        if let Payload::BoundaryState { subdomain: 1, w, .. } = &mut msg.payload {
+            if msg.envelope.iteration == 2 && msg.envelope.stage != Stage::Final {
+                let k = col * w.rows() + row;
+                w.data[k] = w.data[k] * (1.0 + 1e-9) + 1e-12;
+                changed = true;
+            }
+        }
+        rec.record(m.topic, m.log_time, &encode(&msg)).unwrap();
+    }
+    rec.finish().unwrap();
+    assert!(changed);
+    let tampered = Recording::open(&tampered_path).unwrap();
+
+    // Subdomain 1 re-executed publishes the untampered value: its recorded output differs.
+    let r = reexecute(&tampered, parse_node("subdomain:1").unwrap()).unwrap();
+    let m = r.mismatch.expect("the tampered output is caught");
+    assert!(m.topic.ends_with("/subdomain/1/boundary_state"), "{m}");
+    assert_eq!(m.iteration, 2, "{m}");
+    assert!(
+        m.detail.contains(&format!("BoundaryState.w[row {row}, column {col}]")),
+        "{m}"
+    );
+    // The other subdomains do not read subdomain 1's state: still identical.
+    let r0 = reexecute(&tampered, parse_node("subdomain:0").unwrap()).unwrap();
+    assert_eq!(r0.mismatch, None);
+    // The interface node reads it: its outputs from iteration 2 on differ from the recorded ones.
+    let ri = reexecute(&tampered, parse_node("interface:0").unwrap()).unwrap();
+    let mi = ri.mismatch.expect("the interface node's outputs change with its input");
+    assert_eq!(mi.iteration, 2, "{mi}");
+    assert!(mi.detail.starts_with("field "), "{mi}");
+    // And the command line says the same, exiting 3.
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["replay", "--node", "subdomain:1"])
+        .arg(&tampered_path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("subdomain/1/boundary_state` (iteration 2, stage Linear)")
+            && stdout.contains(&format!("w[row {row}, column {col}]")),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `rerun rrd verify` on `rrd`, or None (reason printed) when the Rerun CLI is absent.
+fn rerun_verify(rrd: &Path) -> Option<()> {
+    let version = match Command::new("rerun").arg("--version").output() {
+        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).trim().to_string(),
+        _ => {
+            println!("skipped `rerun rrd verify`: no `rerun` CLI on PATH (pip install rerun-sdk==0.36.3)");
+            return None;
+        }
+    };
+    let v = Command::new("rerun").args(["rrd", "verify"]).arg(rrd).output().unwrap();
+    assert!(
+        v.status.success(),
+        "`rerun rrd verify` ({version}) rejected {}: {}{}",
+        rrd.display(),
+        String::from_utf8_lossy(&v.stdout),
+        String::from_utf8_lossy(&v.stderr)
+    );
+    println!("`rerun rrd verify` ({version}) accepted {}", rrd.display());
+    Some(())
+}
+
+#[test]
+fn a_thinned_recording_replays_but_refuses_to_reexecute_nodes_that_need_every_field() {
+    let dir = temp_dir("thinned");
+    let text = scene_text("small-three-layer");
+    assert!(
+        !text.contains("[recording]"),
+        "the test appends its own [recording] table"
+    );
+    let path = record(&format!("{text}\n[recording]\nfull_fields_every = 3\n"), &dir, "rx-3");
+    let recording = Recording::open(&path).unwrap();
+    let err = reexecute(&recording, parse_node("subdomain:0").unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("local_directions only every 3 iterations") && err.contains("full_fields_every = 1"),
+        "{err}"
+    );
+    let err = reexecute(&recording, parse_node("interface:0").unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("boundary_state only every 3 iterations"), "{err}");
+    // The coarse node reads no thinned field: it re-executes.
+    let r = reexecute(&recording, parse_node("coarse:0").unwrap()).unwrap();
+    assert_eq!(r.mismatch, None);
+
+    // The Rerun view: meshes only at the iterations that kept the boundary states, and the final
+    // state (from the interface solutions) at every time point.
+    let rrd = dir.join("thinned.rrd");
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["replay", "--save"])
+        .arg(&rrd)
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let iterations = recording.messages().filter(|m| m.topic.ends_with("/decision")).count();
+    let kept = recording
+        .messages()
+        .filter(|m| m.topic.ends_with("/boundary_state"))
+        .count();
+    let sc = scene(&text);
+    let meshes = kept + sc.model.subdomains.len() * sc.model.time.n_points();
+    assert!(
+        stdout.contains(&format!("{iterations} iterations, {meshes} meshes")),
+        "expected {iterations} iterations and {meshes} meshes: {stdout}"
+    );
+    rerun_verify(&rrd);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn replay_and_live_run_write_rrd_files_the_rerun_cli_accepts() {
+    let dir = temp_dir("rrd");
+    let scene_path = dir.join("small-three-layer.toml");
+    std::fs::write(&scene_path, scene_text("small-three-layer")).unwrap();
+    // A live in-process run streamed to an .rrd, recorded at the same time.
+    let live = dir.join("live.rrd");
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["run", "--in-process", "--quiet", "--run-id", "rx-4", "--out"])
+        .arg(&dir)
+        .arg("--rerun")
+        .arg(&live)
+        .arg(&scene_path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("rerun: "), "{stdout}");
+    // Replay of the recording, coloured by |u|.
+    let replayed = dir.join("replayed.rrd");
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["replay", "--color-by", "displacement", "--save"])
+        .arg(&replayed)
+        .arg(dir.join("small-three-layer-rx-4.mcap"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    // Every node of that run re-executes bit-identically from the command line too.
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["replay", "--node", "all"])
+        .arg(dir.join("small-three-layer-rx-4.mcap"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(stdout.matches("bit-identical").count(), 8, "{stdout}");
+    for rrd in [&live, &replayed] {
+        assert!(std::fs::metadata(rrd).unwrap().len() > 10_000, "{}", rrd.display());
+        rerun_verify(rrd);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
