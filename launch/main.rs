@@ -609,15 +609,35 @@ fn reference(scene: &std::path::Path, out: &std::path::Path) -> anyhow::Result<E
     Ok(ExitCode::SUCCESS)
 }
 
-fn bench(scene: &std::path::Path, out: &std::path::Path, max_iterations: Option<usize>) -> anyhow::Result<ExitCode> {
+/// The scene with the command line's `--tolerance` and `--max-iterations` applied, after checking
+/// them and that the output folder is writable (before anything is solved).
+fn load_with_overrides(
+    scene: &std::path::Path,
+    out: &std::path::Path,
+    tolerance: Option<f64>,
+    max_iterations: Option<usize>,
+) -> anyhow::Result<glissade_mechanics::scene::LoadedScene> {
     let mut sc = load_scene(scene)?;
+    if let Some(tolerance) = tolerance {
+        if !(tolerance > 0.0 && tolerance.is_finite()) {
+            anyhow::bail!("--tolerance {tolerance}: must be a positive number");
+        }
+    }
     ensure_writable(out)?;
+    if let Some(tolerance) = tolerance {
+        sc.model.solver.tolerance = tolerance;
+    }
     if let Some(m) = max_iterations {
         if m == 0 {
             anyhow::bail!("--max-iterations 0: must be at least 1");
         }
         sc.model.solver.max_iterations = m;
     }
+    Ok(sc)
+}
+
+fn bench(scene: &std::path::Path, out: &std::path::Path, max_iterations: Option<usize>) -> anyhow::Result<ExitCode> {
+    let sc = load_with_overrides(scene, out, None, max_iterations)?;
     let run_id = default_run_id()?;
     let report = glissade::bench::bench(&sc, &run_id)?;
     print!("{}", glissade::bench::render(&report));
@@ -636,18 +656,7 @@ fn report(
     tolerance: f64,
     max_iterations: Option<usize>,
 ) -> anyhow::Result<ExitCode> {
-    let mut sc = load_scene(scene)?;
-    if !(tolerance > 0.0 && tolerance.is_finite()) {
-        anyhow::bail!("--tolerance {tolerance}: must be a positive number");
-    }
-    ensure_writable(out)?;
-    sc.model.solver.tolerance = tolerance;
-    if let Some(m) = max_iterations {
-        if m == 0 {
-            anyhow::bail!("--max-iterations 0: must be at least 1");
-        }
-        sc.model.solver.max_iterations = m;
-    }
+    let sc = load_with_overrides(scene, out, Some(tolerance), max_iterations)?;
     let run_id = default_run_id()?;
     let (report, _, _) = build_report(&sc, &run_id)?;
     let name = &sc.model.name;
@@ -702,18 +711,7 @@ fn report_stages(
             )),
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let mut sc = load_scene(scene)?;
-    if !(tolerance > 0.0 && tolerance.is_finite()) {
-        anyhow::bail!("--tolerance {tolerance}: must be a positive number");
-    }
-    ensure_writable(out)?;
-    sc.model.solver.tolerance = tolerance;
-    if let Some(m) = max_iterations {
-        if m == 0 {
-            anyhow::bail!("--max-iterations 0: must be at least 1");
-        }
-        sc.model.solver.max_iterations = m;
-    }
+    let sc = load_with_overrides(scene, out, Some(tolerance), max_iterations)?;
     // In-process runs only: the run id names nothing on a network.
     let run_id = format!("{}-report", sc.model.name);
     let (reports, _) = glissade::report::build_reports(&sc, &run_id, &stages)?;

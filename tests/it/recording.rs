@@ -273,19 +273,25 @@ fn multi_process_recording_matches_in_process() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// SIGKILL of the recorder process mid-run: the run goes on and says what happened; the file
-/// holds every chunk written before the kill (at least everything a copy taken just before the
-/// kill holds), and what it holds is the run's messages, per channel a prefix of the full run's.
-#[test]
-fn recording_survives_sigkill_of_the_recorder() {
-    let dir = temp_dir("sigkill");
-    // Enough iterations for the kill to land mid-run.
+/// A folder `tag` holding `long.toml`: the small three-layer scene run to 400 iterations, long
+/// enough for a signal to land mid-run. Returns (folder, scene path, scene text).
+fn long_run_scene(tag: &str) -> (PathBuf, PathBuf, String) {
+    let dir = temp_dir(tag);
     let text = scene_text("small-three-layer").replace(
         "tolerance = 1e-4",
         "tolerance = 1e-300\nmax_iterations = 400\nstagnation_window = 1000",
     );
     let scene_path = dir.join("long.toml");
     std::fs::write(&scene_path, &text).unwrap();
+    (dir, scene_path, text)
+}
+
+/// SIGKILL of the recorder process mid-run: the run goes on and says what happened; the file
+/// holds every chunk written before the kill (at least everything a copy taken just before the
+/// kill holds), and what it holds is the run's messages, per channel a prefix of the full run's.
+#[test]
+fn recording_survives_sigkill_of_the_recorder() {
+    let (dir, scene_path, text) = long_run_scene("sigkill");
     let mut child = spawn_run(&scene_path, &dir, "rec-4");
     let path = dir.join("small-three-layer-rec-4.mcap");
     // The recorder announces its pid; forward the rest of stderr to a buffer.
@@ -359,14 +365,7 @@ fn recording_survives_sigkill_of_the_recorder() {
 /// open it, agree per channel on counts and bytes, and what it holds is a prefix of the run.
 #[test]
 fn sigterm_leaves_a_finalised_recording_both_readers_open() {
-    let dir = temp_dir("sigterm");
-    // Enough iterations for the signal to land mid-run.
-    let text = scene_text("small-three-layer").replace(
-        "tolerance = 1e-4",
-        "tolerance = 1e-300\nmax_iterations = 400\nstagnation_window = 1000",
-    );
-    let scene_path = dir.join("long.toml");
-    std::fs::write(&scene_path, &text).unwrap();
+    let (dir, scene_path, text) = long_run_scene("sigterm");
     let mut child = spawn_run(&scene_path, &dir, "rec-5");
     let path = dir.join("small-three-layer-rec-5.mcap");
     let deadline = Instant::now() + Duration::from_secs(300);
