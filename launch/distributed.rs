@@ -332,7 +332,20 @@ pub fn run_distributed(
     opts: &RunOptions,
     exe: &Path,
     net: &Network,
+    on_iteration: impl FnMut(&IterationRecord),
+) -> anyhow::Result<(RunResult, Traffic)> {
+    run_distributed_observed(scene, opts, exe, net, on_iteration, |_| {})
+}
+
+/// As [`run_distributed`]; `observe` sees every message of the run the launcher receives, in
+/// arrival order (the live Rerun view of a multi-process run).
+pub fn run_distributed_observed(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    exe: &Path,
+    net: &Network,
     mut on_iteration: impl FnMut(&IterationRecord),
+    mut observe: impl FnMut(&Message),
 ) -> anyhow::Result<(RunResult, Traffic)> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
@@ -579,6 +592,7 @@ pub fn run_distributed(
                     continue;
                 }
                 let Ok(m) = decode(&bytes, &expected) else { continue };
+                observe(&m);
                 if let Some(rec) = got.take(m) {
                     stop_seen |= rec.decision.verdict.is_stop();
                     on_iteration(rec);
@@ -623,6 +637,7 @@ pub fn run_distributed(
             continue;
         }
         if let Ok(m) = decode(&bytes, &expected) {
+            observe(&m);
             if let Some(rec) = got.take(m) {
                 on_iteration(rec);
             }

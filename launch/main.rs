@@ -4,7 +4,7 @@
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use glissade::distributed::{
-    install_interrupt_handler, run_distributed, run_node_process, Interrupted, Network, NodeName, NodeRole,
+    install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Network, NodeName, NodeRole,
 };
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
@@ -12,6 +12,7 @@ use glissade::report::{build_report, linear_stage_table, plot_svg};
 use glissade::runner::{IterationRecord, RunOptions};
 use glissade_mechanics::monolithic::solve_glued;
 use glissade_mechanics::reference::{solve_reference, verify, ReferenceOptions};
+use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::Verdict;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -211,10 +212,57 @@ struct RunArgs {
     /// Longest wait for the nodes of --remote to be ready (s).
     #[arg(long, default_value_t = 300)]
     remote_timeout: u64,
-    /// Stream the run's Rerun view as it goes (in-process runs): to a spawned viewer (`spawn`,
-    /// the default), a running one (`connect` or its rerun+http://… address), or an .rrd file.
-    #[arg(long, num_args = 0..=1, default_missing_value = "spawn", value_name = "SINK", requires = "in_process")]
+    /// Stream the run's Rerun view as it goes (in-process, or from the launcher of a
+    /// multi-process run): to a spawned viewer (`spawn`, the default), a running one (`connect`
+    /// or its rerun+http://… address), or an .rrd file.
+    #[arg(long, num_args = 0..=1, default_missing_value = "spawn", value_name = "SINK")]
     rerun: Option<String>,
+}
+
+/// The live Rerun view of `run --rerun`, fed every message of the run; its first failure is kept
+/// and reported when the run ends (the run itself does not depend on the view).
+struct LiveView {
+    view: Option<glissade_replay::View>,
+    failure: Option<glissade_replay::ReplayError>,
+}
+
+impl LiveView {
+    fn new(args: &RunArgs, sc: &LoadedScene, run_id: &str) -> anyhow::Result<Self> {
+        let view = match &args.rerun {
+            Some(sink) => {
+                let sink = glissade_replay::Sink::parse(sink).map_err(|e| anyhow::anyhow!("--rerun {e}"))?;
+                let opts = glissade_replay::ReplayOptions {
+                    sink,
+                    color_by: glissade_replay::ColorBy::VonMises,
+                    amplification: None,
+                    time_point: None,
+                };
+                let origin = args.scene.display().to_string();
+                Some(glissade_replay::View::new(&sc.text, &origin, run_id, &opts, None)?)
+            }
+            None => None,
+        };
+        Ok(Self { view, failure: None })
+    }
+
+    fn message(&mut self, m: &glissade_messages::Message) {
+        if let (Some(v), None) = (self.view.as_mut(), &self.failure) {
+            if let Err(e) = v.message(m) {
+                self.failure = Some(e);
+            }
+        }
+    }
+
+    fn finish(&mut self) -> anyhow::Result<()> {
+        if let Some(e) = self.failure.take() {
+            anyhow::bail!("--rerun: {e}");
+        }
+        if let Some(v) = self.view.take() {
+            let s = v.finish()?;
+            println!("rerun: {} iterations, {} meshes streamed", s.iterations, s.meshes);
+        }
+        Ok(())
+    }
 }
 
 /// Exit code of a run that ended without converging (outputs are still written).
@@ -367,39 +415,15 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         ));
     };
     let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
+    let mut live = LiveView::new(&args, &sc, &run_id)?;
     let result = if args.in_process {
-        let mut view = match &args.rerun {
-            Some(sink) => {
-                let sink = glissade_replay::Sink::parse(sink).map_err(|e| anyhow::anyhow!("--rerun {e}"))?;
-                let opts = glissade_replay::ReplayOptions {
-                    sink,
-                    color_by: glissade_replay::ColorBy::VonMises,
-                    amplification: None,
-                    time_point: None,
-                };
-                let origin = args.scene.display().to_string();
-                Some(glissade_replay::View::new(&sc.text, &origin, &run_id, &opts, None)?)
-            }
-            None => None,
-        };
-        let mut view_failure = None;
         let (result, outcome) =
             glissade::recording::run_in_process_recorded_observed(&sc, &opts, recording.as_deref(), progress, |m| {
                 let t0 = std::time::Instant::now();
-                if let (Some(v), None) = (view.as_mut(), &view_failure) {
-                    if let Err(e) = v.message(m) {
-                        view_failure = Some(e);
-                    }
-                }
+                live.message(m);
                 t0.elapsed()
             })?;
-        if let Some(e) = view_failure {
-            anyhow::bail!("--rerun: {e}");
-        }
-        if let Some(v) = view {
-            let s = v.finish()?;
-            println!("rerun: {} iterations, {} meshes streamed", s.iterations, s.meshes);
-        }
+        live.finish()?;
         if let Some(o) = outcome {
             if let Some(st) = &o.stats {
                 println!(
@@ -422,9 +446,10 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
             recording: recording.clone(),
         };
-        match run_distributed(&sc, &opts, &exe, &net, progress) {
+        match run_distributed_observed(&sc, &opts, &exe, &net, progress, |m| live.message(m)) {
             Ok((result, traffic)) => {
                 bar.finish_and_clear();
+                live.finish()?;
                 let per = traffic.iterations.max(1) as f64;
                 for (kind, t) in &traffic.by_kind {
                     let rate = if t.messages >= traffic.iterations {
