@@ -1,5 +1,5 @@
-//! A multi-process run stops within 10 s, naming the node, when any one node is killed, and
-//! stops every node when the launcher gets Ctrl-C; no node process of the run remains.
+//! A multi-process run without restarts stops within 10 s, naming the node, when any one node is
+//! killed, and stops every node when the launcher gets Ctrl-C; no node process of the run remains.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -194,7 +194,8 @@ fn kill_one(role: &str, index: Option<&str>) {
 fn kill_one_of(role: &str, index: Option<&str>, deployment: &str) {
     let several = if deployment.is_empty() { "" } else { "-of-several" };
     let name = format!("kill-{role}-{}{several}", index.unwrap_or("0"));
-    let (mut launcher, run_id, _dir) = launch_endless_with(&name, deployment);
+    // Without restarts (tests/it/recovery.rs has the supervised runs).
+    let (mut launcher, run_id, _dir) = launch_endless_with(&name, &format!("restarts = 0\n{deployment}"));
     let mut words = vec!["node", role];
     if let Some(i) = index {
         words.extend(["--index", i]);

@@ -1,0 +1,175 @@
+//! Supervision: a node process killed with SIGKILL mid-run is restarted by the launcher, the
+//! replacement rebuilds its state from the recorder's log, and the run ends bit-identical to an
+//! undisturbed one; a node that keeps dying stops the run after `deployment.restarts` restarts.
+
+use crate::common::scene;
+use crate::distributed::assert_identical;
+use crate::node_failures::{processes_with, scratch};
+use glissade::distributed::{run_distributed, Network};
+use glissade::runner::{run_in_process, RunOptions};
+use std::path::Path;
+
+fn exe() -> &'static Path {
+    Path::new(env!("CARGO_BIN_EXE_glissade"))
+}
+
+fn small_three_layer(deployment: &str) -> String {
+    let text = std::fs::read_to_string(format!(
+        "{}/launch/scenes/small-three-layer.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .expect("scene file");
+    assert!(text.contains("\n[deployment]\n"), "the scene has a deployment section");
+    text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{deployment}\n"), 1)
+}
+
+fn options(run_id: &str) -> RunOptions {
+    RunOptions {
+        run_id: run_id.to_string(),
+        interior: false,
+    }
+}
+
+/// A small xorshift generator: the kill iterations are reproducible from the printed seed.
+struct Rng(u64);
+
+impl Rng {
+    fn below(&mut self, n: u64) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0 % n
+    }
+}
+
+/// SIGKILL to the one process of run `run_id` that is node `role` (with `--index index`).
+fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
+    // The coarse node takes no --index (a run has one).
+    let words: &[&str] = if role == "coarse" {
+        &["node", role]
+    } else {
+        &["node", role, "--index", index]
+    };
+    let pids = processes_with(run_id, words);
+    assert_eq!(pids.len(), 1, "node {role}:{index} of run {run_id}: processes {pids:?}");
+    // SAFETY: kill(2) on a pid of this test's run.
+    unsafe {
+        libc::kill(pids[0], libc::SIGKILL);
+    }
+    pids[0]
+}
+
+/// kill -9 of each node role (subdomain, interface, coarse) at an iteration drawn by a seeded
+/// generator: the launcher restarts the node, which resumes from the recording, and the run's
+/// decisions and every interface field are bit-identical to the undisturbed in-process run
+/// (itself bit-identical to a multi-process run, tests/it/distributed.rs).
+#[test]
+fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
+    let sc = scene(&small_three_layer(""));
+    let undisturbed = run_in_process(&sc, &options("undisturbed"), |_| {}).expect("undisturbed run");
+    let n = undisturbed.iterations.len() as u64;
+    assert!(
+        n > 6,
+        "the scene converges in {n} iterations: too few to kill a node mid-run"
+    );
+    let seed = 0x9e37_79b9_7f4a_7c15;
+    let mut rng = Rng(seed);
+    for (role, index) in [("subdomain", "1"), ("interface", "0"), ("coarse", "0")] {
+        // Not the last iteration: the kill must land while the run still needs the node.
+        let at = 1 + rng.below(n - 3) as u32;
+        println!("seed {seed:#x}: kill {role}:{index} at iteration {at} of {n}");
+        let dir = scratch(&format!("recovery-{role}"));
+        let run_id = format!("recovery-{role}-{}", std::process::id());
+        let net = Network {
+            recording: Some(dir.join("run.mcap")),
+            ..Network::default()
+        };
+        let opts = options(&run_id);
+        let mut killed = None;
+        let (result, _) = run_distributed(&sc, &opts, exe(), &net, |r| {
+            if r.iteration == at && killed.is_none() {
+                killed = Some(kill_node(&run_id, role, index));
+            }
+        })
+        .unwrap_or_else(|e| panic!("run with {role}:{index} killed at iteration {at}: {e:#}"));
+        let old = killed.expect("the kill iteration was reached");
+        assert!(!processes_with(&run_id, &[]).contains(&old));
+        assert!(
+            processes_with(&run_id, &[]).is_empty(),
+            "processes of run {run_id} remain"
+        );
+        assert_identical(&undisturbed, &result);
+        // The recording of the disturbed run is complete and finalised: every iteration's
+        // decision is in it once.
+        let rec = glissade_recorder::Recording::open(&dir.join("run.mcap")).expect("recording");
+        assert!(rec.is_finished(), "the recording is finalised");
+        let decisions = rec.messages().filter(|m| m.topic.ends_with("/decision")).count();
+        assert!(
+            decisions >= n as usize,
+            "{decisions} decisions recorded for {n} iterations"
+        );
+    }
+}
+
+/// A node killed again after its last allowed restart stops the run with an error that says so.
+#[test]
+fn a_node_that_keeps_dying_stops_the_run_after_its_restarts() {
+    let sc = scene(&small_three_layer("restarts = 1"));
+    let dir = scratch("recovery-again");
+    let run_id = format!("recovery-again-{}", std::process::id());
+    let net = Network {
+        recording: Some(dir.join("run.mcap")),
+        ..Network::default()
+    };
+    let opts = options(&run_id);
+    let mut kills = Vec::new();
+    let err = run_distributed(&sc, &opts, exe(), &net, |r| {
+        if (r.iteration == 2 || r.iteration == 5) && kills.len() < 2 {
+            kills.push(kill_node(&run_id, "subdomain", "0"));
+        }
+    })
+    .expect_err("the run must stop");
+    let msg = format!("{err:#}");
+    assert_eq!(kills.len(), 2, "{msg}");
+    assert_ne!(kills[0], kills[1], "the second kill hits the replacement");
+    assert!(
+        msg.contains("node subdomain:0 died again after 1 restart(s) (deployment.restarts = 1)"),
+        "{msg}"
+    );
+    assert!(
+        processes_with(&run_id, &[]).is_empty(),
+        "processes of run {run_id} remain"
+    );
+}
+
+/// A scene whose recording leaves messages out cannot resume a node: the launcher says restarts
+/// are off and why, and a node's death stops the run as without supervision.
+#[test]
+fn restarts_need_a_complete_recording() {
+    let text = small_three_layer("") + "\n[recording]\nfull_fields_every = 5\n";
+    let sc = scene(&text);
+    assert_eq!(
+        sc.recording.incomplete().as_deref(),
+        Some("recording.full_fields_every = 5 leaves full fields out")
+    );
+    let dir = scratch("recovery-thinned");
+    let run_id = format!("recovery-thinned-{}", std::process::id());
+    let net = Network {
+        recording: Some(dir.join("run.mcap")),
+        ..Network::default()
+    };
+    let opts = options(&run_id);
+    let mut killed = false;
+    let err = run_distributed(&sc, &opts, exe(), &net, |r| {
+        if r.iteration == 2 && !killed {
+            kill_node(&run_id, "subdomain", "0");
+            killed = true;
+        }
+    })
+    .expect_err("the run must stop");
+    assert!(format!("{err:#}").contains("node subdomain:0 failed"), "{err:#}");
+    assert!(
+        processes_with(&run_id, &[]).is_empty(),
+        "processes of run {run_id} remain"
+    );
+}
