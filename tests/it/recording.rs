@@ -401,3 +401,43 @@ fn sigterm_leaves_a_finalised_recording_both_readers_open() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A full disk (the recording file on `/dev/full`, where every write fails with ENOSPC): both an
+/// in-process and a multi-process run fail before solving, exit 2, name the recording's path and
+/// the cause, and write no summary or fields file.
+#[test]
+fn a_full_disk_fails_the_run_before_solving() {
+    if !Path::new("/dev/full").exists() {
+        println!("skipped: no /dev/full on this system");
+        return;
+    }
+    let dir = temp_dir("disk-full");
+    let scene_path = dir.join("small-three-layer.toml");
+    std::fs::write(&scene_path, scene_text("small-three-layer")).unwrap();
+    for (run_id, in_process) in [("full-1", true), ("full-2", false)] {
+        let file = dir.join(format!("small-three-layer-{run_id}.mcap"));
+        std::os::unix::fs::symlink("/dev/full", &file).unwrap();
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_glissade"));
+        cmd.args(["run", "--quiet", "--run-id", run_id, "--out"]).arg(&dir);
+        if in_process {
+            cmd.arg("--in-process");
+        }
+        let out = cmd.arg(&scene_path).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        // The launcher's error (its last lines: the recorder's own error, multi-process).
+        let error = stderr.find("\nerror:").or(stderr.starts_with("error:").then_some(0)).map_or("", |i| &stderr[i..]);
+        assert!(
+            error.contains(&file.display().to_string()) && stderr.contains("No space left on device"),
+            "in-process {in_process}: {stderr}"
+        );
+        assert!(!stderr.contains("iterating"), "the run started: {stderr}");
+        let written: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains(run_id) && !n.ends_with(".mcap"))
+            .collect();
+        assert!(written.is_empty(), "outputs written: {written:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

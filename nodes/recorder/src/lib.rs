@@ -196,7 +196,7 @@ impl Recorder {
         let file = File::create(path).map_err(|e| io(format!("cannot create the file: {e}")))?;
         let mcap_err = |e: mcap::McapError| RecorderError::Mcap {
             path: path.to_path_buf(),
-            detail: e.to_string(),
+            detail: mcap_detail(&e),
         };
         let mut writer = mcap::WriteOptions::new()
             .profile("glissade")
@@ -263,7 +263,7 @@ impl Recorder {
     fn mcap_err(&self, e: mcap::McapError) -> RecorderError {
         RecorderError::Mcap {
             path: self.path.clone(),
-            detail: e.to_string(),
+            detail: mcap_detail(&e),
         }
     }
 
@@ -307,7 +307,7 @@ impl Recorder {
                             .add_schema(&schema_name, ENCODING, text.as_bytes())
                             .map_err(|e| RecorderError::Mcap {
                                 path: self.path.clone(),
-                                detail: e.to_string(),
+                                detail: mcap_detail(&e),
                             })?;
                         self.schemas.insert(schema_name, s);
                         s
@@ -320,7 +320,7 @@ impl Recorder {
                     .add_channel(schema, topic, ENCODING, &meta)
                     .map_err(|e| RecorderError::Mcap {
                         path: self.path.clone(),
-                        detail: e.to_string(),
+                        detail: mcap_detail(&e),
                     })?;
                 self.channels.insert(topic.to_string(), c);
                 self.stats.channels = self.channels.len();
@@ -390,3 +390,14 @@ pub fn log_time_now() -> u64 {
 
 #[cfg(test)]
 mod tests;
+
+/// An mcap error with its causes (e.g. "I/O error from writing…: No space left on device").
+fn mcap_detail(e: &mcap::McapError) -> String {
+    let mut s = e.to_string();
+    let mut source = std::error::Error::source(e);
+    while let Some(cause) = source {
+        s.push_str(&format!(": {cause}"));
+        source = cause.source();
+    }
+    s
+}
