@@ -7,6 +7,7 @@ mod bad_input;
 mod bench;
 mod common;
 mod distributed;
+mod fuzz_nodes;
 mod latin_perfect;
 mod monolithic;
 mod node_failures;

@@ -59,14 +59,14 @@ fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
     pids[0]
 }
 
-/// kill -9 of each node role (subdomain, interface, coarse) at an iteration drawn by a seeded
-/// generator: the launcher restarts the node, which resumes from the recording, and the run's
+/// kill -9 of each node role (subdomain, interface, coarse, and one of several interface nodes)
+/// at an iteration drawn by a seeded generator: the launcher restarts the node, which resumes from the recording, and the run's
 /// decisions and every interface field are bit-identical to the undisturbed in-process run
 /// (itself bit-identical to a multi-process run, tests/it/distributed.rs).
 #[test]
 fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
-    let sc = scene(&small_three_layer(""));
-    let undisturbed = run_in_process(&sc, &options("undisturbed"), |_| {}).expect("undisturbed run");
+    let undisturbed =
+        run_in_process(&scene(&small_three_layer("")), &options("undisturbed"), |_| {}).expect("undisturbed run");
     let n = undisturbed.iterations.len() as u64;
     assert!(
         n > 6,
@@ -74,12 +74,20 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
     );
     let seed = 0x9e37_79b9_7f4a_7c15;
     let mut rng = Rng(seed);
-    for (role, index) in [("subdomain", "1"), ("interface", "0"), ("coarse", "0")] {
+    // The last case: one of three interface nodes, one that does not decide (it sends its
+    // indicator sums to node 0); several interface nodes are bit-identical to one.
+    for (role, index, deployment) in [
+        ("subdomain", "1", ""),
+        ("interface", "0", ""),
+        ("coarse", "0", ""),
+        ("interface", "1", "interface_nodes = 3"),
+    ] {
+        let sc = scene(&small_three_layer(deployment));
         // Not the last iteration: the kill must land while the run still needs the node.
         let at = 1 + rng.below(n - 3) as u32;
         println!("seed {seed:#x}: kill {role}:{index} at iteration {at} of {n}");
-        let dir = scratch(&format!("recovery-{role}"));
-        let run_id = format!("recovery-{role}-{}", std::process::id());
+        let dir = scratch(&format!("recovery-{role}-{index}"));
+        let run_id = format!("recovery-{role}-{index}-{}", std::process::id());
         let net = Network {
             recording: Some(dir.join("run.mcap")),
             ..Network::default()

@@ -4,7 +4,7 @@
 //! (all messages of a round are handled, nodes in parallel on a rayon pool, outputs collected in
 //! node order), so a run is deterministic whatever the thread count.
 
-use glissade_messages::{key_matches, Envelope, Field, Message, NodeId, Role, Stage, SCHEMA_VERSION};
+use glissade_messages::{key_matches, Envelope, Field, Message, NodeId, Payload, Role, Stage, SCHEMA_VERSION};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -31,20 +31,50 @@ impl RunContext {
     }
 }
 
-/// A failure inside a node, named by the node.
+/// What a [`NodeError`] means for the run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// The node could not go on: a value became non-finite, an operator could not be built, a
+    /// received field holds NaN or ∞. The run must stop with this error.
+    Failed,
+    /// The node refused one message and its state is exactly what it was before: a message of
+    /// another iteration or stage, a duplicate, a wrong sender or recipient, a field of the wrong
+    /// shape. A transport that may carry foreign or damaged messages logs it and goes on; the
+    /// in-process bus, where every message comes from a node of the run, stops on it (a bug).
+    Rejected,
+}
+
+/// A failure inside a node, or a message it refused, named by the node.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{node}: {detail}")]
 pub struct NodeError {
     pub node: NodeId,
     pub detail: String,
+    pub kind: ErrorKind,
 }
 
 impl NodeError {
+    /// A failure: the run cannot go on.
     pub fn new(node: NodeId, detail: impl std::fmt::Display) -> Self {
         Self {
             node,
             detail: detail.to_string(),
+            kind: ErrorKind::Failed,
         }
+    }
+
+    /// A refused message: the node's state is unchanged and the run may go on without it.
+    pub fn rejected(node: NodeId, detail: impl std::fmt::Display) -> Self {
+        Self {
+            node,
+            detail: detail.to_string(),
+            kind: ErrorKind::Rejected,
+        }
+    }
+
+    /// The node refused one message and is unchanged ([`ErrorKind::Rejected`]).
+    pub fn is_rejection(&self) -> bool {
+        self.kind == ErrorKind::Rejected
     }
 }
 
@@ -194,12 +224,73 @@ impl InProcessBus {
     }
 }
 
-/// Checks that a field has the expected shape; names the field in the error.
+/// Checks that a field has the expected shape and holds as many values as it declares; names the
+/// field in the error (a rejection: the node has not read it).
 pub fn expect_shape(node: NodeId, what: &str, f: &Field, rows: usize, cols: usize) -> Result<(), NodeError> {
     if f.rows() != rows || f.cols() != cols {
-        return Err(NodeError::new(
+        return Err(NodeError::rejected(
             node,
             format!("{what} has shape {} × {}, expected {rows} × {cols}", f.rows(), f.cols()),
+        ));
+    }
+    if f.data.len() as u64 != rows as u64 * cols as u64 {
+        return Err(NodeError::rejected(
+            node,
+            format!("{what} declares {rows} × {cols} values but holds {}", f.data.len()),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks that a received field holds finite values only; names the field, the entry and `from`
+/// in the error (a failure: its sender diverged or the message was damaged, the run stops).
+pub fn expect_finite(node: NodeId, what: &str, from: &str, f: &Field) -> Result<(), NodeError> {
+    match f.first_non_finite() {
+        Some((r, c, v)) => Err(NodeError::new(
+            node,
+            format!("{what} from {from} holds {v} at row {r}, column {c}: not finite"),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// The stage every payload is published at.
+pub fn stage_of(payload: &Payload) -> Stage {
+    match payload {
+        Payload::Scene { .. } | Payload::HomogenizedOperator { .. } => Stage::Setup,
+        Payload::MacroForces { .. } => Stage::Micro1,
+        Payload::MacroDisplacements { .. } => Stage::Macro,
+        Payload::BoundaryState { .. } | Payload::AndersonGram { .. } | Payload::AndersonStep { .. } => Stage::Linear,
+        Payload::LocalDirections { .. } | Payload::Decision(_) | Payload::IndicatorPartials { .. } => Stage::Local,
+        Payload::InterfaceSolution(_) | Payload::Displacement { .. } => Stage::Final,
+    }
+}
+
+/// Checks a message's origin: sent by a node of `role` (with index `index` when given) at the
+/// stage its payload belongs to. Names the message, the sender and the stage in the rejection.
+pub fn expect_origin(node: NodeId, msg: &Message, role: Role, index: Option<u32>) -> Result<(), NodeError> {
+    let (env, field) = (&msg.envelope, msg.payload.field_key());
+    if env.sender.role != role || index.is_some_and(|i| env.sender.index != i) {
+        let from = match index {
+            Some(i) => format!("{}:{i}", role.key()),
+            None => format!("a {} node", role.key()),
+        };
+        return Err(NodeError::rejected(
+            node,
+            format!(
+                "{field} of iteration {} sent by {}, expected from {from}",
+                env.iteration, env.sender
+            ),
+        ));
+    }
+    let stage = stage_of(&msg.payload);
+    if env.stage != stage {
+        return Err(NodeError::rejected(
+            node,
+            format!(
+                "{field} of iteration {} from {} at stage {:?}, expected stage {stage:?}",
+                env.iteration, env.sender, env.stage
+            ),
         ));
     }
     Ok(())

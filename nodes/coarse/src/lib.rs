@@ -4,7 +4,7 @@
 
 use faer::Mat;
 use glissade_bus::convert::{field_of, mat_of};
-use glissade_bus::{expect_shape, Node, NodeError, RunContext};
+use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::coarse::{Contribution, MacroProblem};
 use glissade_messages::{role_field_topic, Message, NodeId, Payload, Role, Stage};
 use std::collections::BTreeMap;
@@ -25,7 +25,10 @@ pub struct CoarseNode {
     problem: Option<MacroProblem>,
     columns: BTreeMap<u32, Vec<usize>>,
     forces: BTreeMap<u32, Mat<f64>>,
+    /// Iteration of the macro forces being gathered: the number of macro problems solved.
     iteration: u32,
+    /// The last iteration whose decision arrived.
+    decided: Option<u32>,
     finished: bool,
 }
 
@@ -45,8 +48,21 @@ impl CoarseNode {
             columns: BTreeMap::new(),
             forces: BTreeMap::new(),
             iteration: 0,
+            decided: None,
             finished: false,
         }
+    }
+
+    /// Refuses a message of a subdomain that takes no part, or sent by another node than the
+    /// subdomain it names, or at another stage than its payload's.
+    fn expect_subdomain(&self, msg: &Message, what: &str, subdomain: u32) -> Result<(), NodeError> {
+        if !self.subdomains.contains(&subdomain) {
+            return Err(NodeError::rejected(
+                self.id,
+                format!("{what} from unknown subdomain {subdomain}"),
+            ));
+        }
+        expect_origin(self.id, msg, Role::Subdomain, Some(subdomain))
     }
 
     fn assemble(&mut self) -> Result<(), NodeError> {
@@ -90,6 +106,7 @@ impl CoarseNode {
             });
         }
         self.forces.clear();
+        self.iteration += 1;
         out
     }
 }
@@ -112,29 +129,48 @@ impl Node for CoarseNode {
         Ok(Vec::new())
     }
 
+    /// Every message is checked in full (origin, stage, iteration, shapes, finite values) before
+    /// it changes anything: a refused message leaves the node as it was.
     fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError> {
         if self.finished {
             return Ok(Vec::new());
         }
+        let it = msg.envelope.iteration;
         match &msg.payload {
             Payload::HomogenizedOperator { subdomain, slots, l_e } => {
-                if !self.subdomains.contains(subdomain) {
-                    return Err(NodeError::new(
+                self.expect_subdomain(msg, "homogenized operator", *subdomain)?;
+                if it != 0 {
+                    return Err(NodeError::rejected(
                         self.id,
-                        format!("homogenized operator from unknown subdomain {subdomain}"),
+                        format!(
+                            "homogenized operator of iteration {it} from subdomain {subdomain}: it is sent at setup"
+                        ),
+                    ));
+                }
+                if self.operators.contains_key(subdomain) {
+                    return Err(NodeError::rejected(
+                        self.id,
+                        format!("second homogenized operator from subdomain {subdomain}"),
                     ));
                 }
                 let slots: Vec<(usize, usize)> = slots.iter().map(|&(i, k)| (i as usize, k as usize)).collect();
-                for &(i, k) in &slots {
+                for (n, &(i, k)) in slots.iter().enumerate() {
                     if self.n_modes.get(i) != Some(&k) {
-                        return Err(NodeError::new(
+                        return Err(NodeError::rejected(
                             self.id,
                             format!("subdomain {subdomain} reports {k} macro modes on interface {i}"),
+                        ));
+                    }
+                    if slots[..n].iter().any(|s| s.0 == i) {
+                        return Err(NodeError::rejected(
+                            self.id,
+                            format!("subdomain {subdomain} reports interface {i} twice"),
                         ));
                     }
                 }
                 let n: usize = slots.iter().map(|s| s.1).sum();
                 expect_shape(self.id, "l_e", l_e, n, n)?;
+                expect_finite(self.id, "l_e", &format!("subdomain {subdomain}"), l_e)?;
                 self.operators.insert(*subdomain, (slots, mat_of(l_e)));
                 if self.operators.len() == self.subdomains.len() {
                     self.assemble()?;
@@ -145,21 +181,20 @@ impl Node for CoarseNode {
                 Ok(Vec::new())
             }
             Payload::MacroForces { subdomain, forces } => {
-                if !self.subdomains.contains(subdomain) {
-                    return Err(NodeError::new(
-                        self.id,
-                        format!("macro forces from unknown subdomain {subdomain}"),
-                    ));
-                }
-                if self.forces.is_empty() {
-                    self.iteration = msg.envelope.iteration;
-                } else if msg.envelope.iteration != self.iteration {
-                    return Err(NodeError::new(
+                self.expect_subdomain(msg, "macro forces", *subdomain)?;
+                if it != self.iteration {
+                    return Err(NodeError::rejected(
                         self.id,
                         format!(
-                            "macro forces of iteration {} mixed with iteration {}",
-                            msg.envelope.iteration, self.iteration
+                            "macro forces of iteration {it} from subdomain {subdomain} while gathering iteration {}",
+                            self.iteration
                         ),
+                    ));
+                }
+                if self.forces.contains_key(subdomain) {
+                    return Err(NodeError::rejected(
+                        self.id,
+                        format!("second macro forces of iteration {it} from subdomain {subdomain}"),
                     ));
                 }
                 let n_m = self
@@ -167,23 +202,51 @@ impl Node for CoarseNode {
                     .get(subdomain)
                     .map(|(slots, _)| slots.iter().map(|s| s.1).sum())
                     .ok_or_else(|| {
-                        NodeError::new(
+                        NodeError::rejected(
                             self.id,
                             format!("macro forces from subdomain {subdomain} before its homogenized operator"),
                         )
                     })?;
                 expect_shape(self.id, "forces", forces, n_m, self.n_times)?;
+                expect_finite(self.id, "forces", &format!("subdomain {subdomain}"), forces)?;
                 self.forces.insert(*subdomain, mat_of(forces));
                 if self.forces.len() == self.subdomains.len() && self.problem.is_some() {
                     return Ok(self.solve());
                 }
                 Ok(Vec::new())
             }
-            Payload::Decision(d) if d.verdict.is_stop() => {
+            Payload::Decision(d) => {
+                expect_origin(self.id, msg, Role::Interface, Some(0))?;
+                // The decision of iteration n follows the macro problem of iteration n; a late
+                // decision to go on is let pass.
+                let current = it.checked_add(1) == Some(self.iteration);
+                if it >= self.iteration || self.decided == Some(it) || (d.verdict.is_stop() && !current) {
+                    return Err(NodeError::rejected(
+                        self.id,
+                        format!(
+                            "{} decision of iteration {it} while gathering the macro forces of iteration {}",
+                            if self.decided == Some(it) { "second" } else { "a" },
+                            self.iteration
+                        ),
+                    ));
+                }
+                if !d.verdict.is_stop() {
+                    if current {
+                        self.decided = Some(it);
+                    }
+                    return Ok(Vec::new());
+                }
                 self.finished = true;
                 Ok(Vec::new())
             }
-            _ => Ok(Vec::new()),
+            other => Err(NodeError::rejected(
+                self.id,
+                format!(
+                    "the coarse node does not take {} messages (from {}, iteration {it})",
+                    other.field_key(),
+                    msg.envelope.sender
+                ),
+            )),
         }
     }
 

@@ -18,7 +18,7 @@
 
 use faer::Mat;
 use glissade_bus::convert::field_of;
-use glissade_bus::{expect_shape, Node, NodeError, RunContext};
+use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonCoordinator, AndersonStep, GramPartials, MAX_CONDITION};
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
@@ -130,6 +130,8 @@ fn period_two(window: &[f64]) -> Option<(f64, f64)> {
 struct Decider {
     rule: StopRule,
     n_nodes: u32,
+    /// The interfaces each interface node owns (ascending), by node index.
+    groups: Vec<Vec<u32>>,
     /// Each interface node's per-interface indicators of the current iteration, by node index.
     shares: BTreeMap<u32, Vec<InterfaceIndicators>>,
     /// Why the current iteration diverged, when a node saw a non-finite value.
@@ -138,7 +140,11 @@ struct Decider {
     /// subdomain, the subdomains that send them (every one with an interface), and whether search
     /// directions changed since the last step.
     anderson: Option<AndersonCoordinator>,
+    /// Largest number of stored differences a subdomain may hold (the scene's window).
+    window: usize,
     grams: BTreeMap<u32, GramPartials>,
+    /// The last iteration whose Anderson step was sent.
+    stepped: Option<u32>,
     anderson_participants: Vec<u32>,
     directions_changed: bool,
 }
@@ -230,13 +236,26 @@ impl InterfaceNode {
         let decider = (index == 0).then(|| Decider {
             rule: StopRule::new(&model.solver),
             n_nodes: groups.len() as u32,
+            groups: groups
+                .iter()
+                .map(|g| {
+                    let mut g: Vec<u32> = g.iter().map(|&i| i as u32).collect();
+                    g.sort_unstable();
+                    g
+                })
+                .collect(),
             shares: BTreeMap::new(),
             diverged: None,
             anderson: match model.solver.acceleration {
                 Acceleration::None => None,
                 Acceleration::Anderson { .. } => Some(AndersonCoordinator::new(MAX_CONDITION)),
             },
+            window: match model.solver.acceleration {
+                Acceleration::None => 0,
+                Acceleration::Anderson { window } => window,
+            },
             grams: BTreeMap::new(),
+            stepped: None,
             anderson_participants: with_slot(&|_| true),
             directions_changed: false,
         });
@@ -268,6 +287,20 @@ impl InterfaceNode {
             decider,
             finished: false,
         }
+    }
+
+    /// The rejection of a message this node does not take.
+    fn not_taken(&self, msg: &Message) -> NodeError {
+        NodeError::rejected(
+            self.id,
+            format!(
+                "interface node {} does not take {} messages (from {}, iteration {})",
+                self.id.index,
+                msg.payload.field_key(),
+                msg.envelope.sender,
+                msg.envelope.iteration
+            ),
+        )
     }
 
     /// Subdomains whose boundary state this node needs (a side on an interface it owns).
@@ -480,11 +513,12 @@ impl InterfaceNode {
         diverged: &Option<String>,
     ) -> Result<Vec<Message>, NodeError> {
         let Some(d) = self.decider.as_ref() else {
-            return Ok(Vec::new());
+            return Err(self.not_taken(msg));
         };
+        expect_origin(self.id, msg, Role::Interface, None)?;
         let (from, it) = (msg.envelope.sender.index, msg.envelope.iteration);
         if from == 0 || from >= d.n_nodes {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!(
                     "indicators from interface node {from}; this run has interface nodes 0 to {}",
@@ -493,7 +527,7 @@ impl InterfaceNode {
             ));
         }
         if it != self.iteration {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!(
                     "indicators of iteration {it} from interface node {from} while at iteration {}",
@@ -502,14 +536,14 @@ impl InterfaceNode {
             ));
         }
         if d.shares.contains_key(&from) {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!("second indicators of iteration {it} from interface node {from}"),
             ));
         }
         let n_itf = self.model.interfaces.len() as u32;
         if let Some(bad) = share.iter().find(|i| i.interface >= n_itf) {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!(
                     "indicators of interface {} from interface node {from}: the scene has {n_itf}",
@@ -517,9 +551,17 @@ impl InterfaceNode {
                 ),
             ));
         }
+        let owned = &d.groups[from as usize];
+        let covers: Vec<u32> = share.iter().map(|i| i.interface).collect();
+        if diverged.is_none() && &covers != owned {
+            return Err(NodeError::rejected(
+                self.id,
+                format!("indicators of interfaces {covers:?} from interface node {from}, which owns {owned:?}"),
+            ));
+        }
         let held: BTreeSet<u32> = d.shares.values().flatten().map(|i| i.interface).collect();
         if let Some(dup) = share.iter().find(|i| held.contains(&i.interface)) {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!(
                     "indicators of interface {} from interface node {from}, which another node owns",
@@ -532,18 +574,19 @@ impl InterfaceNode {
 
     /// A non-deciding node acts on the decider's decision.
     fn decision(&mut self, msg: &Message, d: &Decision) -> Result<Vec<Message>, NodeError> {
-        if self.decider.is_some() || msg.envelope.sender == self.id {
-            return Ok(Vec::new());
+        if self.decider.is_some() {
+            return Err(self.not_taken(msg));
         }
+        expect_origin(self.id, msg, Role::Interface, Some(0))?;
         let it = msg.envelope.iteration;
         if it != self.iteration {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!("decision of iteration {it} while at iteration {}", self.iteration),
             ));
         }
         if !self.reported && !d.verdict.is_stop() {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!("decision to continue at iteration {it} before this node's indicators"),
             ));
@@ -557,7 +600,7 @@ impl InterfaceNode {
     /// order, decides the step and sends it.
     fn anderson_gram(
         &mut self,
-        iteration: u32,
+        msg: &Message,
         s: u32,
         gram: &glissade_messages::Field,
         projection: &glissade_messages::Field,
@@ -565,27 +608,51 @@ impl InterfaceNode {
     ) -> Result<Vec<Message>, NodeError> {
         let id = self.id;
         let at = self.iteration;
-        let Some(d) = self.decider.as_mut().filter(|d| d.anderson.is_some()) else {
-            return Ok(Vec::new());
-        };
+        let iteration = msg.envelope.iteration;
+        if self.decider.as_ref().is_none_or(|d| d.anderson.is_none()) {
+            return Err(self.not_taken(msg));
+        }
+        expect_origin(id, msg, Role::Subdomain, Some(s))?;
+        let d = self.decider.as_mut().expect("checked");
         if !d.anderson_participants.contains(&s) {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 id,
                 format!("Anderson partials from subdomain {s}, which has no interface"),
             ));
         }
         if iteration != at {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 id,
                 format!("Anderson partials of iteration {iteration} from subdomain {s} while at iteration {at}"),
             ));
         }
+        if d.stepped == Some(iteration) {
+            return Err(NodeError::rejected(
+                id,
+                format!("Anderson partials of iteration {iteration} from subdomain {s} after the step was sent"),
+            ));
+        }
+        if d.grams.contains_key(&s) {
+            return Err(NodeError::rejected(
+                id,
+                format!("second Anderson partials of iteration {iteration} from subdomain {s}"),
+            ));
+        }
         let k = gram.rows();
+        if k > d.window {
+            return Err(NodeError::rejected(
+                id,
+                format!(
+                    "Anderson partials of iteration {iteration} from subdomain {s} over {k} differences; the window is {}",
+                    d.window
+                ),
+            ));
+        }
         expect_shape(id, "gram", gram, k, k)?;
         expect_shape(id, "projection", projection, k, 1)?;
         if let Some((other, p)) = d.grams.iter().next() {
             if p.k != k {
-                return Err(NodeError::new(
+                return Err(NodeError::rejected(
                     id,
                     format!(
                         "Anderson partials of iteration {iteration}: subdomain {s} holds {k} differences, subdomain {other} {}",
@@ -600,12 +667,7 @@ impl InterfaceNode {
             projection: projection.data.clone(),
             residual2,
         };
-        if d.grams.insert(s, partials).is_some() {
-            return Err(NodeError::new(
-                id,
-                format!("second Anderson partials of iteration {iteration} from subdomain {s}"),
-            ));
-        }
+        d.grams.insert(s, partials);
         if d.grams.len() < d.anderson_participants.len() {
             return Ok(Vec::new());
         }
@@ -614,6 +676,7 @@ impl InterfaceNode {
             sum.add(p);
         }
         d.grams.clear();
+        d.stepped = Some(at);
         let changed = std::mem::take(&mut d.directions_changed);
         let step = d.anderson.as_mut().expect("checked").decide(&sum, changed);
         let (gamma, restart) = match step {
@@ -665,16 +728,16 @@ impl Node for InterfaceNode {
                 gram,
                 projection,
                 residual2,
-            } => return self.anderson_gram(msg.envelope.iteration, *subdomain, gram, projection, *residual2),
+            } => return self.anderson_gram(msg, *subdomain, gram, projection, *residual2),
             Payload::IndicatorPartials { interfaces, diverged } => {
                 return self.indicator_partials(msg, interfaces, diverged)
             }
             Payload::Decision(d) => return self.decision(msg, d),
             Payload::BoundaryState { subdomain, w, f } => (*subdomain, w, f),
-            _ => return Ok(Vec::new()),
+            _ => return Err(self.not_taken(msg)),
         };
         if self.layouts.get(s as usize).is_none_or(Option::is_none) {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!("boundary state from subdomain {s}, which has no interface"),
             ));
@@ -683,8 +746,9 @@ impl Node for InterfaceNode {
             // A side on interfaces other nodes own only.
             return Ok(Vec::new());
         }
+        expect_origin(self.id, msg, Role::Subdomain, Some(s))?;
         if msg.envelope.iteration != self.iteration {
-            return Err(NodeError::new(
+            return Err(NodeError::rejected(
                 self.id,
                 format!(
                     "boundary state of iteration {} from subdomain {s} while at iteration {}",
@@ -692,12 +756,8 @@ impl Node for InterfaceNode {
                 ),
             ));
         }
-        if self.reported {
-            // This iteration already diverged here: the decision is on its way.
-            return Ok(Vec::new());
-        }
-        if !self.received.insert(s) {
-            return Err(NodeError::new(
+        if self.received.contains(&s) {
+            return Err(NodeError::rejected(
                 self.id,
                 format!(
                     "second boundary state of iteration {} from subdomain {s}",
@@ -705,10 +765,15 @@ impl Node for InterfaceNode {
                 ),
             ));
         }
+        if self.reported {
+            // This iteration already diverged here: the decision is on its way.
+            return Ok(Vec::new());
+        }
         let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
         let nt = self.model.time.n_points();
         expect_shape(self.id, "w", w, n_b, nt)?;
         expect_shape(self.id, "f", f, n_b, nt)?;
+        self.received.insert(s);
         for (name, field) in [("W", w), ("F", f)] {
             if let Some((r, c, v)) = field.first_non_finite() {
                 let detail = format!(
@@ -882,9 +947,10 @@ mod tests {
         let err = n0_copy.handle(&wrong).unwrap_err();
         assert!(
             err.detail
-                .contains("interface 1 from interface node 1, which another node owns"),
+                .contains("indicators of interfaces [1] from interface node 1, which owns [0]"),
             "{err}"
         );
+        assert!(err.is_rejection(), "{err:?}");
 
         from0.extend(n0.handle(partials).unwrap());
         let decision = |out: &[Message]| {

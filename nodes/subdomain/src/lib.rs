@@ -14,7 +14,7 @@
 
 use faer::Mat;
 use glissade_bus::convert::{copy_into, field_of};
-use glissade_bus::{expect_shape, Node, NodeError, RunContext};
+use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonHistory, AndersonStep};
 use glissade_mechanics::linear::SubdomainSolver;
 use glissade_mechanics::model::{Acceleration, Model};
@@ -57,6 +57,17 @@ pub struct SubdomainOptions {
     pub acceleration: Acceleration,
 }
 
+/// What a subdomain node waits for next within its iteration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// q̂ of the next iteration (its boundary state is sent).
+    Directions,
+    /// w̃ of this iteration (its macro forces are sent).
+    Macro,
+    /// The Anderson step of this iteration (its partials are sent).
+    Step,
+}
+
 pub struct SubdomainNode {
     id: NodeId,
     ctx: RunContext,
@@ -75,7 +86,9 @@ pub struct SubdomainNode {
     macro_forces: Mat<f64>,
     /// Anderson history (acceleration on) and whether the node waits for its step.
     anderson: Option<AndersonHistory>,
-    awaiting_step: bool,
+    phase: Phase,
+    /// The last iteration whose decision arrived.
+    decided: Option<u32>,
     /// Per boundary slot (interface), whether this iteration's q̂ rows arrived (several interface
     /// nodes each send the rows of their interfaces).
     directions_in: Vec<bool>,
@@ -115,7 +128,8 @@ impl SubdomainNode {
                 Acceleration::None => None,
                 Acceleration::Anderson { window } => Some(AndersonHistory::new(window, options.relaxation, n_b, nt)),
             },
-            awaiting_step: false,
+            phase: Phase::Directions,
+            decided: None,
             directions_in: vec![false; n_slots],
             finished: false,
             pgd: None,
@@ -221,6 +235,7 @@ impl SubdomainNode {
         let coarse = self.options.coarse && self.solver.n_macro() > 0;
         self.solve_micro1(coarse);
         if coarse {
+            self.phase = Phase::Macro;
             vec![self.msg(
                 Stage::Micro1,
                 Payload::MacroForces {
@@ -258,7 +273,7 @@ impl SubdomainNode {
             }
             if self.iteration >= 2 {
                 let p = history.partials();
-                self.awaiting_step = true;
+                self.phase = Phase::Step;
                 return self.msg(
                     Stage::Linear,
                     Payload::AndersonGram {
@@ -276,6 +291,7 @@ impl SubdomainNode {
                 self.f[(r, j)] = mu * self.f1[(r, j)] + (1.0 - mu) * self.f[(r, j)];
             }
         }
+        self.phase = Phase::Directions;
         self.boundary_state()
     }
 
@@ -287,6 +303,36 @@ impl SubdomainNode {
                 w: field_of(self.w.as_ref()),
                 f: field_of(self.f.as_ref()),
             },
+        )
+    }
+
+    /// Refuses a message addressed to another subdomain.
+    fn expect_recipient(&self, what: &str, subdomain: u32) -> Result<(), NodeError> {
+        if subdomain != self.subdomain() {
+            return Err(NodeError::rejected(
+                self.id,
+                format!(
+                    "{what} addressed to subdomain {subdomain}, this is subdomain {}",
+                    self.subdomain()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The rejection of a message that is not the one this node waits for.
+    fn out_of_turn(&self, what: &str, it: u32) -> NodeError {
+        let waits = match self.phase {
+            Phase::Directions => format!("local directions of iteration {}", self.iteration + 1),
+            Phase::Macro => format!("macro displacements of iteration {}", self.iteration),
+            Phase::Step => format!("the Anderson step of iteration {}", self.iteration),
+        };
+        NodeError::rejected(
+            self.id,
+            format!(
+                "{what} of iteration {it} while at iteration {}, waiting for {waits}",
+                self.iteration
+            ),
         )
     }
 
@@ -358,38 +404,46 @@ impl Node for SubdomainNode {
         Ok(out)
     }
 
+    /// Every message is checked in full (origin, stage, iteration, phase, recipient, shapes, finite
+    /// values) before it changes anything: a refused message leaves the node as it was.
     fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError> {
         if self.finished {
             return Ok(Vec::new());
         }
         let it = msg.envelope.iteration;
+        let me = self.subdomain();
         match &msg.payload {
             Payload::LocalDirections {
                 subdomain,
                 interfaces,
                 q_hat,
-            } if *subdomain == self.subdomain() => {
-                if it != self.iteration + 1 {
-                    return Err(NodeError::new(
-                        self.id,
-                        format!(
-                            "local directions of iteration {it} while at iteration {}",
-                            self.iteration
-                        ),
-                    ));
+            } => {
+                expect_origin(self.id, msg, Role::Interface, None)?;
+                self.expect_recipient("local directions", *subdomain)?;
+                if it != self.iteration + 1 || self.phase != Phase::Directions {
+                    return Err(self.out_of_turn("local directions", it));
                 }
                 // One interface node's rows: its interfaces' slots, one after the other.
                 let slots = &self.solver.op.layout.slots;
+                if interfaces.is_empty() {
+                    return Err(NodeError::rejected(
+                        self.id,
+                        format!(
+                            "local directions of iteration {it} from {} cover no interface",
+                            msg.envelope.sender
+                        ),
+                    ));
+                }
                 let mut at = Vec::with_capacity(interfaces.len());
                 for &i in interfaces {
                     let Some(k) = slots.iter().position(|sl| sl.interface == i as usize) else {
-                        return Err(NodeError::new(
+                        return Err(NodeError::rejected(
                             self.id,
                             format!("local directions of interface {i}, which is not on this subdomain's boundary"),
                         ));
                     };
                     if self.directions_in[k] || at.contains(&k) {
-                        return Err(NodeError::new(
+                        return Err(NodeError::rejected(
                             self.id,
                             format!("second local directions of interface {i} at iteration {it}"),
                         ));
@@ -398,6 +452,7 @@ impl Node for SubdomainNode {
                 }
                 let rows = at.iter().map(|&k| 2 * slots[k].n_pairs).sum();
                 expect_shape(self.id, "q_hat", q_hat, rows, self.q_hat.ncols())?;
+                expect_finite(self.id, "q_hat", &msg.envelope.sender.to_string(), q_hat)?;
                 let mut r0 = 0;
                 for &k in &at {
                     let (offset, n) = (slots[k].offset, 2 * slots[k].n_pairs);
@@ -416,43 +471,38 @@ impl Node for SubdomainNode {
                 self.iteration = it;
                 Ok(self.micro1())
             }
-            Payload::MacroDisplacements { subdomain, w_tilde } if *subdomain == self.subdomain() => {
-                if it != self.iteration {
-                    return Err(NodeError::new(
-                        self.id,
-                        format!(
-                            "macro displacements of iteration {it} while at iteration {}",
-                            self.iteration
-                        ),
-                    ));
+            Payload::MacroDisplacements { subdomain, w_tilde } => {
+                expect_origin(self.id, msg, Role::Coarse, Some(0))?;
+                self.expect_recipient("macro displacements", *subdomain)?;
+                if it != self.iteration || self.phase != Phase::Macro {
+                    return Err(self.out_of_turn("macro displacements", it));
                 }
                 expect_shape(self.id, "w_tilde", w_tilde, self.w_tilde.nrows(), self.w_tilde.ncols())?;
+                expect_finite(self.id, "w_tilde", "coarse:0", w_tilde)?;
                 copy_into(w_tilde, &mut self.w_tilde);
                 self.solve_micro2();
                 Ok(vec![self.finish_linear_stage()])
             }
             Payload::AndersonStep { gamma, restart } if self.anderson.is_some() => {
-                if !self.awaiting_step || it != self.iteration {
-                    return Err(NodeError::new(
-                        self.id,
-                        format!(
-                            "Anderson step of iteration {it} while at iteration {}{}",
-                            self.iteration,
-                            if self.awaiting_step {
-                                ""
-                            } else {
-                                " without partials sent"
-                            }
-                        ),
-                    ));
+                expect_origin(self.id, msg, Role::Interface, Some(0))?;
+                if it != self.iteration || self.phase != Phase::Step {
+                    return Err(self.out_of_turn("Anderson step", it));
                 }
                 let history = self.anderson.as_mut().expect("checked");
                 let step = match (restart, gamma.is_empty()) {
                     (true, _) => AndersonStep::Restart,
                     (false, true) => AndersonStep::Plain,
-                    (false, false) if gamma.len() == history.len() => AndersonStep::Mix(gamma.clone()),
+                    (false, false) if gamma.len() == history.len() => {
+                        if let Some((i, g)) = gamma.iter().enumerate().find(|(_, g)| !g.is_finite()) {
+                            return Err(NodeError::new(
+                                self.id,
+                                format!("Anderson step of iteration {it} has coefficient γ_{i} = {g}: not finite"),
+                            ));
+                        }
+                        AndersonStep::Mix(gamma.clone())
+                    }
                     (false, false) => {
-                        return Err(NodeError::new(
+                        return Err(NodeError::rejected(
                             self.id,
                             format!(
                                 "Anderson step with {} coefficients for {} stored differences",
@@ -463,10 +513,29 @@ impl Node for SubdomainNode {
                     }
                 };
                 history.apply(&step, &mut self.w, &mut self.f);
-                self.awaiting_step = false;
+                self.phase = Phase::Directions;
                 Ok(vec![self.boundary_state()])
             }
-            Payload::Decision(d) if d.verdict.is_stop() => {
+            Payload::Decision(d) => {
+                expect_origin(self.id, msg, Role::Interface, Some(0))?;
+                if it > self.iteration || self.decided == Some(it) || (d.verdict.is_stop() && it != self.iteration) {
+                    return Err(NodeError::rejected(
+                        self.id,
+                        format!(
+                            "{} decision of iteration {it} while at iteration {}",
+                            if self.decided == Some(it) { "second" } else { "a" },
+                            self.iteration
+                        ),
+                    ));
+                }
+                if !d.verdict.is_stop() {
+                    // Nothing to do on a decision to go on (q̂ brings the next iteration); a late
+                    // one, after that q̂, is let pass.
+                    if it == self.iteration {
+                        self.decided = Some(it);
+                    }
+                    return Ok(Vec::new());
+                }
                 self.finished = true;
                 Ok(if self.options.send_displacement {
                     vec![self.displacement()]
@@ -474,7 +543,14 @@ impl Node for SubdomainNode {
                     Vec::new()
                 })
             }
-            _ => Ok(Vec::new()),
+            other => Err(NodeError::rejected(
+                self.id,
+                format!(
+                    "subdomain {me} does not take {} messages (from {}, iteration {it})",
+                    other.field_key(),
+                    msg.envelope.sender
+                ),
+            )),
         }
     }
 

@@ -1,0 +1,518 @@
+//! Fuzzing of the nodes' input handling (issue 9, "bad messages"). A run of the small three-layer
+//! scene, with Anderson acceleration, the coarse problem and two interface nodes (so that every
+//! payload a node takes occurs: operators, macro forces and displacements, boundary states, Gram
+//! partials and steps, indicator partials, decisions, local directions), is driven by hand round
+//! by round as the in-process bus does. Around every genuine delivery the receiving node gets bad
+//! messages: before it, mutants of the genuine message (another iteration, stage, sender or
+//! recipient, fields of the wrong shape, NaN/∞ values, Anderson payloads of the wrong size) and
+//! messages of earlier rounds (replays, messages addressed to other nodes); after it, the same
+//! message again and byte-damaged copies of it passed through the decoder (bit flips, overwritten
+//! bytes, truncation).
+//!
+//! Every bad message must be refused (`Err` naming the problem: a rejection, or for non-finite
+//! values a failure), or ignored without output; none may panic; and the run, continued with the
+//! genuine messages only, must publish bit for bit what the undisturbed run publishes: a refused
+//! message leaves the node as it was.
+
+use glissade::runner::{build_nodes, Plan, Selection};
+use glissade_bus::{Node, NodeError, RunContext};
+use glissade_mechanics::scene::{load_str, LoadedScene};
+use glissade_messages::{decode, encode, key_matches, Expected, Field, Message, NodeId, Payload, Role, Stage};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::Arc;
+
+const RUN: &str = "fuzz-nodes";
+/// The scene's Anderson window (set below).
+const WINDOW: u32 = 3;
+/// Bad messages per genuine delivery: mutants before it, damaged copies after it.
+const BEFORE: usize = 170;
+const AFTER: usize = 100;
+
+fn scene() -> LoadedScene {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/launch/scenes/small-three-layer.toml");
+    let text = std::fs::read_to_string(path).expect("scene file");
+    // A tolerance the run does not reach, so that it ends at max_iterations with several mixed
+    // Anderson steps; two interface nodes so that indicator partials travel.
+    let fuzzed = text
+        .replace(
+            "[solver]\ntolerance = 1e-4\n",
+            &format!(
+                "[solver]\ntolerance = 1e-14\nmax_iterations = 8\nacceleration = \"anderson\"\nanderson_window = {WINDOW}\n"
+            ),
+        )
+        .replace("[deployment]\n", "[deployment]\ninterface_nodes = 2\n");
+    assert_ne!(fuzzed, text, "the scene's [solver] and [deployment] tables moved");
+    load_str(&fuzzed, "small-three-layer.toml").unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn nodes(scene: &LoadedScene) -> (Vec<Box<dyn Node>>, Expected) {
+    let model = Arc::new(scene.model.clone());
+    let ctx = RunContext {
+        run_id: RUN.into(),
+        scene_fingerprint: scene.fingerprint,
+    };
+    let plan = Plan::new(&model).with_scene(scene);
+    assert!(plan.coarse && plan.interface_groups.len() == 2, "{plan:?}");
+    let nodes = build_nodes(&model, &ctx, false, &plan, &Selection::everything(&plan)).expect("nodes");
+    let expected = Expected {
+        run_id: RUN.into(),
+        scene_fingerprint: scene.fingerprint,
+    };
+    (nodes, expected)
+}
+
+/// A deterministic generator (SplitMix64), so that a failure replays.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// What a bad message must get.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Want {
+    /// A rejection naming one of these words (or, when empty, any rejection), or no output.
+    Refused(&'static [&'static str]),
+    /// A failure naming the non-finite value, before the node changed anything.
+    NonFinite,
+    /// After the genuine delivery: anything but an accepted message.
+    NotAccepted,
+}
+
+#[derive(Debug, Default)]
+struct Stats {
+    inputs: u64,
+    rejected: u64,
+    failed: u64,
+    ignored: u64,
+    undecodable: u64,
+}
+
+struct Fuzzer {
+    rng: Rng,
+    expected: Expected,
+    stats: Stats,
+}
+
+const STAGES: [Stage; 6] = [
+    Stage::Setup,
+    Stage::Micro1,
+    Stage::Macro,
+    Stage::Linear,
+    Stage::Local,
+    Stage::Final,
+];
+const ROLES: [Role; 5] = [
+    Role::Subdomain,
+    Role::Interface,
+    Role::Coarse,
+    Role::Launcher,
+    Role::Recorder,
+];
+
+/// A field of another shape, or one that holds fewer or more values than it declares.
+fn misshapen(f: &Field, rng: &mut Rng) -> Field {
+    let mut g = f.clone();
+    match rng.below(5) {
+        0 => {
+            g.rows += 1;
+            g.data = vec![0.5; g.rows() * g.cols()];
+        }
+        1 => {
+            g.cols += 1 + rng.below(3) as u32;
+            g.data = vec![0.5; g.rows() * g.cols()];
+        }
+        2 if g.rows > 0 => {
+            g.rows -= 1;
+            g.data = vec![0.5; g.rows() * g.cols()];
+        }
+        3 if !g.data.is_empty() => {
+            g.data.pop();
+        }
+        _ => g.data.push(1.0),
+    }
+    g
+}
+
+/// The field with one value NaN or ±∞ (None when it is empty).
+fn non_finite(f: &Field, rng: &mut Rng) -> Option<Field> {
+    let mut g = f.clone();
+    let k = rng.below(g.data.len());
+    *g.data.get_mut(k)? = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY][rng.below(3)];
+    Some(g)
+}
+
+impl Fuzzer {
+    /// Feeds one bad message and checks the node's answer.
+    fn feed(&mut self, node: &mut dyn Node, bad: &Message, want: Want, what: &str) {
+        self.stats.inputs += 1;
+        let id = node.id();
+        let answer = catch_unwind(AssertUnwindSafe(|| node.handle(bad)))
+            .unwrap_or_else(|_| panic!("{id} panicked on {what}: {}", describe(bad)));
+        match answer {
+            Ok(out) => {
+                assert!(
+                    out.is_empty() && want != Want::NonFinite,
+                    "{id} accepted {what} ({}) and published {:?}",
+                    describe(bad),
+                    out.iter().map(Message::topic).collect::<Vec<_>>()
+                );
+                self.stats.ignored += 1;
+            }
+            Err(e) => self.check_error(&e, bad, want, what),
+        }
+    }
+
+    fn check_error(&mut self, e: &NodeError, bad: &Message, want: Want, what: &str) {
+        let context = || format!("{what} ({}): {e}", describe(bad));
+        if e.is_rejection() {
+            self.stats.rejected += 1;
+            assert!(
+                want != Want::NonFinite,
+                "non-finite values refused as a rejection: {}",
+                context()
+            );
+            if let Want::Refused(words) = want {
+                assert!(
+                    words.is_empty() || words.iter().any(|w| e.detail.contains(w)),
+                    "the rejection does not name the problem ({words:?}): {}",
+                    context()
+                );
+            }
+        } else {
+            self.stats.failed += 1;
+            assert!(
+                matches!(want, Want::NonFinite | Want::NotAccepted) && e.detail.contains("not finite"),
+                "a failure where a rejection was due: {}",
+                context()
+            );
+        }
+        assert!(!e.detail.is_empty(), "an error without detail: {}", context());
+    }
+
+    /// Bad messages before `m` reaches `node`: mutants of `m` and messages of earlier rounds.
+    fn before(&mut self, node: &mut dyn Node, m: &Message, earlier: &[Message]) {
+        for _ in 0..BEFORE {
+            if let Some((bad, want, what)) = self.mutant(m, earlier) {
+                self.feed(node, &bad, want, what);
+            }
+        }
+    }
+
+    /// Bad messages after `m` reached `node`: `m` again, and byte-damaged copies of it through
+    /// the decoder.
+    fn after(&mut self, node: &mut dyn Node, m: &Message) {
+        self.feed(node, m, Want::NotAccepted, "a duplicate");
+        let bytes = encode(m);
+        for _ in 0..AFTER {
+            let mut b = bytes.clone();
+            for _ in 0..1 + self.rng.below(3) {
+                let n = b.len().max(1);
+                match self.rng.below(4) {
+                    0 => b.truncate(self.rng.below(n)),
+                    1 => {
+                        let (i, v) = (self.rng.below(n), self.rng.next() as u8);
+                        if let Some(x) = b.get_mut(i) {
+                            *x = v;
+                        }
+                    }
+                    _ => {
+                        let (i, bit) = (self.rng.below(n), self.rng.below(8));
+                        if let Some(x) = b.get_mut(i) {
+                            *x ^= 1 << bit;
+                        }
+                    }
+                }
+            }
+            match decode(&b, &self.expected) {
+                Err(_) => {
+                    self.stats.inputs += 1;
+                    self.stats.undecodable += 1;
+                }
+                Ok(d) => self.feed(node, &d, Want::NotAccepted, "a damaged copy"),
+            }
+        }
+    }
+
+    /// A bad variant of `m` (or a message of an earlier round) and what it must get.
+    fn mutant(&mut self, m: &Message, earlier: &[Message]) -> Option<(Message, Want, &'static str)> {
+        let mut bad = m.clone();
+        let env = &mut bad.envelope;
+        let rng = &mut self.rng;
+        let it = env.iteration;
+        Some(match rng.below(9) {
+            0 => {
+                let shifts = [1, 2, 1000, u32::MAX - it, it.wrapping_neg()];
+                env.iteration = it.wrapping_add(shifts[rng.below(shifts.len())].max(1));
+                if env.iteration == it {
+                    env.iteration = it + 1;
+                }
+                (bad, Want::Refused(&["iteration"]), "another iteration")
+            }
+            1 => {
+                let other: Vec<Stage> = STAGES.into_iter().filter(|s| *s != env.stage).collect();
+                env.stage = other[rng.below(other.len())];
+                (bad, Want::Refused(&["stage"]), "another stage")
+            }
+            2 => {
+                let other: Vec<Role> = ROLES.into_iter().filter(|r| *r != env.sender.role).collect();
+                env.sender.role = other[rng.below(other.len())];
+                (bad, Want::Refused(&["sent by"]), "another sender role")
+            }
+            3 if !matches!(m.payload, Payload::LocalDirections { .. }) => {
+                // Interface nodes may send any subdomain its directions: the index is checked
+                // for every other payload.
+                env.sender.index = env.sender.index.wrapping_add([1, 2, 7, 1 << 31][rng.below(4)]);
+                (
+                    bad,
+                    Want::Refused(&["sent by", "interface node", "owns"]),
+                    "an unknown sender index",
+                )
+            }
+            4 => {
+                let shift = [1u32, 2, 3, 6, 99, u32::MAX][rng.below(6)];
+                let target = match &mut bad.payload {
+                    Payload::HomogenizedOperator { subdomain, .. }
+                    | Payload::MacroForces { subdomain, .. }
+                    | Payload::MacroDisplacements { subdomain, .. }
+                    | Payload::BoundaryState { subdomain, .. }
+                    | Payload::LocalDirections { subdomain, .. }
+                    | Payload::AndersonGram { subdomain, .. } => subdomain,
+                    _ => return None,
+                };
+                *target = target.wrapping_add(shift);
+                (
+                    bad,
+                    Want::Refused(&["addressed to", "sent by", "unknown subdomain", "no interface"]),
+                    "another subdomain in the payload",
+                )
+            }
+            5 => {
+                let r = &mut *rng;
+                match &mut bad.payload {
+                    Payload::HomogenizedOperator { slots, l_e, .. } => match r.below(3) {
+                        0 if !slots.is_empty() => {
+                            let k = r.below(slots.len());
+                            slots[k].1 += 1;
+                        }
+                        1 if !slots.is_empty() => {
+                            let k = r.below(slots.len());
+                            slots.push(slots[k]);
+                        }
+                        _ => *l_e = misshapen(l_e, r),
+                    },
+                    Payload::MacroForces { forces: f, .. }
+                    | Payload::MacroDisplacements { w_tilde: f, .. }
+                    | Payload::BoundaryState { w: f, .. } => *f = misshapen(f, r),
+                    Payload::LocalDirections { interfaces, q_hat, .. } => match r.below(4) {
+                        0 => interfaces.push(99),
+                        1 => {
+                            let k = r.below(interfaces.len());
+                            interfaces.push(interfaces[k]);
+                        }
+                        2 if interfaces.len() > 1 => {
+                            interfaces.pop();
+                        }
+                        _ => *q_hat = misshapen(q_hat, r),
+                    },
+                    Payload::AndersonGram { gram, projection, .. } => match r.below(3) {
+                        0 => *gram = misshapen(gram, r),
+                        1 => *projection = misshapen(projection, r),
+                        _ => {
+                            let k = WINDOW as usize + 1;
+                            *gram = Field::from_fn(k, k, |i, j| (i == j) as u8 as f64);
+                            *projection = Field::zeros(k, 1);
+                        }
+                    },
+                    Payload::AndersonStep { gamma, restart: false } if !gamma.is_empty() => gamma.push(0.25),
+                    Payload::IndicatorPartials {
+                        interfaces,
+                        diverged: None,
+                    } if !interfaces.is_empty() => match r.below(3) {
+                        0 => {
+                            interfaces.pop();
+                        }
+                        1 => interfaces.push(interfaces[0].clone()),
+                        _ => interfaces[0].interface = interfaces[0].interface.wrapping_add(1 + r.below(9) as u32),
+                    },
+                    _ => return None,
+                }
+                (
+                    bad,
+                    Want::Refused(&[
+                        "shape",
+                        "declares",
+                        "modes",
+                        "twice",
+                        "differences",
+                        "window",
+                        "coefficients",
+                        "interface",
+                    ]),
+                    "a payload of the wrong size",
+                )
+            }
+            6 => {
+                let r = &mut *rng;
+                match &mut bad.payload {
+                    Payload::HomogenizedOperator { l_e: f, .. }
+                    | Payload::MacroForces { forces: f, .. }
+                    | Payload::MacroDisplacements { w_tilde: f, .. }
+                    | Payload::LocalDirections { q_hat: f, .. } => *f = non_finite(f, r)?,
+                    Payload::AndersonStep { gamma, restart: false } if !gamma.is_empty() => {
+                        let k = r.below(gamma.len());
+                        gamma[k] = f64::NAN;
+                    }
+                    // Boundary states and Gram partials with NaN stop the run by design (a
+                    // diverged verdict naming where, an Anderson restart): only their bad copies
+                    // after the genuine one are fed.
+                    _ => return None,
+                }
+                (bad, Want::NonFinite, "non-finite values")
+            }
+            7 if !earlier.is_empty() => (
+                earlier[rng.below(earlier.len())].clone(),
+                Want::Refused(&[]),
+                "a message of an earlier round",
+            ),
+            _ => {
+                bad.payload = Payload::Scene {
+                    text: "[time]\nT = 1.0".into(),
+                };
+                (
+                    bad,
+                    Want::Refused(&["does not take"]),
+                    "a payload the node does not take",
+                )
+            }
+        })
+    }
+}
+
+/// A message in a line: topic, iteration, stage, sender.
+fn describe(m: &Message) -> String {
+    let e = &m.envelope;
+    format!(
+        "{} iteration {} stage {:?} from {}",
+        m.topic(),
+        e.iteration,
+        e.stage,
+        e.sender
+    )
+}
+
+/// Drives the nodes round by round as the in-process bus does (every message of a round to every
+/// subscriber, nodes in order), with bad messages around every delivery when fuzzing. Returns
+/// every published message, encoded, in publication order.
+fn run(mut nodes: Vec<Box<dyn Node>>, mut fuzz: Option<&mut Fuzzer>) -> Vec<Vec<u8>> {
+    let subs: Vec<Vec<String>> = nodes.iter().map(|n| n.subscriptions()).collect();
+    let mut queue = Vec::new();
+    for node in &mut nodes {
+        queue.extend(node.start().expect("start"));
+    }
+    let mut published = queue.clone();
+    // Messages of earlier rounds: every subscriber has them.
+    let mut delivered = 0;
+    while !queue.is_empty() {
+        let topics: Vec<String> = queue.iter().map(Message::topic).collect();
+        let mut next = Vec::new();
+        for (node, subs) in nodes.iter_mut().zip(&subs) {
+            for (m, topic) in queue.iter().zip(&topics) {
+                if !subs.iter().any(|s| key_matches(s, topic)) {
+                    continue;
+                }
+                if let Some(f) = fuzz.as_deref_mut() {
+                    f.before(node.as_mut(), m, &published[..delivered]);
+                }
+                let id = node.id();
+                next.extend(
+                    node.handle(m)
+                        .unwrap_or_else(|e| panic!("{id} refused the genuine {}: {e}", describe(m))),
+                );
+                if let Some(f) = fuzz.as_deref_mut() {
+                    f.after(node.as_mut(), m);
+                }
+            }
+        }
+        delivered = published.len();
+        published.extend(next.iter().cloned());
+        queue = next;
+    }
+    let unfinished: Vec<NodeId> = nodes.iter().filter(|n| !n.is_finished()).map(|n| n.id()).collect();
+    assert!(unfinished.is_empty(), "nodes {unfinished:?} did not finish");
+    published.iter().map(encode).collect()
+}
+
+#[test]
+fn bad_messages_are_refused_and_leave_nodes_unchanged() {
+    let scene = scene();
+    let (clean_nodes, expected) = nodes(&scene);
+    let clean = run(clean_nodes, None);
+    let kinds = |msgs: &[Vec<u8>], key: &str| {
+        msgs.iter()
+            .filter(|b| decode(b, &expected).is_ok_and(|m| m.payload.field_key() == key))
+            .count()
+    };
+    // The run exercises every payload the nodes take, mixed Anderson steps included.
+    for key in [
+        "homogenized_operator",
+        "macro_forces",
+        "macro_displacements",
+        "boundary_state",
+        "local_directions",
+        "anderson_gram",
+        "anderson_step",
+        "indicator_partials",
+        "decision",
+    ] {
+        assert!(kinds(&clean, key) > 0, "the run publishes no {key}");
+    }
+    let mixed = clean
+        .iter()
+        .filter_map(|b| decode(b, &expected).ok())
+        .filter(|m| matches!(&m.payload, Payload::AndersonStep { gamma, .. } if !gamma.is_empty()))
+        .count();
+    assert!(mixed > 0, "no mixed Anderson step in the run");
+
+    let (fuzzed_nodes, _) = nodes(&scene);
+    let mut fuzz = Fuzzer {
+        rng: Rng(0x9_1ad_e5e),
+        expected,
+        stats: Stats::default(),
+    };
+    let disturbed = run(fuzzed_nodes, Some(&mut fuzz));
+    assert_eq!(
+        disturbed.len(),
+        clean.len(),
+        "the disturbed run published another number of messages"
+    );
+    for (k, (a, b)) in disturbed.iter().zip(&clean).enumerate() {
+        assert!(
+            a == b,
+            "message {k} of the disturbed run differs from the undisturbed run's"
+        );
+    }
+    let s = &fuzz.stats;
+    eprintln!(
+        "node fuzz: {} inputs, 0 panics, {} rejected, {} failed (non-finite values, node unchanged), \
+         {} ignored without output, {} refused by the decoder; {} genuine messages, run bit-identical",
+        s.inputs,
+        s.rejected,
+        s.failed,
+        s.ignored,
+        s.undecodable,
+        clean.len()
+    );
+    assert_eq!(s.inputs, s.rejected + s.failed + s.ignored + s.undecodable);
+    assert!(s.inputs >= 100_000, "{} inputs", s.inputs);
+}
