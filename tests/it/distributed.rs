@@ -18,7 +18,7 @@ fn exe() -> &'static Path {
 }
 
 /// Same iterations, same decisions, and the same bits in every interface field.
-fn assert_identical(a: &RunResult, b: &RunResult) {
+pub(crate) fn assert_identical(a: &RunResult, b: &RunResult) {
     assert_eq!(a.iterations.len(), b.iterations.len(), "iteration counts");
     for (x, y) in a.iterations.iter().zip(&b.iterations) {
         assert_eq!(x.decision, y.decision, "decision of iteration {}", x.iteration);

@@ -426,7 +426,10 @@ fn a_full_disk_fails_the_run_before_solving() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{stderr}");
         // The launcher's error (its last lines: the recorder's own error, multi-process).
-        let error = stderr.find("\nerror:").or(stderr.starts_with("error:").then_some(0)).map_or("", |i| &stderr[i..]);
+        let error = stderr
+            .find("\nerror:")
+            .or(stderr.starts_with("error:").then_some(0))
+            .map_or("", |i| &stderr[i..]);
         assert!(
             error.contains(&file.display().to_string()) && stderr.contains("No space left on device"),
             "in-process {in_process}: {stderr}"

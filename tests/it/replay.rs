@@ -283,3 +283,38 @@ fn replay_and_live_run_write_rrd_files_the_rerun_cli_accepts() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `replay --reference` logs each iteration's error against the monolithic Newton reference, and
+/// it is exactly what `glissade report` measures on the same run: the recording's boundary states
+/// are the run's, the reference solve and the error formula are the same, so the numbers are
+/// bit-identical.
+#[test]
+fn replay_logs_the_error_against_the_reference_as_the_report_measures_it() {
+    let dir = temp_dir("reference");
+    let text = scene_text("small-three-layer");
+    let path = record(&text, &dir, "rx-ref");
+    let (report, _, _) = glissade::report::build_report(&scene(&text), "rx-ref-report").unwrap();
+    let summary = glissade_replay::replay(
+        &Recording::open(&path).unwrap(),
+        &glissade_replay::ReplayOptions {
+            sink: glissade_replay::Sink::Save(dir.join("reference.rrd")),
+            color_by: glissade_replay::ColorBy::VonMises,
+            amplification: None,
+            time_point: None,
+            reference: true,
+        },
+    )
+    .unwrap();
+    assert!(summary.reference_s.is_some());
+    assert_eq!(summary.errors.len(), report.points.len(), "one error per iteration");
+    for p in &report.points {
+        let &(_, e_f, e_w) = summary
+            .errors
+            .iter()
+            .find(|e| e.0 == p.iteration)
+            .unwrap_or_else(|| panic!("no error logged for iteration {}", p.iteration));
+        assert_eq!(e_f.to_bits(), p.traction_error.to_bits(), "iteration {}", p.iteration);
+        assert_eq!(e_w.to_bits(), p.jump_error.to_bits(), "iteration {}", p.iteration);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

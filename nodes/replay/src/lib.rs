@@ -22,6 +22,8 @@
 use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator};
 use glissade_mechanics::element::{elasticity, stress, NODE_XI};
 use glissade_mechanics::linear::default_k0;
+use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
 use glissade_mechanics::model::Side;
 use glissade_mechanics::model::{Model, Plane};
 use glissade_mechanics::scene::load_str;
@@ -78,6 +80,9 @@ pub struct ReplayOptions {
     pub amplification: Option<f64>,
     /// Time point of the per-iteration meshes; None: the one with the largest boundary displacement.
     pub time_point: Option<usize>,
+    /// Solve the scene with the monolithic Newton reference first and log each iteration's error
+    /// against it (contact tractions and jumps, as `glissade report` measures them).
+    pub reference: bool,
 }
 
 /// What a replay logged.
@@ -93,6 +98,10 @@ pub struct ReplaySummary {
     pub color_range: (f64, f64),
     /// Interior displacements came from the recording's `Displacement` messages.
     pub interior_recorded: bool,
+    /// (iteration, traction error, jump error) against the reference, when asked for.
+    pub errors: Vec<(u32, f64, f64)>,
+    /// Wall time of the reference solve (s), when asked for.
+    pub reference_s: Option<f64>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -340,6 +349,59 @@ pub struct View {
     displacements: BTreeMap<u32, Field>,
     last_iteration: i64,
     summary: ReplaySummary,
+    errors: Option<ErrorTracker>,
+}
+
+/// Each iteration's error against the reference, from the boundary states (the measure of
+/// `glissade report`: relative L2-in-time norms over the interfaces).
+struct ErrorTracker {
+    layouts: Vec<BoundaryLayout>,
+    participants: usize,
+    fields: Vec<InterfaceFields>,
+    seen: std::collections::BTreeSet<u32>,
+    reference: Vec<InterfaceFields>,
+    weights: Vec<f64>,
+}
+
+impl ErrorTracker {
+    fn new(model: &Model, reference: Vec<InterfaceFields>) -> Self {
+        let k0 = default_k0(model);
+        let layouts: Vec<BoundaryLayout> = (0..model.subdomains.len())
+            .map(|s| BoundaryLayout::new(model, s, &k0))
+            .collect();
+        let nt = model.time.n_points();
+        Self {
+            participants: layouts.iter().filter(|l| !l.is_empty()).count(),
+            layouts,
+            fields: model
+                .interfaces
+                .iter()
+                .map(|i| InterfaceFields::zeros(i.n_pairs(), nt))
+                .collect(),
+            seen: Default::default(),
+            reference,
+            weights: model.time.trapezoid_weights(),
+        }
+    }
+
+    /// Takes a boundary state; once every subdomain's of an iteration is in, its errors.
+    fn boundary_state(&mut self, model: &Model, subdomain: u32, w: &Field, f: &Field) -> Option<(f64, f64)> {
+        let layout = self.layouts.get(subdomain as usize)?;
+        for slot in &layout.slots {
+            self.fields[slot.interface].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
+        }
+        self.seen.insert(subdomain);
+        if self.seen.len() < self.participants {
+            return None;
+        }
+        self.seen.clear();
+        Some(error_against_reference(
+            &model.interfaces,
+            &self.fields,
+            &self.reference,
+            &self.weights,
+        ))
+    }
 }
 
 impl View {
@@ -383,8 +445,21 @@ impl View {
             )),
         )
         .map_err(rerr)?;
+        let mut summary = ReplaySummary::default();
+        let errors = if opts.reference {
+            let t0 = std::time::Instant::now();
+            let reference = solve_reference(&model, &ReferenceOptions::default()).map_err(|e| ReplayError::Content {
+                path: origin.to_string(),
+                detail: format!("the reference solve failed: {e}"),
+            })?;
+            summary.reference_s = Some(t0.elapsed().as_secs_f64());
+            Some(ErrorTracker::new(&model, reference.interfaces))
+        } else {
+            None
+        };
         Ok(Self {
             rec,
+            errors,
             recovery: Recovery::new(&model),
             model,
             color_by: opts.color_by,
@@ -397,7 +472,7 @@ impl View {
             interfaces: Vec::new(),
             displacements: BTreeMap::new(),
             last_iteration: 0,
-            summary: ReplaySummary::default(),
+            summary,
         })
     }
 
@@ -408,6 +483,27 @@ impl View {
             Payload::BoundaryState { subdomain, w, f } if msg.envelope.stage != Stage::Final => {
                 if self.time_point.is_none() {
                     self.time_point = Some(largest_time_point(w));
+                }
+                let it = msg.envelope.iteration;
+                if let Some((e_f, e_w)) = self
+                    .errors
+                    .as_mut()
+                    .and_then(|t| t.boundary_state(&self.model, *subdomain, w, f))
+                {
+                    self.summary.errors.push((it, e_f, e_w));
+                    let rec = &self.rec;
+                    rec.set_time_sequence("iteration", it as i64);
+                    rec.disable_timeline("time");
+                    for (name, v) in [
+                        ("error/traction", e_f),
+                        ("error/jump", e_w),
+                        ("error/log10_traction", e_f.log10()),
+                        ("error/log10_jump", e_w.log10()),
+                    ] {
+                        if v.is_finite() {
+                            rec.log(name, &rerun::Scalars::single(v)).map_err(rerr)?;
+                        }
+                    }
                 }
                 self.pending.insert(*subdomain, (w.clone(), f.clone()));
             }

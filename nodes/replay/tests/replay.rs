@@ -110,6 +110,7 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
             color_by: ColorBy::VonMises,
             amplification: None,
             time_point: None,
+            reference: false,
         },
     )
     .unwrap();
