@@ -29,7 +29,42 @@ fn field() -> impl Strategy<Value = Field> {
     })
 }
 
+/// Every payload kind: `prop_oneof!` takes at most ten arms unboxed, so the two Anderson payloads
+/// form a group of their own, drawn in proportion (2 kinds of 12).
 fn payload() -> impl Strategy<Value = Payload> {
+    prop_oneof![10 => other_payload().boxed(), 2 => anderson_payload().boxed()]
+}
+
+/// The Anderson payloads: Gram partials (square Gram matrix, k × 1 projection) and steps.
+fn anderson_payload() -> impl Strategy<Value = Payload> {
+    prop_oneof![
+        (any::<u32>(), 0usize..5, any::<f64>()).prop_flat_map(|(subdomain, k, residual2)| {
+            (
+                proptest::collection::vec(any::<f64>(), k * k),
+                proptest::collection::vec(any::<f64>(), k),
+            )
+                .prop_map(move |(gram, projection)| Payload::AndersonGram {
+                    subdomain,
+                    gram: Field {
+                        rows: k as u32,
+                        cols: k as u32,
+                        data: gram,
+                    },
+                    projection: Field {
+                        rows: k as u32,
+                        cols: 1,
+                        data: projection,
+                    },
+                    residual2,
+                })
+        }),
+        (proptest::collection::vec(any::<f64>(), 0..6), any::<bool>())
+            .prop_map(|(gamma, restart)| Payload::AndersonStep { gamma, restart }),
+    ]
+}
+
+/// The payload kinds other than Anderson's.
+fn other_payload() -> impl Strategy<Value = Payload> {
     let verdict = prop_oneof![
         Just(Verdict::Continue),
         Just(Verdict::Converged),
