@@ -10,6 +10,7 @@ use glissade_bus::{Node, RunContext};
 use glissade_mechanics::scene::load_str;
 use glissade_messages::{encode, key_matches, Message, NodeId, Role};
 use glissade_recorder::Recording;
+use glissade_subdomain::{LinearStageLog, LinearStageRecord};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -56,6 +57,8 @@ pub struct Reexecution {
     pub bytes: u64,
     /// None: every output is bit-identical to the recorded one.
     pub mismatch: Option<Mismatch>,
+    /// A subdomain node's linear stages, iteration by iteration (PGD basis sizes among them).
+    pub linear_stages: Vec<LinearStageRecord>,
 }
 
 /// Parses `role:id` (`subdomain:3`, `interface:0`, `coarse:0`).
@@ -127,7 +130,9 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
         run_id: recording.run_id().to_string(),
         scene_fingerprint: scene.fingerprint,
     };
-    let plan = Plan::new(&model).with_scene(&scene);
+    let mut plan = Plan::new(&model).with_scene(&scene);
+    let log = LinearStageLog::default();
+    plan.log = Some(log.clone());
     let interior = recording.channels().iter().any(|c| c.topic.ends_with("/displacement"));
     let selection = match id.role {
         Role::Subdomain => Selection {
@@ -279,6 +284,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
         recorded_outputs,
         bytes,
         mismatch: first,
+        linear_stages: log.lock().map(|v| v.clone()).unwrap_or_default(),
     })
 }
 
@@ -381,4 +387,35 @@ fn short(v: &serde_json::Value) -> String {
     } else {
         s
     }
+}
+
+/// The PGD basis sizes of a recorded run, (iteration, subdomain, basis size after the linear
+/// stage), from re-executing its subdomain nodes: no message carries them. None when no
+/// subdomain of the run uses the PGD stage. An error when the recording cannot give them (not
+/// finished, thinned) or when a re-executed node does not reproduce the recording.
+pub fn recorded_basis_sizes(recording: &Recording) -> anyhow::Result<Option<Vec<(u32, u32, usize)>>> {
+    let path = recording.path().display().to_string();
+    let text = recording
+        .scene_text()
+        .with_context(|| format!("{path}: the recording holds no scene"))?;
+    let scene = load_str(text, &format!("{path} (scene.toml)"))?;
+    let model = Arc::new(scene.model.clone());
+    let plan = Plan::new(&model).with_scene(&scene);
+    let pgd = |s: u32| plan.stage_of(&model, s as usize) == glissade_mechanics::scene::LinearStage::Pgd;
+    if !plan.participants.iter().any(|&s| pgd(s)) {
+        return Ok(None);
+    }
+    let mut sizes = Vec::new();
+    for id in recorded_nodes(recording)? {
+        if id.role != Role::Subdomain || !pgd(id.index) {
+            continue;
+        }
+        let r = reexecute(recording, id)?;
+        if let Some(m) = &r.mismatch {
+            bail!("{path}: node {id} re-executed differs from the recording ({m}): its basis sizes would not be the run's");
+        }
+        sizes.extend(r.linear_stages.iter().map(|x| (x.iteration, x.subdomain, x.modes)));
+    }
+    sizes.sort_unstable();
+    Ok(Some(sizes))
 }

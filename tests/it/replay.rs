@@ -302,6 +302,7 @@ fn replay_logs_the_error_against_the_reference_as_the_report_measures_it() {
             amplification: None,
             time_point: None,
             reference: true,
+            basis_sizes: Vec::new(),
         },
     )
     .unwrap();
@@ -316,5 +317,53 @@ fn replay_logs_the_error_against_the_reference_as_the_report_measures_it() {
         assert_eq!(e_f.to_bits(), p.traction_error.to_bits(), "iteration {}", p.iteration);
         assert_eq!(e_w.to_bits(), p.jump_error.to_bits(), "iteration {}", p.iteration);
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A PGD run's basis sizes, which no message carries, come back from re-executing its subdomain
+/// nodes: exactly the sizes the run's own linear stages logged, and `glissade replay` puts them
+/// in the view (`pgd/basis/<subdomain>`).
+#[test]
+fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
+    let dir = temp_dir("pgd-basis");
+    let text = scene_text("small-three-layer");
+    assert!(text.contains("[solver]\n"));
+    let text = text.replace("[solver]\n", "[solver]\nlinear_stage = \"pgd\"\n");
+    let path = record(&text, &dir, "rx-pgd");
+    let opts = RunOptions {
+        run_id: "rx-pgd-log".into(),
+        interior: false,
+    };
+    let (_, records) =
+        glissade::runner::run_in_process_logged(&scene(&text), &opts, |_| {}, |_| std::time::Duration::ZERO).unwrap();
+    let mut expected: Vec<(u32, u32, usize)> = records.iter().map(|r| (r.iteration, r.subdomain, r.modes)).collect();
+    expected.sort_unstable();
+    assert!(
+        expected.iter().any(|e| e.2 > 1),
+        "the run built PGD bases: {expected:?}"
+    );
+    let sizes = glissade::reexecute::recorded_basis_sizes(&Recording::open(&path).unwrap())
+        .unwrap()
+        .expect("a PGD run");
+    assert_eq!(sizes, expected);
+    // Another linear stage: nothing to show.
+    let plain = record(&scene_text("small-three-layer"), &dir, "rx-plain");
+    assert_eq!(
+        glissade::reexecute::recorded_basis_sizes(&Recording::open(&plain).unwrap()).unwrap(),
+        None
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["replay", "--save"])
+        .arg(dir.join("pgd.rrd"))
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        stdout.contains(&format!("PGD basis sizes: {} linear stages", expected.len())),
+        "{stdout}"
+    );
+    rerun_verify(&dir.join("pgd.rrd"));
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -23,9 +23,9 @@ use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator};
 use glissade_mechanics::element::{elasticity, stress, NODE_XI};
 use glissade_mechanics::linear::default_k0;
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
-use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
 use glissade_mechanics::model::Side;
 use glissade_mechanics::model::{Model, Plane};
+use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
 use glissade_mechanics::scene::load_str;
 use glissade_messages::{Field, InterfaceSolution, Message, Payload, Stage};
 use glissade_recorder::Recording;
@@ -83,6 +83,9 @@ pub struct ReplayOptions {
     /// Solve the scene with the monolithic Newton reference first and log each iteration's error
     /// against it (contact tractions and jumps, as `glissade report` measures them).
     pub reference: bool,
+    /// PGD basis sizes to log: (iteration, subdomain, basis size), e.g. from re-executing the
+    /// subdomain nodes of a PGD run (no message carries them).
+    pub basis_sizes: Vec<(u32, u32, usize)>,
 }
 
 /// What a replay logged.
@@ -446,12 +449,27 @@ impl View {
         )
         .map_err(rerr)?;
         let mut summary = ReplaySummary::default();
+        for &(it, s, modes) in &opts.basis_sizes {
+            let name = model
+                .subdomains
+                .get(s as usize)
+                .map(|sd| sd.name.clone())
+                .ok_or_else(|| ReplayError::Content {
+                    path: origin.to_string(),
+                    detail: format!("basis size of subdomain {s}: the scene has {}", model.subdomains.len()),
+                })?;
+            rec.set_time_sequence("iteration", it as i64);
+            rec.disable_timeline("time");
+            rec.log(format!("pgd/basis/{name}"), &rerun::Scalars::single(modes as f64))
+                .map_err(rerr)?;
+        }
         let errors = if opts.reference {
             let t0 = std::time::Instant::now();
-            let reference = solve_reference(&model, &ReferenceOptions::default()).map_err(|e| ReplayError::Content {
-                path: origin.to_string(),
-                detail: format!("the reference solve failed: {e}"),
-            })?;
+            let reference =
+                solve_reference(&model, &ReferenceOptions::default()).map_err(|e| ReplayError::Content {
+                    path: origin.to_string(),
+                    detail: format!("the reference solve failed: {e}"),
+                })?;
             summary.reference_s = Some(t0.elapsed().as_secs_f64());
             Some(ErrorTracker::new(&model, reference.interfaces))
         } else {

@@ -111,6 +111,7 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
             amplification: None,
             time_point: None,
             reference: false,
+            basis_sizes: Vec::new(),
         },
     )
     .unwrap();
