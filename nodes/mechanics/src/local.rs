@@ -6,6 +6,7 @@
 
 use crate::laws::{self, ContactPoint, PairState, Status};
 use crate::model::{Interface, InterfaceKind};
+use faer::reborrow::ReborrowMut;
 use faer::{Mat, MatMut};
 
 /// Traces W and forces F of both sides of an interface over all time points (mm, N/mm).
@@ -28,15 +29,26 @@ impl InterfaceFields {
         }
     }
 
+    /// Column i of (W_A, W_B, F_A, F_B).
     #[inline]
-    fn pair(&self, p: usize, i: usize) -> PairState {
-        let g = |m: &Mat<f64>| [m[(2 * p, i)], m[(2 * p + 1, i)]];
-        PairState {
-            w_a: g(&self.w_a),
-            w_b: g(&self.w_b),
-            f_a: g(&self.f_a),
-            f_b: g(&self.f_b),
-        }
+    fn columns(&self, i: usize) -> [&[f64]; 4] {
+        [
+            self.w_a.col_as_slice(i),
+            self.w_b.col_as_slice(i),
+            self.f_a.col_as_slice(i),
+            self.f_b.col_as_slice(i),
+        ]
+    }
+
+    /// Column i of (W_A, W_B, F_A, F_B), to write.
+    #[inline]
+    fn columns_mut(&mut self, i: usize) -> [&mut [f64]; 4] {
+        [
+            self.w_a.col_as_slice_mut(i),
+            self.w_b.col_as_slice_mut(i),
+            self.f_a.col_as_slice_mut(i),
+            self.f_b.col_as_slice_mut(i),
+        ]
     }
 }
 
@@ -55,9 +67,9 @@ impl InterfaceFields {
             crate::model::Side::B => (&mut self.w_b, &mut self.f_b),
         };
         for j in 0..w.ncols() {
-            for e in 0..w.nrows() {
-                w[(e, j)] = get_w(offset + e, j);
-                f[(e, j)] = get_f(offset + e, j);
+            for (e, (w, f)) in w.col_as_slice_mut(j).iter_mut().zip(f.col_as_slice_mut(j)).enumerate() {
+                *w = get_w(offset + e, j);
+                *f = get_f(offset + e, j);
             }
         }
     }
@@ -226,6 +238,8 @@ pub struct InterfaceLocal {
     /// Status per (pair, time) at index p + n_pairs·i (contact interfaces only).
     pub status: Vec<Status>,
     prev_status: Vec<Status>,
+    /// [Ŵ]·t of the current time point per pair, carried to the next one (contact only).
+    slip: Vec<f64>,
     /// C_N and 𝒯 = |C_T| − f|C_N| of the last two local stages (paper eq. 6), contact only.
     c_n: Mat<f64>,
     c_t: Mat<f64>,
@@ -233,6 +247,9 @@ pub struct InterfaceLocal {
     prev_c_t: Mat<f64>,
     have_prev: bool,
     pub directions: Option<ContactDirections>,
+    /// Storage of the updated directions, allocated with the interface (contact only), so that
+    /// the update inside the iteration loop does not allocate.
+    spare: Option<ContactDirections>,
 }
 
 impl InterfaceLocal {
@@ -249,34 +266,43 @@ impl InterfaceLocal {
             hat: InterfaceFields::zeros(np, n_times),
             status: vec![Status::Stick; ns],
             prev_status: vec![Status::Stick; ns],
+            slip: vec![0.0; if itf.is_contact() { np } else { 0 }],
             c_n: Mat::zeros(nc.0, nc.1),
             c_t: Mat::zeros(nc.0, nc.1),
             prev_c_n: Mat::zeros(nc.0, nc.1),
             prev_c_t: Mat::zeros(nc.0, nc.1),
             have_prev: false,
             directions: None,
+            spare: itf.is_contact().then(|| ContactDirections {
+                k_n: Mat::zeros(np, n_times),
+                k_t: Mat::zeros(np, n_times),
+            }),
         }
     }
 
     /// Runs the local stage: ŝ from s along E⁺, pair by pair; contact marches in time (the slip of
-    /// t_{i−1} enters t_i) only when friction is positive.
+    /// t_{i−1} enters t_i) only when friction is positive. Time points are visited in order and
+    /// pairs within a time point, so that every pass reads and writes whole columns.
     pub fn local_stage(&mut self, itf: &Interface, s: &InterfaceFields) {
         let np = itf.n_pairs();
         let nt = s.w_a.ncols();
-        let hat = &mut self.hat;
-        let put = |m: &mut Mat<f64>, p: usize, i: usize, v: [f64; 2]| {
-            m[(2 * p, i)] = v[0];
-            m[(2 * p + 1, i)] = v[1];
-        };
         match &itf.kind {
             InterfaceKind::Perfect => {
+                let k = self.k0;
                 for i in 0..nt {
-                    for p in 0..np {
-                        let h = laws::perfect(self.k0, &s.pair(p, i));
-                        put(&mut hat.w_a, p, i, h.w_a);
-                        put(&mut hat.w_b, p, i, h.w_b);
-                        put(&mut hat.f_a, p, i, h.f_a);
-                        put(&mut hat.f_b, p, i, [-h.f_a[0], -h.f_a[1]]);
+                    let [w_a, w_b, f_a, f_b] = s.columns(i);
+                    let [h_wa, h_wb, h_fa, h_fb] = self.hat.columns_mut(i);
+                    let n = 2 * np;
+                    let (w_a, w_b, f_a, f_b) = (&w_a[..n], &w_b[..n], &f_a[..n], &f_b[..n]);
+                    let (h_wa, h_wb, h_fa, h_fb) = (&mut h_wa[..n], &mut h_wb[..n], &mut h_fa[..n], &mut h_fb[..n]);
+                    // laws::perfect, component by component.
+                    for e in 0..n {
+                        let w = 0.5 * (w_a[e] + w_b[e]) - 0.5 / k * (f_a[e] + f_b[e]);
+                        let f = f_a[e] + k * (w - w_a[e]);
+                        h_wa[e] = w;
+                        h_wb[e] = w;
+                        h_fa[e] = f;
+                        h_fb[e] = -f;
                     }
                 }
             }
@@ -284,11 +310,19 @@ impl InterfaceLocal {
                 std::mem::swap(&mut self.prev_status, &mut self.status);
                 std::mem::swap(&mut self.prev_c_n, &mut self.c_n);
                 std::mem::swap(&mut self.prev_c_t, &mut self.c_t);
-                for (p, &gap_p) in gap.iter().enumerate().take(np) {
-                    let mut slip_prev = 0.0;
-                    for i in 0..nt {
-                        let (k_n, k_t) = match &self.directions {
-                            Some(d) => (d.k_n[(p, i)], d.k_t[(p, i)]),
+                self.slip.fill(0.0);
+                for i in 0..nt {
+                    let [w_a, w_b, f_a, f_b] = s.columns(i);
+                    let [h_wa, h_wb, h_fa, h_fb] = self.hat.columns_mut(i);
+                    let (c_n, c_t) = (self.c_n.col_as_slice_mut(i), self.c_t.col_as_slice_mut(i));
+                    let status = &mut self.status[np * i..np * (i + 1)];
+                    let k = self
+                        .directions
+                        .as_ref()
+                        .map(|d| (d.k_n.col_as_slice(i), d.k_t.col_as_slice(i)));
+                    for (p, (&gap_p, slip)) in gap.iter().zip(self.slip.iter_mut()).enumerate().take(np) {
+                        let (k_n, k_t) = match k {
+                            Some((k_n, k_t)) => (k_n[p], k_t[p]),
                             None => (self.k0, self.k0),
                         };
                         let point = ContactPoint {
@@ -298,17 +332,24 @@ impl InterfaceLocal {
                             tangent: itf.tangent,
                             gap: gap_p,
                             friction: *friction,
-                            slip_prev: if *friction > 0.0 { slip_prev } else { 0.0 },
+                            slip_prev: if *friction > 0.0 { *slip } else { 0.0 },
                         };
-                        let r = laws::contact(&point, &s.pair(p, i));
-                        slip_prev = r.slip;
-                        put(&mut hat.w_a, p, i, r.hat.w_a);
-                        put(&mut hat.w_b, p, i, r.hat.w_b);
-                        put(&mut hat.f_a, p, i, r.hat.f_a);
-                        put(&mut hat.f_b, p, i, [-r.hat.f_a[0], -r.hat.f_a[1]]);
-                        self.status[p + np * i] = r.status;
-                        self.c_n[(p, i)] = r.c_n;
-                        self.c_t[(p, i)] = r.c_t_excess;
+                        let (x, y) = (2 * p, 2 * p + 1);
+                        let state = PairState {
+                            w_a: [w_a[x], w_a[y]],
+                            w_b: [w_b[x], w_b[y]],
+                            f_a: [f_a[x], f_a[y]],
+                            f_b: [f_b[x], f_b[y]],
+                        };
+                        let r = laws::contact(&point, &state);
+                        *slip = r.slip;
+                        [h_wa[x], h_wa[y]] = r.hat.w_a;
+                        [h_wb[x], h_wb[y]] = r.hat.w_b;
+                        [h_fa[x], h_fa[y]] = r.hat.f_a;
+                        [h_fb[x], h_fb[y]] = [-r.hat.f_a[0], -r.hat.f_a[1]];
+                        status[p] = r.status;
+                        c_n[p] = r.c_n;
+                        c_t[p] = r.c_t_excess;
                     }
                 }
             }
@@ -348,10 +389,12 @@ impl InterfaceLocal {
         let np = itf.n_pairs();
         let nt = self.c_n.ncols();
         let low = self.k0 * (1.0 - alpha);
-        let mut d = ContactDirections {
-            k_n: Mat::from_fn(np, nt, |_, _| self.k0),
-            k_t: Mat::from_fn(np, nt, |_, _| self.k0),
+        let Some(mut d) = self.spare.take() else {
+            return false;
         };
+        debug_assert_eq!((d.k_n.nrows(), d.k_n.ncols()), (np, nt), "directions shape");
+        d.k_n.fill(self.k0);
+        d.k_t.fill(self.k0);
         for i in 0..nt {
             for p in 0..np {
                 match self.status[p + np * i] {
@@ -380,23 +423,29 @@ impl InterfaceLocal {
         let k = self.k0;
         let h = &self.hat;
         let np = itf.n_pairs();
+        let contact = itf.is_contact();
+        let sq = |x: f64| x * x;
         for (i, &wt) in time_weights.iter().enumerate() {
-            for e in 0..2 * np {
+            let [sw_a, sw_b, sf_a, sf_b] = s.columns(i);
+            let [hw_a, hw_b, hf_a, hf_b] = h.columns(i);
+            let n = 2 * np;
+            let (sw_a, sw_b, sf_a, sf_b) = (&sw_a[..n], &sw_b[..n], &sf_a[..n], &sf_b[..n]);
+            let (hw_a, hw_b, hf_a, hf_b) = (&hw_a[..n], &hw_b[..n], &hf_a[..n], &hf_b[..n]);
+            for e in 0..n {
                 let m = itf.weights[e / 2] * wt;
-                let sq = |x: f64| x * x;
-                let dw = sq(s.w_a[(e, i)] - h.w_a[(e, i)]) + sq(s.w_b[(e, i)] - h.w_b[(e, i)]);
-                let df = sq(s.f_a[(e, i)] - h.f_a[(e, i)]) + sq(s.f_b[(e, i)] - h.f_b[(e, i)]);
+                let dw = sq(sw_a[e] - hw_a[e]) + sq(sw_b[e] - hw_b[e]);
+                let df = sq(sf_a[e] - hf_a[e]) + sq(sf_b[e] - hf_b[e]);
                 out.eta_num += m * (k * dw + df / k);
-                let sw = sq(s.w_a[(e, i)]) + sq(s.w_b[(e, i)]) + sq(h.w_a[(e, i)]) + sq(h.w_b[(e, i)]);
-                let sf = sq(s.f_a[(e, i)]) + sq(s.f_b[(e, i)]) + sq(h.f_a[(e, i)]) + sq(h.f_b[(e, i)]);
+                let sw = sq(sw_a[e]) + sq(sw_b[e]) + sq(hw_a[e]) + sq(hw_b[e]);
+                let sf = sq(sf_a[e]) + sq(sf_b[e]) + sq(hf_a[e]) + sq(hf_b[e]);
                 out.eta_den += m * (k * sw + sf / k);
-                if itf.is_contact() {
+                if contact {
                     out.force_num += m * df;
-                    out.force_den += m * (sq(h.f_a[(e, i)]) + sq(h.f_b[(e, i)]));
-                    let jump = s.w_b[(e, i)] - s.w_a[(e, i)];
-                    let jump_hat = h.w_b[(e, i)] - h.w_a[(e, i)];
+                    out.force_den += m * (sq(hf_a[e]) + sq(hf_b[e]));
+                    let jump = sw_b[e] - sw_a[e];
+                    let jump_hat = hw_b[e] - hw_a[e];
                     out.jump_num += m * sq(jump - jump_hat);
-                    out.jump_den += m * (sq(jump_hat) + 0.5 * (sq(h.w_a[(e, i)]) + sq(h.w_b[(e, i)])));
+                    out.jump_den += m * (sq(jump_hat) + 0.5 * (sq(hw_a[e]) + sq(hw_b[e])));
                 }
             }
         }
@@ -416,9 +465,16 @@ impl InterfaceLocal {
         } else {
             (&self.hat.w_b, &self.hat.f_b)
         };
+        let k = self.k0;
         for i in 0..w.ncols() {
-            for e in 0..w.nrows() {
-                out[(offset + e, i)] = f[(e, i)] + self.k0 * w[(e, i)];
+            let q = &mut out
+                .rb_mut()
+                .col_mut(i)
+                .try_as_col_major_mut()
+                .expect("q̂ has unit row stride")
+                .as_slice_mut()[offset..offset + w.nrows()];
+            for ((q, f), w) in q.iter_mut().zip(f.col_as_slice(i)).zip(w.col_as_slice(i)) {
+                *q = f + k * w;
             }
         }
     }

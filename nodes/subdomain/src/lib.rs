@@ -16,7 +16,7 @@ use faer::Mat;
 use glissade_bus::convert::{copy_into, field_of};
 use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonHistory, AndersonStep};
-use glissade_mechanics::linear::SubdomainSolver;
+use glissade_mechanics::linear::{relax_into, sum_into, sum_relax_into, SubdomainSolver};
 use glissade_mechanics::model::{Acceleration, Model};
 use glissade_mechanics::pgd::{PgdSettings, PgdStage};
 use glissade_mechanics::scene::PgdCriterion;
@@ -260,37 +260,38 @@ impl SubdomainNode {
         } else {
             self.options.relaxation
         };
-        let (n_b, nt) = (self.w.nrows(), self.w.ncols());
-        for j in 0..nt {
-            for r in 0..n_b {
-                self.w1[(r, j)] += self.w2[(r, j)];
-                self.f1[(r, j)] += self.f2[(r, j)];
-            }
+        let Some(history) = self.anderson.as_mut() else {
+            // s₁ + s₂ and the relaxation in one pass.
+            sum_relax_into(
+                mu,
+                self.w1.as_mut(),
+                self.f1.as_mut(),
+                self.w2.as_ref(),
+                self.f2.as_ref(),
+                self.w.as_mut(),
+                self.f.as_mut(),
+            );
+            self.phase = Phase::Directions;
+            return self.boundary_state();
+        };
+        sum_into(self.w1.as_mut(), self.f1.as_mut(), self.w2.as_ref(), self.f2.as_ref());
+        if self.iteration >= 1 {
+            history.record(&self.w, &self.f, &self.w1, &self.f1);
         }
-        if let Some(history) = self.anderson.as_mut() {
-            if self.iteration >= 1 {
-                history.record(&self.w, &self.f, &self.w1, &self.f1);
-            }
-            if self.iteration >= 2 {
-                let p = history.partials();
-                self.phase = Phase::Step;
-                return self.msg(
-                    Stage::Linear,
-                    Payload::AndersonGram {
-                        subdomain: self.subdomain(),
-                        gram: Field::from_fn(p.k, p.k, |i, j| p.gram[j * p.k + i]),
-                        projection: Field::from_fn(p.k, 1, |i, _| p.projection[i]),
-                        residual2: p.residual2,
-                    },
-                );
-            }
+        if self.iteration >= 2 {
+            let p = history.partials();
+            self.phase = Phase::Step;
+            return self.msg(
+                Stage::Linear,
+                Payload::AndersonGram {
+                    subdomain: self.subdomain(),
+                    gram: Field::from_fn(p.k, p.k, |i, j| p.gram[j * p.k + i]),
+                    projection: Field::from_fn(p.k, 1, |i, _| p.projection[i]),
+                    residual2: p.residual2,
+                },
+            );
         }
-        for j in 0..nt {
-            for r in 0..n_b {
-                self.w[(r, j)] = mu * self.w1[(r, j)] + (1.0 - mu) * self.w[(r, j)];
-                self.f[(r, j)] = mu * self.f1[(r, j)] + (1.0 - mu) * self.f[(r, j)];
-            }
-        }
+        relax_into(mu, self.w1.as_ref(), self.f1.as_ref(), self.w.as_mut(), self.f.as_mut());
         self.phase = Phase::Directions;
         self.boundary_state()
     }
@@ -456,9 +457,9 @@ impl Node for SubdomainNode {
                 let mut r0 = 0;
                 for &k in &at {
                     let (offset, n) = (slots[k].offset, 2 * slots[k].n_pairs);
-                    for j in 0..q_hat.cols() {
-                        for r in 0..n {
-                            self.q_hat[(offset + r, j)] = q_hat.get(r0 + r, j);
+                    if n > 0 {
+                        for (j, column) in q_hat.data.chunks_exact(rows).enumerate() {
+                            self.q_hat.col_as_slice_mut(j)[offset..offset + n].copy_from_slice(&column[r0..r0 + n]);
                         }
                     }
                     r0 += n;

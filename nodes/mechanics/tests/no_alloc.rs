@@ -1,0 +1,112 @@
+//! No allocation inside the iteration loop: after warm-up iterations, whole LATIN iterations —
+//! micro problem 1, macro forces, macro problem, micro problem 2 with the relaxation, the local
+//! stage with its indicators and search-direction update, q̂ for the next linear stage — run
+//! without one call to the allocator. Counted by a global allocator on the test's own thread.
+
+#[path = "support/latin.rs"]
+mod latin;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+struct Counting;
+
+thread_local! {
+    /// Allocator calls made on this thread (realloc included).
+    static CALLS: Cell<u64> = const { Cell::new(0) };
+}
+
+fn count() {
+    // `try_with`: a thread being torn down has no counter left, and is not the test's.
+    let _ = CALLS.try_with(|c| c.set(c.get() + 1));
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        System.alloc(layout)
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        System.alloc_zeroed(layout)
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        System.realloc(ptr, layout, new_size)
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        System.dealloc(ptr, layout)
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn calls() -> u64 {
+    CALLS.with(|c| c.get())
+}
+
+/// Runs `warm_up` iterations (μ = 1 at 0 and 1, relaxed from 2 on; first use of the product
+/// kernels' thread-local buffers), then `measured` more, and returns the allocator calls of the
+/// setup and of the measured iterations, and whether some interface updated its directions.
+fn allocations(scene: &str, search_direction_update: bool, warm_up: usize, measured: usize) -> (u64, u64, bool) {
+    let path = format!("{}/../../launch/scenes/{scene}", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(&path).expect("scene file");
+    let before_setup = calls();
+    let mut model = glissade_mechanics::scene::load_str(&text, &path)
+        .expect("valid scene")
+        .model;
+    model.solver.search_direction_update = search_direction_update;
+    let mut run = latin::Latin::new(model);
+    for _ in 0..warm_up {
+        run.iterate();
+    }
+    let setup = calls() - before_setup;
+    let mut eta = Vec::with_capacity(measured);
+    let updated_before = run.locals.iter().any(|l| l.directions.is_some());
+    let before = calls();
+    for _ in 0..measured {
+        eta.push(run.iterate().eta());
+    }
+    let during = calls() - before;
+    // The iterations did work: η is finite and moved (a loop that skipped the stages would not
+    // change it).
+    assert!(eta.iter().all(|e| e.is_finite()), "η {eta:?}");
+    assert!(
+        eta.first() != eta.last(),
+        "η did not change over the measured iterations: {eta:?}"
+    );
+    let updated = !updated_before && run.locals.iter().any(|l| l.directions.is_some());
+    (setup, during, updated)
+}
+
+#[test]
+fn latin_iterations_do_not_allocate() {
+    // small-three-layer: perfect interfaces and two frictional contact interfaces, coarse problem
+    // on; 3 warm-up iterations reach the relaxed regime (μ < 1 from iteration 2).
+    let (setup, during, _) = allocations("small-three-layer.toml", false, 3, 10);
+    // The counter sees this thread's allocations: building the model and operators allocates.
+    assert!(
+        setup > 100,
+        "the counting allocator saw only {setup} calls during the setup"
+    );
+    assert_eq!(during, 0, "allocator calls during 10 iterations");
+}
+
+#[test]
+fn iterations_with_the_search_direction_update_do_not_allocate() {
+    // With the update on, its directions are stored in buffers allocated with the interface. On
+    // small-three-layer the update happens within the 60 measured iterations (asserted).
+    let (_, during, updated) = allocations("small-three-layer.toml", true, 3, 60);
+    assert!(
+        updated,
+        "no direction update during the measured iterations: the case does not test it"
+    );
+    assert_eq!(
+        during, 0,
+        "allocator calls during 60 iterations with the search-direction update"
+    );
+}

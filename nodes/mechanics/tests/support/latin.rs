@@ -1,0 +1,207 @@
+//! A LATIN iteration on a whole model in one thread, from the crate's kernels alone (no nodes, no
+//! bus): the same calls, in the same order, as the subdomain, coarse and interface nodes make.
+//! Shared by the allocation test and the iteration benchmark.
+
+// Each user reads a part of it (the test does not read the stage names).
+#![allow(dead_code)]
+
+use faer::Mat;
+use glissade_mechanics::coarse::{Contribution, MacroProblem};
+use glissade_mechanics::linear::{default_k0, macro_basis, macro_degree, sum_relax_into, SubdomainSolver};
+use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
+use glissade_mechanics::model::{Model, Side};
+use std::time::{Duration, Instant};
+
+/// Stages of one iteration, in the order they run.
+pub const STAGES: [&str; 6] = [
+    "micro problem 1",
+    "macro forces",
+    "macro problem",
+    "micro problem 2 and relaxation",
+    "local stage and indicators",
+    "gather s, scatter q̂",
+];
+
+/// One subdomain's fields, allocated once.
+struct SubdomainFields {
+    q_hat: Mat<f64>,
+    w1: Mat<f64>,
+    f1: Mat<f64>,
+    w2: Mat<f64>,
+    f2: Mat<f64>,
+    w: Mat<f64>,
+    f: Mat<f64>,
+    w_tilde: Mat<f64>,
+    macro_forces: Mat<f64>,
+    /// Global macro unknown of each of its macro columns.
+    columns: Vec<usize>,
+}
+
+pub struct Latin {
+    pub model: Model,
+    pub solvers: Vec<SubdomainSolver>,
+    fields: Vec<SubdomainFields>,
+    coarse: MacroProblem,
+    rhs: Mat<f64>,
+    pub locals: Vec<InterfaceLocal>,
+    pub interface_fields: Vec<InterfaceFields>,
+    time_weights: Vec<f64>,
+    pub iteration: usize,
+    /// Time spent per stage of [`STAGES`], summed over the iterations run.
+    pub stage_time: [Duration; 6],
+}
+
+impl Latin {
+    /// Builds every subdomain's solver (condensed linear stage), the macro problem and the
+    /// interfaces' local-stage state, as the runner does.
+    pub fn new(model: Model) -> Self {
+        let k0 = default_k0(&model);
+        let bases: Vec<_> = model
+            .interfaces
+            .iter()
+            .map(|itf| macro_basis(itf, macro_degree(&model, itf)))
+            .collect();
+        let nt = model.time.n_points();
+        let solvers: Vec<SubdomainSolver> = (0..model.subdomains.len())
+            .map(|s| SubdomainSolver::new(&model, s, &k0, &bases).expect("subdomain operator"))
+            .collect();
+        let n_modes: Vec<usize> = bases.iter().map(|b| b.len()).collect();
+        let slots: Vec<Vec<(usize, usize)>> = solvers
+            .iter()
+            .map(|s| s.macro_slots.iter().map(|m| (m.interface, m.n_modes)).collect())
+            .collect();
+        let parts: Vec<Contribution<'_>> = solvers
+            .iter()
+            .zip(&slots)
+            .map(|(s, sl)| Contribution {
+                subdomain: s.subdomain,
+                interfaces: sl,
+                l_e: s.l_e.as_ref(),
+            })
+            .collect();
+        let coarse = MacroProblem::new(&n_modes, &parts).expect("macro problem");
+        let fields = solvers
+            .iter()
+            .zip(&slots)
+            .map(|(s, sl)| {
+                let z = |r: usize| Mat::<f64>::zeros(r, nt);
+                SubdomainFields {
+                    q_hat: z(s.n_boundary()),
+                    w1: z(s.n_boundary()),
+                    f1: z(s.n_boundary()),
+                    w2: z(s.n_boundary()),
+                    f2: z(s.n_boundary()),
+                    w: z(s.n_boundary()),
+                    f: z(s.n_boundary()),
+                    w_tilde: z(s.n_macro()),
+                    macro_forces: z(s.n_macro()),
+                    columns: coarse.columns_of(sl),
+                }
+            })
+            .collect();
+        let locals = model
+            .interfaces
+            .iter()
+            .enumerate()
+            .map(|(i, itf)| InterfaceLocal::new(i, itf, k0[i], nt))
+            .collect();
+        let interface_fields = model
+            .interfaces
+            .iter()
+            .map(|itf| InterfaceFields::zeros(itf.n_pairs(), nt))
+            .collect();
+        Self {
+            rhs: Mat::zeros(coarse.n(), nt),
+            time_weights: model.time.trapezoid_weights(),
+            model,
+            solvers,
+            fields,
+            coarse,
+            locals,
+            interface_fields,
+            iteration: 0,
+            stage_time: [Duration::ZERO; 6],
+        }
+    }
+
+    /// One iteration: linear stage from the stored q̂ (0 at iteration 0), relaxation (μ = 1 at
+    /// iterations 0 and 1), local stage and indicators, q̂ for the next one.
+    pub fn iterate(&mut self) -> IndicatorSums {
+        let n = self.iteration;
+        let mu = if n <= 1 { 1.0 } else { self.model.solver.relaxation };
+        let mut clock = Instant::now();
+        let mut lap = |stage: usize, times: &mut [Duration; 6]| {
+            let now = Instant::now();
+            times[stage] += now - clock;
+            clock = now;
+        };
+        for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
+            solver.micro1_into(x.q_hat.as_ref(), x.w1.as_mut(), x.f1.as_mut());
+            lap(0, &mut self.stage_time);
+            solver.macro_forces_into(x.f1.as_ref(), x.macro_forces.as_mut());
+            lap(1, &mut self.stage_time);
+        }
+        // The coarse node: rhs = −Σ F̂ᴹ, then w̃ per subdomain.
+        self.rhs.fill(0.0);
+        for x in &self.fields {
+            for j in 0..self.rhs.ncols() {
+                for (r, &g) in x.columns.iter().enumerate() {
+                    self.rhs[(g, j)] -= x.macro_forces[(r, j)];
+                }
+            }
+        }
+        self.coarse.solve_in_place(&mut self.rhs);
+        for x in &mut self.fields {
+            for j in 0..self.rhs.ncols() {
+                for (r, &g) in x.columns.iter().enumerate() {
+                    x.w_tilde[(r, j)] = self.rhs[(g, j)];
+                }
+            }
+        }
+        lap(2, &mut self.stage_time);
+        for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
+            solver.micro2_into(x.w_tilde.as_ref(), x.w2.as_mut(), x.f2.as_mut());
+            sum_relax_into(
+                mu,
+                x.w1.as_mut(),
+                x.f1.as_mut(),
+                x.w2.as_ref(),
+                x.f2.as_ref(),
+                x.w.as_mut(),
+                x.f.as_mut(),
+            );
+        }
+        lap(3, &mut self.stage_time);
+        for (solver, x) in self.solvers.iter().zip(&self.fields) {
+            for slot in &solver.op.layout.slots {
+                let (w, f) = (&x.w, &x.f);
+                self.interface_fields[slot.interface].set_side(
+                    slot.side,
+                    slot.offset,
+                    |r, c| w[(r, c)],
+                    |r, c| f[(r, c)],
+                );
+            }
+        }
+        lap(5, &mut self.stage_time);
+        let mut sums = IndicatorSums::default();
+        let solver_params = &self.model.solver;
+        for (i, (local, s)) in self.locals.iter_mut().zip(&self.interface_fields).enumerate() {
+            let itf = &self.model.interfaces[i];
+            local.local_stage(itf, s);
+            sums.add(&local.indicator_sums(itf, &self.time_weights, s, n == 0));
+            if solver_params.search_direction_update {
+                local.update_directions(itf, solver_params.alpha, solver_params.i0);
+            }
+        }
+        lap(4, &mut self.stage_time);
+        for (solver, x) in self.solvers.iter().zip(&mut self.fields) {
+            for slot in &solver.op.layout.slots {
+                self.locals[slot.interface].q_hat_into(slot.side == Side::A, x.q_hat.as_mut(), slot.offset);
+            }
+        }
+        lap(5, &mut self.stage_time);
+        self.iteration += 1;
+        sums
+    }
+}
