@@ -134,10 +134,10 @@ pub struct SubdomainSolver {
     /// A_E M k⁻ 𝔼 (n_b × n_m).
     pub a_mk_e: Mat<f64>,
     /// A_Eᵀ stored column-major (0 × 0 without A_E): its transpose is A_E entry for entry, laid
-    /// out by rows, which makes the product pack A_E into the kernel's contiguous buffer. Read in
-    /// place, A_E's columns are n_b·8 bytes apart and one kernel pass touches a page per column:
-    /// measured on the stratified scene (n_b = 246, 101 time points), the product took 0.7 to
-    /// 2.5 ms depending on where A_E sits in memory, and 0.23 ms packed.
+    /// out by rows, which makes the product kernel pack A_E into its own contiguous buffer. Read
+    /// in place (column-major), measured on the stratified scene (n_b = 246, 101 time points),
+    /// the product took 0.7 to 2.5 ms depending on where A_E sat in memory (0.2 to 0.7 ms for
+    /// copies of it elsewhere), and 0.23 ms packed.
     a_rows: Mat<f64>,
     /// (M 𝔼)ᵀ (n_m × n_b), column-major: the macro forces are one product with it.
     me_t: Mat<f64>,
