@@ -162,13 +162,29 @@ pub struct Interrupted {
     pub partial: RunResult,
 }
 
+/// How a node process takes part in a run.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Supervision {
+    /// Send the full displacement fields at the end (subdomain role, `glissade node --interior`).
+    pub interior: bool,
+    /// The launcher restarts node processes that die (`glissade node --supervised`).
+    pub supervised: bool,
+    /// This process replaces one that died (`glissade node --resume`).
+    pub resume: bool,
+}
+
 /// One spawned node process.
 struct NodeProcess {
     name: NodeName,
     child: Child,
+    /// Its `glissade node` arguments (a replacement gets them too, with `--resume`).
+    args: Vec<String>,
     last_lines: Arc<Mutex<Vec<String>>>,
     /// Exit status once it exited.
     status: Option<ExitStatus>,
+    /// Its liveliness token was seen (a token of the same name that disappears before is its
+    /// predecessor's).
+    token_seen: bool,
     /// When its liveliness token disappeared while it was still running.
     token_lost: Option<Instant>,
 }
@@ -233,8 +249,9 @@ pub(crate) fn forward(prefix: String, stream: impl std::io::Read + Send + 'stati
     });
 }
 
-/// The `glissade node` arguments of node `name` (after the executable).
-fn node_args(name: NodeName, run_id: &str, connect: &[String], interior: bool) -> Vec<String> {
+/// The `glissade node` arguments of node `name` (after the executable); `tls`: its `--tls-*`
+/// arguments ([`tls_args`]).
+fn node_args(name: NodeName, run_id: &str, connect: &[String], interior: bool, tls: &[String]) -> Vec<String> {
     let mut args = vec![
         "node".to_string(),
         name.role.key().to_string(),
@@ -250,7 +267,69 @@ fn node_args(name: NodeName, run_id: &str, connect: &[String], interior: bool) -
     if name.role == NodeRole::Subdomain && interior {
         args.push("--interior".into());
     }
+    args.extend_from_slice(tls);
     args
+}
+
+/// The `--tls-*` arguments of a node process that trusts the certificate authority `root_ca` and,
+/// with mutual TLS, presents `identity` (certificate, private key).
+fn tls_args(root_ca: &Path, identity: Option<(&Path, &Path)>) -> Vec<String> {
+    let mut args = vec!["--tls-root-ca".to_string(), root_ca.display().to_string()];
+    if let Some((cert, key)) = identity {
+        args.extend([
+            "--tls-cert".to_string(),
+            cert.display().to_string(),
+            "--tls-key".to_string(),
+            key.display().to_string(),
+        ]);
+    }
+    args
+}
+
+/// The common name of the (first) certificate in PEM file `path`, if it has one.
+fn cert_common_name(path: &Path) -> anyhow::Result<Option<String>> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: not a PEM certificate: {e}", path.display()))?;
+    let cert = pem
+        .parse_x509()
+        .map_err(|e| anyhow::anyhow!("{}: not an X.509 certificate: {e}", path.display()))?;
+    let cn = cert.subject().iter_common_name().next().and_then(|cn| cn.as_str().ok());
+    Ok(cn.map(str::to_string))
+}
+
+/// The TLS of a node process from its `--tls-root-ca`, `--tls-cert` and `--tls-key` arguments
+/// (None without them); each file must be readable.
+pub fn node_tls(
+    root_ca: Option<&Path>,
+    cert: Option<&Path>,
+    key: Option<&Path>,
+) -> anyhow::Result<Option<transport::Tls>> {
+    let identity = match (cert, key) {
+        (Some(c), Some(k)) => Some((c.to_path_buf(), k.to_path_buf())),
+        (None, None) => None,
+        _ => bail!("--tls-cert and --tls-key go together (a certificate and its private key)"),
+    };
+    let Some(root_ca) = root_ca else {
+        if identity.is_some() {
+            bail!("--tls-cert needs --tls-root-ca (the certificate authority of the run)");
+        }
+        return Ok(None);
+    };
+    for (flag, path) in [
+        ("--tls-root-ca", Some(root_ca)),
+        ("--tls-cert", cert),
+        ("--tls-key", key),
+    ] {
+        if let Some(p) = path {
+            std::fs::File::open(p).with_context(|| format!("{flag} {}: cannot read it", p.display()))?;
+        }
+    }
+    Ok(Some(transport::Tls {
+        root_ca: root_ca.to_path_buf(),
+        identity,
+        mutual: false,
+    }))
 }
 
 fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<NodeProcess> {
@@ -287,8 +366,10 @@ fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<Nod
     Ok(NodeProcess {
         name,
         child,
+        args: args.to_vec(),
         last_lines: last,
         status: None,
+        token_seen: false,
         token_lost: None,
     })
 }
@@ -374,14 +455,49 @@ pub fn run_distributed_observed(
     if !net.connect.is_empty() && !net.listen.is_empty() {
         bail!("--listen and --connect exclude each other: the launcher either hosts the router or connects to one");
     }
+    // TLS and access control as the scene's [network] says.
+    let tls = scene.network.tls.as_ref().map(|t| transport::Tls {
+        root_ca: t.root_ca.clone(),
+        identity: Some((t.cert.clone(), t.key.clone())),
+        mutual: t.mutual,
+    });
+    let access = scene.network.allow.as_ref().map(|a| transport::Access::run(run_id, a));
+    if access.is_some() && !net.connect.is_empty() {
+        bail!(
+            "network.allow: access control is enforced by the router this launcher hosts; with --connect {}, \
+             configure it on that router",
+            net.connect.join(", ")
+        );
+    }
+    if let (Some(allow), Some(t)) = (&scene.network.allow, &scene.network.tls) {
+        // The nodes this launcher starts present its certificate.
+        let cn = cert_common_name(&t.cert)?;
+        if all_nodes.iter().any(|n| !net.remote.contains(n)) && !cn.as_ref().is_some_and(|cn| allow.contains(cn)) {
+            bail!(
+                "network.allow: the launcher's certificate {} has common name {}, which the list does not allow; \
+                 the nodes it starts present that certificate (list it, or start every node by hand)",
+                t.cert.display(),
+                cn.map_or("(none)".to_string(), |cn| format!("`{cn}`"))
+            );
+        }
+    }
+    let bus_config = |mode: &str, listen: &[String], connect: &[String]| {
+        transport::secure_config(mode, listen, connect, false, tls.as_ref(), access.as_ref())
+            .context("the bus (the scene's [network] section, --listen, --connect)")
+    };
+    let node_tls = match &scene.network.tls {
+        Some(t) => tls_args(&t.root_ca, t.mutual.then_some((&*t.cert, &*t.key))),
+        None => Vec::new(),
+    };
     // The bus: a router hosted here, or a client of the given router.
     let (session, node_connect, bus) = if net.connect.is_empty() {
         let listen = if net.listen.is_empty() {
-            vec![format!("tcp/127.0.0.1:{}", free_port()?)]
+            let scheme = if tls.is_some() { "tls" } else { "tcp" };
+            vec![format!("{scheme}/127.0.0.1:{}", free_port()?)]
         } else {
             net.listen.clone()
         };
-        let session = transport::open(transport::config("router", &listen, &[], false)?)
+        let session = transport::open(bus_config("router", &listen, &[])?)
             .with_context(|| format!("cannot host the Zenoh router on {}", listen.join(", ")))?;
         let connect = vec![local_endpoint(&listen[0])];
         (
@@ -390,7 +506,7 @@ pub fn run_distributed_observed(
             format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
         )
     } else {
-        let session = transport::open(transport::config("client", &[], &net.connect, false)?)
+        let session = transport::open(bus_config("client", &[], &net.connect)?)
             .with_context(|| format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")))?;
         (
             session,
@@ -424,10 +540,29 @@ pub fn run_distributed_observed(
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: subscribe to the run: {e}"))?;
 
+    // Node processes that die mid-run are restarted (they resume from the recorder's log) when
+    // the scene allows restarts and the run is recorded completely; otherwise a death stops the
+    // run, and the launcher says why up front.
+    let restarts = scene.deployment.restarts;
+    let no_resume = match &net.recording {
+        None => Some("the run is not recorded".to_string()),
+        Some(_) => scene.recording.incomplete(),
+    };
+    let supervised = restarts > 0 && no_resume.is_none();
+    if let (true, Some(why)) = (restarts > 0, &no_resume) {
+        eprintln!("node restarts off ({why}): a node process that dies stops the run");
+    }
+    let with_supervision = |mut args: Vec<String>| {
+        if supervised {
+            args.push("--supervised".into());
+        }
+        args
+    };
+    let mut restarted: BTreeMap<NodeName, usize> = BTreeMap::new();
     // Spawn the local node processes; tell how to start the others.
     let mut children = Children(Vec::new());
     for &name in all_nodes.iter().filter(|n| !net.remote.contains(n)) {
-        let args = node_args(name, run_id, &node_connect, opts.interior);
+        let args = with_supervision(node_args(name, run_id, &node_connect, opts.interior, &node_tls));
         children.0.push(spawn_node(exe, name, &args)?);
     }
     let mut recorder = match &net.recording {
@@ -436,6 +571,7 @@ pub fn run_distributed_observed(
             &session,
             run_id,
             &node_connect[0],
+            &node_tls,
             path,
         )?),
         None => None,
@@ -455,8 +591,28 @@ pub fn run_distributed_observed(
             remote_timeout.as_secs(),
             net.remote.len()
         );
+        let remote_tls = match &scene.network.tls {
+            Some(t) => {
+                eprintln!(
+                    "(TLS: copy {} to the other machine(s){})",
+                    t.root_ca.display(),
+                    if t.mutual {
+                        "; each node presents its own certificate signed by it"
+                    } else {
+                        ""
+                    }
+                );
+                let ca = Path::new(t.root_ca.file_name().unwrap_or(t.root_ca.as_os_str()));
+                let identity = (Path::new("<node-cert.pem>"), Path::new("<node-key.pem>"));
+                tls_args(ca, t.mutual.then_some(identity))
+            }
+            None => Vec::new(),
+        };
         for &r in &net.remote {
-            eprintln!("  glissade {}", node_args(r, run_id, &connect, opts.interior).join(" "));
+            eprintln!(
+                "  glissade {}",
+                with_supervision(node_args(r, run_id, &connect, opts.interior, &remote_tls)).join(" ")
+            );
         }
     }
     let expected = Expected {
@@ -473,6 +629,7 @@ pub fn run_distributed_observed(
     };
 
     let mut got = Collected::default();
+    let mut heard: std::collections::HashSet<u64> = std::collections::HashSet::new();
     let mut traffic = Traffic::default();
     let mut remote_lost: BTreeMap<NodeName, Instant> = BTreeMap::new();
     let mut stop_seen = false;
@@ -490,19 +647,20 @@ pub fn run_distributed_observed(
         // Which node failed first, if any.
         for (key, up) in presence.changes() {
             let Some(&name) = tokens.get(&key) else { continue };
-            if up {
-                continue;
-            }
             if let Some(p) = children.0.iter_mut().find(|p| p.name == name) {
-                if p.status.is_none() {
+                if up {
+                    p.token_seen = true;
+                    p.token_lost = None;
+                } else if p.status.is_none() && p.token_seen {
                     p.token_lost = Some(Instant::now());
                 }
-            } else {
+            } else if !up {
                 remote_lost.entry(name).or_insert_with(Instant::now);
             }
         }
         let mut child_failure: Option<String> = None;
-        for p in &mut children.0 {
+        let mut dead: Option<usize> = None;
+        for (k, p) in children.0.iter_mut().enumerate() {
             if p.status.is_some() || child_failure.is_some() {
                 continue;
             }
@@ -514,6 +672,7 @@ pub fn run_distributed_observed(
                         p.name,
                         p.last_lines()
                     ));
+                    dead = Some(k);
                 } else if got.started.is_none() {
                     child_failure = Some(format!("node {} exited before the run started", p.name));
                 }
@@ -524,6 +683,34 @@ pub fn run_distributed_observed(
                     p.name,
                     EXIT_GRACE.as_secs(),
                     p.last_lines()
+                ));
+                dead = Some(k);
+            }
+        }
+        // A node process that died mid-run: a replacement resumes from the recorder's log, up to
+        // `restarts` times per node.
+        if let (Some(k), Some(why), true) = (dead, &child_failure, supervised && got.started.is_some()) {
+            let name = children.0[k].name;
+            let count = restarted.entry(name).or_default();
+            let why_short = why.split("; its last lines").next().unwrap_or(why).to_string();
+            if *count < restarts {
+                *count += 1;
+                eprintln!(
+                    "{why_short}; restarting it ({} of {restarts}): it resumes from the recording",
+                    *count
+                );
+                let p = &mut children.0[k];
+                let _ = p.child.kill();
+                let _ = p.child.wait();
+                let base = p.args.clone();
+                let mut args = base.clone();
+                args.push("--resume".into());
+                *p = spawn_node(exe, name, &args)?;
+                p.args = base;
+                child_failure = None;
+            } else {
+                child_failure = Some(format!(
+                    "node {name} died again after {restarts} restart(s) (deployment.restarts = {restarts}): {why}"
                 ));
             }
         }
@@ -591,6 +778,10 @@ pub fn run_distributed_observed(
                 if !count(&mut traffic, &key, &bytes, run_id) {
                     continue;
                 }
+                // A restarted node re-sends outputs its predecessor may have sent already.
+                if !heard.insert(transport::message_hash(&key, &bytes)) {
+                    continue;
+                }
                 let Ok(m) = decode(&bytes, &expected) else { continue };
                 observe(&m);
                 if let Some(rec) = got.take(m) {
@@ -633,7 +824,7 @@ pub fn run_distributed_observed(
     }
     // Messages still queued (sent before their nodes left).
     while let Ok((key, bytes)) = rx.try_recv() {
-        if !count(&mut traffic, &key, &bytes, run_id) {
+        if !count(&mut traffic, &key, &bytes, run_id) || !heard.insert(transport::message_hash(&key, &bytes)) {
             continue;
         }
         if let Ok(m) = decode(&bytes, &expected) {
@@ -741,13 +932,24 @@ pub fn run_node_process(
     connect: &[String],
     subdomains: &[u32],
     index: u32,
-    interior: bool,
+    supervision: Supervision,
+    tls: Option<&transport::Tls>,
 ) -> anyhow::Result<()> {
+    let interior = supervision.interior;
     let name = NodeName { role, index };
     if role == NodeRole::Coarse && index != 0 {
         bail!("node {name}: a run has one coarse node, index 0");
     }
-    let session = transport::open(transport::config("client", &[], connect, false)?)?;
+    let config = transport::secure_config("client", &[], connect, false, tls, None).context("--connect, --tls-*")?;
+    let session = transport::open(config).with_context(|| {
+        let hint = if tls.is_some() {
+            " (TLS: --tls-root-ca must be the run's certificate authority, and with mutual TLS --tls-cert a \
+             certificate it signed)"
+        } else {
+            ""
+        };
+        format!("cannot join the run's bus at {}{hint}", connect.join(", "))
+    })?;
     let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
     let fp = transport::scene_fingerprint_of(&bytes, run_id)?;
     let expected = Expected {
@@ -819,6 +1021,8 @@ pub fn run_node_process(
         start_timeout: READY_TIMEOUT,
         idle_timeout: IDLE_TIMEOUT,
         departure_grace: DEPARTURE_GRACE,
+        supervised: supervision.supervised,
+        resume: supervision.resume,
     };
     let outcome = transport::run_nodes(&session, &run, nodes, |l| eprintln!("{l}"));
     let _ = session.close().wait();

@@ -14,8 +14,11 @@ use anyhow::Context;
 use glissade_mechanics::scene::{load_str, LoadedScene};
 use std::path::Path;
 
-/// Reads and validates a scene file.
+/// Reads and validates a scene file; its TLS files (`network.tls`) become relative to its folder
+/// and must be readable.
 pub fn load_scene(path: &Path) -> anyhow::Result<LoadedScene> {
     let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scene file {}", path.display()))?;
-    Ok(load_str(&text, &path.display().to_string())?)
+    let mut scene = load_str(&text, &path.display().to_string())?;
+    scene.network.resolve_files(path)?;
+    Ok(scene)
 }

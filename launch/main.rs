@@ -5,6 +5,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 use glissade::distributed::{
     install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Network, NodeName, NodeRole,
+    Supervision,
 };
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
@@ -137,6 +138,24 @@ struct NodeArgs {
     /// The MCAP file to write (recorder role).
     #[arg(long)]
     file: Option<PathBuf>,
+    /// The launcher restarts node processes that die: a peer leaving does not stop this one.
+    #[arg(long)]
+    supervised: bool,
+    /// Replace a node process that died mid-run: rebuild its state from the recorder's log
+    /// instead of waiting for the start (the launcher passes it when it restarts a node).
+    #[arg(long)]
+    resume: bool,
+    /// TLS (`--connect tls/…`): the certificate authority of the run (PEM), which signed the
+    /// launcher's certificate.
+    #[arg(long, value_name = "PEM")]
+    tls_root_ca: Option<PathBuf>,
+    /// Mutual TLS: this node's certificate (PEM), signed by `--tls-root-ca`; its common name must
+    /// be in the scene's `network.allow` when the scene has one.
+    #[arg(long, value_name = "PEM", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// Mutual TLS: the private key of `--tls-cert` (PEM).
+    #[arg(long, value_name = "PEM", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -171,6 +190,10 @@ struct ReplayArgs {
     /// displacement).
     #[arg(long)]
     time_point: Option<usize>,
+    /// Solve the scene with the monolithic Newton reference first and log each iteration's error
+    /// against it (`error/traction`, `error/jump`), as `glissade report` measures it.
+    #[arg(long, conflicts_with = "node")]
+    reference: bool,
     /// Re-execute this node (`subdomain:<i>`, `interface:0`, `coarse:0`, or `all`) from its
     /// recorded inputs and check that its outputs are bit-identical (repeatable).
     #[arg(long, value_name = "ROLE:ID")]
@@ -236,6 +259,8 @@ impl LiveView {
                     color_by: glissade_replay::ColorBy::VonMises,
                     amplification: None,
                     time_point: None,
+                    reference: false,
+                    basis_sizes: Vec::new(),
                 };
                 let origin = args.scene.display().to_string();
                 Some(glissade_replay::View::new(&sc.text, &origin, run_id, &opts, None)?)
@@ -322,6 +347,11 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
         } => bench(&scene, &out, max_iterations),
         Command::Replay(args) => replay(args),
         Command::Node(args) => {
+            let tls = glissade::distributed::node_tls(
+                args.tls_root_ca.as_deref(),
+                args.tls_cert.as_deref(),
+                args.tls_key.as_deref(),
+            )?;
             let role = match args.role {
                 RoleArg::Subdomain => NodeRole::Subdomain,
                 RoleArg::Interface => NodeRole::Interface,
@@ -330,7 +360,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     let Some(file) = &args.file else {
                         anyhow::bail!("a recorder node needs --file <recording.mcap>");
                     };
-                    glissade::recording::run_recorder_process(&args.run, &args.connect, file)?;
+                    glissade::recording::run_recorder_process(&args.run, &args.connect, tls.as_ref(), file)?;
                     return Ok(ExitCode::SUCCESS);
                 }
             };
@@ -340,7 +370,12 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 &args.connect,
                 &args.subdomains,
                 args.index,
-                args.interior,
+                Supervision {
+                    interior: args.interior,
+                    supervised: args.supervised,
+                    resume: args.resume,
+                },
+                tls.as_ref(),
             )?;
             Ok(ExitCode::SUCCESS)
         }
@@ -561,14 +596,33 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         let p = args.save.unwrap_or_else(|| args.recording.with_extension("rrd"));
         glissade_replay::Sink::Save(p)
     };
+    // PGD runs: the basis sizes come from re-executing the subdomain nodes (no message has them).
+    let t0 = std::time::Instant::now();
+    let basis_sizes = match glissade::reexecute::recorded_basis_sizes(&recording) {
+        Ok(Some(b)) => {
+            println!(
+                "PGD basis sizes: {} linear stages, from re-executing the subdomain nodes in {:.2} s",
+                b.len(),
+                t0.elapsed().as_secs_f64()
+            );
+            b
+        }
+        Ok(None) => Vec::new(),
+        Err(e) => {
+            println!("PGD basis sizes not shown: {e:#}");
+            Vec::new()
+        }
+    };
     let opts = glissade_replay::ReplayOptions {
         sink: sink.clone(),
+        basis_sizes,
         color_by: match args.color_by {
             ColorByArg::VonMises => glissade_replay::ColorBy::VonMises,
             ColorByArg::Displacement => glissade_replay::ColorBy::Displacement,
         },
         amplification: args.amplification,
         time_point: args.time_point,
+        reference: args.reference,
     };
     let t0 = std::time::Instant::now();
     let s = glissade_replay::replay(&recording, &opts)?;
@@ -583,6 +637,11 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         s.color_range.1,
         t0.elapsed().as_secs_f64()
     );
+    if let (Some(t), Some(&(it, e_f, e_w))) = (s.reference_s, s.errors.last()) {
+        println!(
+            "error against the reference (solved in {t:.2} s), iteration {it}: tractions {e_f:.3e}, jumps {e_w:.3e}"
+        );
+    }
     if let glissade_replay::Sink::Save(p) = sink {
         println!("rerun: {} (open with `rerun {}`)", p.display(), p.display());
     }

@@ -175,13 +175,14 @@ impl Drop for RecorderProcess {
     }
 }
 
-/// Starts `exe node recorder` for run `run_id`, connected to `endpoint` (the bus of `session`),
-/// writing `path`.
+/// Starts `exe node recorder` for run `run_id`, connected to `endpoint` (the bus of `session`)
+/// with the `--tls-*` arguments `tls`, writing `path`.
 pub fn spawn_recorder_process(
     exe: &Path,
     session: &zenoh::Session,
     run_id: &str,
     endpoint: &str,
+    tls: &[String],
     path: &Path,
 ) -> anyhow::Result<RecorderProcess> {
     let ready = Arc::new(AtomicBool::new(false));
@@ -194,7 +195,9 @@ pub fn spawn_recorder_process(
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: watch the recorder's liveliness: {e}"))?;
     let mut cmd = Command::new(exe);
-    cmd.args(["node", "recorder", "--run", run_id, "--connect", endpoint, "--file"])
+    cmd.args(["node", "recorder", "--run", run_id, "--connect", endpoint])
+        .args(tls)
+        .arg("--file")
         .arg(path);
     // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
     unsafe {
@@ -299,16 +302,48 @@ extern "C" fn on_signal(_: libc::c_int) {
     SIGNALLED.store(true, Ordering::SeqCst);
 }
 
+/// What the recorder process hears: a message of the run (key, bytes, log time) or a query for
+/// its log.
+enum Heard {
+    Put(String, Vec<u8>, u64),
+    LogQuery(zenoh::query::Query),
+}
+
+/// The recorded messages of `path` whose key matches one of `patterns` (newline-separated), in
+/// recorded order, encoded with [`glissade_zenoh::encode_log`].
+fn log_of(path: &Path, patterns: &str) -> Result<Vec<u8>, String> {
+    let patterns: Vec<&str> = patterns.lines().filter(|p| !p.is_empty()).collect();
+    let recording = glissade_recorder::Recording::open(path).map_err(|e| e.to_string())?;
+    let messages: Vec<(String, Vec<u8>)> = recording
+        .messages()
+        .filter(|m| patterns.iter().any(|p| glissade_messages::key_matches(p, m.topic)))
+        .map(|m| (m.topic.to_string(), m.data.into_owned()))
+        .collect();
+    eprintln!(
+        "log query: {} message(s) matching {} pattern(s) served",
+        messages.len(),
+        patterns.len()
+    );
+    Ok(glissade_zenoh::encode_log(&messages))
+}
+
 /// The `glissade node recorder` process: fetches the scene, creates the file, subscribes to the
 /// run, declares its liveliness token, and records until the launcher's stop (or SIGINT/SIGTERM,
 /// which finalise the file too).
-pub fn run_recorder_process(run_id: &str, connect: &[String], path: &Path) -> anyhow::Result<()> {
+pub fn run_recorder_process(
+    run_id: &str,
+    connect: &[String],
+    tls: Option<&glissade_zenoh::Tls>,
+    path: &Path,
+) -> anyhow::Result<()> {
     // SAFETY: the handler only stores to an atomic.
     unsafe {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
     }
-    let session = glissade_zenoh::open(glissade_zenoh::config("client", &[], connect, false)?)?;
+    let config =
+        glissade_zenoh::secure_config("client", &[], connect, false, tls, None).context("--connect, --tls-*")?;
+    let session = glissade_zenoh::open(config)?;
     let bytes = glissade_zenoh::fetch_scene(&session, run_id, Duration::from_secs(60))?;
     let fp = glissade_zenoh::scene_fingerprint_of(&bytes, run_id)?;
     let expected = Expected {
@@ -324,11 +359,12 @@ pub fn run_recorder_process(run_id: &str, connect: &[String], path: &Path) -> an
     let scene = load_str(&text, "<scene from the bus>")?;
     let mut recorder = create_recorder(&scene, run_id, path)?;
     eprintln!("recording to {} (pid {})", path.display(), std::process::id());
-    let (tx, rx) = mpsc::channel::<(String, Vec<u8>, u64)>();
+    let (tx, rx) = mpsc::channel::<Heard>();
+    let log_tx = tx.clone();
     let _sub = session
         .declare_subscriber(run_topics(run_id))
         .callback(move |s| {
-            let _ = tx.send((
+            let _ = tx.send(Heard::Put(
                 s.key_expr().as_str().to_string(),
                 s.payload().to_bytes().into_owned(),
                 log_time_now(),
@@ -336,6 +372,17 @@ pub fn run_recorder_process(run_id: &str, connect: &[String], path: &Path) -> an
         })
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: subscribe to the run: {e}"))?;
+    // A replacement node process asks for the messages it needs to resume; the query goes
+    // through the same channel, so every message heard before it is in the file when it is
+    // answered.
+    let _log = session
+        .declare_queryable(glissade_zenoh::log_key(run_id))
+        .callback(move |q| {
+            let _ = log_tx.send(Heard::LogQuery(q));
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("zenoh: declare the log queryable: {e}"))?;
+    let incomplete = scene.recording.incomplete();
     let _token = session
         .liveliness()
         .declare_token(recorder_alive_key(run_id))
@@ -368,7 +415,28 @@ pub fn run_recorder_process(run_id: &str, connect: &[String], path: &Path) -> an
             }
         }
         match rx.recv_timeout(Duration::from_millis(100)) {
-            Ok((key, bytes, t)) => {
+            Ok(Heard::LogQuery(q)) => {
+                let answer = match &incomplete {
+                    Some(why) => Err(format!("this recording cannot resume a node: {why}")),
+                    None => recorder.flush().map_err(|e| e.to_string()).and_then(|()| {
+                        log_of(
+                            path,
+                            &String::from_utf8_lossy(&q.payload().map(|p| p.to_bytes()).unwrap_or_default()),
+                        )
+                    }),
+                };
+                let sent = match answer {
+                    Ok(bytes) => q.reply(q.key_expr().clone(), bytes).wait(),
+                    Err(why) => {
+                        eprintln!("log query refused: {why}");
+                        q.reply_err(why.into_bytes()).wait()
+                    }
+                };
+                if let Err(e) = sent {
+                    eprintln!("cannot answer a log query: {e}");
+                }
+            }
+            Ok(Heard::Put(key, bytes, t)) => {
                 last = Instant::now();
                 if key == end {
                     let n = <[u8; 8]>::try_from(bytes.as_slice())

@@ -162,6 +162,12 @@ const CASES: &[Case] = &[
         error: "bad.toml: deployment.interface_groups[0][0]: `lower-upper`: name an interface as \"A|B\" (blocks or subdomains) or by its index",
     },
     Case {
+        name: "unbounded node restarts",
+        args: RUN,
+        edits: &[("uy = -0.01\n", "uy = -0.01\n\n[deployment]\nrestarts = 1000\n")],
+        error: "bad.toml: deployment.restarts: 1000: at most 100 (a node that keeps dying will not recover)",
+    },
+    Case {
         name: "unknown solver key",
         args: RUN,
         edits: &[("uy = -0.01\n", "uy = -0.01\n\n[solver]\ntolerence = 1e-6\n")],
@@ -202,6 +208,66 @@ const CASES: &[Case] = &[
         args: &["frobnicate"],
         edits: &[],
         error: "error: unrecognized subcommand 'frobnicate'",
+    },
+    Case {
+        name: "TLS certificate authority file missing",
+        args: RUN,
+        edits: &[(
+            "uy = -0.01\n",
+            "uy = -0.01\n\n[network]\ntls = { root_ca = \"certs/ca.pem\", cert = \"a-file\", key = \"a-file\" }\n",
+        )],
+        error: "bad.toml: network.tls.root_ca: cannot read {dir}/certs/ca.pem: No such file or directory",
+    },
+    Case {
+        name: "TLS file not PEM",
+        args: RUN,
+        edits: &[(
+            "uy = -0.01\n",
+            "uy = -0.01\n\n[network]\ntls = { root_ca = \"a-file\", cert = \"a-file\", key = \"a-file\" }\n",
+        )],
+        error: "bad.toml: network.tls.root_ca: {dir}/a-file is not a PEM file (no -----BEGIN line)",
+    },
+    Case {
+        name: "TLS key missing",
+        args: RUN,
+        edits: &[(
+            "uy = -0.01\n",
+            "uy = -0.01\n\n[network]\ntls = { root_ca = \"ca.pem\", cert = \"node.pem\" }\n",
+        )],
+        error: "bad.toml: network.tls.key: line 50, column 7: missing field `key`",
+    },
+    Case {
+        name: "access control without TLS",
+        args: RUN,
+        edits: &[("uy = -0.01\n", "uy = -0.01\n\n[network]\nallow = [\"node-a\"]\n")],
+        error: "bad.toml: network.allow: access control names processes by their certificates: it needs network.tls",
+    },
+    Case {
+        name: "access control without mutual TLS",
+        args: RUN,
+        edits: &[(
+            "uy = -0.01\n",
+            "uy = -0.01\n\n[network]\ntls = { root_ca = \"ca.pem\", cert = \"c.pem\", key = \"k.pem\" }\nallow = [\"node-a\"]\n",
+        )],
+        error: "bad.toml: network.allow: access control needs network.tls.mutual = true",
+    },
+    Case {
+        name: "node: TLS endpoint without a CA file",
+        args: &["node", "subdomain", "--run", "r", "--connect", "tls/127.0.0.1:9"],
+        edits: &[],
+        error: "endpoint tls/127.0.0.1:9: a TLS endpoint needs the certificate authority's file",
+    },
+    Case {
+        name: "node: TLS certificate without its key",
+        args: &["node", "subdomain", "--run", "r", "--connect", "tls/127.0.0.1:9", "--tls-cert", "{dir}/a-file"],
+        edits: &[],
+        error: "error: the following required arguments were not provided:\n  --tls-key <PEM>",
+    },
+    Case {
+        name: "node: TLS CA file missing",
+        args: &["node", "subdomain", "--run", "r", "--connect", "tls/127.0.0.1:9", "--tls-root-ca", "{dir}/ca.pem"],
+        edits: &[],
+        error: "error: --tls-root-ca {dir}/ca.pem: cannot read it: No such file or directory",
     },
 ];
 

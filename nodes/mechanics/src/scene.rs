@@ -96,6 +96,9 @@
 //!                            # an entry is an interface index (model order, as `glissade check`
 //!                            # counts them) or "A|B": every interface between block or subdomain
 //!                            # A and block or subdomain B. Every interface in exactly one group.
+//! restarts = 3               # 0 ≤ n ≤ 100: times the launcher restarts a node process that
+//!                            # died mid-run (it resumes from the recording, which must then be
+//!                            # complete: enabled, topics ["**"], full_fields_every = 1)
 //!
 //! [recording]
 //! enabled = true
@@ -162,6 +165,61 @@ pub struct LoadedScene {
     pub fingerprint: u64,
     /// The scene text as given (remote nodes get the scene from the bus).
     pub text: String,
+    /// How the processes of a run reach each other (`[network]`).
+    pub network: Network,
+}
+
+/// `[network]`: TLS between the processes of a run and access control on its bus.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Network {
+    /// `network.tls`; None: plain TCP.
+    pub tls: Option<TlsFiles>,
+    /// `network.allow`: certificate common names allowed to take part (deny by default); None:
+    /// every process the certificate authority vouches for (or any, without TLS).
+    pub allow: Option<Vec<String>>,
+}
+
+/// `network.tls`: PEM files, as written until [`Network::resolve_files`] makes them relative to
+/// the scene file's folder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TlsFiles {
+    /// The certificate authority that signs every certificate of the run.
+    pub root_ca: std::path::PathBuf,
+    /// The launcher's certificate (its router's, and the one of the nodes it starts).
+    pub cert: std::path::PathBuf,
+    /// The private key of `cert`.
+    pub key: std::path::PathBuf,
+    /// Clients must present a certificate signed by `root_ca` (mutual TLS).
+    pub mutual: bool,
+}
+
+impl Network {
+    /// Makes the TLS file paths relative to the folder of `scene_file` (absolute ones stay) and
+    /// checks that each is a readable PEM file; errors name the key and the path.
+    pub fn resolve_files(&mut self, scene_file: &std::path::Path) -> Result<(), SceneError> {
+        let Some(tls) = &mut self.tls else { return Ok(()) };
+        let folder = scene_file.parent().unwrap_or(std::path::Path::new(""));
+        for (key, path) in [
+            ("network.tls.root_ca", &mut tls.root_ca),
+            ("network.tls.cert", &mut tls.cert),
+            ("network.tls.key", &mut tls.key),
+        ] {
+            *path = folder.join(&*path);
+            let err = |problem: String| SceneError {
+                file: scene_file.display().to_string(),
+                key: key.to_string(),
+                problem,
+            };
+            let bytes = std::fs::read(&*path).map_err(|e| err(format!("cannot read {}: {e}", path.display())))?;
+            if !bytes.windows(11).any(|w| w == b"-----BEGIN ") {
+                return Err(err(format!(
+                    "{} is not a PEM file (no -----BEGIN line)",
+                    path.display()
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// How the PGD enrichment criterion ξ is measured (DESIGN §3, "Where PGD pays").
@@ -240,6 +298,8 @@ pub struct Deployment {
     /// The interfaces each interface node owns (model interface indices, ascending), when the
     /// scene assigns them; None: [`balanced_interface_groups`].
     pub interface_groups: Option<Vec<Vec<usize>>>,
+    /// How many times the launcher restarts each node process that dies mid-run.
+    pub restarts: usize,
 }
 
 impl Default for Deployment {
@@ -248,6 +308,7 @@ impl Default for Deployment {
             subdomain_nodes: 1,
             interface_nodes: 1,
             interface_groups: None,
+            restarts: 3,
         }
     }
 }
@@ -302,6 +363,25 @@ pub struct Recording {
     pub full_fields_every: usize,
 }
 
+impl Recording {
+    /// Why a node process cannot resume from this recording (it needs every message), if it
+    /// cannot.
+    pub fn incomplete(&self) -> Option<String> {
+        if !self.enabled {
+            Some("recording.enabled = false".into())
+        } else if self.topics.iter().all(|t| t != "**") {
+            Some(format!("recording.topics = {:?} leaves messages out", self.topics))
+        } else if self.full_fields_every > 1 {
+            Some(format!(
+                "recording.full_fields_every = {} leaves full fields out",
+                self.full_fields_every
+            ))
+        } else {
+            None
+        }
+    }
+}
+
 impl Default for Recording {
     fn default() -> Self {
         Self {
@@ -346,6 +426,7 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
         linear_stage: built.linear_stage,
         fingerprint: fingerprint(text),
         text: text.to_string(),
+        network: ctx.network(&raw.network)?,
     })
 }
 
@@ -372,6 +453,8 @@ struct RawScene {
     deployment: RawDeployment,
     #[serde(default)]
     recording: RawRecording,
+    #[serde(default)]
+    network: RawNetwork,
 }
 
 #[derive(Deserialize, Clone, Copy)]
@@ -530,6 +613,7 @@ struct RawDeployment {
     subdomain_nodes: Option<usize>,
     interface_nodes: Option<usize>,
     interface_groups: Option<Vec<Vec<RawInterfaceRef>>>,
+    restarts: Option<usize>,
 }
 
 /// An interface in `deployment.interface_groups`: its index, or `"A|B"` (every interface between
@@ -539,6 +623,22 @@ struct RawDeployment {
 enum RawInterfaceRef {
     Index(usize),
     Between(String),
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawNetwork {
+    tls: Option<RawTls>,
+    allow: Option<Vec<String>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTls {
+    root_ca: String,
+    cert: String,
+    key: String,
+    mutual: Option<bool>,
 }
 
 #[derive(Deserialize, Default)]
@@ -1030,6 +1130,51 @@ impl Ctx<'_> {
         Ok(rec)
     }
 
+    fn network(&self, r: &RawNetwork) -> Result<Network, SceneError> {
+        let tls = match &r.tls {
+            None => None,
+            Some(t) => {
+                for (key, value) in [("root_ca", &t.root_ca), ("cert", &t.cert), ("key", &t.key)] {
+                    self.check(!value.trim().is_empty(), &format!("network.tls.{key}"), || {
+                        "must name a PEM file (relative to the scene file's folder)".to_string()
+                    })?;
+                }
+                Some(TlsFiles {
+                    root_ca: t.root_ca.clone().into(),
+                    cert: t.cert.clone().into(),
+                    key: t.key.clone().into(),
+                    mutual: t.mutual.unwrap_or(false),
+                })
+            }
+        };
+        if let Some(allow) = &r.allow {
+            self.check(tls.is_some(), "network.allow", || {
+                "access control names processes by their certificates: it needs network.tls (with mutual = true)"
+                    .to_string()
+            })?;
+            self.check(tls.as_ref().is_some_and(|t| t.mutual), "network.allow", || {
+                "access control needs network.tls.mutual = true (a process's common name is known only from the \
+                 certificate it presents)"
+                    .to_string()
+            })?;
+            self.check(!allow.is_empty(), "network.allow", || {
+                "an empty list would let no process take part (remove the key to turn access control off)".to_string()
+            })?;
+            for (i, name) in allow.iter().enumerate() {
+                self.check(!name.trim().is_empty(), &format!("network.allow[{i}]"), || {
+                    "must be a certificate common name, not empty".to_string()
+                })?;
+                self.check(!allow[..i].contains(name), &format!("network.allow[{i}]"), || {
+                    format!("`{name}` is listed twice")
+                })?;
+            }
+        }
+        Ok(Network {
+            tls,
+            allow: r.allow.clone(),
+        })
+    }
+
     fn deployment(&self, r: &RawDeployment, n_subdomains: usize) -> Result<Deployment, SceneError> {
         let d = Deployment::default();
         let dep = Deployment {
@@ -1039,7 +1184,14 @@ impl Ctx<'_> {
                 .or(r.interface_groups.as_ref().map(Vec::len))
                 .unwrap_or(d.interface_nodes),
             interface_groups: None,
+            restarts: r.restarts.unwrap_or(d.restarts),
         };
+        self.check(dep.restarts <= 100, "deployment.restarts", || {
+            format!(
+                "{}: at most 100 (a node that keeps dying will not recover)",
+                dep.restarts
+            )
+        })?;
         self.check(dep.subdomain_nodes >= 1, "deployment.subdomain_nodes", || {
             "must be ≥ 1".to_string()
         })?;
@@ -2750,5 +2902,104 @@ uy = -0.01
             e.to_string().contains("broyden") && e.to_string().contains("anderson"),
             "{e}"
         );
+    }
+
+    /// `[network]`: TLS files as written, mutual TLS, access control; each inconsistency is
+    /// named by its key.
+    #[test]
+    fn network_section() {
+        let net = |lines: &str| format!("{TWO_BLOCKS}\n[network]\n{lines}\n");
+        let tls = r#"tls = { root_ca = "tls/ca.pem", cert = "tls/node.pem", key = "tls/node.key" }"#;
+        let mutual = r#"tls = { root_ca = "tls/ca.pem", cert = "tls/node.pem", key = "tls/node.key", mutual = true }"#;
+        assert_eq!(load(TWO_BLOCKS).unwrap().network, Network::default());
+        let s = load(&net(&format!("{mutual}\nallow = [\"node-a\", \"node-b\"]"))).unwrap();
+        assert_eq!(
+            s.network,
+            Network {
+                tls: Some(TlsFiles {
+                    root_ca: "tls/ca.pem".into(),
+                    cert: "tls/node.pem".into(),
+                    key: "tls/node.key".into(),
+                    mutual: true,
+                }),
+                allow: Some(vec!["node-a".into(), "node-b".into()]),
+            }
+        );
+        assert!(!load(&net(tls)).unwrap().network.tls.unwrap().mutual);
+        expect_err(&net("allow = [\"node-a\"]"), "network.allow", "it needs network.tls");
+        expect_err(
+            &net(&format!("{tls}\nallow = [\"node-a\"]")),
+            "network.allow",
+            "needs network.tls.mutual = true",
+        );
+        expect_err(&net(&format!("{mutual}\nallow = []")), "network.allow", "an empty list");
+        expect_err(
+            &net(&format!("{mutual}\nallow = [\"a\", \"a\"]")),
+            "network.allow[1]",
+            "`a` is listed twice",
+        );
+        expect_err(
+            &net(&format!("{mutual}\nallow = [\" \"]")),
+            "network.allow[0]",
+            "not empty",
+        );
+        expect_err(
+            &net(r#"tls = { root_ca = "tls/ca.pem", cert = "", key = "k.pem" }"#),
+            "network.tls.cert",
+            "must name a PEM file",
+        );
+        expect_err(
+            &net(r#"tls = { root_ca = "tls/ca.pem", cert = "tls/node.pem" }"#),
+            "network.tls.key",
+            "missing field `key`",
+        );
+        expect_err(&net("encrypt = true"), "network.encrypt", "unknown field `encrypt`");
+    }
+
+    /// TLS paths are relative to the scene file's folder and must be readable PEM files.
+    #[test]
+    fn network_files_resolve_and_are_checked() {
+        let dir = std::env::temp_dir().join(format!("glissade-scene-tls-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("tls")).unwrap();
+        let pem = "-----BEGIN CERTIFICATE-----\nMA==\n-----END CERTIFICATE-----\n";
+        for f in ["ca.pem", "node.pem", "node.key"] {
+            std::fs::write(dir.join("tls").join(f), pem).unwrap();
+        }
+        std::fs::write(dir.join("tls/plain.txt"), "not a certificate").unwrap();
+        let scene_file = dir.join("scene.toml");
+        let network = |cert: &str| Network {
+            tls: Some(TlsFiles {
+                root_ca: "tls/ca.pem".into(),
+                cert: cert.into(),
+                key: "tls/node.key".into(),
+                mutual: false,
+            }),
+            allow: None,
+        };
+        let mut ok = network("tls/node.pem");
+        ok.resolve_files(&scene_file).unwrap();
+        let t = ok.tls.unwrap();
+        assert_eq!(t.root_ca, dir.join("tls/ca.pem"));
+        assert_eq!(t.cert, dir.join("tls/node.pem"));
+        assert_eq!(t.key, dir.join("tls/node.key"));
+        let absolute = dir.join("tls/node.pem");
+        let mut abs = network(absolute.to_str().unwrap());
+        abs.resolve_files(&scene_file).unwrap();
+        assert_eq!(abs.tls.unwrap().cert, absolute);
+        let e = network("tls/missing.pem").resolve_files(&scene_file).unwrap_err();
+        assert_eq!(e.key, "network.tls.cert");
+        assert_eq!(e.file, scene_file.display().to_string());
+        assert!(
+            e.problem
+                .starts_with(&format!("cannot read {}: ", dir.join("tls/missing.pem").display())),
+            "{e}"
+        );
+        let e = network("tls/plain.txt").resolve_files(&scene_file).unwrap_err();
+        assert_eq!(e.key, "network.tls.cert");
+        assert!(
+            e.problem.ends_with("plain.txt is not a PEM file (no -----BEGIN line)"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -24,7 +24,9 @@
 
 use glissade_bus::{Node, NodeError};
 use glissade_messages::{decode, encode, DecodeError, Expected, Message};
-use std::collections::{BTreeSet, VecDeque};
+use std::collections::{BTreeSet, HashSet, VecDeque};
+use std::hash::{Hash, Hasher};
+use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use zenoh::qos::CongestionControl;
@@ -126,17 +128,160 @@ pub fn config(mode: &str, listen: &[String], connect: &[String], multicast: bool
     Ok(c)
 }
 
+/// TLS of a session (PEM files): links are encrypted and the router's certificate is checked
+/// against `root_ca` (its subject alternative names must cover the address connected to).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Tls {
+    /// The certificate authority that signs the run's certificates.
+    pub root_ca: PathBuf,
+    /// This session's certificate and private key: what a router presents to its clients, and
+    /// what a client presents to a router that asks for it (mutual TLS). None: a client that
+    /// presents none.
+    pub identity: Option<(PathBuf, PathBuf)>,
+    /// As a router: clients must present a certificate signed by `root_ca`.
+    pub mutual: bool,
+}
+
+/// Access control on a router: deny by default; the sessions whose certificate common name is in
+/// `allow` may publish, subscribe, query, reply and hold liveliness tokens on `key_exprs`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Access {
+    pub allow: Vec<String>,
+    pub key_exprs: Vec<String>,
+}
+
+impl Access {
+    /// Access to the key space of run `run_id` (`glissade/<run>/**`) for `allow`.
+    pub fn run(run_id: &str, allow: &[String]) -> Self {
+        Self {
+            allow: allow.to_vec(),
+            key_exprs: vec![format!("glissade/{run_id}/**")],
+        }
+    }
+}
+
+/// [`config`] with TLS on every endpoint (`tls/…`) and, on a router, access control: the
+/// endpoints must all be `tls/…` exactly when `tls` is given; access control needs a router with
+/// mutual TLS (a client's common name is known only from the certificate it presents).
+pub fn secure_config(
+    mode: &str,
+    listen: &[String],
+    connect: &[String],
+    multicast: bool,
+    tls: Option<&Tls>,
+    access: Option<&Access>,
+) -> Result<Config, TransportError> {
+    let endpoints = listen.iter().chain(connect);
+    match tls {
+        Some(_) => {
+            if let Some(e) = endpoints.clone().find(|e| !e.starts_with("tls/")) {
+                return Err(TransportError::Protocol(format!(
+                    "endpoint {e}: TLS is on, so every endpoint must be tls/<host>:<port>"
+                )));
+            }
+        }
+        None => {
+            if let Some(e) = endpoints.clone().find(|e| e.starts_with("tls/")) {
+                return Err(TransportError::Protocol(format!(
+                    "endpoint {e}: a TLS endpoint needs the certificate authority's file (and, for mutual TLS, \
+                     a certificate and key)"
+                )));
+            }
+        }
+    }
+    if let Some(a) = access {
+        let ok = mode == "router" && tls.is_some_and(|t| t.mutual);
+        if !ok {
+            return Err(TransportError::Protocol(
+                "access control by certificate common name needs a router with mutual TLS".into(),
+            ));
+        }
+        if a.allow.is_empty() || a.key_exprs.is_empty() {
+            return Err(TransportError::Protocol(
+                "access control with no allowed name or no key expression would let nothing through".into(),
+            ));
+        }
+    }
+    let mut c = config(mode, listen, connect, multicast)?;
+    let path = |p: &Path| json_string(&p.to_string_lossy());
+    if let Some(t) = tls {
+        let prefix = "transport/link/tls";
+        let mut set = |key: &str, value: String| {
+            c.insert_json5(&format!("{prefix}/{key}"), &value)
+                .map_err(|e| zerr(&format!("config tls {key}"), e))
+        };
+        set("root_ca_certificate", path(&t.root_ca))?;
+        let router = mode == "router";
+        if let Some((cert, key)) = &t.identity {
+            let (cert_key, key_key) = if router {
+                ("listen_certificate", "listen_private_key")
+            } else {
+                ("connect_certificate", "connect_private_key")
+            };
+            set(cert_key, path(cert))?;
+            set(key_key, path(key))?;
+        }
+        // A router asks for client certificates; a client presents its own when it has one.
+        let mtls = if router { t.mutual } else { t.identity.is_some() };
+        set("enable_mtls", mtls.to_string())?;
+    }
+    if let Some(a) = access {
+        let list = |v: &[String]| format!("[{}]", v.iter().map(|s| json_string(s)).collect::<Vec<_>>().join(","));
+        let acl = format!(
+            r#"{{
+                enabled: true,
+                default_permission: "deny",
+                rules: [{{
+                    id: "run",
+                    messages: ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+                               "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"],
+                    flows: ["egress", "ingress"],
+                    permission: "allow",
+                    key_exprs: {keys},
+                }}],
+                subjects: [{{ id: "allowed", cert_common_names: {names} }}],
+                policies: [{{ rules: ["run"], subjects: ["allowed"] }}],
+            }}"#,
+            keys = list(&a.key_exprs),
+            names = list(&a.allow),
+        );
+        c.insert_json5("access_control", &acl)
+            .map_err(|e| zerr("config access_control", e))?;
+    }
+    Ok(c)
+}
+
+/// `s` as a JSON string literal (quotes and backslashes escaped).
+fn json_string(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for ch in s.chars() {
+        match ch {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if (c as u32) < 0x20 => out.push_str(&format!("\\u{:04x}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
 pub fn open(config: Config) -> Result<Session, TransportError> {
     zenoh::open(config).wait().map_err(|e| zerr("open session", e))
 }
 
 /// Publishes one message on its topic, blocking rather than dropping under congestion.
 pub fn publish(session: &Session, msg: &Message) -> Result<(), TransportError> {
+    put_bytes(session, &msg.topic(), encode(msg))
+}
+
+fn put_bytes(session: &Session, key: &str, bytes: Vec<u8>) -> Result<(), TransportError> {
     session
-        .put(msg.topic(), encode(msg))
+        .put(key, bytes)
         .congestion_control(CongestionControl::Block)
         .wait()
-        .map_err(|e| zerr(&format!("put {}", msg.topic()), e))
+        .map_err(|e| zerr(&format!("put {key}"), e))
 }
 
 /// Fetches a run's scene message from the launcher's queryable (bytes), waiting up to `timeout`.
@@ -177,6 +322,12 @@ pub struct NodeRun {
     /// How long messages are still handled after a peer's token disappeared, before this
     /// process gives up (a peer that finished leaves right after its last messages).
     pub departure_grace: Duration,
+    /// The launcher restarts node processes that die: a peer leaving is not fatal here (the
+    /// launcher stops the run when it gives up on one); only the launcher's departure is.
+    pub supervised: bool,
+    /// This process replaces one that died mid-run: it rebuilds its nodes' state from the
+    /// recorder's log of the run ([`fetch_log`]) instead of waiting for the launcher's start.
+    pub resume: bool,
 }
 
 /// What reaches a node process from the bus.
@@ -223,6 +374,7 @@ pub fn run_nodes(
 ) -> Result<(), TransportError> {
     let (run_id, expected) = (&run.run_id, &run.expected);
     let own_token = alive_key(run_id, &run.token_role, run.token_index);
+    let launcher_token = alive_key(run_id, "launcher", 0);
     let (tx, rx) = mpsc::channel::<Event>();
     let subscriptions: Vec<Vec<String>> = nodes.iter().map(|n| n.subscriptions()).collect();
     let mut keys: Vec<String> = subscriptions.iter().flatten().cloned().collect();
@@ -265,37 +417,16 @@ pub fn run_nodes(
         .wait()
         .map_err(|e| zerr("liveliness token", e))?;
 
-    // Until the launcher's start: keep the data that arrives early (a faster peer may start
-    // first), fail on a departure or a stop.
-    let start_deadline = Instant::now() + run.start_timeout;
-    let mut early = VecDeque::new();
-    loop {
-        let left = start_deadline.saturating_duration_since(Instant::now());
-        match rx.recv_timeout(left) {
-            Ok(Event::Start) => break,
-            Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
-            Ok(Event::Alive(key, false)) if key != own_token => {
-                return Err(TransportError::PeerLeft {
-                    peer: node_of_alive_key(&key),
-                    others: Vec::new(),
-                })
-            }
-            Ok(Event::Data(key, bytes)) => early.push_back((key, bytes)),
-            Ok(Event::Alive(..)) => {}
-            Err(_) => {
-                return Err(TransportError::Protocol(format!(
-                    "the launcher did not start the run within {:?}",
-                    run.start_timeout
-                )))
-            }
-        }
-    }
-    for node in &mut nodes {
-        for m in node.start()? {
-            publish(session, &m)?;
-        }
-    }
-    let mut handle = |key: String, bytes: Vec<u8>, nodes: &mut Vec<Box<dyn Node>>| -> Result<(), TransportError> {
+    // Messages already handled (a replacement process re-sends outputs its predecessor may have
+    // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
+    let mut seen: HashSet<u64> = HashSet::new();
+    let mut published: HashSet<u64> = HashSet::new();
+    let mut handle = |key: String,
+                      bytes: Vec<u8>,
+                      nodes: &mut Vec<Box<dyn Node>>,
+                      published: &HashSet<u64>,
+                      log: &mut dyn FnMut(&str)|
+     -> Result<(), TransportError> {
         let msg = match decode(&bytes, expected) {
             Ok(m) => m,
             Err(e) => {
@@ -310,17 +441,94 @@ pub fn run_nodes(
             ));
             return Ok(());
         }
+        if !seen.insert(message_hash(&key, &bytes)) {
+            log(&format!(
+                "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
+                msg.envelope.iteration, msg.envelope.stage
+            ));
+            return Ok(());
+        }
         for (node, subs) in nodes.iter_mut().zip(&subscriptions) {
             if subs.iter().any(|s| glissade_messages::key_matches(s, &key)) {
                 for out in node.handle(&msg)? {
-                    publish(session, &out)?;
+                    publish_new(session, &out, published)?;
                 }
             }
         }
         Ok(())
     };
-    while let Some((key, bytes)) = early.pop_front() {
-        handle(key, bytes, &mut nodes)?;
+    if run.resume {
+        // Replace a process that died: the recorder's log holds every input its nodes handled
+        // and every output they published; handling the inputs again in recorded order rebuilds
+        // their state (nodes are deterministic whatever the arrival order of one stage's
+        // inputs), and the outputs not yet on the bus are published as they come.
+        let own: Vec<String> = nodes
+            .iter()
+            .map(|n| {
+                let id = n.id();
+                format!("glissade/{run_id}/{}/{}/**", id.role.key(), id.index)
+            })
+            .collect();
+        let mut patterns = keys.clone();
+        patterns.extend(own.iter().cloned());
+        let recorded = fetch_log(session, run_id, &patterns, run.start_timeout)?;
+        let mut inputs = Vec::new();
+        for (key, bytes) in recorded {
+            if own.iter().any(|p| glissade_messages::key_matches(p, &key)) {
+                published.insert(message_hash(&key, &bytes));
+            }
+            if keys.iter().any(|p| glissade_messages::key_matches(p, &key)) {
+                inputs.push((key, bytes));
+            }
+        }
+        log(&format!(
+            "resuming from the recorder's log: {} input(s) to handle again, {} output(s) already on the bus",
+            inputs.len(),
+            published.len()
+        ));
+        for node in &mut nodes {
+            for m in node.start()? {
+                publish_new(session, &m, &published)?;
+            }
+        }
+        for (key, bytes) in inputs {
+            handle(key, bytes, &mut nodes, &published, &mut log)?;
+        }
+        log("resumed: state rebuilt, continuing on the bus");
+    } else {
+        // Until the launcher's start: keep the data that arrives early (a faster peer may start
+        // first), fail on a departure or a stop.
+        let start_deadline = Instant::now() + run.start_timeout;
+        let mut early = VecDeque::new();
+        loop {
+            let left = start_deadline.saturating_duration_since(Instant::now());
+            match rx.recv_timeout(left) {
+                Ok(Event::Start) => break,
+                Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
+                Ok(Event::Alive(key, false)) if key != own_token => {
+                    return Err(TransportError::PeerLeft {
+                        peer: node_of_alive_key(&key),
+                        others: Vec::new(),
+                    })
+                }
+                Ok(Event::Data(key, bytes)) => early.push_back((key, bytes)),
+                Ok(Event::Alive(..)) => {}
+                Err(_) => {
+                    return Err(TransportError::Protocol(format!(
+                        "the launcher did not start the run within {:?}",
+                        run.start_timeout
+                    )))
+                }
+            }
+        }
+        for node in &mut nodes {
+            for m in node.start()? {
+                publish(session, &m)?;
+            }
+        }
+        while let Some((key, bytes)) = early.pop_front() {
+            handle(key, bytes, &mut nodes, &published, &mut log)?;
+        }
     }
     let mut last_message = Instant::now();
     // The peers that left (first first), and when this process gives up on them.
@@ -348,9 +556,15 @@ pub fn run_nodes(
         match rx.recv_timeout(wait) {
             Ok(Event::Data(key, bytes)) => {
                 last_message = Instant::now();
-                handle(key, bytes, &mut nodes)?;
+                handle(key, bytes, &mut nodes, &published, &mut log)?;
             }
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
+            Ok(Event::Alive(key, false)) if run.supervised && key != own_token && key != launcher_token => {
+                log(&format!(
+                    "peer {} left the run; waiting for the launcher to restart it",
+                    node_of_alive_key(&key)
+                ));
+            }
             Ok(Event::Alive(key, false)) if key != own_token => {
                 give_up.get_or_insert_with(|| Instant::now() + run.departure_grace);
                 departed.push(key);
@@ -448,6 +662,103 @@ pub fn scene_fingerprint_of(bytes: &[u8], run_id: &str) -> Result<u64, DecodeErr
     glissade_messages::peek_envelope(bytes, run_id).map(|e| e.scene_fingerprint)
 }
 
+/// Key of the recorder's log queryable of a run: the recorded messages whose key matches one of
+/// the query's patterns, in recorded order ([`fetch_log`]).
+pub fn log_key(run_id: &str) -> String {
+    format!("glissade/{run_id}/recorder/0/log")
+}
+
+/// A 64-bit hash of a message's key and bytes (its envelope and up to 4 KiB at each end, and its
+/// length: a re-sent message is byte-identical, since nodes are deterministic).
+pub fn message_hash(key: &str, bytes: &[u8]) -> u64 {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    key.hash(&mut h);
+    bytes.len().hash(&mut h);
+    let n = bytes.len();
+    bytes[..n.min(4096)].hash(&mut h);
+    bytes[n.saturating_sub(4096)..].hash(&mut h);
+    h.finish()
+}
+
+/// Publishes `msg` unless it is among the outputs already on the bus (`published`, the hashes
+/// of a resumed process's outputs that the recorder holds).
+fn publish_new(session: &Session, msg: &Message, published: &HashSet<u64>) -> Result<(), TransportError> {
+    if published.is_empty() {
+        return publish(session, msg);
+    }
+    let bytes = encode(msg);
+    if published.contains(&message_hash(&msg.topic(), &bytes)) {
+        return Ok(());
+    }
+    put_bytes(session, &msg.topic(), bytes)
+}
+
+/// Encodes a log: per message its key length (u32 LE), key, length (u64 LE) and bytes.
+pub fn encode_log(messages: &[(String, Vec<u8>)]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(messages.iter().map(|(k, b)| 12 + k.len() + b.len()).sum());
+    for (k, b) in messages {
+        out.extend_from_slice(&(k.len() as u32).to_le_bytes());
+        out.extend_from_slice(k.as_bytes());
+        out.extend_from_slice(&(b.len() as u64).to_le_bytes());
+        out.extend_from_slice(b);
+    }
+    out
+}
+
+/// Decodes [`encode_log`]'s bytes; a truncated or malformed log is an error naming the offset.
+pub fn decode_log(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, TransportError> {
+    let bad = |at: usize, what: &str| TransportError::Protocol(format!("malformed recorder log at byte {at}: {what}"));
+    let mut out = Vec::new();
+    let mut at = 0;
+    let take = |at: &mut usize, n: usize, what: &str| -> Result<&[u8], TransportError> {
+        let end = at
+            .checked_add(n)
+            .filter(|&e| e <= bytes.len())
+            .ok_or_else(|| bad(*at, what))?;
+        let s = &bytes[*at..end];
+        *at = end;
+        Ok(s)
+    };
+    while at < bytes.len() {
+        let n = u32::from_le_bytes(take(&mut at, 4, "key length")?.try_into().expect("4 bytes")) as usize;
+        let key = std::str::from_utf8(take(&mut at, n, "key")?)
+            .map_err(|_| bad(at, "key is not UTF-8"))?
+            .to_string();
+        let n = u64::from_le_bytes(take(&mut at, 8, "message length")?.try_into().expect("8 bytes"));
+        let n = usize::try_from(n).map_err(|_| bad(at, "message length"))?;
+        out.push((key, take(&mut at, n, "message")?.to_vec()));
+    }
+    Ok(out)
+}
+
+/// Asks the recorder of run `run_id` for every recorded message whose key matches one of
+/// `patterns`, in recorded order (what a replacement node process needs to resume).
+pub fn fetch_log(
+    session: &Session,
+    run_id: &str,
+    patterns: &[String],
+    timeout: Duration,
+) -> Result<Vec<(String, Vec<u8>)>, TransportError> {
+    let replies = session
+        .get(log_key(run_id))
+        .payload(patterns.join("\n"))
+        .timeout(timeout)
+        .wait()
+        .map_err(|e| zerr("query the recorder's log", e))?;
+    match replies.recv_timeout(timeout) {
+        Ok(Some(reply)) => match reply.result() {
+            Ok(sample) => decode_log(&sample.payload().to_bytes()),
+            Err(e) => Err(TransportError::Protocol(format!(
+                "the recorder cannot serve its log: {}",
+                String::from_utf8_lossy(&e.payload().to_bytes())
+            ))),
+        },
+        _ => Err(TransportError::Protocol(format!(
+            "no answer from the recorder's log within {timeout:?} (is the run recorded?)"
+        ))),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -508,5 +819,27 @@ mod tests {
         .unwrap();
         assert_eq!(back, msg);
         drop(router);
+    }
+
+    /// The recorder's log survives its encoding, and a truncated one is refused with the offset.
+    #[test]
+    fn log_round_trip_and_truncation() {
+        let log = vec![
+            ("glissade/r/subdomain/0/boundary_state".to_string(), vec![1u8, 2, 3]),
+            ("glissade/r/interface/0/decision".to_string(), Vec::new()),
+        ];
+        let bytes = encode_log(&log);
+        assert_eq!(decode_log(&bytes).unwrap(), log);
+        assert_eq!(decode_log(&[]).unwrap(), Vec::new());
+        for cut in 1..bytes.len() {
+            let e = decode_log(&bytes[..cut]);
+            // A cut between two entries is a shorter valid log; anywhere else, an error.
+            if cut != 4 + log[0].0.len() + 8 + 3 {
+                let msg = e.expect_err("truncated").to_string();
+                assert!(msg.contains("malformed recorder log at byte"), "{msg}");
+            }
+        }
+        assert_ne!(message_hash("a", &[1, 2]), message_hash("a", &[1, 3]));
+        assert_ne!(message_hash("a", &[1, 2]), message_hash("b", &[1, 2]));
     }
 }
