@@ -1,8 +1,9 @@
 //! Fuzzing of the nodes' input handling (issue 9, "bad messages"). A run of the small three-layer
 //! scene, with Anderson acceleration, the coarse problem and two interface nodes (so that every
 //! payload a node takes occurs: operators, macro forces and displacements, boundary states, Gram
-//! partials and steps, indicator partials, decisions, local directions), is driven by hand round
-//! by round as the in-process bus does. Around every genuine delivery the receiving node gets bad
+//! partials and steps, indicator partials, decisions, local directions), and one without the
+//! coarse problem nor acceleration (PGD linear stage, search-direction updates, displacements at
+//! the stop), are driven by hand round by round as the in-process bus does. Around every genuine delivery the receiving node gets bad
 //! messages: before it, mutants of the genuine message (another iteration, stage, sender or
 //! recipient, fields of the wrong shape, NaN/∞ values, Anderson payloads of the wrong size) and
 //! messages of earlier rounds (replays, messages addressed to other nodes); after it, the same
@@ -28,32 +29,29 @@ const WINDOW: u32 = 3;
 const BEFORE: usize = 170;
 const AFTER: usize = 100;
 
-fn scene() -> LoadedScene {
+/// The small three-layer scene with `solver` keys added (a tolerance the run does not reach, so
+/// that it ends at max_iterations) and `deployment` keys.
+fn scene(solver: &str, deployment: &str) -> LoadedScene {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/launch/scenes/small-three-layer.toml");
     let text = std::fs::read_to_string(path).expect("scene file");
-    // A tolerance the run does not reach, so that it ends at max_iterations with several mixed
-    // Anderson steps; two interface nodes so that indicator partials travel.
     let fuzzed = text
         .replace(
             "[solver]\ntolerance = 1e-4\n",
-            &format!(
-                "[solver]\ntolerance = 1e-14\nmax_iterations = 8\nacceleration = \"anderson\"\nanderson_window = {WINDOW}\n"
-            ),
+            &format!("[solver]\ntolerance = 1e-14\nmax_iterations = 8\n{solver}"),
         )
-        .replace("[deployment]\n", "[deployment]\ninterface_nodes = 2\n");
+        .replace("[deployment]\n", &format!("[deployment]\n{deployment}"));
     assert_ne!(fuzzed, text, "the scene's [solver] and [deployment] tables moved");
     load_str(&fuzzed, "small-three-layer.toml").unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn nodes(scene: &LoadedScene) -> (Vec<Box<dyn Node>>, Expected) {
+fn nodes(scene: &LoadedScene, interior: bool) -> (Vec<Box<dyn Node>>, Expected) {
     let model = Arc::new(scene.model.clone());
     let ctx = RunContext {
         run_id: RUN.into(),
         scene_fingerprint: scene.fingerprint,
     };
     let plan = Plan::new(&model).with_scene(scene);
-    assert!(plan.coarse && plan.interface_groups.len() == 2, "{plan:?}");
-    let nodes = build_nodes(&model, &ctx, false, &plan, &Selection::everything(&plan)).expect("nodes");
+    let nodes = build_nodes(&model, &ctx, interior, &plan, &Selection::everything(&plan)).expect("nodes");
     let expected = Expected {
         run_id: RUN.into(),
         scene_fingerprint: scene.fingerprint,
@@ -89,7 +87,7 @@ enum Want {
     NotAccepted,
 }
 
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone, Copy)]
 struct Stats {
     inputs: u64,
     rejected: u64,
@@ -453,40 +451,21 @@ fn run(mut nodes: Vec<Box<dyn Node>>, mut fuzz: Option<&mut Fuzzer>) -> Vec<Vec<
     published.iter().map(encode).collect()
 }
 
-#[test]
-fn bad_messages_are_refused_and_leave_nodes_unchanged() {
-    let scene = scene();
-    let (clean_nodes, expected) = nodes(&scene);
+/// Runs `scene` undisturbed and fuzzed (seed `seed`), checks that the run publishes every payload
+/// kind of `kinds` and that the fuzzed run publishes the same bytes; returns the fuzz counts.
+fn fuzz_run(scene: &LoadedScene, interior: bool, kinds: &[&str], seed: u64) -> Stats {
+    let (clean_nodes, expected) = nodes(scene, interior);
     let clean = run(clean_nodes, None);
-    let kinds = |msgs: &[Vec<u8>], key: &str| {
-        msgs.iter()
-            .filter(|b| decode(b, &expected).is_ok_and(|m| m.payload.field_key() == key))
-            .count()
-    };
-    // The run exercises every payload the nodes take, mixed Anderson steps included.
-    for key in [
-        "homogenized_operator",
-        "macro_forces",
-        "macro_displacements",
-        "boundary_state",
-        "local_directions",
-        "anderson_gram",
-        "anderson_step",
-        "indicator_partials",
-        "decision",
-    ] {
-        assert!(kinds(&clean, key) > 0, "the run publishes no {key}");
+    let decoded: Vec<Message> = clean.iter().map(|b| decode(b, &expected).expect("decodes")).collect();
+    for key in kinds {
+        assert!(
+            decoded.iter().any(|m| m.payload.field_key() == *key),
+            "the run publishes no {key}"
+        );
     }
-    let mixed = clean
-        .iter()
-        .filter_map(|b| decode(b, &expected).ok())
-        .filter(|m| matches!(&m.payload, Payload::AndersonStep { gamma, .. } if !gamma.is_empty()))
-        .count();
-    assert!(mixed > 0, "no mixed Anderson step in the run");
-
-    let (fuzzed_nodes, _) = nodes(&scene);
+    let (fuzzed_nodes, _) = nodes(scene, interior);
     let mut fuzz = Fuzzer {
-        rng: Rng(0x9_1ad_e5e),
+        rng: Rng(seed),
         expected,
         stats: Stats::default(),
     };
@@ -499,10 +478,11 @@ fn bad_messages_are_refused_and_leave_nodes_unchanged() {
     for (k, (a, b)) in disturbed.iter().zip(&clean).enumerate() {
         assert!(
             a == b,
-            "message {k} of the disturbed run differs from the undisturbed run's"
+            "message {k} ({}) of the disturbed run differs",
+            describe(&decoded[k])
         );
     }
-    let s = &fuzz.stats;
+    let s = fuzz.stats;
     eprintln!(
         "node fuzz: {} inputs, 0 panics, {} rejected, {} failed (non-finite values, node unchanged), \
          {} ignored without output, {} refused by the decoder; {} genuine messages, run bit-identical",
@@ -514,5 +494,40 @@ fn bad_messages_are_refused_and_leave_nodes_unchanged() {
         clean.len()
     );
     assert_eq!(s.inputs, s.rejected + s.failed + s.ignored + s.undecodable);
+    s
+}
+
+/// Anderson acceleration, the coarse problem, two interface nodes: every payload a node takes.
+#[test]
+fn bad_messages_are_refused_and_leave_nodes_unchanged() {
+    let scene = scene(
+        &format!("acceleration = \"anderson\"\nanderson_window = {WINDOW}\n"),
+        "interface_nodes = 2\n",
+    );
+    let kinds = [
+        "homogenized_operator",
+        "macro_forces",
+        "macro_displacements",
+        "boundary_state",
+        "local_directions",
+        "anderson_gram",
+        "anderson_step",
+        "indicator_partials",
+        "decision",
+    ];
+    let s = fuzz_run(&scene, false, &kinds, 0x9_1ad_e5e);
     assert!(s.inputs >= 100_000, "{} inputs", s.inputs);
+}
+
+/// The other paths: no coarse problem (micro problem 1 ends the linear stage), the PGD linear
+/// stage, search-direction updates, one interface node, displacements sent at the stop.
+#[test]
+fn bad_messages_are_refused_without_coarse_problem_nor_acceleration() {
+    let scene = scene(
+        "coarse = false\nlinear_stage = \"pgd\"\nsearch_direction_update = true\n",
+        "",
+    );
+    let kinds = ["boundary_state", "local_directions", "decision", "displacement"];
+    let s = fuzz_run(&scene, true, &kinds, 0x5eed_0002);
+    assert!(s.inputs >= 30_000, "{} inputs", s.inputs);
 }
