@@ -362,8 +362,11 @@ impl SubdomainSolver {
             let (fj, oj) = (col(f, j), col_mut(&mut out, j));
             for (ms, slot) in self.macro_slots.iter().zip(&self.op.layout.slots) {
                 let rows = slot.offset..slot.offset + 2 * slot.n_pairs;
-                for m in ms.first_col..ms.first_col + ms.n_modes {
-                    oj[m] = dot(&self.m_e.col_as_slice(m)[rows.clone()], &fj[rows.clone()]);
+                for (m, o) in oj[ms.first_col..ms.first_col + ms.n_modes].iter_mut().enumerate() {
+                    *o = dot(
+                        &self.m_e.col_as_slice(ms.first_col + m)[rows.clone()],
+                        &fj[rows.clone()],
+                    );
                 }
             }
         }
