@@ -874,7 +874,22 @@ struct Collected {
 impl Collected {
     /// Keeps the results of message `m`; a decision's record is returned.
     fn take(&mut self, m: Message) -> Option<&IterationRecord> {
+        let from = m.envelope.sender;
         match m.payload {
+            // Decisions come from interface node 0, one per iteration, in order; anything else on
+            // that key is not the run's.
+            Payload::Decision(_)
+                if from
+                    != (NodeId {
+                        role: Role::Interface,
+                        index: 0,
+                    })
+                    || self
+                        .iterations
+                        .last()
+                        .is_some_and(|r| r.iteration >= m.envelope.iteration) => {}
+            Payload::InterfaceSolution(_) if from.role != Role::Interface => {}
+            Payload::Displacement { .. } if from.role != Role::Subdomain => {}
             Payload::Decision(decision) => {
                 self.iterations.push(IterationRecord {
                     iteration: m.envelope.iteration,

@@ -337,6 +337,24 @@ fn messages_of_another_run_are_ignored() {
                     envelope(victim, fingerprint ^ 1, Role::Interface, 0, Stage::Local),
                     decision,
                 ),
+                // The victim's run and scene, but fields of the wrong shape: the nodes refuse them
+                // and stay unchanged, the transport logs and skips them.
+                (
+                    envelope(victim, fingerprint, Role::Subdomain, 0, Stage::Linear),
+                    Payload::BoundaryState {
+                        subdomain: 0,
+                        w: Field::zeros(4, 11),
+                        f: Field::zeros(4, 11),
+                    },
+                ),
+                (
+                    envelope(victim, fingerprint, Role::Interface, 0, Stage::Local),
+                    Payload::LocalDirections {
+                        subdomain: 1,
+                        interfaces: vec![0],
+                        q_hat: Field::zeros(4, 11),
+                    },
+                ),
             ];
             let mut sent = 0u64;
             while !stop.load(Ordering::SeqCst) {

@@ -361,8 +361,9 @@ fn watch_tokens<T: Send + 'static>(
 /// Runs `nodes` (all hosted by this process) on `session` until each is finished.
 ///
 /// Messages that do not decode for this run (other run, other scene, other schema version,
-/// corrupt) are skipped with a reason passed to `log`; a message a node rejects stops the
-/// process with that node's error. A peer whose liveliness token disappears while a node here
+/// corrupt), repeats of a message already handled, and messages a node refuses while staying
+/// unchanged ([`NodeError::is_rejection`]) are skipped with a reason passed to `log`; any other
+/// node error (e.g. a non-finite result) stops the process with that node's error. A peer whose liveliness token disappears while a node here
 /// is unfinished stops the process after `departure_grace` ([`TransportError::PeerLeft`]), so
 /// does the launcher's stop message ([`TransportError::Stopped`]); `idle_timeout` bounds the
 /// wait for any message.
@@ -441,19 +442,37 @@ pub fn run_nodes(
             ));
             return Ok(());
         }
-        if !seen.insert(message_hash(&key, &bytes)) {
+        let hash = message_hash(&key, &bytes);
+        if seen.contains(&hash) {
             log(&format!(
                 "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
                 msg.envelope.iteration, msg.envelope.stage
             ));
             return Ok(());
         }
+        let mut taken = true;
         for (node, subs) in nodes.iter_mut().zip(&subscriptions) {
             if subs.iter().any(|s| glissade_messages::key_matches(s, &key)) {
-                for out in node.handle(&msg)? {
-                    publish_new(session, &out, published)?;
+                match node.handle(&msg) {
+                    Ok(outs) => {
+                        for out in outs {
+                            publish_new(session, &out, published)?;
+                        }
+                    }
+                    // The node refused this message and is unchanged: it is not the run's (a
+                    // damaged or stray copy); the genuine one may still come.
+                    Err(e) if e.is_rejection() => {
+                        log(&format!("ignored a message on {key}: {e}"));
+                        taken = false;
+                    }
+                    Err(e) => return Err(e.into()),
                 }
             }
+        }
+        // Only a message the nodes took counts as handled: a refused copy does not hide the
+        // genuine one.
+        if taken {
+            seen.insert(hash);
         }
         Ok(())
     };
