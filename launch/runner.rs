@@ -257,7 +257,8 @@ pub fn build_nodes(
     let mut nodes: Vec<Box<dyn Node>> = Vec::new();
     for solver in solvers {
         let stage = plan.stage_of(model, solver.subdomain);
-        let mut node = SubdomainNode::new(ctx.clone(), model.clone(), solver, options);
+        let mut node = SubdomainNode::new(ctx.clone(), model.clone(), solver, options)
+            .with_interface_owners(&plan.interface_groups);
         if stage == LinearStage::Pgd {
             node = node.with_pgd(PgdSettings {
                 criterion: plan.pgd.criterion,

@@ -267,14 +267,14 @@ impl Fuzzer {
                 env.sender.role = other[rng.below(other.len())];
                 (bad, Want::Refused(&["sent by"]), "another sender role")
             }
-            3 if !matches!(m.payload, Payload::LocalDirections { .. }) => {
-                // Interface nodes may send any subdomain its directions: the index is checked
-                // for every other payload.
+            3 => {
+                // Local directions are taken only from the interface node that owns the
+                // interface; every other payload from its one sender.
                 env.sender.index = env.sender.index.wrapping_add([1, 2, 7, 1 << 31][rng.below(4)]);
                 (
                     bad,
-                    Want::Refused(&["sent by", "interface node", "owns"]),
-                    "an unknown sender index",
+                    Want::Refused(&["sent by", "interface node", "owns", "does not own"]),
+                    "another sender index",
                 )
             }
             4 => {

@@ -97,6 +97,9 @@ pub struct SubdomainNode {
     pgd: Option<PgdStage>,
     log: Option<LinearStageLog>,
     record: LinearStageRecord,
+    /// Per boundary slot, the index of the interface node that owns its interface (None: any
+    /// interface node is taken).
+    owners: Option<Vec<u32>>,
 }
 
 impl SubdomainNode {
@@ -135,7 +138,23 @@ impl SubdomainNode {
             pgd: None,
             log: None,
             record: LinearStageRecord::default(),
+            owners: None,
         }
+    }
+
+    /// The interfaces each interface node owns (the deployment's groups, by node index): local
+    /// directions of an interface are then taken only from its owner.
+    pub fn with_interface_owners(mut self, groups: &[Vec<usize>]) -> Self {
+        let owner = |i: usize| groups.iter().position(|g| g.contains(&i)).map(|g| g as u32);
+        self.owners = self
+            .solver
+            .op
+            .layout
+            .slots
+            .iter()
+            .map(|sl| owner(sl.interface))
+            .collect::<Option<Vec<u32>>>();
+        self
     }
 
     /// Runs micro problems 1 and 2 through a PGD basis ([`PgdStage`]): the state stays
@@ -443,6 +462,17 @@ impl Node for SubdomainNode {
                             format!("local directions of interface {i}, which is not on this subdomain's boundary"),
                         ));
                     };
+                    if let Some(owner) = self.owners.as_ref().map(|o| o[k]) {
+                        if msg.envelope.sender.index != owner {
+                            return Err(NodeError::rejected(
+                                self.id,
+                                format!(
+                                    "local directions of interface {i} at iteration {it} from {}, which does not own it (interface:{owner} does)",
+                                    msg.envelope.sender
+                                ),
+                            ));
+                        }
+                    }
                     if self.directions_in[k] || at.contains(&k) {
                         return Err(NodeError::rejected(
                             self.id,
