@@ -6,15 +6,12 @@
 //! (plotted under the errors).
 
 use crate::runner::{run_in_process_logged, RunOptions, RunResult};
-use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::linear::default_k0;
-use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::local::ReferenceErrors;
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
 use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion};
 use glissade_messages::{encode, Payload, Stage};
 use serde::Serialize;
-use std::collections::BTreeSet;
 use std::time::Instant;
 
 /// One LATIN iteration of the report.
@@ -116,19 +113,7 @@ fn report_against(
     reference_s: f64,
 ) -> anyhow::Result<(Report, RunResult)> {
     let model = &scene.model;
-    let k0 = default_k0(model);
-    let layouts: Vec<BoundaryLayout> = (0..model.subdomains.len())
-        .map(|s| BoundaryLayout::new(model, s, &k0))
-        .collect();
-    let participants = layouts.iter().filter(|l| !l.is_empty()).count();
-    let nt = model.time.n_points();
-    let weights = model.time.trapezoid_weights();
-    let mut fields: Vec<InterfaceFields> = model
-        .interfaces
-        .iter()
-        .map(|i| InterfaceFields::zeros(i.n_pairs(), nt))
-        .collect();
-    let mut seen = BTreeSet::new();
+    let mut tracker = ReferenceErrors::new(model);
     let mut errors: Vec<(u32, f64, f64)> = Vec::new();
     let mut anderson_steps = [0u32; 3];
     let mut bytes: Vec<u64> = Vec::new();
@@ -159,15 +144,14 @@ fn report_against(
                 }] += 1;
             }
             if let Payload::BoundaryState { subdomain, w, f } = &m.payload {
-                for slot in &layouts[*subdomain as usize].slots {
-                    fields[slot.interface].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
-                }
-                seen.insert(*subdomain);
-                if seen.len() == participants {
-                    let (e_f, e_w) =
-                        error_against_reference(&model.interfaces, &fields, &reference.interfaces, &weights);
+                if let Some((e_f, e_w)) = tracker.boundary_state(
+                    &model.interfaces,
+                    *subdomain as usize,
+                    |r, c| w.get(r, c),
+                    |r, c| f.get(r, c),
+                    &reference.interfaces,
+                ) {
                     errors.push((m.envelope.iteration, e_f, e_w));
-                    seen.clear();
                 }
             }
             t.elapsed()

@@ -103,6 +103,64 @@ pub fn contact_pair_groups(interfaces: &[Interface]) -> Vec<PairGroup> {
     groups.into_values().collect()
 }
 
+/// Each LATIN iteration's error against a reference ([`error_against_reference`]), from the
+/// subdomains' boundary states s = (W, F) as they come: once every subdomain with a boundary has
+/// sent its state, the iteration's interface fields are complete and their errors are returned.
+pub struct ReferenceErrors {
+    layouts: Vec<crate::condensed::BoundaryLayout>,
+    participants: usize,
+    fields: Vec<InterfaceFields>,
+    seen: std::collections::BTreeSet<usize>,
+    weights: Vec<f64>,
+}
+
+impl ReferenceErrors {
+    pub fn new(model: &crate::model::Model) -> Self {
+        let k0 = crate::linear::default_k0(model);
+        let layouts: Vec<crate::condensed::BoundaryLayout> = (0..model.subdomains.len())
+            .map(|s| crate::condensed::BoundaryLayout::new(model, s, &k0))
+            .collect();
+        let nt = model.time.n_points();
+        Self {
+            participants: layouts.iter().filter(|l| !l.is_empty()).count(),
+            layouts,
+            fields: model
+                .interfaces
+                .iter()
+                .map(|i| InterfaceFields::zeros(i.n_pairs(), nt))
+                .collect(),
+            seen: Default::default(),
+            weights: model.time.trapezoid_weights(),
+        }
+    }
+
+    /// Takes subdomain `subdomain`'s boundary state (accessors `w(row, col)`, `f(row, col)`);
+    /// returns (e_F, e_W) against `reference` once the iteration's states are all in.
+    pub fn boundary_state(
+        &mut self,
+        interfaces: &[Interface],
+        subdomain: usize,
+        w: impl Fn(usize, usize) -> f64,
+        f: impl Fn(usize, usize) -> f64,
+        reference: &[InterfaceFields],
+    ) -> Option<(f64, f64)> {
+        for slot in &self.layouts.get(subdomain)?.slots {
+            self.fields[slot.interface].set_side(slot.side, slot.offset, &w, &f);
+        }
+        self.seen.insert(subdomain);
+        if self.seen.len() < self.participants {
+            return None;
+        }
+        self.seen.clear();
+        Some(error_against_reference(
+            interfaces,
+            &self.fields,
+            reference,
+            &self.weights,
+        ))
+    }
+}
+
 /// Error of interface fields `s` against a reference solution of the same discrete problem, on
 /// contact interfaces (DESIGN §3, "error against a reference"): relative space-time norms
 /// (trapezoid weights w_i):

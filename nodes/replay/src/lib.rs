@@ -22,7 +22,7 @@
 use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator};
 use glissade_mechanics::element::{elasticity, stress, NODE_XI};
 use glissade_mechanics::linear::default_k0;
-use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::local::{InterfaceFields, ReferenceErrors};
 use glissade_mechanics::model::Side;
 use glissade_mechanics::model::{Model, Plane};
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
@@ -352,59 +352,8 @@ pub struct View {
     displacements: BTreeMap<u32, Field>,
     last_iteration: i64,
     summary: ReplaySummary,
-    errors: Option<ErrorTracker>,
-}
-
-/// Each iteration's error against the reference, from the boundary states (the measure of
-/// `glissade report`: relative L2-in-time norms over the interfaces).
-struct ErrorTracker {
-    layouts: Vec<BoundaryLayout>,
-    participants: usize,
-    fields: Vec<InterfaceFields>,
-    seen: std::collections::BTreeSet<u32>,
-    reference: Vec<InterfaceFields>,
-    weights: Vec<f64>,
-}
-
-impl ErrorTracker {
-    fn new(model: &Model, reference: Vec<InterfaceFields>) -> Self {
-        let k0 = default_k0(model);
-        let layouts: Vec<BoundaryLayout> = (0..model.subdomains.len())
-            .map(|s| BoundaryLayout::new(model, s, &k0))
-            .collect();
-        let nt = model.time.n_points();
-        Self {
-            participants: layouts.iter().filter(|l| !l.is_empty()).count(),
-            layouts,
-            fields: model
-                .interfaces
-                .iter()
-                .map(|i| InterfaceFields::zeros(i.n_pairs(), nt))
-                .collect(),
-            seen: Default::default(),
-            reference,
-            weights: model.time.trapezoid_weights(),
-        }
-    }
-
-    /// Takes a boundary state; once every subdomain's of an iteration is in, its errors.
-    fn boundary_state(&mut self, model: &Model, subdomain: u32, w: &Field, f: &Field) -> Option<(f64, f64)> {
-        let layout = self.layouts.get(subdomain as usize)?;
-        for slot in &layout.slots {
-            self.fields[slot.interface].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
-        }
-        self.seen.insert(subdomain);
-        if self.seen.len() < self.participants {
-            return None;
-        }
-        self.seen.clear();
-        Some(error_against_reference(
-            &model.interfaces,
-            &self.fields,
-            &self.reference,
-            &self.weights,
-        ))
-    }
+    /// The reference's interface fields and the errors against them, when asked for.
+    errors: Option<(Vec<InterfaceFields>, ReferenceErrors)>,
 }
 
 impl View {
@@ -471,7 +420,7 @@ impl View {
                     detail: format!("the reference solve failed: {e}"),
                 })?;
             summary.reference_s = Some(t0.elapsed().as_secs_f64());
-            Some(ErrorTracker::new(&model, reference.interfaces))
+            Some((reference.interfaces, ReferenceErrors::new(&model)))
         } else {
             None
         };
@@ -503,11 +452,15 @@ impl View {
                     self.time_point = Some(largest_time_point(w));
                 }
                 let it = msg.envelope.iteration;
-                if let Some((e_f, e_w)) = self
-                    .errors
-                    .as_mut()
-                    .and_then(|t| t.boundary_state(&self.model, *subdomain, w, f))
-                {
+                if let Some((e_f, e_w)) = self.errors.as_mut().and_then(|(reference, t)| {
+                    t.boundary_state(
+                        &self.model.interfaces,
+                        *subdomain as usize,
+                        |r, c| w.get(r, c),
+                        |r, c| f.get(r, c),
+                        reference,
+                    )
+                }) {
                     self.summary.errors.push((it, e_f, e_w));
                     let rec = &self.rec;
                     rec.set_time_sequence("iteration", it as i64);
