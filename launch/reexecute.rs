@@ -29,6 +29,19 @@ pub struct Mismatch {
     pub detail: String,
 }
 
+impl Mismatch {
+    /// A difference on `topic` about message `msg` (the recorded one at `index`, or an extra one).
+    fn about(index: Option<usize>, topic: &str, msg: &Message, detail: String) -> Self {
+        Self {
+            index,
+            topic: topic.to_string(),
+            iteration: msg.envelope.iteration,
+            stage: format!("{:?}", msg.envelope.stage),
+            detail,
+        }
+    }
+}
+
 impl std::fmt::Display for Mismatch {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self.index {
@@ -228,17 +241,16 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
         for (k, (index, data, rmsg)) in rec.iter().enumerate() {
             let Some(g) = got.get(k) else {
                 note(
-                    Mismatch {
-                        index: Some(*index),
-                        topic: topic.clone(),
-                        iteration: rmsg.envelope.iteration,
-                        stage: format!("{:?}", rmsg.envelope.stage),
-                        detail: format!(
+                    Mismatch::about(
+                        Some(*index),
+                        topic,
+                        rmsg,
+                        format!(
                             "the re-executed node published only {} message(s) on this key, the recording has {}",
                             got.len(),
                             rec.len()
                         ),
-                    },
+                    ),
                     &mut first,
                 );
                 break;
@@ -247,13 +259,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
             bytes += g_bytes.len() as u64;
             if &g_bytes != data {
                 note(
-                    Mismatch {
-                        index: Some(*index),
-                        topic: topic.clone(),
-                        iteration: rmsg.envelope.iteration,
-                        stage: format!("{:?}", rmsg.envelope.stage),
-                        detail: field_difference(rmsg, g, data, &g_bytes),
-                    },
+                    Mismatch::about(Some(*index), topic, rmsg, field_difference(rmsg, g, data, &g_bytes)),
                     &mut first,
                 );
                 break;
@@ -262,17 +268,16 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
         if got.len() > rec.len() {
             let g = &got[rec.len()];
             note(
-                Mismatch {
-                    index: None,
-                    topic: topic.clone(),
-                    iteration: g.envelope.iteration,
-                    stage: format!("{:?}", g.envelope.stage),
-                    detail: format!(
+                Mismatch::about(
+                    None,
+                    topic,
+                    g,
+                    format!(
                         "the re-executed node published {} message(s) on this key, the recording has {}",
                         got.len(),
                         rec.len()
                     ),
-                },
+                ),
                 &mut first,
             );
         }
