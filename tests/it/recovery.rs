@@ -4,7 +4,7 @@
 
 use crate::common::scene;
 use crate::distributed::assert_identical;
-use crate::node_failures::{processes_with, scratch};
+use crate::node_failures::{processes_with, scratch, Scratch};
 use glissade::distributed::{run_distributed, Network};
 use glissade::runner::{run_in_process, RunOptions};
 use std::path::Path;
@@ -28,6 +28,18 @@ fn options(run_id: &str) -> RunOptions {
         run_id: run_id.to_string(),
         interior: false,
     }
+}
+
+/// A scratch folder, a run id, and a bus whose run is recorded into the folder (`run.mcap`), for
+/// run `name`.
+fn recorded_run(name: &str) -> (Scratch, String, Network) {
+    let dir = scratch(name);
+    let run_id = format!("{name}-{}", std::process::id());
+    let net = Network {
+        recording: Some(dir.join("run.mcap")),
+        ..Network::default()
+    };
+    (dir, run_id, net)
 }
 
 /// A small xorshift generator: the kill iterations are reproducible from the printed seed.
@@ -86,12 +98,7 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
         // Not the last iteration: the kill must land while the run still needs the node.
         let at = 1 + rng.below(n - 3) as u32;
         println!("seed {seed:#x}: kill {role}:{index} at iteration {at} of {n}");
-        let dir = scratch(&format!("recovery-{role}-{index}"));
-        let run_id = format!("recovery-{role}-{index}-{}", std::process::id());
-        let net = Network {
-            recording: Some(dir.join("run.mcap")),
-            ..Network::default()
-        };
+        let (dir, run_id, net) = recorded_run(&format!("recovery-{role}-{index}"));
         let opts = options(&run_id);
         let mut killed = None;
         let (result, _) = run_distributed(&sc, &opts, exe(), &net, |r| {
@@ -123,12 +130,7 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
 #[test]
 fn a_node_that_keeps_dying_stops_the_run_after_its_restarts() {
     let sc = scene(&small_three_layer("restarts = 1"));
-    let dir = scratch("recovery-again");
-    let run_id = format!("recovery-again-{}", std::process::id());
-    let net = Network {
-        recording: Some(dir.join("run.mcap")),
-        ..Network::default()
-    };
+    let (_dir, run_id, net) = recorded_run("recovery-again");
     let opts = options(&run_id);
     let mut kills = Vec::new();
     let err = run_distributed(&sc, &opts, exe(), &net, |r| {
@@ -160,12 +162,7 @@ fn restarts_need_a_complete_recording() {
         sc.recording.incomplete().as_deref(),
         Some("recording.full_fields_every = 5 leaves full fields out")
     );
-    let dir = scratch("recovery-thinned");
-    let run_id = format!("recovery-thinned-{}", std::process::id());
-    let net = Network {
-        recording: Some(dir.join("run.mcap")),
-        ..Network::default()
-    };
+    let (_dir, run_id, net) = recorded_run("recovery-thinned");
     let opts = options(&run_id);
     let mut killed = false;
     let err = run_distributed(&sc, &opts, exe(), &net, |r| {

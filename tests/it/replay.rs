@@ -24,6 +24,17 @@ fn temp_dir(tag: &str) -> PathBuf {
     d
 }
 
+/// Runs `glissade` with `args`, asserts that it succeeded, and returns its standard output.
+fn glissade_ok(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(args.iter().map(|a| a.as_ref()))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    stdout
+}
+
 /// Records an in-process run of `text` into `dir`; returns the file.
 fn record(text: &str, dir: &Path, run_id: &str) -> PathBuf {
     let sc = scene(text);
@@ -183,14 +194,7 @@ fn a_thinned_recording_replays_but_refuses_to_reexecute_nodes_that_need_every_fi
     // The Rerun view: meshes only at the iterations that kept the boundary states, and the final
     // state (from the interface solutions) at every time point.
     let rrd = dir.join("thinned.rrd");
-    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["replay", "--save"])
-        .arg(&rrd)
-        .arg(&path)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = glissade_ok(&[&"replay", &"--save", &rrd, &path]);
     let iterations = recording.messages().filter(|m| m.topic.ends_with("/decision")).count();
     let kept = recording
         .messages()
@@ -214,16 +218,17 @@ fn multi_process_live_view_writes_an_rrd_the_rerun_cli_accepts() {
     let scene_path = dir.join("small-three-layer.toml");
     std::fs::write(&scene_path, scene_text("small-three-layer")).unwrap();
     let live = dir.join("live-mp.rrd");
-    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["run", "--quiet", "--run-id", "rx-mp", "--out"])
-        .arg(&dir)
-        .arg("--rerun")
-        .arg(&live)
-        .arg(&scene_path)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = glissade_ok(&[
+        &"run",
+        &"--quiet",
+        &"--run-id",
+        &"rx-mp",
+        &"--out",
+        &dir,
+        &"--rerun",
+        &live,
+        &scene_path,
+    ]);
     // "rerun: <iterations> iterations, <meshes> meshes streamed": every decision reached the view
     // (the run's iteration count is in the summary), and each of the 6 subdomains was drawn at
     // least once per iteration.
@@ -247,35 +252,32 @@ fn replay_and_live_run_write_rrd_files_the_rerun_cli_accepts() {
     std::fs::write(&scene_path, scene_text("small-three-layer")).unwrap();
     // A live in-process run streamed to an .rrd, recorded at the same time.
     let live = dir.join("live.rrd");
-    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["run", "--in-process", "--quiet", "--run-id", "rx-4", "--out"])
-        .arg(&dir)
-        .arg("--rerun")
-        .arg(&live)
-        .arg(&scene_path)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = glissade_ok(&[
+        &"run",
+        &"--in-process",
+        &"--quiet",
+        &"--run-id",
+        &"rx-4",
+        &"--out",
+        &dir,
+        &"--rerun",
+        &live,
+        &scene_path,
+    ]);
     assert!(stdout.contains("rerun: "), "{stdout}");
     // Replay of the recording, coloured by |u|.
     let replayed = dir.join("replayed.rrd");
-    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["replay", "--color-by", "displacement", "--save"])
-        .arg(&replayed)
-        .arg(dir.join("small-three-layer-rx-4.mcap"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let recorded = dir.join("small-three-layer-rx-4.mcap");
+    glissade_ok(&[
+        &"replay",
+        &"--color-by",
+        &"displacement",
+        &"--save",
+        &replayed,
+        &recorded,
+    ]);
     // Every node of that run re-executes bit-identically from the command line too.
-    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["replay", "--node", "all"])
-        .arg(dir.join("small-three-layer-rx-4.mcap"))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = glissade_ok(&[&"replay", &"--node", &"all", &recorded]);
     assert_eq!(stdout.matches("bit-identical").count(), 8, "{stdout}");
     for rrd in [&live, &replayed] {
         assert!(std::fs::metadata(rrd).unwrap().len() > 10_000, "{}", rrd.display());
@@ -352,14 +354,7 @@ fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
         glissade::reexecute::recorded_basis_sizes(&Recording::open(&plain).unwrap()).unwrap(),
         None
     );
-    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["replay", "--save"])
-        .arg(dir.join("pgd.rrd"))
-        .arg(&path)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = glissade_ok(&[&"replay", &"--save", &dir.join("pgd.rrd"), &path]);
     assert!(
         stdout.contains(&format!("PGD basis sizes: {} linear stages", expected.len())),
         "{stdout}"
