@@ -705,11 +705,11 @@ fn publish_new(session: &Session, msg: &Message, published: &HashSet<u64>) -> Re
     if published.is_empty() {
         return publish(session, msg);
     }
-    let bytes = encode(msg);
-    if published.contains(&message_hash(&msg.topic(), &bytes)) {
+    let (topic, bytes) = (msg.topic(), encode(msg));
+    if published.contains(&message_hash(&topic, &bytes)) {
         return Ok(());
     }
-    put_bytes(session, &msg.topic(), bytes)
+    put_bytes(session, &topic, bytes)
 }
 
 /// Encodes a log: per message its key length (u32 LE), key, length (u64 LE) and bytes.
