@@ -42,6 +42,9 @@ const EXIT_GRACE: Duration = Duration::from_secs(3);
 const STOP_TIMEOUT: Duration = Duration::from_secs(5);
 /// How long nodes started by hand may take to leave once the run has ended.
 const FINISH_TIMEOUT: Duration = Duration::from_secs(30);
+/// Longest wait, once every node process has exited, for its last messages still on their way
+/// through the router.
+const STRAGGLER_TIMEOUT: Duration = Duration::from_secs(5);
 
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
@@ -822,8 +825,18 @@ pub fn run_distributed_observed(
             }
         }
     }
-    // Messages still queued (sent before their nodes left).
-    while let Ok((key, bytes)) = rx.try_recv() {
+    // Messages still queued (sent before their nodes left), and the ones the router has yet to
+    // hand to this process's subscriber: a node's last puts may arrive after the node exited.
+    let drain_until = Instant::now() + STRAGGLER_TIMEOUT;
+    loop {
+        let next = match rx.try_recv() {
+            Ok(m) => Some(m),
+            Err(_) if got.interfaces.len() < model.interfaces.len() && Instant::now() < drain_until => {
+                rx.recv_timeout(Duration::from_millis(50)).ok()
+            }
+            Err(_) => break,
+        };
+        let Some((key, bytes)) = next else { continue };
         if !count(&mut traffic, &key, &bytes, run_id) || !heard.insert(transport::message_hash(&key, &bytes)) {
             continue;
         }
