@@ -833,11 +833,15 @@ fn stability(quick: bool, only: &[String], list: bool, out: &std::path::Path) ->
     }
     ensure_writable(out)?;
     let rows = run_cases(&selected, |r| {
+        let its = |n: Option<usize>| n.map_or("—".into(), |n| n.to_string());
         eprintln!(
-            "{}: {} after {} iterations ({:?})",
+            "{}: {} after {} iterations, with Anderson {} after {} ({}; {:?})",
             r.case,
-            r.outcome.kind(),
-            r.iterations.map_or("—".into(), |n| n.to_string()),
+            r.plain.outcome.kind(),
+            its(r.plain.iterations),
+            r.anderson.outcome.kind(),
+            its(r.anderson.iterations),
+            r.acceleration.kind(),
             r.assessment
         );
     });

@@ -73,6 +73,39 @@ impl RunResult {
     }
 }
 
+/// The Anderson steps of a run, told apart from its messages: each iteration's `anderson_gram`
+/// partials say how many differences the histories hold, and the `anderson_step` sent back says
+/// what the subdomains do with them.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct AndersonTally {
+    /// Mixed steps (coefficients γ sent).
+    pub mixed: u32,
+    /// Plain relaxation steps taken because the previous mixed step made the residual grow (the
+    /// safeguard).
+    pub safeguarded: u32,
+    /// Restarts of every history (ill-conditioned or non-finite least squares, or a
+    /// search-direction update).
+    pub restarted: u32,
+    /// Plain steps with no stored difference yet (the first iteration).
+    pub unmixed: u32,
+    #[serde(skip)]
+    differences: usize,
+}
+
+impl AndersonTally {
+    /// Counts `m` if it is one of the Anderson messages.
+    pub fn observe(&mut self, m: &Message) {
+        match &m.payload {
+            Payload::AndersonGram { gram, .. } => self.differences = gram.rows(),
+            Payload::AndersonStep { restart: true, .. } => self.restarted += 1,
+            Payload::AndersonStep { gamma, .. } if !gamma.is_empty() => self.mixed += 1,
+            Payload::AndersonStep { .. } if self.differences > 0 => self.safeguarded += 1,
+            Payload::AndersonStep { .. } => self.unmixed += 1,
+            _ => {}
+        }
+    }
+}
+
 /// Errors of a run.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {

@@ -11,19 +11,25 @@
 //! ([`error_against_reference`]: relative space-time norms on contact interfaces). Panics are
 //! caught per case and reported as such; non-finite values are flagged per case.
 //!
-//! `glissade stability` runs the whole matrix (about 25 s in release on 2 cores, most of it
-//! steps-10000 and the thin layers); `--quick` leaves out the [`SLOW`] cases (about 13 s in the
-//! debug test profile) and is what `tests/it/stability.rs` runs.
+//! Every case runs twice, as stated (plain relaxation) and with Anderson acceleration
+//! ([`Case::accelerated`]), against one reference: the row says what acceleration did to the
+//! outcome ([`AccelerationEffect`]) and how many Anderson steps were mixed, safeguarded and
+//! restarted ([`AndersonTally`]).
+//!
+//! `glissade stability` runs the whole matrix (about 45 s with the test-profile binary on 2
+//! loaded cores, most of it steps-10000 and the thin layers); `--quick` leaves out the [`SLOW`]
+//! cases (about 15 s in the test profile) and is what `tests/it/stability.rs` runs.
 
-use crate::runner::{run_in_process, RunOptions};
+use crate::runner::{run_in_process_observed, AndersonTally, RunOptions};
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::model::Model;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
-use glissade_mechanics::scene::load_str;
+use glissade_mechanics::scene::{load_str, LoadedScene};
 use glissade_messages::Verdict;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// One layer of the base scene: a block spanning the whole length.
 #[derive(Debug, Clone, PartialEq)]
@@ -206,6 +212,9 @@ pub struct Case {
     /// What the case varies with respect to the base.
     pub varies: String,
     pub scene: String,
+    /// The same scene with Anderson acceleration on (`acceleration = "anderson"` in its `[solver]`,
+    /// the default window).
+    pub accelerated: String,
     pub expect: Expect,
     /// Options of the monolithic reference; `None`: not computed.
     pub reference: Option<ReferenceOptions>,
@@ -286,14 +295,9 @@ pub enum Assessment {
     Unexpected,
 }
 
-/// The result of one case: a row of the table.
+/// One LATIN run of a case (plain or accelerated).
 #[derive(Debug, Clone, Serialize)]
-pub struct CaseResult {
-    pub case: String,
-    pub varies: String,
-    pub expect: Expect,
-    /// The scene's η tolerance (when the scene loaded).
-    pub tolerance: Option<f64>,
+pub struct RunRow {
     pub iterations: Option<usize>,
     pub eta: Option<f64>,
     pub contact_indicator: Option<f64>,
@@ -302,22 +306,109 @@ pub struct CaseResult {
     /// tractions are all zero.
     pub traction_error: Option<f64>,
     pub jump_error: Option<f64>,
-    /// Why an error is missing.
-    pub reference_note: Option<String>,
     /// LATIN wall time, operator setup included (s).
     pub latin_s: Option<f64>,
-    pub reference_s: Option<f64>,
-    /// Reference Newton iterations, all time steps.
-    pub reference_newton: Option<usize>,
     /// Contact points (separated, stuck, slipping) at the last time point, at the stop.
     pub final_counts: Option<[u64; 3]>,
     /// Iteration of the first search-direction update, if any.
     pub first_direction_update: Option<u32>,
+    /// The Anderson steps of an accelerated run (`None` for the plain run).
+    pub anderson_steps: Option<AndersonTally>,
     pub outcome: Outcome,
-    /// Every interface field of the run and of the reference, and every error and time, is finite.
+    /// Every interface field of the run (and of the reference), and every error and time, is finite.
     pub fields_finite: bool,
     /// Every indicator of every iteration (η, e_c, e_F, e_W) is finite.
     pub indicators_finite: bool,
+}
+
+impl RunRow {
+    fn new() -> Self {
+        Self {
+            iterations: None,
+            eta: None,
+            contact_indicator: None,
+            traction_error: None,
+            jump_error: None,
+            latin_s: None,
+            final_counts: None,
+            first_direction_update: None,
+            anderson_steps: None,
+            outcome: Outcome::Converged,
+            fields_finite: true,
+            indicators_finite: true,
+        }
+    }
+
+    /// Converged to η ≤ `tolerance` with finite values and, where compared with a reference, a
+    /// contact traction error ≤ `error` (the jump error where the reference's contact tractions
+    /// are all zero).
+    pub fn reaches(&self, tolerance: Option<f64>, error: f64) -> bool {
+        self.fields_finite
+            && self.indicators_finite
+            && self.outcome == Outcome::Converged
+            && self.eta.zip(tolerance).is_none_or(|(e, t)| e <= t)
+            && self.traction_error.or(self.jump_error).is_none_or(|e| e <= error)
+    }
+}
+
+/// What Anderson acceleration does to a case's outcome, against the plain run (both judged by
+/// [`RunRow::reaches`] with the case's error bound, [`ERROR_TOLERANCE`] for the cases expected to
+/// stop).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AccelerationEffect {
+    /// The same outcome: both reach the reference, or both stop the same way (or are rejected).
+    Kept,
+    /// The plain run does not reach the reference, the accelerated one does.
+    Improved,
+    /// Neither reaches the reference, and they stop differently.
+    Changed,
+    /// The plain run reaches the reference and the accelerated one does not: what the safeguard
+    /// must prevent.
+    Broke,
+}
+
+impl AccelerationEffect {
+    fn of(plain: &RunRow, anderson: &RunRow, tolerance: Option<f64>, error: f64) -> Self {
+        match (plain.reaches(tolerance, error), anderson.reaches(tolerance, error)) {
+            (true, true) => Self::Kept,
+            (true, false) => Self::Broke,
+            (false, true) => Self::Improved,
+            (false, false) if plain.outcome.kind() == anderson.outcome.kind() => Self::Kept,
+            (false, false) => Self::Changed,
+        }
+    }
+
+    /// Short name.
+    pub fn kind(self) -> &'static str {
+        match self {
+            Self::Kept => "kept",
+            Self::Improved => "improved",
+            Self::Changed => "changed",
+            Self::Broke => "broke",
+        }
+    }
+}
+
+/// The result of one case: a row of the table.
+#[derive(Debug, Clone, Serialize)]
+pub struct CaseResult {
+    pub case: String,
+    pub varies: String,
+    pub expect: Expect,
+    /// The scene's η tolerance (when the scene loaded).
+    pub tolerance: Option<f64>,
+    /// The case's scene as stated, with plain relaxation.
+    pub plain: RunRow,
+    /// The same scene with Anderson acceleration.
+    pub anderson: RunRow,
+    pub acceleration: AccelerationEffect,
+    /// Why an error is missing.
+    pub reference_note: Option<String>,
+    pub reference_s: Option<f64>,
+    /// Reference Newton iterations, all time steps.
+    pub reference_newton: Option<usize>,
+    /// The plain run ends as the case expects.
     pub assessment: Assessment,
 }
 
@@ -373,10 +464,13 @@ pub const SLOW: [&str; 4] = [
 fn case(name: &'static str, varies: &str, b: &Base, expect: Expect) -> Case {
     let mut b = b.clone();
     b.name = name.into();
+    let scene = b.to_toml();
+    b.solver_set("acceleration", "\"anderson\"");
     Case {
         name,
         varies: varies.into(),
-        scene: b.to_toml(),
+        scene,
+        accelerated: b.to_toml(),
         expect,
         reference: Some(ReferenceOptions::default()),
         quick: true,
@@ -651,55 +745,81 @@ fn fields_finite(f: &[InterfaceFields]) -> bool {
     })
 }
 
-/// Runs one case (a panic inside is caught and reported as [`Outcome::Panicked`]).
+/// Runs one case, plain and accelerated, against one reference (a panic inside a run or the
+/// reference is caught and reported as [`Outcome::Panicked`]).
 pub fn run_case(case: &Case) -> CaseResult {
+    let (mut plain, plain_run) = latin_run(case, &case.scene, false);
+    let (mut anderson, anderson_run) = latin_run(case, &case.accelerated, true);
     let mut row = CaseResult {
         case: case.name.into(),
         varies: case.varies.clone(),
         expect: case.expect.clone(),
-        tolerance: None,
-        iterations: None,
-        eta: None,
-        contact_indicator: None,
-        traction_error: None,
-        jump_error: None,
+        tolerance: plain_run.as_ref().map(|(sc, _)| sc.model.solver.tolerance),
+        plain: RunRow::new(),
+        anderson: RunRow::new(),
+        acceleration: AccelerationEffect::Kept,
         reference_note: None,
-        latin_s: None,
         reference_s: None,
         reference_newton: None,
-        final_counts: None,
-        first_direction_update: None,
-        outcome: Outcome::Converged,
-        fields_finite: true,
-        indicators_finite: true,
         assessment: Assessment::Unexpected,
     };
-    if let Err(e) = catch_unwind(AssertUnwindSafe(|| fill(case, &mut row))) {
-        row.outcome = Outcome::Panicked {
-            detail: panic_text(e.as_ref()),
-        };
+    match (&case.reference, plain_run.as_ref().or(anderson_run.as_ref())) {
+        (None, _) => row.reference_note = Some("reference not computed for this case".into()),
+        (Some(_), None) => {}
+        (Some(opts), Some((sc, _))) => {
+            let model = &sc.model;
+            let t1 = Instant::now();
+            match catch_unwind(AssertUnwindSafe(|| solve_reference(model, opts))) {
+                Ok(Ok(reference)) => {
+                    row.reference_s = Some(t1.elapsed().as_secs_f64());
+                    row.reference_newton = Some(reference.newton_iterations.iter().sum());
+                    let finite = fields_finite(&reference.interfaces);
+                    for (run, fields) in [(&mut plain, &plain_run), (&mut anderson, &anderson_run)] {
+                        run.fields_finite &= finite;
+                        if let Some((_, fields)) = fields {
+                            let note = compare(run, model, fields, &reference.interfaces);
+                            row.reference_note = row.reference_note.take().or(note);
+                        }
+                    }
+                }
+                Ok(Err(e)) => row.reference_note = Some(format!("reference failed: {e}")),
+                Err(e) => row.reference_note = Some(format!("reference panicked: {}", panic_text(e.as_ref()))),
+            }
+        }
     }
     let finite = |v: Option<f64>| v.is_none_or(f64::is_finite);
-    row.fields_finite &= [row.traction_error, row.jump_error, row.latin_s, row.reference_s]
-        .into_iter()
-        .all(finite);
-    row.assessment = assess(&row);
+    for run in [&mut plain, &mut anderson] {
+        run.fields_finite &= [run.traction_error, run.jump_error, run.latin_s, row.reference_s]
+            .into_iter()
+            .all(finite);
+    }
+    let error = match row.expect {
+        Expect::Converge { error } => error,
+        _ => ERROR_TOLERANCE,
+    };
+    row.acceleration = AccelerationEffect::of(&plain, &anderson, row.tolerance, error);
+    let sound = |r: &RunRow| r.fields_finite && !matches!(r.outcome, Outcome::Panicked { .. });
+    row.assessment = if assess(&row.expect, row.tolerance, &plain) == Assessment::AsExpected
+        && sound(&anderson)
+        && row.acceleration != AccelerationEffect::Broke
+    {
+        Assessment::AsExpected
+    } else {
+        Assessment::Unexpected
+    };
+    row.plain = plain;
+    row.anderson = anderson;
     row
 }
 
-/// Compares a row's outcome with its expectation.
-fn assess(row: &CaseResult) -> Assessment {
-    if !row.fields_finite || matches!(row.outcome, Outcome::Panicked { .. }) {
+/// Compares a plain run's outcome with what its case expects.
+fn assess(expect: &Expect, tolerance: Option<f64>, run: &RunRow) -> Assessment {
+    if !run.fields_finite || matches!(run.outcome, Outcome::Panicked { .. }) {
         return Assessment::Unexpected;
     }
-    let met = row.indicators_finite
-        && match (&row.expect, &row.outcome) {
-            (Expect::Converge { error }, Outcome::Converged) => match (row.traction_error, row.jump_error) {
-                (Some(e), _) => e <= *error,
-                // The reference's contact tractions are all zero: judge on the jumps.
-                (None, Some(e)) => e <= *error,
-                (None, None) => true,
-            },
+    let met = run.indicators_finite
+        && match (expect, &run.outcome) {
+            (Expect::Converge { error }, Outcome::Converged) => run.reaches(tolerance, *error),
             (Expect::Stop { outcome, .. }, o) => o.kind() == *outcome,
             (Expect::Rejected { reason }, Outcome::Rejected { reason: r }) => r.contains(reason),
             _ => false,
@@ -711,35 +831,58 @@ fn assess(row: &CaseResult) -> Assessment {
     }
 }
 
-fn fill(case: &Case, row: &mut CaseResult) {
-    let sc = match load_str(&case.scene, &format!("{}.toml", case.name)) {
+/// The loaded scene of a run and its interface fields at the stop.
+type Stopped = (LoadedScene, Vec<InterfaceFields>);
+
+/// Loads `scene` (a case's text, plain or accelerated) and runs it in-process; the fields are
+/// `None` when the scene is rejected or the run fails or panics.
+fn latin_run(case: &Case, scene: &str, accelerated: bool) -> (RunRow, Option<Stopped>) {
+    let mut row = RunRow::new();
+    let sc = match load_str(scene, &format!("{}.toml", case.name)) {
         Ok(sc) => sc,
         Err(e) => {
             row.outcome = Outcome::Rejected { reason: e.to_string() };
-            return;
+            return (row, None);
         }
     };
-    row.tolerance = Some(sc.model.solver.tolerance);
-    let t0 = Instant::now();
+    let mut tally = accelerated.then(AndersonTally::default);
     let run_id = format!(
-        "stability-{}",
-        case.name.replace(|c: char| !c.is_ascii_alphanumeric(), "-")
+        "stability-{}{}",
+        case.name.replace(|c: char| !c.is_ascii_alphanumeric(), "-"),
+        if accelerated { "-anderson" } else { "" }
     );
-    let result = match run_in_process(
-        &sc,
-        &RunOptions {
-            run_id,
-            interior: false,
-        },
-        |_| {},
-    ) {
-        Ok(r) => r,
-        Err(e) => {
+    let t0 = Instant::now();
+    let result = catch_unwind(AssertUnwindSafe(|| {
+        run_in_process_observed(
+            &sc,
+            &RunOptions {
+                run_id,
+                interior: false,
+            },
+            |_| {},
+            |m| {
+                if let Some(t) = tally.as_mut() {
+                    t.observe(m);
+                }
+                Duration::ZERO
+            },
+        )
+    }));
+    let result = match result {
+        Ok(Ok(r)) => r,
+        Ok(Err(e)) => {
             row.outcome = Outcome::Error { detail: e.to_string() };
-            return;
+            return (row, None);
+        }
+        Err(e) => {
+            row.outcome = Outcome::Panicked {
+                detail: panic_text(e.as_ref()),
+            };
+            return (row, None);
         }
     };
     row.latin_s = Some(t0.elapsed().as_secs_f64());
+    row.anderson_steps = tally;
     row.iterations = Some(result.iterations.len());
     let last = result.iterations.last().map(|r| &r.decision);
     row.eta = last.map(|d| d.eta);
@@ -776,45 +919,36 @@ fn fill(case: &Case, row: &mut CaseResult) {
     row.final_counts = Some(counts);
     let fields = result.interface_fields();
     row.fields_finite &= fields_finite(&fields);
-    let Some(opts) = &case.reference else {
-        row.reference_note = Some("reference not computed for this case".into());
-        return;
-    };
-    let t1 = Instant::now();
-    match solve_reference(model, opts) {
-        Ok(reference) => {
-            row.reference_s = Some(t1.elapsed().as_secs_f64());
-            row.reference_newton = Some(reference.newton_iterations.iter().sum());
-            row.fields_finite &= fields_finite(&reference.interfaces);
-            if fields.len() != model.interfaces.len() {
-                row.reference_note = Some("LATIN returned no interface fields".into());
-                return;
-            }
-            let (e_f, e_w) = error_against_reference(
-                &model.interfaces,
-                &fields,
-                &reference.interfaces,
-                &model.time.trapezoid_weights(),
-            );
-            // A relative error against a zero reference is infinite whenever s is not exactly 0.
-            if e_f.is_finite() {
-                row.traction_error = Some(e_f);
-            } else {
-                let f_max = fields
-                    .iter()
-                    .zip(&model.interfaces)
-                    .filter(|(_, i)| i.is_contact())
-                    .flat_map(|(f, _)| [&f.f_a, &f.f_b])
-                    .flat_map(|m| (0..m.ncols()).flat_map(move |j| (0..m.nrows()).map(move |i| m[(i, j)].abs())))
-                    .fold(0.0, f64::max);
-                row.reference_note = Some(format!(
-                    "the reference's contact tractions are all 0; max |F| of LATIN = {f_max:.1e} N/mm"
-                ));
-            }
-            row.jump_error = e_w.is_finite().then_some(e_w);
-        }
-        Err(e) => row.reference_note = Some(format!("reference failed: {e}")),
+    (row, Some((sc, fields)))
+}
+
+/// Sets a run's errors against the reference; returns why one is missing.
+fn compare(
+    run: &mut RunRow,
+    model: &Model,
+    fields: &[InterfaceFields],
+    reference: &[InterfaceFields],
+) -> Option<String> {
+    if fields.len() != model.interfaces.len() {
+        return Some("LATIN returned no interface fields".into());
     }
+    let (e_f, e_w) = error_against_reference(&model.interfaces, fields, reference, &model.time.trapezoid_weights());
+    run.jump_error = e_w.is_finite().then_some(e_w);
+    // A relative error against a zero reference is infinite whenever s is not exactly 0.
+    if e_f.is_finite() {
+        run.traction_error = Some(e_f);
+        return None;
+    }
+    let f_max = fields
+        .iter()
+        .zip(&model.interfaces)
+        .filter(|(_, i)| i.is_contact())
+        .flat_map(|(f, _)| [&f.f_a, &f.f_b])
+        .flat_map(|m| (0..m.ncols()).flat_map(move |j| (0..m.nrows()).map(move |i| m[(i, j)].abs())))
+        .fold(0.0, f64::max);
+    Some(format!(
+        "the reference's contact tractions are all 0; max |F| of LATIN = {f_max:.1e} N/mm"
+    ))
 }
 
 /// Runs every case of the matrix in order; `on_case` sees each row as it is done.
@@ -838,13 +972,17 @@ fn opt(v: Option<f64>, prec: usize) -> String {
     v.map_or("—".into(), |x| format!("{x:.prec$e}"))
 }
 
-/// The table as Markdown.
+/// The table as Markdown: the plain run's columns, then the accelerated run's and what
+/// acceleration did to the outcome.
 pub fn markdown(rows: &[CaseResult]) -> String {
     let mut s = String::from(
         "| case | varies | expected | iterations | final η | traction error | jump error | LATIN (s) | \
-         reference (s) | sep/stick/slip at t = T | outcome |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+         reference (s) | sep/stick/slip at t = T | outcome | Anderson: iterations | Anderson: final η | \
+         Anderson: traction error | Anderson: LATIN (s) | mixed/safeguarded/restarted | acceleration |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
+        let (p, a) = (&r.plain, &r.anderson);
         let expected = match &r.expect {
             Expect::Converge { error } => format!(
                 "η ≤ {}{}",
@@ -858,7 +996,7 @@ pub fn markdown(rows: &[CaseResult]) -> String {
             Expect::Stop { outcome, .. } => format!("stop: {}", outcome.replace('_', " ")),
             Expect::Rejected { .. } => "rejected".into(),
         };
-        let mut outcome = r.outcome.text();
+        let mut outcome = p.outcome.text();
         match (r.assessment, &r.expect) {
             (Assessment::AsExpected, Expect::Stop { why, .. }) => {
                 let _ = write!(outcome, " — expected: {why}");
@@ -869,24 +1007,54 @@ pub fn markdown(rows: &[CaseResult]) -> String {
         if let Some(n) = &r.reference_note {
             let _ = write!(outcome, " (error: {n})");
         }
-        if let Some(i) = r.first_direction_update {
+        if let Some(i) = p.first_direction_update {
             let _ = write!(outcome, " (directions updated at iteration {i})");
         }
+        let iterations = |run: &RunRow| run.iterations.map_or("—".into(), |n| n.to_string());
+        let seconds = |run: &RunRow| run.latin_s.map_or("—".into(), |t| format!("{t:.2}"));
+        let steps = a.anderson_steps.map_or("—".into(), |t| {
+            format!("{}/{}/{}", t.mixed, t.safeguarded, t.restarted)
+        });
+        let effect = match r.acceleration {
+            AccelerationEffect::Kept => match (p.iterations, a.iterations, &a.outcome) {
+                (Some(n), Some(m), Outcome::Converged) => format!("kept ({n} → {m} iterations)"),
+                _ => format!("kept ({})", a.outcome.kind().replace('_', " ")),
+            },
+            e => {
+                let mut t = format!("{}: {}", e.kind(), a.outcome.text());
+                if let (Outcome::Converged, Some(err)) = (&a.outcome, a.traction_error.or(a.jump_error)) {
+                    let _ = write!(t, ", error {err:.1e}");
+                }
+                if e == AccelerationEffect::Broke {
+                    t = format!("**{t}**");
+                }
+                t
+            }
+        };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.case,
             r.varies,
             expected,
-            r.iterations.map_or("—".into(), |n| n.to_string()),
-            opt(r.eta, 2),
-            opt(r.traction_error, 1),
-            opt(r.jump_error, 1),
-            r.latin_s.map_or("—".into(), |t| format!("{t:.2}")),
+            iterations(p),
+            opt(p.eta, 2),
+            opt(p.traction_error, 1),
+            opt(p.jump_error, 1),
+            seconds(p),
             r.reference_s.map_or("—".into(), |t| format!("{t:.2}")),
-            r.final_counts
+            p.final_counts
                 .map_or("—".into(), |c| format!("{}/{}/{}", c[0], c[1], c[2])),
-            outcome.replace('|', "\\|")
+            outcome.replace('|', "\\|"),
+            iterations(a),
+            opt(a.eta, 2),
+            match (a.traction_error, a.jump_error) {
+                (None, Some(e)) => format!("jump {e:.1e}"),
+                (e, _) => opt(e, 1),
+            },
+            seconds(a),
+            steps,
+            effect.replace('|', "\\|"),
         );
     }
     s
