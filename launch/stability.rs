@@ -408,7 +408,8 @@ pub struct CaseResult {
     pub reference_s: Option<f64>,
     /// Reference Newton iterations, all time steps.
     pub reference_newton: Option<usize>,
-    /// The plain run ends as the case expects.
+    /// The plain run ends as the case expects, the accelerated one neither panics nor leaves a
+    /// non-finite value, and acceleration does not break a converging case.
     pub assessment: Assessment,
 }
 
