@@ -99,9 +99,19 @@ fn quick_stability_matrix() {
             // The accelerated scene does mix: every run of more than two iterations (the
             // first mixed step is at iteration 2) takes mixed steps.
             let steps = row.anderson.anderson_steps.expect("Anderson steps counted");
-            if row.anderson.iterations.is_some_and(|n| n > 2) {
+            let n = row.anderson.iterations.expect("iterations");
+            if n > 2 {
                 assert!(steps.mixed > 0, "{name}: {steps:?}");
             }
+            // One step per iteration from iteration 2 on (iterations 0 and 1 only record), each
+            // counted once; every one holds at least one difference (the subdomains send
+            // partials from their first difference on, and a restart keeps the last iterate).
+            assert_eq!(
+                steps.mixed + steps.safeguarded + steps.restarted + steps.unmixed,
+                n.saturating_sub(2) as u32,
+                "{name}: {steps:?}"
+            );
+            assert_eq!(steps.unmixed, 0, "{name}: {steps:?}");
         }
         assert_ne!(row.acceleration, AccelerationEffect::Broke, "{name}");
         if kind == "rejected" {
