@@ -406,6 +406,29 @@ enum StepSolver {
     SparseLu(LuPattern),
 }
 
+/// Scratch of the Newton iterations of one step.
+struct NewtonWork {
+    /// `SparseLu`: the Jacobian's values, fixed part filled in.
+    values: Vec<f64>,
+    /// `Condensed`: Sᵀ, the transposed Schur complement.
+    s_t: Mat<f64>,
+}
+
+impl NewtonWork {
+    fn new(solver: &StepSolver, n_pairs: usize) -> Self {
+        match solver {
+            StepSolver::SparseLu(pat) => Self {
+                values: pat.fixed.clone(),
+                s_t: Mat::new(),
+            },
+            StepSolver::Condensed(_) => Self {
+                values: Vec::new(),
+                s_t: Mat::zeros(2 * n_pairs, 2 * n_pairs),
+            },
+        }
+    }
+}
+
 /// One perfect copy joining two vertices of a group.
 #[derive(Debug, Clone, Copy)]
 struct PerfectEdge {
@@ -748,10 +771,11 @@ impl<'m> Problem<'m> {
 
     /// Solves J dx = −r for the Newton correction (in place in `r`). None if a factorisation
     /// fails or the correction is not finite.
-    fn newton_step(&self, jac: &[PairJacobian], r: &mut [f64], values: &mut [f64]) -> Option<()> {
+    fn newton_step(&self, jac: &[PairJacobian], r: &mut [f64], work: &mut NewtonWork) -> Option<()> {
         let n_free = self.n_free;
         match &self.solver {
             StepSolver::SparseLu(pat) => {
+                let values = &mut work.values;
                 for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
                     let mut o = pat.offset[m];
                     for q in (0..4).filter(|&q| mp.free[q] != NONE) {
@@ -780,32 +804,40 @@ impl<'m> Problem<'m> {
                 // a = K_ff⁻¹(−R_u).
                 let mut a: Vec<f64> = r[..n_free].iter().map(|v| -v).collect();
                 cs.k_ff.solve_vec_in_place(&mut a);
-                // S = C_λ − C_u Z, rhs = −C − C_u a.
-                let mut s_mat = Mat::<f64>::zeros(np2, np2);
+                // rhs = −C − C_u a.
                 let mut rhs = Mat::<f64>::zeros(np2, 1);
                 for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
                     let (rn, rt) = (2 * m, 2 * m + 1);
-                    s_mat[(rn, rn)] += pj.dln_n;
-                    s_mat[(rt, rn)] += pj.dln_t;
-                    s_mat[(rt, rt)] += pj.dlt_t;
                     rhs[(rn, 0)] = -r[n_free + rn];
                     rhs[(rt, 0)] = -r[n_free + rt];
-                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
-                        let (fd, cn, ct) = (mp.free[q], pj.du_n[q], pj.du_t[q]);
-                        if cn == 0.0 && ct == 0.0 {
-                            continue;
-                        }
-                        let z = cs.z_t.col(cs.position[fd]);
-                        for j in 0..np2 {
-                            s_mat[(rn, j)] -= cn * z[j];
-                            s_mat[(rt, j)] -= ct * z[j];
-                        }
-                        rhs[(rn, 0)] -= cn * a[fd];
-                        rhs[(rt, 0)] -= ct * a[fd];
+                    for (q, &fd) in mp.free.iter().enumerate().filter(|&(_, &fd)| fd != NONE) {
+                        rhs[(rn, 0)] -= pj.du_n[q] * a[fd];
+                        rhs[(rt, 0)] -= pj.du_t[q] * a[fd];
                     }
                 }
-                let lu = faer::linalg::solvers::PartialPivLu::new(s_mat.as_ref());
-                lu.solve_in_place(rhs.as_mut());
+                // S = C_λ − C_u Z, built as Sᵀ (a row of S is a contiguous column of Sᵀ: the
+                // rows of Zᵀ are added to it in place) and solved transposed.
+                let s_t = &mut work.s_t;
+                s_t.fill(0.0);
+                for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
+                    let (rn, rt) = (2 * m, 2 * m + 1);
+                    s_t[(rn, rn)] += pj.dln_n;
+                    s_t[(rn, rt)] += pj.dln_t;
+                    s_t[(rt, rt)] += pj.dlt_t;
+                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
+                        let (fd, cn, ct) = (mp.free[q], pj.du_n[q], pj.du_t[q]);
+                        let z = cs.z_t.col(cs.position[fd]);
+                        for (row, c) in [(rn, cn), (rt, ct)] {
+                            if c != 0.0 {
+                                for (s, &zj) in s_t.col_mut(row).iter_mut().zip(z.iter()) {
+                                    *s -= c * zj;
+                                }
+                            }
+                        }
+                    }
+                }
+                let lu = faer::linalg::solvers::PartialPivLu::new(s_t.as_ref());
+                lu.solve_transpose_in_place(rhs.as_mut());
                 // Δu = K_ff⁻¹(−R_u − Bᵀ Δλ).
                 let mut b: Vec<f64> = r[..n_free].iter().map(|v| -v).collect();
                 for (m, mp) in self.pairs.iter().enumerate() {
@@ -839,10 +871,7 @@ impl<'m> Problem<'m> {
         opts: &ReferenceOptions,
     ) -> Result<(StepState, usize, Vec<Status>), (usize, f64)> {
         let mut x = start.x.clone();
-        let mut values = match &self.solver {
-            StepSolver::SparseLu(pat) => pat.fixed.clone(),
-            StepSolver::Condensed(_) => Vec::new(),
-        };
+        let mut work = NewtonWork::new(&self.solver, self.pairs.len());
         let mut worst = f64::INFINITY;
         for it in 0..=opts.max_newton_iterations {
             let u = self.displacement(&x, prescribed);
@@ -859,7 +888,7 @@ impl<'m> Problem<'m> {
                 break;
             }
             let psi0: f64 = r.iter().map(|v| v * v).sum();
-            if self.newton_step(&jac, &mut r, &mut values).is_none() {
+            if self.newton_step(&jac, &mut r, &mut work).is_none() {
                 return Err((it + 1, worst));
             }
             // Backtracking on ψ = ‖[R_u; C]‖² (both in N): the semi-smooth Newton direction is a
