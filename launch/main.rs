@@ -65,10 +65,12 @@ enum Command {
         /// LATIN iteration cap (overrides the scene's).
         #[arg(long)]
         max_iterations: Option<usize>,
-        /// Compare linear stages against one reference solve, e.g. `condensed,sparse,pgd`
-        /// (writes `<scene>-<stage>-report.json` / `.svg` each, and prints a comparison table).
-        #[arg(long, value_delimiter = ',')]
-        linear_stages: Vec<String>,
+        /// Compare solver variants against one reference solve: linear stages, each optionally
+        /// with `+anderson` or `+plain`, e.g. `condensed,condensed+anderson,pgd+anderson` or
+        /// `condensed,sparse,pgd` (writes `<scene>-<variant>-report.json` / `.svg` each, and
+        /// prints a comparison table).
+        #[arg(long, alias = "linear-stages", value_delimiter = ',')]
+        variants: Vec<String>,
     },
     /// Run a scene in-process and split an iteration's time by stage, against the machine's
     /// measured dense-product rate and memory bandwidth (`<scene>-bench.json`; use a release build).
@@ -330,8 +332,8 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             out,
             tolerance,
             max_iterations,
-            linear_stages,
-        } if !linear_stages.is_empty() => report_stages(&scene, &out, tolerance, max_iterations, &linear_stages),
+            variants,
+        } if !variants.is_empty() => report_variants(&scene, &out, tolerance, max_iterations, &variants),
         Command::Report {
             scene,
             out,
@@ -774,31 +776,25 @@ fn report(
     Ok(ExitCode::SUCCESS)
 }
 
-/// `glissade report --linear-stages a,b,…`: one reference, one LATIN run per linear stage.
-fn report_stages(
+/// `glissade report --variants a,b,…`: one reference, one LATIN run per variant.
+fn report_variants(
     scene: &std::path::Path,
     out: &std::path::Path,
     tolerance: f64,
     max_iterations: Option<usize>,
     names: &[String],
 ) -> anyhow::Result<ExitCode> {
-    use glissade_mechanics::scene::LinearStage;
-    let stages = names
+    let variants = names
         .iter()
-        .map(|n| match n.as_str() {
-            "condensed" => Ok(LinearStage::Condensed),
-            "sparse" => Ok(LinearStage::Sparse),
-            "pgd" => Ok(LinearStage::Pgd),
-            "auto" => Ok(LinearStage::Auto),
-            other => Err(anyhow::anyhow!(
-                "--linear-stages: `{other}` is not a linear stage (condensed, sparse, pgd, auto)"
-            )),
+        .map(|n| {
+            n.parse::<glissade::report::Variant>()
+                .map_err(|e| anyhow::anyhow!("--variants: {e}"))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let sc = load_with_overrides(scene, out, Some(tolerance), max_iterations)?;
     // In-process runs only: the run id names nothing on a network.
     let run_id = format!("{}-report", sc.model.name);
-    let (reports, _) = glissade::report::build_reports(&sc, &run_id, &stages)?;
+    let (reports, _) = glissade::report::build_reports(&sc, &run_id, &variants)?;
     let name = &sc.model.name;
     println!(
         "scene `{name}`: reference {:.2} s ({} Newton iterations), N = {}",

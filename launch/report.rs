@@ -86,23 +86,82 @@ pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report
     Ok((report, reference, result))
 }
 
-/// One report per linear stage against one reference solve (back to back in one process, so
-/// their times compare on a shared machine).
+/// A solver variant of a report comparison: a linear stage and, if given, an acceleration that
+/// replaces the scene's (`glissade report --variants condensed,condensed+anderson,pgd+anderson`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Variant {
+    pub stage: LinearStage,
+    pub acceleration: Option<Acceleration>,
+}
+
+impl From<LinearStage> for Variant {
+    fn from(stage: LinearStage) -> Self {
+        Self {
+            stage,
+            acceleration: None,
+        }
+    }
+}
+
+impl std::str::FromStr for Variant {
+    type Err = String;
+
+    /// `<stage>` or `<stage>+anderson` / `<stage>+plain` (stage: condensed, sparse, pgd, auto);
+    /// `+anderson` uses the scene's window if it has one, else the default window.
+    fn from_str(name: &str) -> Result<Self, String> {
+        let (stage, accel) = name.split_once('+').map_or((name, None), |(a, b)| (a, Some(b)));
+        let stage = match stage {
+            "condensed" => LinearStage::Condensed,
+            "sparse" => LinearStage::Sparse,
+            "pgd" => LinearStage::Pgd,
+            "auto" => LinearStage::Auto,
+            other => {
+                return Err(format!(
+                    "`{other}` is not a linear stage (condensed, sparse, pgd, auto)"
+                ))
+            }
+        };
+        let acceleration = match accel {
+            None => None,
+            Some("plain") => Some(Acceleration::None),
+            Some("anderson") => Some(Acceleration::Anderson {
+                window: glissade_mechanics::scene::DEFAULT_ANDERSON_WINDOW,
+            }),
+            Some(other) => return Err(format!("`+{other}` is not an acceleration (+anderson, +plain)")),
+        };
+        Ok(Self { stage, acceleration })
+    }
+}
+
+/// One report per variant against one reference solve (back to back in one process, so their
+/// times compare on a shared machine).
 pub fn build_reports(
     scene: &LoadedScene,
     run_id: &str,
-    stages: &[LinearStage],
+    variants: &[Variant],
 ) -> anyhow::Result<(Vec<Report>, ReferenceSolution)> {
     let t0 = Instant::now();
     let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
     let reference_s = t0.elapsed().as_secs_f64();
-    let mut reports = Vec::with_capacity(stages.len());
-    for &stage in stages {
+    let mut reports = Vec::with_capacity(variants.len());
+    for v in variants {
         let mut sc = scene.clone();
-        sc.linear_stage = stage;
+        sc.linear_stage = v.stage;
+        match (v.acceleration, scene.model.solver.acceleration) {
+            (Some(Acceleration::Anderson { .. }), Acceleration::Anderson { .. }) | (None, _) => {}
+            (Some(a), _) => sc.model.solver.acceleration = a,
+        }
         reports.push(report_against(&sc, run_id, &reference, reference_s)?.0);
     }
     Ok((reports, reference))
+}
+
+/// The variant a report ran: its linear stage, and its acceleration if any.
+pub fn variant_name(report: &Report) -> String {
+    match report.acceleration.as_str() {
+        "none" => report.linear_stage.clone(),
+        a => format!("{} + {a}", report.linear_stage),
+    }
 }
 
 /// The LATIN run of `scene` measured against a solved reference.
@@ -260,7 +319,7 @@ pub fn comparison_table(reports: &[Report]) -> String {
     for r in reports {
         out += &format!(
             " {0}: iterations | {0}: wall time (s) | {0}: linear stage (s) |",
-            r.linear_stage
+            variant_name(r)
         );
     }
     out += "\n|---|";
@@ -286,7 +345,7 @@ pub fn comparison_table(reports: &[Report]) -> String {
         let basis = r.points.iter().flat_map(|p| p.basis_sizes.iter().copied()).max();
         out += &format!(
             "{}: setup {:.2} s, {} iterations in {:.2} s ({}), largest basis {}, bus bytes per iteration {:.0}\n",
-            r.linear_stage,
+            variant_name(r),
             r.latin_setup_s,
             r.points.len(),
             r.latin_solve_s,

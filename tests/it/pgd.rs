@@ -2,9 +2,10 @@
 //! gives the condensed stage's iterates, and PGD converges to the same limit.
 
 use crate::common::{rel_max, run, scene};
-use glissade::report::{build_reports, plot_svg};
+use glissade::report::{build_reports, comparison_table, plot_svg, Variant};
 use glissade::runner::RunResult;
 use glissade_mechanics::local::error_against_reference;
+use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion, PgdParams};
 use glissade_messages::Verdict;
 
@@ -62,7 +63,13 @@ fn sparse_stage_gives_the_condensed_iterates() {
 /// Runs `sc` to η ≤ `tolerance` without PGD (condensed) and with it; returns the space-time
 /// relative differences of the contact tractions and jumps (forces of cross-point copies summed:
 /// only their sum is determined) and the iteration counts.
-fn same_limit(mut sc: LoadedScene, pgd: PgdParams, tolerance: f64) -> (f64, f64) {
+fn same_limit(sc: LoadedScene, pgd: PgdParams, tolerance: f64) -> (f64, f64) {
+    same_limit_with(sc, pgd, tolerance, Acceleration::None)
+}
+
+/// [`same_limit`] with the PGD run accelerated by `acceleration` (the exact run stays plain).
+fn same_limit_with(mut sc: LoadedScene, pgd: PgdParams, tolerance: f64, acceleration: Acceleration) -> (f64, f64) {
+    sc.model.solver.acceleration = Acceleration::None;
     sc.model.solver.tolerance = tolerance;
     sc.model.solver.contact_tolerance = None;
     sc.model.solver.max_iterations = 20_000;
@@ -72,6 +79,7 @@ fn same_limit(mut sc: LoadedScene, pgd: PgdParams, tolerance: f64) -> (f64, f64)
     assert_eq!(exact.verdict, Verdict::Converged);
     sc.linear_stage = LinearStage::Pgd;
     sc.pgd = pgd.clone();
+    sc.model.solver.acceleration = acceleration;
     let with_pgd = run(&sc);
     assert_eq!(
         with_pgd.verdict,
@@ -87,7 +95,7 @@ fn same_limit(mut sc: LoadedScene, pgd: PgdParams, tolerance: f64) -> (f64, f64)
         &weights,
     );
     println!(
-        "{} at η ≤ {tolerance:e}, PGD {:?} ξ₀ = ({}, {}) macro_modes {}: {} iterations without PGD, {} with; contact tractions differ by {e_f:.2e}, jumps by {e_w:.2e}",
+        "{} at η ≤ {tolerance:e}, PGD {:?} ξ₀ = ({}, {}) macro_modes {} {acceleration:?}: {} iterations without PGD, {} with; contact tractions differ by {e_f:.2e}, jumps by {e_w:.2e}",
         sc.model.name,
         pgd.criterion,
         pgd.xi1,
@@ -152,6 +160,22 @@ fn pgd_variants_keep_the_limit() {
     );
 }
 
+/// PGD with Anderson acceleration. What is mixed is the expanded boundary state s = (W, F) of
+/// each subdomain, as without PGD: the mixed state is an affine combination (the coefficients sum
+/// to one) of iterates and images that all lie in the span of the subdomain's current basis (it
+/// only grows without compression), so mixing the expanded fields is the same as mixing the time
+/// functions on that basis, and the mixed state is admissible like every PGD state. The fixed
+/// point is the one of the PGD iteration, hence of the exact one (see above), so the same limit
+/// and the same tolerance apply. Measured (test profile) at η ≤ 1e-10: see the printed line.
+#[test]
+fn pgd_with_anderson_keeps_the_limit() {
+    let anderson = Acceleration::Anderson { window: 5 };
+    for name in ["two-blocks", "hertz-slip"] {
+        let (e_f, e_w) = same_limit_with(scene_file(name), default_pgd(), 1e-10, anderson);
+        assert!(e_f <= 1e-7 && e_w <= 1e-7, "{name}: tractions {e_f:e}, jumps {e_w:e}");
+    }
+}
+
 /// Stratified (18 subdomains, N = 100). Measured (release): contact tractions differ by 9.4e-5
 /// at η ≤ 1e-7, 2.1e-6 at η ≤ 1e-9, 2.1e-7 at η ≤ 1e-10 and 2.3e-8 at η ≤ 1e-11 (PGD 857, 1095
 /// and 1408 iterations, plain 1176, 1685 and 2206): the same limit, approached more slowly in η
@@ -165,15 +189,30 @@ fn pgd_keeps_the_stratified_limit() {
     assert!(e_f <= 1e-6 && e_w <= 1e-6, "tractions {e_f:e}, jumps {e_w:e}");
 }
 
-/// `glissade report --linear-stages`: one reference, one report per stage, with the PGD basis
+/// `glissade report --variants`: one reference, one report per stage, with the PGD basis
 /// size per subdomain and iteration and the bus bytes per iteration.
 #[test]
 fn reports_compare_linear_stages() {
     let mut sc = scene_file("two-blocks");
     sc.model.solver.max_iterations = 30;
-    let stages = [LinearStage::Condensed, LinearStage::Pgd];
-    let (reports, _) = build_reports(&sc, "pgd-report", &stages).expect("reports");
-    let (c, p) = (&reports[0], &reports[1]);
+    let mut variants = [LinearStage::Condensed, LinearStage::Pgd].map(Variant::from).to_vec();
+    variants.push("pgd+anderson".parse().expect("a variant"));
+    let (reports, _) = build_reports(&sc, "pgd-report", &variants).expect("reports");
+    let (c, p, pa) = (&reports[0], &reports[1], &reports[2]);
+    // The third variant replaces the scene's plain relaxation by Anderson mixing: every iteration
+    // from iteration 2 on (iterations 0 and 1 only record) takes one Anderson step (mixed,
+    // safeguarded or restarted).
+    assert_eq!(
+        (c.acceleration.as_str(), pa.acceleration.as_str()),
+        ("none", "anderson(5)")
+    );
+    assert_eq!(pa.anderson_steps.iter().sum::<u32>() as usize, pa.points.len() - 2);
+    assert!(pa.anderson_steps[0] > 0, "{:?}", pa.anderson_steps);
+    assert!(comparison_table(&reports).contains("pgd(increment"));
+    assert!(comparison_table(&reports).contains(" + anderson(5): iterations"));
+    for bad in ["dense", "pgd+nesterov", "condensed+"] {
+        assert!(bad.parse::<Variant>().is_err(), "{bad}");
+    }
     assert_eq!(c.linear_stage, "condensed");
     assert!(p.linear_stage.starts_with("pgd(increment"), "{}", p.linear_stage);
     assert_eq!(c.points.len(), 30);
