@@ -418,18 +418,20 @@ pub fn run_distributed(
     net: &Network,
     on_iteration: impl FnMut(&IterationRecord),
 ) -> anyhow::Result<(RunResult, Traffic)> {
-    run_distributed_observed(scene, opts, exe, net, on_iteration, |_| {})
+    run_distributed_observed(scene, opts, exe, net, on_iteration, None::<fn(&Message)>)
 }
 
-/// As [`run_distributed`]; `observe` sees every message of the run the launcher receives, in
-/// arrival order (the live Rerun view of a multi-process run).
+/// As [`run_distributed`]; `observe`, when given, sees every message of the run the launcher
+/// receives, in arrival order (the live Rerun view of a multi-process run). Without it, the
+/// launcher copies and decodes only the messages it keeps (decisions, interface solutions,
+/// displacements) and just counts the others, most of the bus's bytes.
 pub fn run_distributed_observed(
     scene: &LoadedScene,
     opts: &RunOptions,
     exe: &Path,
     net: &Network,
     mut on_iteration: impl FnMut(&IterationRecord),
-    mut observe: impl FnMut(&Message),
+    mut observe: Option<impl FnMut(&Message)>,
 ) -> anyhow::Result<(RunResult, Traffic)> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
@@ -534,11 +536,12 @@ pub fn run_distributed_observed(
         },
     };
     let _queryable = transport::serve_scene(&session, run_id, encode(&scene_msg))?;
-    let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
+    let (tx, rx) = mpsc::channel::<Arrival>();
+    let (watched_run, keep_all) = (run_id.clone(), observe.is_some());
     let _watch = session
         .declare_subscriber(glissade_messages::run_topics(run_id))
         .callback(move |s| {
-            let _ = tx.send((s.key_expr().as_str().to_string(), s.payload().to_bytes().into_owned()));
+            let _ = tx.send(Arrival::of(s.key_expr().as_str(), s.payload(), &watched_run, keep_all));
         })
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: subscribe to the run: {e}"))?;
@@ -770,23 +773,23 @@ pub fn run_distributed_observed(
             bail!("{f}");
         }
         if got.started.is_none() {
-            if let Ok((key, bytes)) = rx.recv_timeout(Duration::from_millis(50)) {
-                count(&mut traffic, &key, &bytes, run_id);
+            if let Ok(a) = rx.recv_timeout(Duration::from_millis(50)) {
+                count(&mut traffic, &a);
             }
             continue;
         }
         match rx.recv_timeout(Duration::from_millis(50)) {
-            Ok((key, bytes)) => {
+            Ok(a) => {
                 last_message = Instant::now();
-                if !count(&mut traffic, &key, &bytes, run_id) {
-                    continue;
-                }
+                let Some(bytes) = count(&mut traffic, &a) else { continue };
                 // A restarted node re-sends outputs its predecessor may have sent already.
-                if !heard.insert(transport::message_hash(&key, &bytes)) {
+                if !heard.insert(transport::message_hash(&a.key, bytes)) {
                     continue;
                 }
-                let Ok(m) = decode(&bytes, &expected) else { continue };
-                observe(&m);
+                let Ok(m) = decode(bytes, &expected) else { continue };
+                if let Some(o) = observe.as_mut() {
+                    o(&m);
+                }
                 if let Some(rec) = got.take(m) {
                     stop_seen |= rec.decision.verdict.is_stop();
                     on_iteration(rec);
@@ -836,12 +839,15 @@ pub fn run_distributed_observed(
             }
             Err(_) => break,
         };
-        let Some((key, bytes)) = next else { continue };
-        if !count(&mut traffic, &key, &bytes, run_id) || !heard.insert(transport::message_hash(&key, &bytes)) {
+        let Some(a) = next else { continue };
+        let Some(bytes) = count(&mut traffic, &a) else { continue };
+        if !heard.insert(transport::message_hash(&a.key, bytes)) {
             continue;
         }
-        if let Ok(m) = decode(&bytes, &expected) {
-            observe(&m);
+        if let Ok(m) = decode(bytes, &expected) {
+            if let Some(o) = observe.as_mut() {
+                o(&m);
+            }
             if let Some(rec) = got.take(m) {
                 on_iteration(rec);
             }
@@ -937,18 +943,52 @@ impl Collected {
     }
 }
 
-/// Adds a message seen on `key` to the traffic if it belongs to run `run_id` (its envelope says
-/// so); returns whether it does.
-fn count(traffic: &mut Traffic, key: &str, bytes: &[u8], run_id: &str) -> bool {
-    if glissade_messages::peek_envelope(bytes, run_id).is_err() {
-        return false;
+/// A message as the launcher's subscriber passes it on.
+struct Arrival {
+    key: String,
+    /// Its size on the bus.
+    size: usize,
+    /// Its envelope says it belongs to the run.
+    ours: bool,
+    /// Its bytes, when the launcher keeps it ([`Arrival::of`]).
+    bytes: Option<Vec<u8>>,
+}
+
+impl Arrival {
+    /// A message of run `run_id` seen on `key`: its bytes are copied out of Zenoh's buffers only
+    /// if it is the run's and it is a decision, an interface solution or a displacement (what
+    /// the launcher keeps), or `keep_all`; the multi-MB fields in between are only counted.
+    fn of(key: &str, payload: &zenoh::bytes::ZBytes, run_id: &str, keep_all: bool) -> Self {
+        // The envelope is the message's first bytes: the first slice holds it unless the
+        // message came in tiny fragments, then the whole message is looked at.
+        let first = payload.slices().next().unwrap_or(&[]);
+        let ours = glissade_messages::peek_envelope(first, run_id).is_ok()
+            || (first.len() < payload.len() && glissade_messages::peek_envelope(&payload.to_bytes(), run_id).is_ok());
+        let kept = keep_all || matches!(kind_of(key), "decision" | "interface_solution" | "displacement");
+        Self {
+            key: key.to_string(),
+            size: payload.len(),
+            ours,
+            bytes: (ours && kept).then(|| payload.to_bytes().into_owned()),
+        }
     }
-    // glissade/<run>/<role>/<index>/<field>[/<destination>]
-    let kind = key.split('/').nth(4).unwrap_or("?");
-    let t = traffic.by_kind.entry(kind.to_string()).or_default();
+}
+
+/// The field of a key: glissade/<run>/<role>/<index>/<field>[/<destination>].
+fn kind_of(key: &str) -> &str {
+    key.split('/').nth(4).unwrap_or("?")
+}
+
+/// Adds a message to the traffic if it belongs to the run (its envelope says so); returns its
+/// bytes if the launcher keeps them.
+fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a [u8]> {
+    if !a.ours {
+        return None;
+    }
+    let t = traffic.by_kind.entry(kind_of(&a.key).to_string()).or_default();
     t.messages += 1;
-    t.bytes += bytes.len() as u64;
-    true
+    t.bytes += a.size as u64;
+    a.bytes.as_deref()
 }
 
 /// Runs one node process: connects to `connect`, fetches the scene of run `run_id` over the bus,

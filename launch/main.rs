@@ -453,13 +453,16 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
     let mut live = LiveView::new(&args, &sc, &run_id)?;
+    // Linear-stage totals per linear stage: in process only (a node process keeps its records).
+    let mut linear_stages = None;
     let result = if args.in_process {
-        let (result, outcome) =
-            glissade::recording::run_in_process_recorded_observed(&sc, &opts, recording.as_deref(), progress, |m| {
+        let (result, records, outcome) =
+            glissade::recording::run_in_process_recorded_logged(&sc, &opts, recording.as_deref(), progress, |m| {
                 let t0 = std::time::Instant::now();
                 live.message(m);
                 t0.elapsed()
             })?;
+        linear_stages = Some(glissade::output::linear_stage_totals(&sc, &records));
         live.finish()?;
         if let Some(o) = outcome {
             if let Some(st) = &o.stats {
@@ -483,7 +486,11 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
             recording: recording.clone(),
         };
-        match run_distributed_observed(&sc, &opts, &exe, &net, progress, |m| live.message(m)) {
+        let observe = live
+            .view
+            .is_some()
+            .then_some(|m: &glissade_messages::Message| live.message(m));
+        match run_distributed_observed(&sc, &opts, &exe, &net, progress, observe) {
             Ok((result, traffic)) => {
                 bar.finish_and_clear();
                 live.finish()?;
@@ -522,11 +529,14 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         println!("left out: {l}");
     }
     let stem = format!("{}-{run_id}", sc.model.name);
-    let summary_path = write_json(
-        &args.out,
-        &format!("{stem}.summary.json"),
-        &summary(&sc, &result, &run_id),
-    )?;
+    let mut run_summary = summary(&sc, &result, &run_id);
+    run_summary["linear_stages"] = match &linear_stages {
+        Some(totals) => serde_json::json!(totals.iter().map(|t| t.json()).collect::<Vec<_>>()),
+        None => {
+            serde_json::json!("not measured: a multi-process run's subdomain nodes keep their linear-stage records")
+        }
+    };
+    let summary_path = write_json(&args.out, &format!("{stem}.summary.json"), &run_summary)?;
     let fields_path = write_json(
         &args.out,
         &format!("{stem}.fields.json"),
@@ -545,6 +555,9 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     println!("scene `{}`: {:?} after {} iterations, η = {:.3e}, contact indicator = {:.3e}; setup {:.2} s, iterations {:.2} s",
         sc.model.name, result.verdict, result.iterations.len(), last.map_or(0.0, |r| r.decision.eta),
         last.map_or(0.0, |r| r.decision.contact_indicator), result.setup_s, result.solve_s);
+    for t in linear_stages.iter().flatten() {
+        println!("{}", t.line());
+    }
     println!("summary: {}\nfields: {}", summary_path.display(), fields_path.display());
     Ok(match result.verdict {
         Verdict::Converged => ExitCode::SUCCESS,
