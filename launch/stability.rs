@@ -465,6 +465,7 @@ pub const SLOW: [&str; 4] = [
 fn case(name: &'static str, varies: &str, b: &Base, expect: Expect) -> Case {
     let mut b = b.clone();
     b.name = name.into();
+    b.solver_set("acceleration", "\"none\"");
     let scene = b.to_toml();
     b.solver_set("acceleration", "\"anderson\"");
     Case {

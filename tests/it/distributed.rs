@@ -179,9 +179,16 @@ fn stratified_over_three_interface_processes() {
     assert_identical(&one, &remote);
 }
 
+/// With plain relaxation: the default Anderson path is covered by the stratified tests here and
+/// by `acceleration::processes_match_in_process_bit_for_bit_with_anderson`.
 #[test]
 fn processes_match_in_process_bit_for_bit() {
-    let sc = scene(&scene_file("small-three-layer"));
+    let text = scene_file("small-three-layer").replace("[solver]\n", "[solver]\nacceleration = \"none\"\n");
+    let sc = scene(&text);
+    assert_eq!(
+        sc.model.solver.acceleration,
+        glissade_mechanics::model::Acceleration::None
+    );
     assert!(
         sc.deployment.subdomain_nodes >= 2,
         "the scene spreads its subdomains over processes"

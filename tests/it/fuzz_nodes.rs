@@ -524,7 +524,7 @@ fn bad_messages_are_refused_and_leave_nodes_unchanged() {
 #[test]
 fn bad_messages_are_refused_without_coarse_problem_nor_acceleration() {
     let scene = scene(
-        "coarse = false\nlinear_stage = \"pgd\"\nsearch_direction_update = true\n",
+        "coarse = false\nlinear_stage = \"pgd\"\nsearch_direction_update = true\nacceleration = \"none\"\n",
         "",
     );
     let kinds = ["boundary_state", "local_directions", "decision", "displacement"];

@@ -195,6 +195,7 @@ fn pgd_keeps_the_stratified_limit() {
 fn reports_compare_linear_stages() {
     let mut sc = scene_file("two-blocks");
     sc.model.solver.max_iterations = 30;
+    sc.model.solver.acceleration = Acceleration::None;
     let mut variants = [LinearStage::Condensed, LinearStage::Pgd].map(Variant::from).to_vec();
     variants.push("pgd+anderson".parse().expect("a variant"));
     let (reports, _) = build_reports(&sc, "pgd-report", &variants).expect("reports");
@@ -234,4 +235,112 @@ fn reports_compare_linear_stages() {
     }
     assert!(plot_svg(p).contains("PGD basis size per subdomain"));
     assert!(!plot_svg(c).contains("PGD basis size per subdomain"));
+}
+
+/// Flops of the three linear stages in the report and the run summary: condensed and sparse
+/// make the same products and solves every iteration (their counts per iteration are the
+/// formulas of the solver's kernels, from n_b, n_m, N + 1 and nnz(L)); PGD's vary with its basis.
+#[test]
+fn reports_count_linear_stage_flops() {
+    use glissade::output::linear_stage_totals;
+    use glissade::runner::{run_in_process_logged, Plan, RunOptions};
+    use glissade_mechanics::linear::SubdomainSolver;
+
+    let mut sc = scene_file("two-blocks");
+    sc.model.solver.max_iterations = 8;
+    sc.model.solver.acceleration = Acceleration::None;
+    let variants = [LinearStage::Condensed, LinearStage::Sparse, LinearStage::Pgd].map(Variant::from);
+    let (reports, _) = build_reports(&sc, "flops", &variants).expect("reports");
+    let model = &sc.model;
+    let plan = Plan::new(model).with_scene(&sc);
+    assert!(
+        plan.coarse,
+        "two-blocks runs the coarse problem: micro 2 and the macro forces count"
+    );
+    // One iteration's flops of every subdomain, from the kernels' formulas.
+    let expected = |dense: bool| -> u64 {
+        plan.participants
+            .iter()
+            .map(|&s| {
+                let solver = SubdomainSolver::with_dense(model, s as usize, &plan.k0, &plan.bases, dense).unwrap();
+                let (n_b, n_m, nt) = (
+                    solver.n_boundary() as u64,
+                    solver.n_macro() as u64,
+                    model.time.n_points() as u64,
+                );
+                let mode_rows: u64 = solver
+                    .macro_slots
+                    .iter()
+                    .zip(&solver.op.layout.slots)
+                    .map(|(m, slot)| (2 * slot.n_pairs * m.n_modes) as u64)
+                    .sum();
+                let macro_forces = 2 * mode_rows * nt;
+                if dense {
+                    // M q̂ and A_E (M q̂), F₁; the macro forces; two n_b × n_m products.
+                    nt * (n_b + 2 * n_b * n_b + 2 * n_b) + macro_forces + 4 * n_b * n_m * nt
+                } else {
+                    let solve = solver.op.sparse_response_flops();
+                    nt * (solve + 3 * n_b) + macro_forces + nt * (2 * n_b * n_m + n_b + solve + 2 * n_b)
+                }
+            })
+            .sum()
+    };
+    let (c, s, p) = (&reports[0], &reports[1], &reports[2]);
+    assert_eq!(
+        (c.linear_stage.as_str(), s.linear_stage.as_str()),
+        ("condensed", "sparse")
+    );
+    assert_eq!(c.points.len(), 8);
+    for (r, dense) in [(c, true), (s, false)] {
+        let per_iteration = expected(dense);
+        assert!(per_iteration > 0);
+        for x in &r.points {
+            assert_eq!(
+                x.linear_flops, per_iteration,
+                "{} iteration {}",
+                r.linear_stage, x.iteration
+            );
+        }
+    }
+    assert!(p.points.iter().all(|x| x.linear_flops > 0));
+    // PGD's count is not a constant: enrichment (a rank-one fit and a boundary response per
+    // mode) comes and goes.
+    let pgd_counts: Vec<u64> = p.points.iter().map(|x| x.linear_flops).collect();
+    assert!(pgd_counts.iter().any(|&f| f != pgd_counts[0]), "{pgd_counts:?}");
+    // Up to an accuracy: the flops of the iterations up to it, and the table prints them.
+    for r in &reports {
+        for a in &r.accuracy {
+            if let (Some(it), Some(fl)) = (a.iterations, a.linear_flops) {
+                let upto: u64 = r
+                    .points
+                    .iter()
+                    .filter(|x| x.iteration <= it)
+                    .map(|x| x.linear_flops)
+                    .sum();
+                assert_eq!(fl, upto, "{} to {:e}", r.linear_stage, a.threshold);
+            }
+        }
+    }
+    let table = comparison_table(&reports);
+    assert!(table.contains("condensed: linear stage (GFLOP)"), "{table}");
+    let per_it = format!("linear stage {:.4} GFLOP per iteration", expected(true) as f64 * 1e-9);
+    assert!(table.contains(&per_it), "{table}");
+
+    // The run summary's totals: the sum of the records, under the stage's name.
+    let mut sparse = sc.clone();
+    sparse.linear_stage = LinearStage::Sparse;
+    let opts = RunOptions {
+        run_id: "flops".into(),
+        interior: false,
+    };
+    let (result, records) = run_in_process_logged(&sparse, &opts, |_| {}, |_| std::time::Duration::ZERO).expect("run");
+    let totals = linear_stage_totals(&sparse, &records);
+    assert_eq!(totals.len(), 1);
+    let t = &totals[0];
+    assert_eq!((t.stage, t.subdomains), ("sparse", plan.participants.len()));
+    // Every iteration has a linear stage (iteration 0's from ŝ = 0 included).
+    assert_eq!(t.iterations, result.iterations.len());
+    assert_eq!(t.flops, expected(false) * t.iterations as u64);
+    assert_eq!(t.flops, records.iter().map(|r| r.flops).sum::<u64>());
+    assert!(t.json()["flops"].as_u64() == Some(t.flops));
 }

@@ -252,17 +252,24 @@ impl Default for SolverParams {
             search_direction_update: false,
             alpha: 0.2,
             i0: 0.1,
-            acceleration: Acceleration::default(),
+            acceleration: Acceleration::Anderson {
+                window: DEFAULT_ANDERSON_WINDOW,
+            },
             macro_degree: None,
         }
     }
 }
 
-/// How the LATIN fixed point s ← G(s) is iterated ([`crate::anderson`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Anderson window of the default acceleration, and of a scene that turns Anderson acceleration
+/// on without `solver.anderson_window`.
+pub const DEFAULT_ANDERSON_WINDOW: usize = 5;
+
+/// How the LATIN fixed point s ← G(s) is iterated ([`crate::anderson`]). The default is Anderson
+/// mixing over [`DEFAULT_ANDERSON_WINDOW`] iterates: it reaches the same limit in fewer iterations
+/// on every scene of this project and every converging case of the stability matrix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Acceleration {
     /// Plain relaxation s ← μ G(s) + (1 − μ) s.
-    #[default]
     None,
     /// Anderson mixing (type II, damping μ) over the last `window` iterates.
     Anderson { window: usize },

@@ -72,8 +72,8 @@
 //! macro_degree = "auto"      # or 1..=5: macro modes per interface = polynomials of this degree
 //!                            # in the abscissa, both components (1 = rigid + extension); "auto":
 //!                            # 5 on slender interfaces (length ≥ 10 × a side's thickness), else 1
-//! acceleration = "anderson"  # "none" (plain relaxation, the default) | "anderson" (Anderson mixing, damping
-//!                            # = relaxation; same limit, fewer iterations on contact scenes)
+//! acceleration = "anderson"  # "anderson" (Anderson mixing, damping = relaxation: the default; same
+//!                            # limit, fewer iterations on contact scenes) | "none" (plain relaxation)
 //! anderson_window = 5        # 1..=50: iterates mixed (only with acceleration = "anderson")
 //! linear_stage = "condensed" # "condensed" (dense A_E) | "sparse" (sparse factors, all time points
 //!                            # in one multi-right-hand-side solve: the paper's baseline) | "pgd" |
@@ -144,8 +144,7 @@ use crate::model::{
 use serde::Deserialize;
 use std::collections::BTreeMap;
 
-/// `solver.anderson_window` when a scene turns Anderson acceleration on without one.
-pub const DEFAULT_ANDERSON_WINDOW: usize = 5;
+pub use crate::model::DEFAULT_ANDERSON_WINDOW;
 /// Largest `solver.anderson_window` accepted (each iterate kept costs three boundary fields).
 pub const MAX_ANDERSON_WINDOW: usize = 50;
 
@@ -2872,6 +2871,14 @@ uy = -0.01
         let with = |s: &str| format!("{TWO_BLOCKS}[solver]\n{s}\n");
         let a = |s: &str| load(&with(s)).unwrap().model.solver.acceleration;
         assert_eq!(a("acceleration = \"none\""), Acceleration::None);
+        // Anderson with the default window unless the scene says otherwise.
+        assert_eq!(
+            a("tolerance = 1e-6"),
+            Acceleration::Anderson {
+                window: DEFAULT_ANDERSON_WINDOW
+            }
+        );
+        assert_eq!(a("anderson_window = 3"), Acceleration::Anderson { window: 3 });
         assert_eq!(
             a("acceleration = \"anderson\""),
             Acceleration::Anderson {
