@@ -464,8 +464,14 @@ fn config() -> impl bincode::config::Config {
 
 /// Encodes envelope then payload.
 pub fn encode(msg: &Message) -> Vec<u8> {
-    let mut out = bincode::serde::encode_to_vec(&msg.envelope, config()).expect("encoding into a Vec cannot fail");
-    out.extend(bincode::serde::encode_to_vec(&msg.payload, config()).expect("encoding into a Vec cannot fail"));
+    // Sized first, then written once into a buffer of that size: a multi-MB field is copied
+    // once, not regrown and moved as it is written.
+    let mut size = bincode::enc::write::SizeWriter::default();
+    bincode::serde::encode_into_writer(&msg.envelope, &mut size, config()).expect("sizing cannot fail");
+    bincode::serde::encode_into_writer(&msg.payload, &mut size, config()).expect("sizing cannot fail");
+    let mut out = Vec::with_capacity(size.bytes_written);
+    bincode::serde::encode_into_std_write(&msg.envelope, &mut out, config()).expect("encoding into a Vec cannot fail");
+    bincode::serde::encode_into_std_write(&msg.payload, &mut out, config()).expect("encoding into a Vec cannot fail");
     out
 }
 
@@ -557,6 +563,10 @@ mod tests {
         let m = msg();
         let bytes = encode(&m);
         assert_eq!(decode(&bytes, &expected()).unwrap(), m);
+        // The wire format: the envelope's bincode encoding, then the payload's.
+        let mut parts = bincode::serde::encode_to_vec(&m.envelope, config()).unwrap();
+        parts.extend(bincode::serde::encode_to_vec(&m.payload, config()).unwrap());
+        assert_eq!(bytes, parts);
         assert_eq!(m.topic(), "glissade/r1/subdomain/2/boundary_state");
         assert!(key_matches(
             &role_field_topic("r1", Role::Subdomain, "boundary_state", None),
