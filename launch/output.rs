@@ -1,12 +1,13 @@
 //! Run outputs: the JSON summary and the interface fields, written under an output folder.
 
-use crate::runner::RunResult;
+use crate::runner::{Plan, RunResult};
 use anyhow::Context;
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{InterfaceKind, Model};
 use glissade_mechanics::reference::ReferenceSolution;
-use glissade_mechanics::scene::LoadedScene;
+use glissade_mechanics::scene::{LinearStage, LoadedScene};
 use glissade_messages::InterfaceSolution;
+use glissade_subdomain::LinearStageRecord;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -56,6 +57,91 @@ pub fn summary(scene: &LoadedScene, result: &RunResult, run_id: &str) -> Value {
         "status_counts_per_time": per_time.iter().enumerate().map(|(i, c)| json!({"t": model.time.t(i), "separated": c[0], "stick": c[1], "slip": c[2]})).collect::<Vec<_>>(),
         "history": result.iterations,
     })
+}
+
+/// Linear-stage totals of one linear stage over a run: summed over its subdomains and iterations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinearStageTotals {
+    /// `condensed`, `sparse` or `pgd` (`auto` resolved per subdomain).
+    pub stage: &'static str,
+    pub subdomains: usize,
+    /// Iterations with a linear stage of this kind (the initial one from ŝ = 0 included).
+    pub iterations: usize,
+    pub seconds: f64,
+    pub flops: u64,
+}
+
+impl LinearStageTotals {
+    /// Mean flops of one iteration's linear stages (summed over the subdomains).
+    pub fn flops_per_iteration(&self) -> f64 {
+        self.flops as f64 / self.iterations.max(1) as f64
+    }
+
+    /// Flops over linear-stage wall time, in 10⁹ per second (None without a measured time).
+    pub fn gflops_per_s(&self) -> Option<f64> {
+        crate::report::gflops_per_s(self.flops, self.seconds)
+    }
+
+    /// One line for the console: flops per iteration and rate.
+    pub fn line(&self) -> String {
+        format!(
+            "linear stage `{}` ({} subdomain(s)): {:.4} GFLOP per iteration over {} iterations, {:.3} s, {} GFLOP/s ({} build)",
+            self.stage,
+            self.subdomains,
+            self.flops_per_iteration() * 1e-9,
+            self.iterations,
+            self.seconds,
+            self.gflops_per_s().map_or("-".to_string(), |g| format!("{g:.2}")),
+            if cfg!(debug_assertions) { "debug" } else { "release" }
+        )
+    }
+
+    pub fn json(&self) -> Value {
+        json!({
+            "stage": self.stage,
+            "subdomains": self.subdomains,
+            "iterations": self.iterations,
+            "seconds": self.seconds,
+            "flops": self.flops,
+            "flops_per_iteration": self.flops_per_iteration(),
+            "gflops_per_s": self.gflops_per_s(),
+        })
+    }
+}
+
+/// Linear-stage totals per linear stage (condensed, sparse, pgd; those the run used) from the
+/// subdomain nodes' records of an in-process run.
+pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord]) -> Vec<LinearStageTotals> {
+    let plan = Plan::new(&scene.model).with_scene(scene);
+    let names: Vec<&str> = (0..scene.model.subdomains.len())
+        .map(|s| match plan.stage_of(&scene.model, s) {
+            LinearStage::Sparse => "sparse",
+            LinearStage::Pgd => "pgd",
+            LinearStage::Condensed | LinearStage::Auto => "condensed",
+        })
+        .collect();
+    let name = |s: u32| names[s as usize];
+    let mut out: Vec<LinearStageTotals> = Vec::new();
+    for stage in ["condensed", "sparse", "pgd"] {
+        let of: Vec<&LinearStageRecord> = records.iter().filter(|r| name(r.subdomain) == stage).collect();
+        if of.is_empty() {
+            continue;
+        }
+        let mut subdomains: Vec<u32> = of.iter().map(|r| r.subdomain).collect();
+        subdomains.sort_unstable();
+        subdomains.dedup();
+        let mut iterations: Vec<u32> = of.iter().map(|r| r.iteration).collect();
+        iterations.sort_unstable();
+        iterations.dedup();
+        out.push(LinearStageTotals {
+            stage,
+            subdomains: subdomains.len(),
+            iterations: iterations.len(),
+            seconds: of.iter().map(|r| r.seconds).sum(),
+            flops: of.iter().map(|r| r.flops).sum(),
+        });
+    }
+    out
 }
 
 /// Interface fields of ŝ (the last local stage) in each interface's local frame: normal and

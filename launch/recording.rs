@@ -14,11 +14,12 @@
 //! A scene with `[recording] enabled = false` starts no recorder. The recording file is created
 //! before anything is solved, so an unwritable folder fails the run at once, naming the path.
 
-use crate::runner::{run_in_process_observed, IterationRecord, RunOptions, RunResult};
+use crate::runner::{run_in_process_logged, IterationRecord, RunOptions, RunResult};
 use anyhow::{bail, Context};
 use glissade_mechanics::scene::{fingerprint, load_str, LoadedScene};
 use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
 use glissade_recorder::{log_time_now, recording_file_name, Recorder, RecorderOptions, RecordingStats, RunInfo};
+use glissade_subdomain::LinearStageRecord;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -118,14 +119,28 @@ pub fn run_in_process_recorded_observed(
     opts: &RunOptions,
     path: Option<&Path>,
     on_iteration: impl FnMut(&IterationRecord),
-    mut observe: impl FnMut(&glissade_messages::Message) -> Duration,
+    observe: impl FnMut(&glissade_messages::Message) -> Duration,
 ) -> anyhow::Result<(RunResult, Option<RecordingOutcome>)> {
+    run_in_process_recorded_logged(scene, opts, path, on_iteration, observe)
+        .map(|(result, _, outcome)| (result, outcome))
+}
+
+/// As [`run_in_process_recorded_observed`], and returns every subdomain's linear-stage records
+/// (wall time, flops, PGD basis per iteration; see [`run_in_process_logged`]).
+pub fn run_in_process_recorded_logged(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    path: Option<&Path>,
+    on_iteration: impl FnMut(&IterationRecord),
+    mut observe: impl FnMut(&glissade_messages::Message) -> Duration,
+) -> anyhow::Result<(RunResult, Vec<LinearStageRecord>, Option<RecordingOutcome>)> {
     let Some(path) = path else {
-        return Ok((run_in_process_observed(scene, opts, on_iteration, observe)?, None));
+        let (result, records) = run_in_process_logged(scene, opts, on_iteration, observe)?;
+        return Ok((result, records, None));
     };
     let mut recorder = create_recorder(scene, &opts.run_id, path)?;
     let mut failure = None;
-    let result = run_in_process_observed(scene, opts, on_iteration, |m| {
+    let (result, records) = run_in_process_logged(scene, opts, on_iteration, |m| {
         let spent = observe(m);
         if failure.is_none() {
             if let Err(e) = recorder.record(&m.topic(), log_time_now(), &glissade_messages::encode(m)) {
@@ -140,6 +155,7 @@ pub fn run_in_process_recorded_observed(
     let stats = recorder.finish()?;
     Ok((
         result,
+        records,
         Some(RecordingOutcome {
             path: path.to_path_buf(),
             stats: Some(stats),

@@ -29,6 +29,9 @@ pub struct ReportPoint {
     pub jump_error: f64,
     /// Wall time of this iteration's linear stages, summed over the subdomains (s).
     pub linear_s: f64,
+    /// Floating-point operations of this iteration's linear stages, summed over the subdomains,
+    /// as the stages' kernels count them (`SubdomainSolver::flops`, `PgdStage::flops`).
+    pub linear_flops: u64,
     /// Bytes of this iteration's messages as encoded on the bus (set-up and final ones excluded).
     pub bus_bytes: u64,
     /// PGD basis size of every subdomain after this iteration's linear stage, frozen macro modes
@@ -45,6 +48,8 @@ pub struct Accuracy {
     pub iterations: Option<u32>,
     /// Linear-stage wall time summed over subdomains and iterations up to it (s).
     pub linear_s: Option<f64>,
+    /// Linear-stage floating-point operations summed over subdomains and iterations up to it.
+    pub linear_flops: Option<u64>,
     /// Largest PGD basis of a subdomain up to it (0 without PGD).
     pub max_basis: Option<usize>,
 }
@@ -231,6 +236,7 @@ fn report_against(
                 traction_error: e_f,
                 jump_error: e_w,
                 linear_s: of_it().map(|x| x.seconds).sum(),
+                linear_flops: of_it().map(|x| x.flops).sum(),
                 bus_bytes: bytes.get(r.iteration as usize).copied().unwrap_or(0),
                 basis_sizes: if pgd {
                     of_it().map(|x| x.modes).collect()
@@ -243,6 +249,7 @@ fn report_against(
     // Linear stages before the first reported iteration (the initial one from ŝ = 0) count too.
     let first = points.first().map_or(0, |p| p.iteration);
     let linear_before: f64 = records.iter().filter(|x| x.iteration < first).map(|x| x.seconds).sum();
+    let flops_before: u64 = records.iter().filter(|x| x.iteration < first).map(|x| x.flops).sum();
     let accuracy: Vec<Accuracy> = [1e-2, 1e-3, 1e-4]
         .iter()
         .map(|&th| {
@@ -253,6 +260,7 @@ fn report_against(
                 wall_s: hit.map(|k| result.setup_s + points[k].elapsed_s),
                 iterations: hit.map(|k| points[k].iteration),
                 linear_s: hit.map(|k| linear_before + upto(k).iter().map(|p| p.linear_s).sum::<f64>()),
+                linear_flops: hit.map(|k| flops_before + upto(k).iter().map(|p| p.linear_flops).sum::<u64>()),
                 max_basis: hit.map(|k| {
                     upto(k)
                         .iter()
@@ -313,27 +321,34 @@ pub fn linear_stage_name(scene: &LoadedScene) -> String {
 }
 
 /// Reports of several linear stages side by side (Markdown): per accuracy, iterations, LATIN
-/// wall time and linear-stage time of each; then largest basis and bus bytes per iteration.
+/// wall time, linear-stage time and linear-stage GFLOP (10⁹ floating-point operations, summed
+/// over subdomains and iterations) of each; then per variant the largest basis, bus bytes, the
+/// linear stage's flops per iteration and its rate (flops over linear-stage wall time).
 pub fn comparison_table(reports: &[Report]) -> String {
     let mut out = String::from("| contact traction error |");
     for r in reports {
         out += &format!(
-            " {0}: iterations | {0}: wall time (s) | {0}: linear stage (s) |",
+            " {0}: iterations | {0}: wall time (s) | {0}: linear stage (s) | {0}: linear stage (GFLOP) |",
             variant_name(r)
         );
     }
     out += "\n|---|";
-    out += &"---|---|---|".repeat(reports.len());
+    out += &"---|---|---|---|".repeat(reports.len());
     out += "\n";
     for k in 0..reports.first().map_or(0, |r| r.accuracy.len()) {
         out += &format!("| {:.0e} |", reports[0].accuracy[k].threshold);
         for r in reports {
             let a = &r.accuracy[k];
-            match (a.iterations, a.wall_s, a.linear_s) {
-                (Some(it), Some(t), Some(l)) => out += &format!(" {it} | {t:.2} | {l:.2} |"),
+            match (a.iterations, a.wall_s, a.linear_s, a.linear_flops) {
+                (Some(it), Some(t), Some(l), Some(fl)) => {
+                    out += &format!(" {it} | {t:.2} | {l:.2} | {:.3} |", fl as f64 * 1e-9)
+                }
                 _ => {
                     let best = r.points.iter().map(|p| p.traction_error).fold(f64::INFINITY, f64::min);
-                    out += &format!(" not reached (best {best:.1e} in {} iterations) | | |", r.points.len())
+                    out += &format!(
+                        " not reached (best {best:.1e} in {} iterations) | | | |",
+                        r.points.len()
+                    )
                 }
             }
         }
@@ -343,18 +358,28 @@ pub fn comparison_table(reports: &[Report]) -> String {
         let n = r.points.len().max(1) as f64;
         let bytes: u64 = r.points.iter().map(|p| p.bus_bytes).sum();
         let basis = r.points.iter().flat_map(|p| p.basis_sizes.iter().copied()).max();
+        let flops: u64 = r.points.iter().map(|p| p.linear_flops).sum();
+        let linear_s: f64 = r.points.iter().map(|p| p.linear_s).sum();
         out += &format!(
-            "{}: setup {:.2} s, {} iterations in {:.2} s ({}), largest basis {}, bus bytes per iteration {:.0}\n",
+            "{}: setup {:.2} s, {} iterations in {:.2} s ({}), largest basis {}, bus bytes per iteration {:.0}, linear stage {:.4} GFLOP per iteration at {} GFLOP/s ({} build)\n",
             variant_name(r),
             r.latin_setup_s,
             r.points.len(),
             r.latin_solve_s,
             r.latin_verdict,
             basis.map_or("-".to_string(), |b| b.to_string()),
-            bytes as f64 / n
+            bytes as f64 / n,
+            flops as f64 * 1e-9 / n,
+            gflops_per_s(flops, linear_s).map_or("-".to_string(), |g| format!("{g:.2}")),
+            r.build_profile
         );
     }
     out
+}
+
+/// Floating-point operations per second in units of 10⁹, None without a measured time.
+pub fn gflops_per_s(flops: u64, seconds: f64) -> Option<f64> {
+    (seconds > 0.0).then(|| flops as f64 * 1e-9 / seconds)
 }
 
 /// The linear stage's cost to each accuracy (Markdown table) and the bus bytes per iteration.

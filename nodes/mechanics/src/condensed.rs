@@ -197,6 +197,14 @@ impl CondensedOperator {
     /// w = B (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q (= A_E M q) for every column of q (n_b × m, N/mm²), by one
     /// multi-right-hand-side solve with the sparse factors; `rhs` is caller-owned scratch of at
     /// least n_free × m. Constrained boundary entries get 0 (as A_E's zero rows).
+    /// Floating-point operations of [`CondensedOperator::sparse_response_into`] per column:
+    /// the right-hand side M q on the free boundary entries (a multiply and an add each) and one
+    /// forward and backward substitution ([`SparseSpd::solve_flops`]).
+    pub fn sparse_response_flops(&self) -> u64 {
+        let free_boundary = self.layout.dofs.iter().filter(|&&d| self.free[d] != usize::MAX).count();
+        2 * free_boundary as u64 + self.factor.solve_flops()
+    }
+
     pub fn sparse_response_into(&self, q: MatRef<'_, f64>, rhs: MatMut<'_, f64>, mut w: MatMut<'_, f64>) {
         let m = q.ncols();
         let mut rhs = rhs.subcols_mut(0, m);

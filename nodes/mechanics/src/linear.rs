@@ -153,6 +153,9 @@ pub struct SubdomainSolver {
     scratch: Mat<f64>,
     /// Scratch right-hand sides of the sparse solves (n_free × (N+1); 0 × 0 when dense).
     sparse_rhs: Mat<f64>,
+    /// Floating-point operations of the linear-stage kernels called since construction
+    /// ([`SubdomainSolver::flops`]).
+    flops: u64,
 }
 
 impl SubdomainSolver {
@@ -267,7 +270,19 @@ impl SubdomainSolver {
             dense,
             scratch: Mat::zeros(n_b, width),
             sparse_rhs,
+            flops: 0,
         })
+    }
+
+    /// Floating-point operations made by [`SubdomainSolver::micro1_into`],
+    /// [`SubdomainSolver::macro_forces_into`], [`SubdomainSolver::micro2_into`] and
+    /// [`SubdomainSolver::boundary_response_into`] since construction (the setup is not
+    /// counted), each kernel adding the exact count of what it runs: a dense product of an
+    /// m × k by a k × n matrix 2mkn, a sparse multi-right-hand-side solve
+    /// [`CondensedOperator::sparse_response_flops`] per column, an element-wise pass one flop per
+    /// multiply, add or subtract of each entry. Copies count nothing.
+    pub fn flops(&self) -> u64 {
+        self.flops
     }
 
     /// Whether the linear stage uses the dense A_E (else the sparse factors).
@@ -290,7 +305,10 @@ impl SubdomainSolver {
 
     fn boundary_response_block(&mut self, q: MatRef<'_, f64>, out: MatMut<'_, f64>) {
         let m = q.ncols();
+        let n_b = self.n_boundary() as u64;
         if self.dense {
+            // M q, then A_E (M q).
+            self.flops += m as u64 * (n_b + 2 * n_b * n_b);
             let layout = &self.op.layout;
             let mut mq = self.scratch.as_mut().subcols_mut(0, m);
             for j in 0..m {
@@ -305,6 +323,7 @@ impl SubdomainSolver {
                 Par::Seq,
             );
         } else {
+            self.flops += m as u64 * self.op.sparse_response_flops();
             self.op.sparse_response_into(q, self.sparse_rhs.as_mut(), out);
         }
     }
@@ -320,7 +339,12 @@ impl SubdomainSolver {
     /// Micro problem 1: W₁ = A_E M q̂ + W_d, F₁ = q̂ − k⁻ W₁.
     pub fn micro1_into(&mut self, q_hat: MatRef<'_, f64>, mut w1: MatMut<'_, f64>, mut f1: MatMut<'_, f64>) {
         let nt = q_hat.ncols();
+        let n_b = self.n_boundary() as u64;
+        // F₁ = q̂ − k⁻W₁: a multiply and a subtract per entry.
+        self.flops += 2 * n_b * nt as u64;
         if self.dense {
+            // M q̂, then W_d + A_E (M q̂).
+            self.flops += nt as u64 * (n_b + 2 * n_b * n_b);
             let layout = &self.op.layout;
             let mut mq = self.scratch.as_mut().subcols_mut(0, nt);
             for j in 0..nt {
@@ -336,6 +360,8 @@ impl SubdomainSolver {
                 Par::Seq,
             );
         } else {
+            // The sparse response, then + W_d.
+            self.flops += nt as u64 * (self.op.sparse_response_flops() + n_b);
             self.op
                 .sparse_response_into(q_hat, self.sparse_rhs.as_mut(), w1.rb_mut());
             for j in 0..nt {
@@ -358,6 +384,14 @@ impl SubdomainSolver {
     /// rows of F. A handful of modes per interface is too thin a product for the matrix kernel
     /// (measured 0.7 GFLOP/s on the stratified scene at N = 1000).
     pub fn macro_forces_into(&mut self, f: MatRef<'_, f64>, mut out: MatMut<'_, f64>) {
+        // A dot product of an interface's 2·n_pairs rows per mode and time point.
+        let per_col: usize = self
+            .macro_slots
+            .iter()
+            .zip(&self.op.layout.slots)
+            .map(|(ms, slot)| 2 * (2 * slot.n_pairs) * ms.n_modes)
+            .sum();
+        self.flops += (per_col * f.ncols()) as u64;
         for j in 0..f.ncols() {
             let (fj, oj) = (col(f, j), col_mut(&mut out, j));
             for (ms, slot) in self.macro_slots.iter().zip(&self.op.layout.slots) {
@@ -376,7 +410,10 @@ impl SubdomainSolver {
     /// products, with A_E M k⁻ 𝔼 and the stored k⁻(𝔼 − A_E M k⁻ 𝔼). Without A_E, W₂ comes from
     /// one sparse solve with right-hand side Bᵀ M k⁻ 𝔼 w̃ for all time points.
     pub fn micro2_into(&mut self, w_tilde: MatRef<'_, f64>, mut w2: MatMut<'_, f64>, mut f2: MatMut<'_, f64>) {
+        let (n_b, n_m, nt) = (self.n_boundary() as u64, self.n_macro() as u64, w_tilde.ncols() as u64);
         if !self.dense {
+            // 𝔼 w̃, k⁻(𝔼 w̃), the sparse response, then F₂ = k⁻(𝔼 w̃ − W₂).
+            self.flops += nt * (2 * n_b * n_m + n_b + self.op.sparse_response_flops() + 2 * n_b);
             let nt = w_tilde.ncols();
             matmul(f2.rb_mut(), Accum::Replace, self.e.as_ref(), w_tilde, 1.0, Par::Seq);
             let layout = &self.op.layout;
@@ -398,6 +435,8 @@ impl SubdomainSolver {
             }
             return;
         }
+        // Two n_b × n_m by n_m × (N+1) products.
+        self.flops += 2 * (2 * n_b * n_m * nt);
         matmul(
             w2.rb_mut(),
             Accum::Replace,
@@ -489,5 +528,110 @@ pub fn relax_into(mu: f64, w1: MatRef<'_, f64>, f1: MatRef<'_, f64>, mut w: MatM
                 *s = mu * s1 + (1.0 - mu) * *s;
             }
         }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod flop_tests {
+    use super::*;
+    use crate::scene::load_str;
+
+    const SCENE: &str = include_str!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../launch/scenes/small-three-layer.toml"
+    ));
+    /// core.2: loaded on its free end, clamped nowhere, a perfect and two contact interfaces (so
+    /// three macro slots).
+    const SUB: usize = 3;
+
+    /// The small-three-layer model and the solver of its subdomain core.2 (also the PGD tests').
+    pub(crate) fn model_and_solver(dense: bool) -> (Model, SubdomainSolver) {
+        let model = load_str(SCENE, "small-three-layer.toml").unwrap().model;
+        let k0 = default_k0(&model);
+        let bases: Vec<_> = model
+            .interfaces
+            .iter()
+            .map(|i| macro_basis(i, macro_degree(&model, i)))
+            .collect();
+        let solver = SubdomainSolver::with_dense(&model, SUB, &k0, &bases, dense).unwrap();
+        (model, solver)
+    }
+
+    fn solver(dense: bool) -> SubdomainSolver {
+        model_and_solver(dense).1
+    }
+
+    fn ramp(n: usize, m: usize) -> Mat<f64> {
+        Mat::from_fn(n, m, |i, j| (i as f64 + 1.0).sin() * (j as f64 + 0.5))
+    }
+
+    /// Counts of one linear stage: micro 1, macro forces, micro 2.
+    fn stage_counts(s: &mut SubdomainSolver) -> [u64; 3] {
+        let (n_b, n_m, nt) = (s.n_boundary(), s.n_macro(), s.w_d.ncols());
+        let (mut w, mut f, mut mf) = (Mat::zeros(n_b, nt), Mat::zeros(n_b, nt), Mat::zeros(n_m, nt));
+        let mut counts = [0; 3];
+        let before = s.flops();
+        s.micro1_into(ramp(n_b, nt).as_ref(), w.as_mut(), f.as_mut());
+        counts[0] = s.flops() - before;
+        s.macro_forces_into(f.as_ref(), mf.as_mut());
+        counts[1] = s.flops() - before - counts[0];
+        s.micro2_into(ramp(n_m, nt).as_ref(), w.as_mut(), f.as_mut());
+        counts[2] = s.flops() - before - counts[0] - counts[1];
+        counts
+    }
+
+    #[test]
+    fn condensed_counts_are_the_formula() {
+        let mut s = solver(true);
+        // The setup's products are not counted.
+        assert_eq!(s.flops(), 0);
+        let (n_b, n_m, nt) = (s.n_boundary() as u64, s.n_macro() as u64, s.w_d.ncols() as u64);
+        assert!(n_b > 0 && n_m > 0 && nt > 1);
+        // Interfaces' rows: n_b is the sum of 2·n_pairs over the slots; each mode's dot product
+        // runs over its interface's rows only.
+        let mode_rows: u64 = s
+            .macro_slots
+            .iter()
+            .zip(&s.op.layout.slots)
+            .map(|(m, slot)| (2 * slot.n_pairs * m.n_modes) as u64)
+            .sum();
+        assert!(mode_rows < n_b * n_m, "𝔼 is block sparse: {mode_rows} vs {}", n_b * n_m);
+        let counts = stage_counts(&mut s);
+        // micro 1: M q̂ (n_b), A_E (M q̂) (2 n_b²), F₁ = q̂ − k⁻W₁ (2 n_b), per time point.
+        assert_eq!(counts[0], nt * (n_b + 2 * n_b * n_b + 2 * n_b));
+        assert_eq!(counts[1], 2 * mode_rows * nt);
+        // micro 2: two n_b × n_m by n_m × nt products.
+        assert_eq!(counts[2], 4 * n_b * n_m * nt);
+        // The counter accumulates: a second stage adds the same again.
+        let total = s.flops();
+        assert_eq!(stage_counts(&mut s), counts);
+        assert_eq!(s.flops(), 2 * total);
+    }
+
+    #[test]
+    fn sparse_counts_are_nt_times_the_per_solve_count() {
+        let mut s = solver(false);
+        assert_eq!(s.flops(), 0);
+        let (n_b, n_m, nt) = (s.n_boundary() as u64, s.n_macro() as u64, s.w_d.ncols() as u64);
+        let n_free = s.op.n_free() as u64;
+        let per_solve = s.op.sparse_response_flops();
+        // One solve: at least the diagonal both ways plus the M q scatter of ≤ n_b entries, at
+        // most a dense factor's 4·n(n+1)/2 − 2n.
+        assert!(
+            per_solve > 2 * n_free && per_solve <= 2 * n_free * n_free + 2 * n_b,
+            "{per_solve}"
+        );
+        let counts = stage_counts(&mut s);
+        // micro 1: one solve per time point, + W_d (n_b) and F₁ (2 n_b).
+        assert_eq!(counts[0], nt * (per_solve + 3 * n_b));
+        // micro 2: 𝔼 w̃ (2 n_b n_m), k⁻ (n_b), one solve, F₂ (2 n_b) per time point.
+        assert_eq!(counts[2], nt * (2 * n_b * n_m + n_b + per_solve + 2 * n_b));
+        // The same macro-force kernel as the condensed stage.
+        assert_eq!(counts[1], stage_counts(&mut solver(true))[1]);
+        // A boundary response of m columns is m solves.
+        let before = s.flops();
+        let mut out = Mat::zeros(n_b as usize, 3);
+        s.boundary_response_into(ramp(n_b as usize, 3).as_ref(), out.as_mut());
+        assert_eq!(s.flops() - before, 3 * per_solve);
     }
 }

@@ -107,6 +107,8 @@ pub struct PgdStage {
     fit_lam: Vec<f64>,
     /// ‖δ‖ of the last micro 1 (scale of the compression tolerance).
     last_delta1: f64,
+    /// Floating-point operations of this stage's own kernels ([`PgdStage::flops`]).
+    flops: u64,
 }
 
 impl PgdStage {
@@ -155,6 +157,7 @@ impl PgdStage {
             fit_l: vec![0.0; n_b],
             fit_lam: vec![0.0; nt],
             last_delta1: 0.0,
+            flops: 0,
         };
         if settings.macro_modes && n_m > 0 {
             // 𝔼 is M-orthonormal (per interface, interfaces on disjoint entries).
@@ -166,7 +169,22 @@ impl PgdStage {
             stage.p = n_m;
             stage.n_frozen = n_m;
         }
+        stage.flops = 0;
         stage
+    }
+
+    /// Floating-point operations made by this stage's own kernels since construction: dense
+    /// products (m × k by k × n: 2mkn) and the passes over entries of n_b × (N+1), n_b, p × (N+1)
+    /// or N+1 arrays (one flop per multiply, add, subtract or divide of an entry); scalar
+    /// operations outside those passes, square roots and the SVD of the compression are not
+    /// counted. The boundary responses of new modes (Z = A_E M L) are the solver's:
+    /// [`SubdomainSolver::flops`] counts them, so a PGD linear stage makes the sum of both.
+    pub fn flops(&self) -> u64 {
+        self.flops
+    }
+
+    fn count(&mut self, flops: usize) {
+        self.flops += flops as u64;
     }
 
     /// Number of modes (frozen ones included).
@@ -229,6 +247,8 @@ impl PgdStage {
     /// enrichment while ξ > ξ₀,₁. Call [`PgdStage::expand_into`] for the fields.
     pub fn micro1(&mut self, solver: &mut SubdomainSolver, q_hat: MatRef<'_, f64>) -> PgdReport {
         let (n_b, nt, p) = (q_hat.nrows(), q_hat.ncols(), self.p);
+        // M q̂, λ¹ = Lᵀ (M q̂), and the residual q̂ − L λ¹.
+        self.count(n_b * nt + 2 * p * n_b * nt + 2 * n_b * p * nt);
         self.prev
             .as_mut()
             .subrows_mut(0, p)
@@ -257,6 +277,9 @@ impl PgdStage {
     /// basis, where it is exact) enrichment while ξ > ξ₀,₂.
     pub fn micro2(&mut self, solver: &mut SubdomainSolver, w_tilde: MatRef<'_, f64>) -> PgdReport {
         let p = self.p;
+        let (n_b, n_m, nt) = (self.l.nrows(), w_tilde.nrows(), w_tilde.ncols());
+        // λ² = (Lᵀ M k⁻𝔼) w̃.
+        self.count(2 * p * n_m * nt);
         self.prev
             .as_mut()
             .subrows_mut(0, p)
@@ -272,6 +295,8 @@ impl PgdStage {
         if self.settings.macro_modes {
             return PgdReport::default();
         }
+        // The target k⁻𝔼 w̃ and the residual k⁻𝔼 w̃ − L λ².
+        self.count(2 * n_b * n_m * nt + 2 * n_b * p * nt);
         matmul(
             self.resid.as_mut(),
             Accum::Replace,
@@ -300,6 +325,9 @@ impl PgdStage {
     /// The criterion and the enrichment loop on the residual in `resid`, for the time functions
     /// of micro 1 (`first`) or micro 2, with their previous values in `prev`.
     fn enrich(&mut self, solver: &mut SubdomainSolver, first: bool, xi0: f64) -> PgdReport {
+        let (n_b, nt) = (self.resid.nrows(), self.resid.ncols());
+        // Two coordinate norms and the residual's norm.
+        self.count(2 * (3 * self.p * nt + 2 * nt) + 3 * n_b * nt + 2 * nt);
         let lambda = if first { &self.lambda1 } else { &self.lambda2 };
         let in_basis = self.coord_norm2(lambda, None);
         let moved = self.coord_norm2(lambda, Some(&self.prev));
@@ -328,8 +356,9 @@ impl PgdStage {
                 break;
             }
             let m = self.p - 1;
-            // Coordinates of the residual on the new mode; the residual loses that part.
-            let nt = self.resid.ncols();
+            // Coordinates of the residual on the new mode, the residual losing that part, and
+            // its norm.
+            self.count(5 * n_b * nt + 3 * n_b * nt + 2 * nt);
             for i in 0..nt {
                 let mut c = 0.0;
                 for r in 0..self.resid.nrows() {
@@ -358,6 +387,7 @@ impl PgdStage {
     fn fit_rank_one(&mut self) {
         let (n_b, nt) = (self.resid.nrows(), self.resid.ncols());
         // Start from the time column of largest norm.
+        self.count(nt * (3 * n_b + 1));
         let mut best = (0, -1.0);
         for i in 0..nt {
             let c: f64 = (0..n_b).map(|r| self.mass[r] * self.resid[(r, i)].powi(2)).sum();
@@ -370,10 +400,13 @@ impl PgdStage {
         }
         let mut last = 0.0;
         for _ in 0..FIT_SWEEPS {
+            self.count(3 * n_b);
             let ll: f64 = (0..n_b).map(|r| self.mass[r] * self.fit_l[r] * self.fit_l[r]).sum();
             if ll <= 0.0 {
                 return;
             }
+            // λ = (Lᵀ M r)/‖L‖² and its norm.
+            self.count(nt * (3 * n_b + 1) + 3 * nt);
             for i in 0..nt {
                 let c: f64 = (0..n_b)
                     .map(|r| self.mass[r] * self.fit_l[r] * self.resid[(r, i)])
@@ -384,6 +417,8 @@ impl PgdStage {
             if lam2 <= 0.0 {
                 return;
             }
+            // L = r W λ / ‖λ‖² and the fitted part's norm.
+            self.count(nt * (2 + 2 * n_b) + 3 * n_b + 1);
             self.fit_l.fill(0.0);
             for i in 0..nt {
                 let c = self.tw[i] * self.fit_lam[i] / lam2;
@@ -407,6 +442,9 @@ impl PgdStage {
     /// it lies in the span of the basis (to round-off).
     fn add_mode(&mut self, solver: &mut SubdomainSolver) -> bool {
         let (n_b, m) = (self.fit_l.len(), self.p);
+        // Norm before and after Gram–Schmidt twice against m modes (a weighted dot product and
+        // an axpy each).
+        self.count(3 * n_b + 2 * m * (3 * n_b + 2 * n_b) + 3 * n_b);
         let dot = |a: &[f64], l: &Mat<f64>, c: usize, mass: &[f64]| -> f64 {
             (0..a.len()).map(|r| mass[r] * a[r] * l[(r, c)]).sum()
         };
@@ -430,6 +468,7 @@ impl PgdStage {
         if norm.is_nan() || norm <= 1e-10 * norm0 {
             return false;
         }
+        self.count(n_b);
         for r in 0..n_b {
             self.l[(r, m)] = self.fit_l[r] / norm;
         }
@@ -442,6 +481,8 @@ impl PgdStage {
     /// G = L − k⁻Z, 𝔼ᵀ M G and Lᵀ M k⁻𝔼 of column `m` (L and Z set).
     fn finish_mode(&mut self, m: usize) {
         let n_b = self.l.nrows();
+        // G = L − k⁻Z, then per macro mode 𝔼ᵀ M G and Lᵀ M k⁻𝔼.
+        self.count(2 * n_b + 5 * n_b * self.me.ncols());
         for r in 0..n_b {
             self.g[(r, m)] = self.l[(r, m)] - self.k[r] * self.z[(r, m)];
         }
@@ -466,6 +507,9 @@ impl PgdStage {
         with_micro2: bool,
     ) {
         let p = self.p;
+        let (n_b, nt) = (w_d.nrows(), w_d.ncols());
+        // λ¹ + λ², W_d + Z λ, G λ and − k⁻W_d.
+        self.count(if with_micro2 { p * nt } else { 0 } + 2 * (2 * n_b * p * nt) + 2 * n_b * nt);
         let mut sum = self.sum.as_mut().subrows_mut(0, p);
         sum.copy_from(self.lambda1.as_ref().subrows(0, p));
         if with_micro2 {
@@ -501,7 +545,8 @@ impl PgdStage {
     }
 
     /// Macro forces 𝔼ᵀ M F₁ of the last micro 1 (n_m × (N+1)), from the modes' 𝔼ᵀ M G.
-    pub fn macro_forces_into(&self, mut out: MatMut<'_, f64>) {
+    pub fn macro_forces_into(&mut self, mut out: MatMut<'_, f64>) {
+        self.count(2 * out.nrows() * self.p * out.ncols());
         out.copy_from(self.mf0.as_ref());
         matmul(
             out.as_mut(),
@@ -528,6 +573,8 @@ impl PgdStage {
         if pf == 0 {
             return 0;
         }
+        // M (F + k⁻W), λ = Lᵀ (…) and λ W^½.
+        self.count(3 * n_b * nt + 2 * pf * n_b * nt + pf * nt);
         for i in 0..nt {
             for r in 0..n_b {
                 self.mq[(r, i)] = self.mass[r] * (f[(r, i)] + self.k[r] * w[(r, i)]);
@@ -558,6 +605,17 @@ impl PgdStage {
         if keep == pf {
             return 0;
         }
+        let (d, n_m) = (pf - keep, self.emg.nrows());
+        // U_dᵀ λ, (Z U_d) and (G U_d) subtracted, then L U_k, Z U_k, G U_k, (𝔼ᵀMG) U_k and
+        // U_kᵀ on Lᵀ M k⁻𝔼, λ¹ and λ².
+        self.count(
+            2 * d * pf * nt
+                + 2 * (2 * n_b * pf * d + 2 * n_b * d * nt)
+                + 3 * (2 * n_b * pf * keep)
+                + 2 * n_m * pf * keep
+                + 2 * keep * pf * n_m
+                + 2 * (2 * keep * pf * nt),
+        );
         // Remove the truncated part: (Z, G) U_d U_dᵀ λ.
         let ud = u.subcols(keep, pf - keep);
         let mut c = Mat::<f64>::zeros(pf - keep, nt);
@@ -602,26 +660,12 @@ impl PgdStage {
 mod tests {
     use super::*;
     use crate::assembly::{stiffness_triplets, triplet_matvec};
-    use crate::linear::{default_k0, macro_basis, macro_degree};
+    use crate::linear::flop_tests::model_and_solver;
     use crate::model::Model;
-    use crate::scene::load_str;
 
-    const SCENE: &str = include_str!(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../launch/scenes/small-three-layer.toml"
-    ));
-    /// core.2: loaded on its free end, clamped nowhere, a perfect and two contact interfaces.
-    const SUB: usize = 3;
-
+    /// The small-three-layer scene's subdomain core.2 ([`model_and_solver`]) with a PGD stage.
     fn setup(macro_modes: bool, dense: bool) -> (Model, SubdomainSolver, PgdStage) {
-        let model = load_str(SCENE, "small-three-layer.toml").unwrap().model;
-        let k0 = default_k0(&model);
-        let bases: Vec<_> = model
-            .interfaces
-            .iter()
-            .map(|i| macro_basis(i, macro_degree(&model, i)))
-            .collect();
-        let mut solver = SubdomainSolver::with_dense(&model, SUB, &k0, &bases, dense).unwrap();
+        let (model, mut solver) = model_and_solver(dense);
         let tw = model.time.trapezoid_weights();
         let settings = PgdSettings {
             criterion: PgdCriterion::Increment,
@@ -744,7 +788,7 @@ mod tests {
             let (model, mut solver, mut stage) = setup(true, dense);
             assert!(stage.n_frozen() > 0);
             grow(&mut solver, &mut stage, 6, 23);
-            let sub = &model.subdomains[SUB];
+            let sub = &model.subdomains[solver.subdomain];
             let k = stiffness_triplets(&sub.mesh, sub.material, model.plane).unwrap();
             let layout = &solver.op.layout;
             let n = sub.n_dofs();
@@ -771,6 +815,44 @@ mod tests {
                     worst <= 1e-10 * scale,
                     "mode {m}: {worst:e} vs {scale:e} (dense {dense})"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn flops_grow_with_the_basis() {
+        for dense in [true, false] {
+            let (_, mut solver, mut stage) = setup(false, dense);
+            let (n_b, nt) = (solver.n_boundary(), solver.w_d.ncols());
+            // Construction is not counted.
+            assert_eq!(stage.flops(), 0);
+            let q_hat = random(n_b, nt, 5);
+            // The update alone (ξ₀ = ∞) on p modes: M q̂, Lᵀ(M q̂) and q̂ − Lλ (n_b + 4 p n_b per
+            // time point), two coordinate norms and the residual's norm.
+            let update =
+                |p: usize| (n_b * nt + 4 * p * n_b * nt + 2 * (3 * p * nt + 2 * nt) + 3 * n_b * nt + 2 * nt) as u64;
+            let mut last = 0;
+            for modes in [0, 2, 5] {
+                while stage.n_modes() < modes {
+                    // Each new mode costs the stage's own kernels and one boundary response.
+                    let (own, solver_before) = (stage.flops(), solver.flops());
+                    stage.settings.xi1 = 1e-14;
+                    stage.micro1(&mut solver, random(n_b, nt, 100 + stage.n_modes() as u64).as_ref());
+                    assert!(stage.flops() - own > update(stage.n_modes() - 1));
+                    let per_response = if dense {
+                        (n_b + 2 * n_b * n_b) as u64
+                    } else {
+                        solver.op.sparse_response_flops()
+                    };
+                    assert_eq!(solver.flops() - solver_before, per_response);
+                }
+                stage.settings.xi1 = f64::INFINITY;
+                let before = stage.flops();
+                stage.micro1(&mut solver, q_hat.as_ref());
+                let count = stage.flops() - before;
+                assert_eq!(count, update(modes), "{modes} modes (dense {dense})");
+                assert!(count > last);
+                last = count;
             }
         }
     }

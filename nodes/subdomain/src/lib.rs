@@ -31,6 +31,10 @@ pub struct LinearStageRecord {
     pub subdomain: u32,
     pub iteration: u32,
     pub seconds: f64,
+    /// Floating-point operations of the stage (micro 1, macro forces, micro 2; with PGD the
+    /// compression, update, enrichment and expansion too), as its kernels count them
+    /// ([`SubdomainSolver::flops`], [`PgdStage::flops`]).
+    pub flops: u64,
     /// PGD basis size after the stage (0 without PGD), frozen macro modes included.
     pub modes: usize,
     /// Modes added in this stage (micro 1 + micro 2) and dropped by compression.
@@ -175,6 +179,7 @@ impl SubdomainNode {
     /// here only without the coarse problem) and the macro forces when the coarse problem is on.
     fn solve_micro1(&mut self, coarse: bool) {
         let t0 = Instant::now();
+        let flops0 = self.flops();
         self.record = LinearStageRecord {
             subdomain: self.subdomain(),
             iteration: self.iteration,
@@ -205,12 +210,19 @@ impl SubdomainNode {
             }
         }
         self.record.seconds = t0.elapsed().as_secs_f64();
+        self.record.flops = self.flops() - flops0;
+    }
+
+    /// Floating-point operations of the linear-stage kernels so far (solver and PGD stage).
+    fn flops(&self) -> u64 {
+        self.solver.flops() + self.pgd.as_ref().map_or(0, PgdStage::flops)
     }
 
     /// Micro problem 2 into (w2, f2); with PGD, (w1, f1) = s₁ + s₂ expanded from the basis and
     /// (w2, f2) = 0. Then the linear stage's record goes to the log.
     fn solve_micro2(&mut self) {
         let t0 = Instant::now();
+        let flops0 = self.flops();
         match self.pgd.as_mut() {
             None => self
                 .solver
@@ -226,6 +238,7 @@ impl SubdomainNode {
             }
         }
         self.record.seconds += t0.elapsed().as_secs_f64();
+        self.record.flops += self.flops() - flops0;
         self.log_record();
     }
 
