@@ -30,6 +30,9 @@ use faer::Mat;
 /// at ≥ 5 significant digits, which is all a mixing step needs.
 pub const MAX_CONDITION: f64 = 1e10;
 
+/// Largest window a history keeps (the scene accepts `anderson_window` ≤ 50).
+pub const MAX_SLOTS: usize = 50;
+
 /// Shares of one part of the state in the least-squares problem, oldest difference first.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GramPartials {
@@ -94,6 +97,10 @@ pub struct AndersonHistory {
     dr_f: Vec<Mat<f64>>,
     /// Δr_iᵀΔr_j by slot (window × window).
     gram: Vec<f64>,
+    /// Δr_iᵀ r_n by slot and ‖r_n‖², of the last recorded iterate (computed by `record` in the
+    /// same pass over the columns as the differences).
+    projection: Vec<f64>,
+    residual2: f64,
     /// s + μ r and r_F of the last recorded iterate.
     p_w: Mat<f64>,
     p_f: Mat<f64>,
@@ -107,7 +114,10 @@ impl AndersonHistory {
     /// A history of `window` ≥ 1 differences of states with W and F of `rows` × `cols`, mixed with
     /// damping `mu`.
     pub fn new(window: usize, mu: f64, rows: usize, cols: usize) -> Self {
-        assert!(window >= 1, "Anderson window must be ≥ 1");
+        assert!(
+            (1..=MAX_SLOTS).contains(&window),
+            "Anderson window must be in 1..={MAX_SLOTS}"
+        );
         let z = || Mat::<f64>::zeros(rows, cols);
         Self {
             window,
@@ -118,6 +128,8 @@ impl AndersonHistory {
             d_f: (0..window).map(|_| z()).collect(),
             dr_f: (0..window).map(|_| z()).collect(),
             gram: vec![0.0; window * window],
+            projection: vec![0.0; window],
+            residual2: 0.0,
             p_w: z(),
             p_f: z(),
             r_f: z(),
@@ -142,7 +154,10 @@ impl AndersonHistory {
     }
 
     /// Records the iterate s = (s_w, s_f) and its image g = G(s): stores s + μ r and r_F
-    /// (r = g − s) and, from the second call on, their differences with the previous call's.
+    /// (r = g − s) and, from the second call on, their differences with the previous call's. The
+    /// new column of the Gram matrix, the projections Δr_iᵀ r_n and ‖r_n‖² are summed in the same
+    /// pass, column by column while the column is in cache (each dot product is the sum over
+    /// columns of the columns' dot products, as [`Self::partials`] reports them).
     pub fn record(&mut self, s_w: &Mat<f64>, s_f: &Mat<f64>, g_w: &Mat<f64>, g_f: &Mat<f64>) {
         for m in [s_w, s_f, g_w, g_f] {
             assert_eq!((m.nrows(), m.ncols()), (self.rows, self.cols), "state shape");
@@ -150,6 +165,15 @@ impl AndersonHistory {
         let mu = self.mu;
         let slot = self.next;
         let push = self.has_last;
+        if push {
+            self.len = (self.len + 1).min(self.window);
+            self.next = (self.next + 1) % self.window;
+        }
+        let slots: [usize; MAX_SLOTS] = std::array::from_fn(|i| if i < self.len { self.slot(i) } else { 0 });
+        let slots = &slots[..if push { self.len } else { 0 }];
+        let mut gram_new = [-0.0f64; MAX_SLOTS];
+        let mut projection = [-0.0f64; MAX_SLOTS];
+        let mut residual2 = -0.0f64;
         for j in 0..self.cols {
             let (sw, gw) = (s_w.col_as_slice(j), g_w.col_as_slice(j));
             let pw = self.p_w.col_as_slice_mut(j);
@@ -186,25 +210,21 @@ impl AndersonHistory {
                     rf[r] = res;
                 }
             }
+            let (drf, rf) = (self.dr_f[slot].col_as_slice(j), self.r_f.col_as_slice(j));
+            for (i, &other) in slots.iter().enumerate() {
+                let d_other = self.dr_f[other].col_as_slice(j);
+                gram_new[i] += dot(drf, d_other);
+                projection[i] += dot(d_other, rf);
+            }
+            residual2 += dot(rf, rf);
         }
         self.has_last = true;
-        if push {
-            self.len = (self.len + 1).min(self.window);
-            self.next = (self.next + 1) % self.window;
-            // The new column of the Gram matrix against every stored difference.
-            for i in 0..self.len {
-                let other = self.slot(i);
-                let v = self.dot_dr(slot, other);
-                self.gram[slot * self.window + other] = v;
-                self.gram[other * self.window + slot] = v;
-            }
+        self.residual2 = residual2;
+        for (i, &other) in slots.iter().enumerate() {
+            self.gram[slot * self.window + other] = gram_new[i];
+            self.gram[other * self.window + slot] = gram_new[i];
+            self.projection[other] = projection[i];
         }
-    }
-
-    fn dot_dr(&self, a: usize, b: usize) -> f64 {
-        (0..self.cols)
-            .map(|j| dot(self.dr_f[a].col_as_slice(j), self.dr_f[b].col_as_slice(j)))
-            .sum()
     }
 
     /// This part's shares of the least-squares problem of the last recorded iterate.
@@ -216,13 +236,9 @@ impl AndersonHistory {
             for j in 0..k {
                 p.gram[j * k + i] = self.gram[self.slot(j) * self.window + si];
             }
-            p.projection[i] = (0..self.cols)
-                .map(|c| dot(self.dr_f[si].col_as_slice(c), self.r_f.col_as_slice(c)))
-                .sum();
+            p.projection[i] = self.projection[si];
         }
-        p.residual2 = (0..self.cols)
-            .map(|c| dot(self.r_f.col_as_slice(c), self.r_f.col_as_slice(c)))
-            .sum();
+        p.residual2 = self.residual2;
         p
     }
 
@@ -237,18 +253,21 @@ impl AndersonHistory {
         if let AndersonStep::Restart = step {
             self.restart();
         }
-        s_w.copy_from(&self.p_w);
-        s_f.copy_from(&self.p_f);
-        if let AndersonStep::Mix(gamma) = step {
-            assert_eq!(gamma.len(), self.len, "one coefficient per stored difference");
-            for (i, &g) in gamma.iter().enumerate() {
-                let si = self.slot(i);
-                for j in 0..self.cols {
-                    let (dw, df) = (self.d_w[si].col_as_slice(j), self.d_f[si].col_as_slice(j));
-                    for (x, d) in s_w.col_as_slice_mut(j).iter_mut().zip(dw) {
-                        *x -= g * d;
-                    }
-                    for (x, d) in s_f.col_as_slice_mut(j).iter_mut().zip(df) {
+        let gamma: &[f64] = match step {
+            AndersonStep::Mix(gamma) => {
+                assert_eq!(gamma.len(), self.len, "one coefficient per stored difference");
+                gamma
+            }
+            AndersonStep::Plain | AndersonStep::Restart => &[],
+        };
+        // s = s + μ r − Σ γ_i D_i, oldest difference first, column by column (the column of s
+        // stays in cache over the k differences).
+        for j in 0..self.cols {
+            for (s, p, d) in [(&mut *s_w, &self.p_w, &self.d_w), (&mut *s_f, &self.p_f, &self.d_f)] {
+                let x = s.col_as_slice_mut(j);
+                x.copy_from_slice(p.col_as_slice(j));
+                for (i, &g) in gamma.iter().enumerate() {
+                    for (x, d) in x.iter_mut().zip(d[self.slot(i)].col_as_slice(j)) {
                         *x -= g * d;
                     }
                 }

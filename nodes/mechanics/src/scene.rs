@@ -146,7 +146,7 @@ use std::collections::BTreeMap;
 
 pub use crate::model::DEFAULT_ANDERSON_WINDOW;
 /// Largest `solver.anderson_window` accepted (each iterate kept costs three boundary fields).
-pub const MAX_ANDERSON_WINDOW: usize = 50;
+pub const MAX_ANDERSON_WINDOW: usize = crate::anderson::MAX_SLOTS;
 
 /// Largest `solver.macro_degree` accepted (2(d + 1) macro modes per interface).
 pub const MAX_MACRO_DEGREE: usize = 5;
