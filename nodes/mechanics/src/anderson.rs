@@ -159,9 +159,26 @@ impl AndersonHistory {
     /// pass, column by column while the column is in cache (each dot product is the sum over
     /// columns of the columns' dot products, as [`Self::partials`] reports them).
     pub fn record(&mut self, s_w: &Mat<f64>, s_f: &Mat<f64>, g_w: &Mat<f64>, g_f: &Mat<f64>) {
-        for m in [s_w, s_f, g_w, g_f] {
+        self.record_with::<false>(s_w, s_f, [g_w, g_w], [g_f, g_f]);
+    }
+
+    /// [`Self::record`] with the image given in two parts, G(s) = g + h (s₁ + s₂ of the linear
+    /// stage), added on the fly instead of in a pass of its own.
+    pub fn record_sum(&mut self, s_w: &Mat<f64>, s_f: &Mat<f64>, g_w: [&Mat<f64>; 2], g_f: [&Mat<f64>; 2]) {
+        self.record_with::<true>(s_w, s_f, g_w, g_f);
+    }
+
+    fn record_with<const SUM: bool>(
+        &mut self,
+        s_w: &Mat<f64>,
+        s_f: &Mat<f64>,
+        g_w: [&Mat<f64>; 2],
+        g_f: [&Mat<f64>; 2],
+    ) {
+        for m in [s_w, s_f, g_w[0], g_w[1], g_f[0], g_f[1]] {
             assert_eq!((m.nrows(), m.ncols()), (self.rows, self.cols), "state shape");
         }
+        let image = |a: &[f64], b: &[f64], r: usize| if SUM { a[r] + b[r] } else { a[r] };
         let mu = self.mu;
         let slot = self.next;
         let push = self.has_last;
@@ -175,28 +192,28 @@ impl AndersonHistory {
         let mut projection = [-0.0f64; MAX_SLOTS];
         let mut residual2 = -0.0f64;
         for j in 0..self.cols {
-            let (sw, gw) = (s_w.col_as_slice(j), g_w.col_as_slice(j));
+            let (sw, gw, hw) = (s_w.col_as_slice(j), g_w[0].col_as_slice(j), g_w[1].col_as_slice(j));
             let pw = self.p_w.col_as_slice_mut(j);
             if push {
                 let dw = self.d_w[slot].col_as_slice_mut(j);
                 for r in 0..self.rows {
-                    let p = sw[r] + mu * (gw[r] - sw[r]);
+                    let p = sw[r] + mu * (image(gw, hw, r) - sw[r]);
                     dw[r] = p - pw[r];
                     pw[r] = p;
                 }
             } else {
                 for r in 0..self.rows {
-                    pw[r] = sw[r] + mu * (gw[r] - sw[r]);
+                    pw[r] = sw[r] + mu * (image(gw, hw, r) - sw[r]);
                 }
             }
-            let (sf, gf) = (s_f.col_as_slice(j), g_f.col_as_slice(j));
+            let (sf, gf, hf) = (s_f.col_as_slice(j), g_f[0].col_as_slice(j), g_f[1].col_as_slice(j));
             let pf = self.p_f.col_as_slice_mut(j);
             let rf = self.r_f.col_as_slice_mut(j);
             if push {
                 let df = self.d_f[slot].col_as_slice_mut(j);
                 let drf = self.dr_f[slot].col_as_slice_mut(j);
                 for r in 0..self.rows {
-                    let res = gf[r] - sf[r];
+                    let res = image(gf, hf, r) - sf[r];
                     let p = sf[r] + mu * res;
                     df[r] = p - pf[r];
                     drf[r] = res - rf[r];
@@ -205,7 +222,7 @@ impl AndersonHistory {
                 }
             } else {
                 for r in 0..self.rows {
-                    let res = gf[r] - sf[r];
+                    let res = image(gf, hf, r) - sf[r];
                     pf[r] = sf[r] + mu * res;
                     rf[r] = res;
                 }

@@ -306,9 +306,14 @@ impl SubdomainNode {
             self.phase = Phase::Directions;
             return self.boundary_state();
         };
-        sum_into(self.w1.as_mut(), self.f1.as_mut(), self.w2.as_ref(), self.f2.as_ref());
-        if self.iteration >= 1 {
-            history.record(&self.w, &self.f, &self.w1, &self.f1);
+        if self.iteration >= 2 {
+            // s₁ + s₂ is only recorded: summed inside the history's pass.
+            history.record_sum(&self.w, &self.f, [&self.w1, &self.w2], [&self.f1, &self.f2]);
+        } else {
+            sum_into(self.w1.as_mut(), self.f1.as_mut(), self.w2.as_ref(), self.f2.as_ref());
+            if self.iteration >= 1 {
+                history.record(&self.w, &self.f, &self.w1, &self.f1);
+            }
         }
         if self.iteration >= 2 {
             let p = history.partials();
