@@ -8,7 +8,7 @@ use glissade_coarse::CoarseNode;
 use glissade_interface::InterfaceNode;
 use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::linear::{default_k0, macro_basis, macro_degree, SubdomainSolver};
+use glissade_mechanics::linear::{default_k0, macro_bases, SubdomainSolver};
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::Model;
 use glissade_mechanics::monolithic::solve_glued;
@@ -140,11 +140,7 @@ pub struct Plan {
 impl Plan {
     pub fn new(model: &Model) -> Self {
         let k0 = default_k0(model);
-        let bases = model
-            .interfaces
-            .iter()
-            .map(|itf| macro_basis(itf, macro_degree(model, itf)))
-            .collect();
+        let bases = macro_bases(model);
         let participants = (0..model.subdomains.len())
             .filter(|&s| model.interfaces.iter().any(|i| i.a == s || i.b == s))
             .map(|s| s as u32)

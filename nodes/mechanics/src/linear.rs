@@ -115,6 +115,15 @@ pub fn macro_degree(model: &Model, itf: &Interface) -> usize {
     }
 }
 
+/// The macro basis of every interface of `model`, of its [`macro_degree`].
+pub fn macro_bases(model: &Model) -> Vec<Vec<Vec<f64>>> {
+    model
+        .interfaces
+        .iter()
+        .map(|itf| macro_basis(itf, macro_degree(model, itf)))
+        .collect()
+}
+
 /// Columns of one interface's macro modes in a subdomain's 𝔼.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MacroSlot {
@@ -548,11 +557,7 @@ pub(crate) mod flop_tests {
     pub(crate) fn model_and_solver(dense: bool) -> (Model, SubdomainSolver) {
         let model = load_str(SCENE, "small-three-layer.toml").unwrap().model;
         let k0 = default_k0(&model);
-        let bases: Vec<_> = model
-            .interfaces
-            .iter()
-            .map(|i| macro_basis(i, macro_degree(&model, i)))
-            .collect();
+        let bases = macro_bases(&model);
         let solver = SubdomainSolver::with_dense(&model, SUB, &k0, &bases, dense).unwrap();
         (model, solver)
     }

@@ -7,7 +7,7 @@
 
 use faer::Mat;
 use glissade_mechanics::coarse::{Contribution, MacroProblem};
-use glissade_mechanics::linear::{default_k0, macro_basis, macro_degree, sum_relax_into, SubdomainSolver};
+use glissade_mechanics::linear::{default_k0, macro_bases, sum_relax_into, SubdomainSolver};
 use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
 use glissade_mechanics::model::{Model, Side};
 use std::time::{Duration, Instant};
@@ -56,11 +56,7 @@ impl Latin {
     /// interfaces' local-stage state, as the runner does.
     pub fn new(model: Model) -> Self {
         let k0 = default_k0(&model);
-        let bases: Vec<_> = model
-            .interfaces
-            .iter()
-            .map(|itf| macro_basis(itf, macro_degree(&model, itf)))
-            .collect();
+        let bases = macro_bases(&model);
         let nt = model.time.n_points();
         let solvers: Vec<SubdomainSolver> = (0..model.subdomains.len())
             .map(|s| SubdomainSolver::new(&model, s, &k0, &bases).expect("subdomain operator"))
