@@ -312,25 +312,31 @@ impl SubdomainSolver {
         }
     }
 
+    /// A_E (M q) into `out` (replacing or adding to it), through the scratch block (q has at
+    /// most its width of columns).
+    fn dense_response(&mut self, q: MatRef<'_, f64>, out: MatMut<'_, f64>, accum: Accum) {
+        let (m, n_b) = (q.ncols(), self.n_boundary() as u64);
+        // M q, then A_E (M q).
+        self.flops += m as u64 * (n_b + 2 * n_b * n_b);
+        let layout = &self.op.layout;
+        let mut mq = self.scratch.as_mut().subcols_mut(0, m);
+        for j in 0..m {
+            scale_into(col_mut(&mut mq, j), &layout.mass, col(q, j));
+        }
+        matmul(
+            out,
+            accum,
+            self.a_rows.transpose(),
+            self.scratch.as_ref().subcols(0, m),
+            1.0,
+            Par::Seq,
+        );
+    }
+
     fn boundary_response_block(&mut self, q: MatRef<'_, f64>, out: MatMut<'_, f64>) {
         let m = q.ncols();
-        let n_b = self.n_boundary() as u64;
         if self.dense {
-            // M q, then A_E (M q).
-            self.flops += m as u64 * (n_b + 2 * n_b * n_b);
-            let layout = &self.op.layout;
-            let mut mq = self.scratch.as_mut().subcols_mut(0, m);
-            for j in 0..m {
-                scale_into(col_mut(&mut mq, j), &layout.mass, col(q, j));
-            }
-            matmul(
-                out,
-                Accum::Replace,
-                self.a_rows.transpose(),
-                self.scratch.as_ref().subcols(0, m),
-                1.0,
-                Par::Seq,
-            );
+            self.dense_response(q, out, Accum::Replace);
         } else {
             self.flops += m as u64 * self.op.sparse_response_flops();
             self.op.sparse_response_into(q, self.sparse_rhs.as_mut(), out);
@@ -352,22 +358,9 @@ impl SubdomainSolver {
         // F₁ = q̂ − k⁻W₁: a multiply and a subtract per entry.
         self.flops += 2 * n_b * nt as u64;
         if self.dense {
-            // M q̂, then W_d + A_E (M q̂).
-            self.flops += nt as u64 * (n_b + 2 * n_b * n_b);
-            let layout = &self.op.layout;
-            let mut mq = self.scratch.as_mut().subcols_mut(0, nt);
-            for j in 0..nt {
-                scale_into(col_mut(&mut mq, j), &layout.mass, col(q_hat, j));
-            }
+            // W_d + A_E (M q̂).
             w1.copy_from(self.w_d.as_ref());
-            matmul(
-                w1.rb_mut(),
-                Accum::Add,
-                self.a_rows.transpose(),
-                self.scratch.as_ref().subcols(0, nt),
-                1.0,
-                Par::Seq,
-            );
+            self.dense_response(q_hat, w1.rb_mut(), Accum::Add);
         } else {
             // The sparse response, then + W_d.
             self.flops += nt as u64 * (self.op.sparse_response_flops() + n_b);
