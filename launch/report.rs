@@ -5,7 +5,7 @@
 //! iteration's messages on the bus and, with PGD, every subdomain's basis size per iteration
 //! (plotted under the errors).
 
-use crate::runner::{run_in_process_logged, RunOptions, RunResult};
+use crate::runner::{run_in_process_logged, AndersonTally, RunOptions, RunResult};
 use glissade_mechanics::local::ReferenceErrors;
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
@@ -179,7 +179,7 @@ fn report_against(
     let model = &scene.model;
     let mut tracker = ReferenceErrors::new(model);
     let mut errors: Vec<(u32, f64, f64)> = Vec::new();
-    let mut anderson_steps = [0u32; 3];
+    let mut anderson = AndersonTally::default();
     let mut bytes: Vec<u64> = Vec::new();
     let opts = RunOptions {
         run_id: run_id.to_string(),
@@ -198,15 +198,7 @@ fn report_against(
                 }
                 bytes[it] += encode(m).len() as u64;
             }
-            if let Payload::AndersonStep { gamma, restart } = &m.payload {
-                anderson_steps[if *restart {
-                    2
-                } else if gamma.is_empty() {
-                    1
-                } else {
-                    0
-                }] += 1;
-            }
+            anderson.observe(m);
             if let Payload::BoundaryState { subdomain, w, f } = &m.payload {
                 if let Some((e_f, e_w)) = tracker.boundary_state(
                     &model.interfaces,
@@ -288,7 +280,12 @@ fn report_against(
             Acceleration::None => "none".into(),
             Acceleration::Anderson { window } => format!("anderson({window})"),
         },
-        anderson_steps,
+        // A plain step is a safeguarded one or one taken before any difference was stored.
+        anderson_steps: [
+            anderson.mixed,
+            anderson.safeguarded + anderson.unmixed,
+            anderson.restarted,
+        ],
         linear_stage: linear_stage_name(scene),
         points,
         time_to_accuracy,
