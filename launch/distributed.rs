@@ -974,9 +974,9 @@ impl Arrival {
     }
 }
 
-/// The field of a key: glissade/<run>/<role>/<index>/<field>[/<destination>].
+/// The field of a key ("?" if it has none).
 fn kind_of(key: &str) -> &str {
-    key.split('/').nth(4).unwrap_or("?")
+    glissade_messages::topic_field(key).unwrap_or("?")
 }
 
 /// Adds a message to the traffic if it belongs to the run (its envelope says so); returns its

@@ -397,6 +397,12 @@ pub fn topic(run_id: &str, sender: NodeId, payload: &Payload) -> String {
     }
 }
 
+/// The field chunk of a key `glissade/<run>/<role>/<id>/<field>[/<destination>]` (None if the key
+/// has fewer chunks).
+pub fn topic_field(topic: &str) -> Option<&str> {
+    topic.split('/').nth(4)
+}
+
 /// Everything of one run: `glissade/<run>/**`.
 pub fn run_topics(run_id: &str) -> String {
     format!("glissade/{run_id}/**")

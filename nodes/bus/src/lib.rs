@@ -4,7 +4,9 @@
 //! (all messages of a round are handled, nodes in parallel on a rayon pool, outputs collected in
 //! node order), so a run is deterministic whatever the thread count.
 
-use glissade_messages::{key_matches, Envelope, Field, Message, NodeId, Payload, Role, Stage, SCHEMA_VERSION};
+use glissade_messages::{
+    key_matches, topic_field, Envelope, Field, Message, NodeId, Payload, Role, Stage, SCHEMA_VERSION,
+};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -120,11 +122,6 @@ pub struct InProcessBus {
     timing: Option<BTreeMap<(Role, String), (u64, Duration)>>,
 }
 
-/// The field chunk of a topic `glissade/<run>/<role>/<id>/<field>[/<destination>]`.
-fn topic_field(topic: &str) -> &str {
-    topic.split('/').nth(4).unwrap_or(topic)
-}
-
 impl InProcessBus {
     pub fn new(nodes: Vec<Box<dyn Node>>) -> Self {
         let subscriptions = nodes.iter().map(|n| n.subscriptions()).collect();
@@ -197,7 +194,9 @@ impl InProcessBus {
                 if let Some(timing) = &mut self.timing {
                     let role = node.id().role;
                     for (k, d) in times {
-                        let e = timing.entry((role, topic_field(&topics[k]).to_string())).or_default();
+                        let e = timing
+                            .entry((role, topic_field(&topics[k]).unwrap_or(&topics[k]).to_string()))
+                            .or_default();
                         e.0 += 1;
                         e.1 += d;
                     }

@@ -281,8 +281,7 @@ impl Recorder {
             return Ok(Recorded::NotSelected);
         }
         let envelope = peek_envelope(bytes, &self.run_id).map_err(|e| msg_err(e.to_string()))?;
-        // glissade/<run>/<role>/<id>/<field>[/<destination>]
-        let Some(field) = topic.split('/').nth(4) else {
+        let Some(field) = glissade_messages::topic_field(topic) else {
             return Err(msg_err(
                 "not a message key expression (glissade/<run>/<role>/<id>/<field>)".into(),
             ));
