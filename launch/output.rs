@@ -115,14 +115,13 @@ pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord]) -
     let plan = Plan::new(&scene.model).with_scene(scene);
     let names: Vec<&str> = (0..scene.model.subdomains.len())
         .map(|s| match plan.stage_of(&scene.model, s) {
-            LinearStage::Sparse => "sparse",
-            LinearStage::Pgd => "pgd",
-            LinearStage::Condensed | LinearStage::Auto => "condensed",
+            LinearStage::Auto => LinearStage::Condensed.key(),
+            stage => stage.key(),
         })
         .collect();
     let name = |s: u32| names[s as usize];
     let mut out: Vec<LinearStageTotals> = Vec::new();
-    for stage in ["condensed", "sparse", "pgd"] {
+    for stage in [LinearStage::Condensed, LinearStage::Sparse, LinearStage::Pgd].map(LinearStage::key) {
         let of: Vec<&LinearStageRecord> = records.iter().filter(|r| name(r.subdomain) == stage).collect();
         if of.is_empty() {
             continue;

@@ -115,16 +115,10 @@ impl std::str::FromStr for Variant {
     /// `+anderson` uses the scene's window if it has one, else the default window.
     fn from_str(name: &str) -> Result<Self, String> {
         let (stage, accel) = name.split_once('+').map_or((name, None), |(a, b)| (a, Some(b)));
-        let stage = match stage {
-            "condensed" => LinearStage::Condensed,
-            "sparse" => LinearStage::Sparse,
-            "pgd" => LinearStage::Pgd,
-            "auto" => LinearStage::Auto,
-            other => {
-                return Err(format!(
-                    "`{other}` is not a linear stage (condensed, sparse, pgd, auto)"
-                ))
-            }
+        let Some(stage) = LinearStage::ALL.into_iter().find(|s| s.key() == stage) else {
+            return Err(format!(
+                "`{stage}` is not a linear stage (condensed, sparse, pgd, auto)"
+            ));
         };
         let acceleration = match accel {
             None => None,
@@ -297,9 +291,7 @@ fn report_against(
 /// The scene's linear stage as the report names it.
 pub fn linear_stage_name(scene: &LoadedScene) -> String {
     match scene.linear_stage {
-        LinearStage::Condensed => "condensed".into(),
-        LinearStage::Sparse => "sparse".into(),
-        LinearStage::Auto => "auto".into(),
+        s @ (LinearStage::Condensed | LinearStage::Sparse | LinearStage::Auto) => s.key().into(),
         LinearStage::Pgd => {
             let p = &scene.pgd;
             let criterion = match p.criterion {

@@ -275,6 +275,18 @@ pub enum LinearStage {
 }
 
 impl LinearStage {
+    pub const ALL: [LinearStage; 4] = [Self::Condensed, Self::Sparse, Self::Pgd, Self::Auto];
+
+    /// The stage's name, as `solver.linear_stage` spells it.
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::Condensed => "condensed",
+            Self::Sparse => "sparse",
+            Self::Pgd => "pgd",
+            Self::Auto => "auto",
+        }
+    }
+
     /// The stage a subdomain with n_b boundary entries uses: `Auto` resolves to `Condensed`, the
     /// fastest to a contact-traction error of 1e-3 on every measured case (README "PGD linear
     /// stage", N = 100, one run per scene): stratified (n_b ≤ 328) condensed 22.2 s, PGD 29.7 s,
