@@ -113,7 +113,7 @@ fn stage_name(role: Role, field: &str) -> &'static str {
         (Role::Subdomain, "decision") => "stop decision",
         (Role::Coarse, "macro_forces") => "macro problem",
         (Role::Coarse, "homogenized_operator") => "setup: macro operator assembly",
-        (Role::Interface, "boundary_state") => "local stage and indicators",
+        (Role::Interface, "boundary_state" | "boundary_modes") => "local stage and indicators",
         (Role::Interface, "anderson_gram") => "Anderson least-squares",
         (Role::Interface, "indicator_partials") => "indicator reduction",
         _ => "other",

@@ -395,31 +395,24 @@ fn short(v: &serde_json::Value) -> String {
 }
 
 /// The PGD basis sizes of a recorded run, (iteration, subdomain, basis size after the linear
-/// stage), from re-executing its subdomain nodes: no message carries them. None when no
-/// subdomain of the run uses the PGD stage. An error when the recording cannot give them (not
-/// finished, thinned) or when a re-executed node does not reproduce the recording.
+/// stage): the row count of the time functions of each `boundary_modes` message, the state a PGD
+/// subdomain sends in mode form (never thinned by `full_fields_every`). None when no subdomain of
+/// the run uses the PGD stage.
 pub fn recorded_basis_sizes(recording: &Recording) -> anyhow::Result<Option<Vec<(u32, u32, usize)>>> {
-    let path = recording.path().display().to_string();
-    let text = recording
-        .scene_text()
-        .with_context(|| format!("{path}: the recording holds no scene"))?;
-    let scene = load_str(text, &format!("{path} (scene.toml)"))?;
-    let model = Arc::new(scene.model.clone());
-    let plan = Plan::new(&model).with_scene(&scene);
-    let pgd = |s: u32| plan.stage_of(&model, s as usize) == glissade_mechanics::scene::LinearStage::Pgd;
-    if !plan.participants.iter().any(|&s| pgd(s)) {
-        return Ok(None);
-    }
     let mut sizes = Vec::new();
-    for id in recorded_nodes(recording)? {
-        if id.role != Role::Subdomain || !pgd(id.index) {
+    for m in recording.messages() {
+        if glissade_messages::topic_field(m.topic) != Some("boundary_modes") {
             continue;
         }
-        let r = reexecute(recording, id)?;
-        if let Some(m) = &r.mismatch {
-            bail!("{path}: node {id} re-executed differs from the recording ({m}): its basis sizes would not be the run's");
+        let msg = recording
+            .decode(&m)
+            .with_context(|| format!("{}: message on `{}`", recording.path().display(), m.topic))?;
+        if let glissade_messages::Payload::BoundaryModes { subdomain, lambda, .. } = &msg.payload {
+            sizes.push((msg.envelope.iteration, *subdomain, lambda.rows()));
         }
-        sizes.extend(r.linear_stages.iter().map(|x| (x.iteration, x.subdomain, x.modes)));
+    }
+    if sizes.is_empty() {
+        return Ok(None);
     }
     sizes.sort_unstable();
     Ok(Some(sizes))

@@ -10,7 +10,8 @@ use glissade_mechanics::local::ReferenceErrors;
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
 use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion};
-use glissade_messages::{encode, Payload, Stage};
+use glissade_messages::{encode, Stage};
+use glissade_replay::BoundaryStates;
 use serde::Serialize;
 use std::time::Instant;
 
@@ -175,6 +176,8 @@ fn report_against(
     let mut errors: Vec<(u32, f64, f64)> = Vec::new();
     let mut anderson = AndersonTally::default();
     let mut bytes: Vec<u64> = Vec::new();
+    let mut states = BoundaryStates::new();
+    let mut undecodable: Option<String> = None;
     let opts = RunOptions {
         run_id: run_id.to_string(),
         interior: false,
@@ -193,10 +196,17 @@ fn report_against(
                 bytes[it] += encode(m).len() as u64;
             }
             anderson.observe(m);
-            if let Payload::BoundaryState { subdomain, w, f } = &m.payload {
+            let state = match states.fields(&m.payload) {
+                Some(Err(e)) => {
+                    undecodable.get_or_insert(e);
+                    None
+                }
+                other => other.and_then(Result::ok),
+            };
+            if let Some((subdomain, w, f)) = state {
                 if let Some((e_f, e_w)) = tracker.boundary_state(
                     &model.interfaces,
-                    *subdomain as usize,
+                    subdomain as usize,
                     |r, c| w.get(r, c),
                     |r, c| f.get(r, c),
                     &reference.interfaces,
@@ -207,6 +217,9 @@ fn report_against(
             t.elapsed()
         },
     )?;
+    if let Some(e) = undecodable {
+        anyhow::bail!("the run's own boundary state could not be read: {e}");
+    }
     let pgd = records.iter().any(|r| r.modes > 0);
     let points: Vec<ReportPoint> = result
         .iterations

@@ -7,8 +7,9 @@
 use serde::{Deserialize, Serialize};
 
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
-/// interfaces it covers (several interface nodes), `IndicatorPartials` added.
-pub const SCHEMA_VERSION: u32 = 2;
+/// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
+/// `BoundaryModes`, a PGD subdomain's state in mode form.
+pub const SCHEMA_VERSION: u32 = 3;
 
 /// Role of a node on the bus.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -198,6 +199,17 @@ pub struct InterfaceIndicators {
     pub direction_updated: bool,
 }
 
+/// The particular part s₀ = (W_d, −k⁻W_d) of a subdomain's state in separated form: the boundary
+/// responses to its load cases and their time functions, W_d = `w` φ, −k⁻W_d = `f` φ.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParticularModes {
+    /// n_b × n_c each.
+    pub w: Field,
+    pub f: Field,
+    /// φ, n_c × (N+1).
+    pub time: Field,
+}
+
 /// One interface's fields at the end of a run: s (last linear stage) and ŝ (last local stage),
 /// and the contact status per (pair, time) at index p + n_pairs·i (0 separated, 1 stick, 2 slip).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -242,6 +254,20 @@ pub enum Payload {
         subdomain: u32,
         w: Field,
         f: Field,
+    },
+    /// s = (W, F) of a subdomain's boundary after a linear stage, in PGD mode form (DESIGN §3–4):
+    /// W = P_W φ + Σ_k Z_k λ_k, F = P_F φ + Σ_k G_k λ_k. The receiver keeps the particular part
+    /// (in the subdomain's first message only) and the basis: it keeps its first `first_mode`
+    /// modes and replaces the rest by the columns of `z` and `g` (n_b × new: new modes, or the
+    /// free modes a compression rotated). `lambda` is the state's time functions, p × (N+1) with
+    /// p = `first_mode` + new.
+    BoundaryModes {
+        subdomain: u32,
+        particular: Option<ParticularModes>,
+        first_mode: u32,
+        z: Field,
+        g: Field,
+        lambda: Field,
     },
     /// q̂ = F̂ + k⁻Ŵ on a subdomain's boundary: all the linear stage needs from the local stage.
     /// One interface node sends the rows of the interfaces it owns: `interfaces` in the order of
@@ -293,6 +319,7 @@ impl Payload {
             Payload::MacroForces { .. } => "macro_forces",
             Payload::MacroDisplacements { .. } => "macro_displacements",
             Payload::BoundaryState { .. } => "boundary_state",
+            Payload::BoundaryModes { .. } => "boundary_modes",
             Payload::LocalDirections { .. } => "local_directions",
             Payload::AndersonGram { .. } => "anderson_gram",
             Payload::AndersonStep { .. } => "anderson_step",
@@ -329,6 +356,51 @@ impl Payload {
                         cols: f.cols,
                         len: f.data.len(),
                     });
+                }
+                Ok(())
+            }
+            Payload::BoundaryModes {
+                particular,
+                first_mode,
+                z,
+                g,
+                lambda,
+                ..
+            } => {
+                z.check("z")?;
+                g.check("g")?;
+                lambda.check("lambda")?;
+                if (g.rows, g.cols) != (z.rows, z.cols) {
+                    return Err(DecodeError::WrongSize {
+                        field: format!("g (z is {} × {})", z.rows, z.cols),
+                        rows: g.rows,
+                        cols: g.cols,
+                        len: g.data.len(),
+                    });
+                }
+                if lambda.rows as u64 != *first_mode as u64 + z.cols as u64 {
+                    return Err(DecodeError::WrongSize {
+                        field: format!("lambda (first mode {first_mode} + {} new modes)", z.cols),
+                        rows: lambda.rows,
+                        cols: lambda.cols,
+                        len: lambda.data.len(),
+                    });
+                }
+                if let Some(pm) = particular {
+                    pm.w.check("particular.w")?;
+                    pm.f.check("particular.f")?;
+                    pm.time.check("particular.time")?;
+                    if (pm.f.rows, pm.f.cols) != (pm.w.rows, pm.w.cols) || pm.time.rows != pm.w.cols {
+                        return Err(DecodeError::WrongSize {
+                            field: format!(
+                                "particular part (w {} × {}, f {} × {})",
+                                pm.w.rows, pm.w.cols, pm.f.rows, pm.f.cols
+                            ),
+                            rows: pm.time.rows,
+                            cols: pm.time.cols,
+                            len: pm.time.data.len(),
+                        });
+                    }
                 }
                 Ok(())
             }
@@ -630,5 +702,40 @@ mod tests {
             e.to_string().contains("field `w` declares 3 × 2 values but holds 5"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn mode_form_sizes_are_checked() {
+        let mut m = msg();
+        let modes = |first_mode: u32, lambda_rows: usize, g_cols: usize| Payload::BoundaryModes {
+            subdomain: 2,
+            particular: Some(ParticularModes {
+                w: Field::zeros(3, 1),
+                f: Field::zeros(3, 1),
+                time: Field::zeros(1, 2),
+            }),
+            first_mode,
+            z: Field::zeros(3, 2),
+            g: Field::zeros(3, g_cols),
+            lambda: Field::zeros(lambda_rows, 2),
+        };
+        m.payload = modes(1, 3, 2);
+        assert_eq!(decode(&encode(&m), &expected()).unwrap(), m);
+        assert_eq!(m.topic(), "glissade/r1/subdomain/2/boundary_modes");
+        m.payload = modes(1, 2, 2);
+        let e = decode(&encode(&m), &expected()).unwrap_err();
+        assert!(e.to_string().contains("lambda (first mode 1 + 2 new modes)"), "{e}");
+        m.payload = modes(1, 3, 1);
+        let e = decode(&encode(&m), &expected()).unwrap_err();
+        assert!(e.to_string().contains("g (z is 3 × 2)"), "{e}");
+        m.payload = modes(1, 3, 2);
+        if let Payload::BoundaryModes {
+            particular: Some(p), ..
+        } = &mut m.payload
+        {
+            p.time = Field::zeros(2, 2);
+        }
+        let e = decode(&encode(&m), &expected()).unwrap_err();
+        assert!(e.to_string().contains("particular part"), "{e}");
     }
 }

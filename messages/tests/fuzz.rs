@@ -30,9 +30,48 @@ fn field() -> impl Strategy<Value = Field> {
 }
 
 /// Every payload kind: `prop_oneof!` takes at most ten arms unboxed, so the two Anderson payloads
-/// form a group of their own, drawn in proportion (2 kinds of 12).
+/// and the mode-form state form groups of their own, drawn in proportion (of 13 kinds).
 fn payload() -> impl Strategy<Value = Payload> {
-    prop_oneof![10 => other_payload().boxed(), 2 => anderson_payload().boxed()]
+    prop_oneof![
+        10 => other_payload().boxed(),
+        2 => anderson_payload().boxed(),
+        1 => boundary_modes().boxed()
+    ]
+}
+
+/// A PGD subdomain's state in mode form, valid as sent (λ has first_mode + new rows, G the shape
+/// of Z, a particular part whose time functions have one row per load case): the damage comes
+/// later.
+fn boundary_modes() -> impl Strategy<Value = Payload> {
+    (any::<u32>(), 0u32..4, 0u32..4, 0u32..3, 0u32..3, 0u32..3, any::<bool>()).prop_flat_map(
+        |(subdomain, n_b, nt, first, new, n_c, with_particular)| {
+            let lambda_rows = first + new;
+            let values = |n: u32| proptest::collection::vec(any::<f64>(), n as usize);
+            (
+                values(n_b * new),
+                values(n_b * new),
+                values(lambda_rows * nt),
+                values(n_b * n_c),
+                values(n_b * n_c),
+                values(n_c * nt),
+            )
+                .prop_map(move |(z, g, lambda, pw, pf, time)| {
+                    let f = |rows: u32, cols: u32, data: Vec<f64>| Field { rows, cols, data };
+                    Payload::BoundaryModes {
+                        subdomain,
+                        particular: with_particular.then(|| glissade_messages::ParticularModes {
+                            w: f(n_b, n_c, pw),
+                            f: f(n_b, n_c, pf),
+                            time: f(n_c, nt, time),
+                        }),
+                        first_mode: first,
+                        z: f(n_b, new, z),
+                        g: f(n_b, new, g),
+                        lambda: f(lambda_rows, nt, lambda),
+                    }
+                })
+        },
+    )
 }
 
 /// The Anderson payloads: Gram partials (square Gram matrix, k × 1 projection) and steps.

@@ -221,6 +221,66 @@ fn processes_match_in_process_bit_for_bit() {
     assert_identical(&local, &remote);
 }
 
+/// PGD subdomains send their state in mode form over Zenoh too (new modes, and after each SVD
+/// compression the rotated free modes, then time functions), with Anderson mixing their time
+/// functions: the run as processes equals the in-process run bit for bit. The compression is
+/// checked to have rotated modes on the wire (a message restarting below the modes held).
+#[test]
+fn pgd_mode_form_processes_match_in_process_bit_for_bit() {
+    use glissade_messages::Payload;
+    use std::collections::BTreeMap;
+    let text = scene_file("small-three-layer")
+        .replace("[solver]\n", "[solver]\nlinear_stage = \"pgd\"\n")
+        .replace(
+            "[deployment]\n",
+            "[solver.pgd]\ncriterion = \"increment-svd\"\nmax_new_modes = 2\n\n[deployment]\n",
+        );
+    let sc = scene(&text);
+    assert_eq!(sc.linear_stage, glissade_mechanics::scene::LinearStage::Pgd);
+    let (mut held, mut rotations) = (BTreeMap::new(), 0);
+    let local = glissade::runner::run_in_process_observed(
+        &sc,
+        &RunOptions {
+            run_id: "local-pgd".into(),
+            interior: false,
+        },
+        |_| {},
+        |m| {
+            if let Payload::BoundaryModes {
+                subdomain,
+                first_mode,
+                lambda,
+                ..
+            } = &m.payload
+            {
+                let before: usize = held.get(subdomain).copied().unwrap_or(0);
+                if (*first_mode as usize) < before {
+                    rotations += 1;
+                }
+                held.insert(*subdomain, lambda.rows());
+            }
+            Duration::ZERO
+        },
+    )
+    .unwrap();
+    assert!(rotations > 0, "the compression rotated modes on the wire");
+    let remote = run_multi_process(
+        &sc,
+        &RunOptions {
+            run_id: "distributed-pgd".into(),
+            interior: false,
+        },
+        exe(),
+        |_| {},
+    )
+    .unwrap();
+    println!(
+        "PGD in mode form: {} iterations in-process and as processes, {rotations} messages with rotated modes",
+        local.iterations.len()
+    );
+    assert_identical(&local, &remote);
+}
+
 /// The stratified scene (18 subdomains) over 3 subdomain processes, one interface node and one
 /// coarse node (N = 10 to keep the debug-profile test short).
 #[test]

@@ -284,6 +284,7 @@ impl Fuzzer {
                     | Payload::MacroForces { subdomain, .. }
                     | Payload::MacroDisplacements { subdomain, .. }
                     | Payload::BoundaryState { subdomain, .. }
+                    | Payload::BoundaryModes { subdomain, .. }
                     | Payload::LocalDirections { subdomain, .. }
                     | Payload::AndersonGram { subdomain, .. } => subdomain,
                     _ => return None,
@@ -311,7 +312,8 @@ impl Fuzzer {
                     },
                     Payload::MacroForces { forces: f, .. }
                     | Payload::MacroDisplacements { w_tilde: f, .. }
-                    | Payload::BoundaryState { w: f, .. } => *f = misshapen(f, r),
+                    | Payload::BoundaryState { w: f, .. }
+                    | Payload::BoundaryModes { lambda: f, .. } => *f = misshapen(f, r),
                     Payload::LocalDirections { interfaces, q_hat, .. } => match r.below(4) {
                         0 => interfaces.push(99),
                         1 => {
@@ -527,7 +529,7 @@ fn bad_messages_are_refused_without_coarse_problem_nor_acceleration() {
         "coarse = false\nlinear_stage = \"pgd\"\nsearch_direction_update = true\nacceleration = \"none\"\n",
         "",
     );
-    let kinds = ["boundary_state", "local_directions", "decision", "displacement"];
+    let kinds = ["boundary_modes", "local_directions", "decision", "displacement"];
     let s = fuzz_run(&scene, true, &kinds, 0x5eed_0002);
     assert!(s.inputs >= 30_000, "{} inputs", s.inputs);
 }

@@ -322,9 +322,9 @@ fn replay_logs_the_error_against_the_reference_as_the_report_measures_it() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// A PGD run's basis sizes, which no message carries, come back from re-executing its subdomain
-/// nodes: exactly the sizes the run's own linear stages logged, and `glissade replay` puts them
-/// in the view (`pgd/basis/<subdomain>`).
+/// A PGD run's basis sizes come back from its recorded mode-form states (the time functions'
+/// row counts): exactly the sizes the run's own linear stages logged, and `glissade replay` puts
+/// them in the view (`pgd/basis/<subdomain>`).
 #[test]
 fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
     let dir = temp_dir("pgd-basis");

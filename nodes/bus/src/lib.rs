@@ -259,7 +259,10 @@ pub fn stage_of(payload: &Payload) -> Stage {
         Payload::Scene { .. } | Payload::HomogenizedOperator { .. } => Stage::Setup,
         Payload::MacroForces { .. } => Stage::Micro1,
         Payload::MacroDisplacements { .. } => Stage::Macro,
-        Payload::BoundaryState { .. } | Payload::AndersonGram { .. } | Payload::AndersonStep { .. } => Stage::Linear,
+        Payload::BoundaryState { .. }
+        | Payload::BoundaryModes { .. }
+        | Payload::AndersonGram { .. }
+        | Payload::AndersonStep { .. } => Stage::Linear,
         Payload::LocalDirections { .. } | Payload::Decision(_) | Payload::IndicatorPartials { .. } => Stage::Local,
         Payload::InterfaceSolution(_) | Payload::Displacement { .. } => Stage::Final,
     }

@@ -10,6 +10,10 @@
 //! decision is bit for bit the same), applies the stop rule and publishes the `Decision` the
 //! others wait for before they send q̂ or, at the stop, their interfaces' solutions.
 //!
+//! A subdomain with the PGD linear stage sends its state in mode form (`BoundaryModes`): the node
+//! keeps that subdomain's particular part and basis ([`ModeForm`]) and expands W and F from the
+//! time functions of each message.
+//!
 //! With Anderson acceleration node 0 also hosts the mixing's global step (DESIGN §3 "Acceleration"):
 //! it sums the subdomains' `AndersonGram` partials in subdomain order (so the sum does not depend
 //! on arrival order), solves the small least-squares problem and sends one `AndersonStep` to
@@ -23,6 +27,7 @@ use glissade_mechanics::anderson::{AndersonCoordinator, AndersonStep, GramPartia
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
 use glissade_mechanics::model::{Acceleration, Model, Side};
+use glissade_mechanics::modes::ModeForm;
 use glissade_messages::{
     role_field_topic, Decision, InterfaceIndicators, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
 };
@@ -162,12 +167,31 @@ pub struct InterfaceNode {
     locals: Vec<InterfaceLocal>,
     fields: Vec<InterfaceFields>,
     received: BTreeSet<u32>,
+    /// Per subdomain, its mode form once its first `BoundaryModes` arrived (PGD linear stage).
+    modes: Vec<Option<ModeReceiver>>,
     iteration: u32,
     time_weights: Vec<f64>,
     /// This node's share of the current iteration went to the decider; it waits for the decision.
     reported: bool,
     decider: Option<Decider>,
     finished: bool,
+}
+
+/// A PGD subdomain's mode form as this node holds it, and its last state expanded.
+struct ModeReceiver {
+    form: ModeForm,
+    w: Mat<f64>,
+    f: Mat<f64>,
+}
+
+/// First (row, column, value) of a matrix that is NaN or infinite.
+fn first_non_finite(m: &Mat<f64>) -> Option<(usize, usize, f64)> {
+    (0..m.ncols()).find_map(|c| {
+        m.col_as_slice(c)
+            .iter()
+            .position(|v| !v.is_finite())
+            .map(|r| (r, c, m[(r, c)]))
+    })
 }
 
 /// One interface's sums as they travel to the decider.
@@ -267,6 +291,7 @@ impl InterfaceNode {
             .iter()
             .map(|&i| InterfaceFields::zeros(model.interfaces[i].n_pairs(), nt))
             .collect();
+        let n_subdomains = model.subdomains.len();
         Self {
             id: NodeId {
                 role: Role::Interface,
@@ -282,6 +307,7 @@ impl InterfaceNode {
             locals,
             fields,
             received: BTreeSet::new(),
+            modes: std::iter::repeat_with(|| None).take(n_subdomains).collect(),
             iteration: 0,
             reported: false,
             decider,
@@ -341,13 +367,90 @@ impl InterfaceNode {
         format!("boundary entry {row}")
     }
 
-    fn store(&mut self, s: u32, w: &glissade_messages::Field, f: &glissade_messages::Field) {
+    fn store(&mut self, s: u32, w: impl Fn(usize, usize) -> f64, f: impl Fn(usize, usize) -> f64) {
         let layout = self.layouts[s as usize].as_ref().expect("participant");
         for slot in &layout.slots {
             if let Some(p) = self.position[slot.interface] {
-                self.fields[p].set_side(slot.side, slot.offset, |r, c| w.get(r, c), |r, c| f.get(r, c));
+                self.fields[p].set_side(slot.side, slot.offset, &w, &f);
             }
         }
+    }
+
+    /// Where a non-finite value of subdomain `s`'s W or F sits, for the divergence diagnosis.
+    fn non_finite_detail(&self, s: u32, name: &str, (r, c, v): (usize, usize, f64)) -> String {
+        format!(
+            "subdomain {} (`{}`) sent {name} = {v} at {}, time t_{c} = {} s, iteration {}",
+            s,
+            self.model.subdomains[s as usize].name,
+            self.locate(s as usize, r),
+            self.model.time.t(c),
+            self.iteration
+        )
+    }
+
+    /// A subdomain's state in mode form, checked in full before anything changes: the
+    /// particular part in its first message only, the basis update and λ of the sizes its
+    /// boundary and the held modes allow. Returns the subdomain's mode receiver, updated and
+    /// expanded, for the caller to put back.
+    fn take_modes(&mut self, s: u32, payload: &Payload) -> Result<ModeReceiver, NodeError> {
+        let Payload::BoundaryModes {
+            particular,
+            first_mode,
+            z,
+            g,
+            lambda,
+            ..
+        } = payload
+        else {
+            unreachable!("called on boundary modes")
+        };
+        let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
+        let nt = self.model.time.n_points();
+        let reject = |what: String| NodeError::rejected(self.id, format!("boundary modes of subdomain {s}: {what}"));
+        if z.rows() != n_b || lambda.cols() != nt {
+            return Err(reject(format!(
+                "modes of {} entries and time functions of {} time points, expected {n_b} and {nt}",
+                z.rows(),
+                lambda.cols()
+            )));
+        }
+        let mut receiver = match (particular, self.modes[s as usize].is_some()) {
+            (Some(pm), false) => {
+                if pm.w.rows() != n_b || pm.time.cols() != nt {
+                    return Err(reject(format!(
+                        "particular part of {} entries and {} time points, expected {n_b} and {nt}",
+                        pm.w.rows(),
+                        pm.time.cols()
+                    )));
+                }
+                let form = ModeForm::new(n_b, nt, pm.time.rows(), &pm.w.data, &pm.f.data, &pm.time.data)
+                    .map_err(|e| reject(e.to_string()))?;
+                ModeReceiver {
+                    form,
+                    w: Mat::zeros(n_b, nt),
+                    f: Mat::zeros(n_b, nt),
+                }
+            }
+            (Some(_), true) => return Err(reject("a second particular part".into())),
+            (None, false) => return Err(reject("mode form before its particular part".into())),
+            (None, true) => self.modes[s as usize].take().expect("held"),
+        };
+        if let Err(e) = receiver
+            .form
+            .check(*first_mode as usize, &z.data, &g.data, &lambda.data)
+        {
+            // Put a held form back unchanged.
+            if particular.is_none() {
+                self.modes[s as usize] = Some(receiver);
+            }
+            return Err(reject(e.to_string()));
+        }
+        receiver
+            .form
+            .update(*first_mode as usize, &z.data, &g.data, &lambda.data)
+            .expect("checked");
+        receiver.form.expand_into(receiver.w.as_mut(), receiver.f.as_mut());
+        Ok(receiver)
     }
 
     /// The local stage on the owned interfaces and their indicators, in interface order.
@@ -699,7 +802,10 @@ impl Node for InterfaceNode {
 
     fn subscriptions(&self) -> Vec<String> {
         let run = &self.ctx.run_id;
-        let mut subs = vec![role_field_topic(run, Role::Subdomain, "boundary_state", None)];
+        let mut subs = vec![
+            role_field_topic(run, Role::Subdomain, "boundary_state", None),
+            role_field_topic(run, Role::Subdomain, "boundary_modes", None),
+        ];
         match &self.decider {
             Some(d) => {
                 if d.n_nodes > 1 {
@@ -733,7 +839,8 @@ impl Node for InterfaceNode {
                 return self.indicator_partials(msg, interfaces, diverged)
             }
             Payload::Decision(d) => return self.decision(msg, d),
-            Payload::BoundaryState { subdomain, w, f } => (*subdomain, w, f),
+            Payload::BoundaryState { subdomain, w, f } => (*subdomain, Some(w), Some(f)),
+            Payload::BoundaryModes { subdomain, .. } => (*subdomain, None, None),
             _ => return Err(self.not_taken(msg)),
         };
         if self.layouts.get(s as usize).is_none_or(Option::is_none) {
@@ -769,25 +876,33 @@ impl Node for InterfaceNode {
             // This iteration already diverged here: the decision is on its way.
             return Ok(Vec::new());
         }
-        let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
-        let nt = self.model.time.n_points();
-        expect_shape(self.id, "w", w, n_b, nt)?;
-        expect_shape(self.id, "f", f, n_b, nt)?;
-        self.received.insert(s);
-        for (name, field) in [("W", w), ("F", f)] {
-            if let Some((r, c, v)) = field.first_non_finite() {
-                let detail = format!(
-                    "subdomain {} (`{}`) sent {name} = {v} at {}, time t_{c} = {} s, iteration {}",
-                    s,
-                    self.model.subdomains[s as usize].name,
-                    self.locate(s as usize, r),
-                    self.model.time.t(c),
-                    self.iteration
-                );
+        if let (Some(w), Some(f)) = (w, f) {
+            let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
+            let nt = self.model.time.n_points();
+            expect_shape(self.id, "w", w, n_b, nt)?;
+            expect_shape(self.id, "f", f, n_b, nt)?;
+            self.received.insert(s);
+            for (name, field) in [("W", w), ("F", f)] {
+                if let Some(at) = field.first_non_finite() {
+                    let detail = self.non_finite_detail(s, name, at);
+                    return Ok(self.report(Vec::new(), Some(detail)));
+                }
+            }
+            self.store(s, |r, c| w.get(r, c), |r, c| f.get(r, c));
+        } else {
+            let receiver = self.take_modes(s, &msg.payload)?;
+            self.received.insert(s);
+            let bad = [("W", &receiver.w), ("F", &receiver.f)]
+                .into_iter()
+                .find_map(|(name, m)| first_non_finite(m).map(|at| (name, at)));
+            if let Some((name, at)) = bad {
+                let detail = self.non_finite_detail(s, name, at);
+                self.modes[s as usize] = Some(receiver);
                 return Ok(self.report(Vec::new(), Some(detail)));
             }
+            self.store(s, |r, c| receiver.w[(r, c)], |r, c| receiver.f[(r, c)]);
+            self.modes[s as usize] = Some(receiver);
         }
-        self.store(s, w, f);
         if self.received.len() == self.participants.len() {
             return Ok(self.local_stage());
         }
@@ -1041,5 +1156,99 @@ mod tests {
             "{detail}"
         );
         assert!(node.is_finished());
+    }
+
+    /// A PGD subdomain's state in mode form gives the local stage what the same state as full
+    /// fields gives it, bit for bit; a mode form without its particular part, a second particular
+    /// part or modes past those held are refused and change nothing.
+    #[test]
+    fn mode_form_states_give_the_full_fields() {
+        let (model, ctx) = in_a_row(3);
+        let k0 = vec![1000.0; model.interfaces.len()];
+        let full = states(&model, &ctx, &k0);
+        let sender = |s: u32| NodeId {
+            role: Role::Subdomain,
+            index: s,
+        };
+        // Each state as W = P_W φ + Z λ, F = P_F φ + G λ with one load case and two modes whose
+        // expansion the full-field node gets.
+        let (mut by_modes, mut by_fields) = (Vec::new(), Vec::new());
+        for s in 0..3u32 {
+            let n_b = BoundaryLayout::new(&model, s as usize, &k0).len();
+            let v = |n: usize, k: usize| {
+                (0..n)
+                    .map(|i| ((i * 7 + k * 3 + s as usize) % 13) as f64 - 6.0)
+                    .collect::<Vec<f64>>()
+            };
+            let (pw, pf, phi) = (v(n_b, 1), v(n_b, 2), v(3, 3));
+            let (z, g, lambda) = (v(2 * n_b, 4), v(2 * n_b, 5), v(2 * 3, 6));
+            let mut form = ModeForm::new(n_b, 3, 1, &pw, &pf, &phi).unwrap();
+            form.update(0, &z, &g, &lambda).unwrap();
+            let (mut w, mut f) = (Mat::zeros(n_b, 3), Mat::zeros(n_b, 3));
+            form.expand_into(w.as_mut(), f.as_mut());
+            by_fields.push(message(
+                &ctx,
+                sender(s),
+                0,
+                Payload::BoundaryState {
+                    subdomain: s,
+                    w: field_of(w.as_ref()),
+                    f: field_of(f.as_ref()),
+                },
+            ));
+            let col = |data: Vec<f64>, rows: usize| Field {
+                rows: rows as u32,
+                cols: (data.len() / rows) as u32,
+                data,
+            };
+            by_modes.push(message(
+                &ctx,
+                sender(s),
+                0,
+                Payload::BoundaryModes {
+                    subdomain: s,
+                    particular: Some(glissade_messages::ParticularModes {
+                        w: col(pw, n_b),
+                        f: col(pf, n_b),
+                        time: col(phi, 1),
+                    }),
+                    first_mode: 0,
+                    z: col(z, n_b),
+                    g: col(g, n_b),
+                    lambda: col(lambda, 2),
+                },
+            ));
+        }
+        assert_eq!(full.len(), 3);
+        let mut node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+        // Refused, nothing changes: no particular part yet, modes past those held.
+        let mut orphan = by_modes[0].clone();
+        if let Payload::BoundaryModes { particular, .. } = &mut orphan.payload {
+            *particular = None;
+        }
+        let e = node.handle(&orphan).unwrap_err();
+        assert!(e.to_string().contains("before its particular part"), "{e}");
+        let mut gap = by_modes[0].clone();
+        if let Payload::BoundaryModes { first_mode, lambda, .. } = &mut gap.payload {
+            *first_mode = 1;
+            *lambda = Field::zeros(3, 3);
+        }
+        let e = node.handle(&gap).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("modes from column 1 on, but only 0 modes are held"),
+            "{e}"
+        );
+        let mut from_modes = Vec::new();
+        for m in &by_modes {
+            from_modes.extend(node.handle(m).unwrap());
+        }
+        let mut reference = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+        let mut from_fields = Vec::new();
+        for m in &by_fields {
+            from_fields.extend(reference.handle(m).unwrap());
+        }
+        assert!(!from_fields.is_empty());
+        assert_eq!(from_modes, from_fields, "the same local stage, bit for bit");
     }
 }

@@ -22,7 +22,7 @@
 //!   last mixed step made the residual grow (the safeguard), or a restart of every history when
 //!   the least-squares problem is ill-conditioned.
 
-use faer::Mat;
+use faer::{Mat, MatMut, MatRef};
 
 /// Largest condition number of the Gram matrix, scaled to a unit diagonal, that the coordinator
 /// solves; above it the histories restart. The Gram matrix squares the condition of the
@@ -108,6 +108,21 @@ pub struct AndersonHistory {
     has_last: bool,
     len: usize,
     next: usize,
+    /// Slot the last record wrote its difference to (None: it stored none).
+    last_slot: Option<usize>,
+    /// Coordinates mixed beside the state ([`AndersonHistory::with_coordinates`]).
+    coords: Option<Coordinates>,
+}
+
+/// Coordinates of the state on a basis of its own (a PGD state's time functions), mixed with the
+/// same coefficients as the state and not part of the least-squares problem: D_i and s + μ r in
+/// coordinates. A slot's rows past `rows[slot]` (`p_rows`) are zeros: a basis only grows between
+/// compressions, and a compression rotates every stored coordinate.
+struct Coordinates {
+    d: Vec<Mat<f64>>,
+    rows: Vec<usize>,
+    p: Mat<f64>,
+    p_rows: usize,
 }
 
 impl AndersonHistory {
@@ -136,6 +151,92 @@ impl AndersonHistory {
             has_last: false,
             len: 0,
             next: 0,
+            last_slot: None,
+            coords: None,
+        }
+    }
+
+    /// Also keeps coordinates of up to `capacity` rows (× the state's columns) beside the state:
+    /// [`Self::record_coordinates`], [`Self::apply_coordinates`], [`Self::rotate_coordinates`].
+    pub fn with_coordinates(mut self, capacity: usize) -> Self {
+        let z = || Mat::<f64>::zeros(capacity, self.cols);
+        self.coords = Some(Coordinates {
+            d: (0..self.window).map(|_| z()).collect(),
+            rows: vec![0; self.window],
+            p: z(),
+            p_rows: 0,
+        });
+        self
+    }
+
+    /// Records the coordinates of the iterate (`state`) and of its image (`image`), both
+    /// p × cols, right after [`Self::record`] or [`Self::record_sum`] recorded the same iterate's
+    /// fields: stores s + μ r in coordinates and its difference with the previous record's (whose
+    /// rows past its own p count as zeros).
+    pub fn record_coordinates(&mut self, state: MatRef<'_, f64>, image: MatRef<'_, f64>) {
+        let (mu, last_slot) = (self.mu, self.last_slot);
+        let c = self.coords.as_mut().expect("history without coordinates");
+        let rows = state.nrows();
+        assert!(rows <= c.p.nrows() && rows >= c.p_rows, "coordinates rows");
+        assert_eq!(
+            (image.nrows(), image.ncols(), state.ncols()),
+            (rows, self.cols, self.cols)
+        );
+        for j in 0..self.cols {
+            for r in 0..rows {
+                let p = state[(r, j)] + mu * (image[(r, j)] - state[(r, j)]);
+                if let Some(slot) = last_slot {
+                    let old = if r < c.p_rows { c.p[(r, j)] } else { 0.0 };
+                    c.d[slot][(r, j)] = p - old;
+                }
+                c.p[(r, j)] = p;
+            }
+        }
+        if let Some(slot) = last_slot {
+            c.rows[slot] = rows;
+        }
+        c.p_rows = rows;
+    }
+
+    /// Writes the next iterate's coordinates into `out` (p × cols, p of the last record) for
+    /// `step`, with the coefficients [`Self::apply`] mixes the fields with; a restart forgets the
+    /// differences here (do not call [`Self::apply`] for the same step as well).
+    pub fn apply_coordinates(&mut self, step: &AndersonStep, mut out: MatMut<'_, f64>) {
+        let gamma = self.begin_step(step);
+        let slots: [usize; MAX_SLOTS] = std::array::from_fn(|i| if i < self.len { self.slot(i) } else { 0 });
+        let c = self.coords.as_ref().expect("history without coordinates");
+        assert_eq!((out.nrows(), out.ncols()), (c.p_rows, self.cols), "coordinates shape");
+        for j in 0..self.cols {
+            for r in 0..c.p_rows {
+                let mut x = c.p[(r, j)];
+                for (i, &g) in gamma.iter().enumerate() {
+                    let s = slots[i];
+                    if r < c.rows[s] {
+                        x -= g * c.d[s][(r, j)];
+                    }
+                }
+                out[(r, j)] = x;
+            }
+        }
+    }
+
+    /// A change of basis of coordinates `first .. first + old`: every stored coordinate's rows
+    /// there become Uᵀ times them (`u` is old × keep), in rows `first .. first + keep`.
+    pub fn rotate_coordinates(&mut self, first: usize, old: usize, u: MatRef<'_, f64>) {
+        let Some(c) = self.coords.as_mut() else {
+            return;
+        };
+        let keep = u.ncols();
+        assert_eq!(u.nrows(), old, "rotation rows");
+        let mats = c.d.iter_mut().zip(c.rows.iter_mut()).chain([(&mut c.p, &mut c.p_rows)]);
+        for (mat, rows) in mats {
+            if *rows <= first {
+                continue;
+            }
+            let avail = (*rows - first).min(old);
+            let rotated = u.subrows(0, avail).transpose() * mat.as_ref().subrows(first, avail);
+            mat.as_mut().subrows_mut(first, keep).copy_from(&rotated);
+            *rows = first + keep;
         }
     }
 
@@ -236,6 +337,7 @@ impl AndersonHistory {
             residual2 += dot(rf, rf);
         }
         self.has_last = true;
+        self.last_slot = push.then_some(slot);
         self.residual2 = residual2;
         for (i, &other) in slots.iter().enumerate() {
             self.gram[slot * self.window + other] = gram_new[i];
@@ -265,18 +367,24 @@ impl AndersonHistory {
         self.next = 0;
     }
 
-    /// Writes the next iterate into (s_w, s_f) for `step` (of the last recorded iterate).
-    pub fn apply(&mut self, step: &AndersonStep, s_w: &mut Mat<f64>, s_f: &mut Mat<f64>) {
+    /// The coefficients of `step` (none for a plain step), after forgetting the differences on a
+    /// restart.
+    fn begin_step<'s>(&mut self, step: &'s AndersonStep) -> &'s [f64] {
         if let AndersonStep::Restart = step {
             self.restart();
         }
-        let gamma: &[f64] = match step {
+        match step {
             AndersonStep::Mix(gamma) => {
                 assert_eq!(gamma.len(), self.len, "one coefficient per stored difference");
                 gamma
             }
             AndersonStep::Plain | AndersonStep::Restart => &[],
-        };
+        }
+    }
+
+    /// Writes the next iterate into (s_w, s_f) for `step` (of the last recorded iterate).
+    pub fn apply(&mut self, step: &AndersonStep, s_w: &mut Mat<f64>, s_f: &mut Mat<f64>) {
+        let gamma = self.begin_step(step);
         // s = s + μ r − Σ γ_i D_i, oldest difference first, column by column (the column of s
         // stays in cache over the k differences).
         for j in 0..self.cols {
@@ -637,5 +745,66 @@ mod tests {
         assert_eq!((w[(0, 0)], f[(1, 0)]), (2.0, 2.0), "a plain step s + μ r");
         h.record(&two, &two, &two, &two);
         assert_eq!(h.len(), 1, "the next record forms a difference with the kept iterate");
+    }
+
+    /// Coordinates mixed beside the state give the state the fields mix to: fields W = B_W λ,
+    /// F = B_F λ of coordinates λ on a basis that grows (new coordinates start at 0) and is once
+    /// rotated (B U, Uᵀ λ: the same fields), under the fixed point λ ↦ A λ + c.
+    #[test]
+    fn coordinates_mix_as_the_fields_do() {
+        let (n, cols, cap, window, mu) = (9, 3, 6, 3, 0.8);
+        let mut seed = 77u64;
+        let mut r = |rows: usize, c: usize| Mat::<f64>::from_fn(rows, c, |_, _| rnd(&mut seed));
+        let (b_w, b_f) = (r(n, cap), r(n, cap));
+        let a = r(cap, cap) * 0.1;
+        let c = r(cap, cols);
+        let mut history = AndersonHistory::new(window, mu, n, cols).with_coordinates(cap);
+        let mut coordinator = AndersonCoordinator::new(MAX_CONDITION);
+        let mut basis = (b_w.clone(), b_f.clone());
+        let mut lam = Mat::<f64>::zeros(2, cols);
+        for it in 0..12 {
+            // The basis grows by one coordinate at iterations 3 and 6, and rotates at 8.
+            let p = lam.nrows();
+            if it == 3 || it == 6 {
+                let mut grown = Mat::<f64>::zeros(p + 1, cols);
+                grown.as_mut().subrows_mut(0, p).copy_from(&lam);
+                lam = grown;
+            }
+            let p = lam.nrows();
+            if it == 8 {
+                let q = r(p, p).qr().compute_Q();
+                history.rotate_coordinates(0, p, q.as_ref());
+                lam = q.transpose() * &lam;
+                basis = (basis.0.as_ref().subcols(0, p) * &q, basis.1.as_ref().subcols(0, p) * &q);
+            }
+            let fields = |l: &Mat<f64>| {
+                let p = l.nrows();
+                (basis.0.as_ref().subcols(0, p) * l, basis.1.as_ref().subcols(0, p) * l)
+            };
+            let image = a.as_ref().subrows(0, p).subcols(0, p) * &lam + c.as_ref().subrows(0, p);
+            let (s_w, s_f) = fields(&lam);
+            let (g_w, g_f) = fields(&image);
+            history.record(&s_w, &s_f, &g_w, &g_f);
+            history.record_coordinates(lam.as_ref(), image.as_ref());
+            let step = coordinator.decide(&history.partials(), false);
+            let (mut w, mut f) = (s_w.clone(), s_f.clone());
+            history.apply(&step, &mut w, &mut f);
+            // apply restarted the history on a restart step: the coordinates take a plain step.
+            let step = if let AndersonStep::Restart = step {
+                AndersonStep::Plain
+            } else {
+                step
+            };
+            let mut next = Mat::<f64>::zeros(p, cols);
+            history.apply_coordinates(&step, next.as_mut());
+            let (nw, nf) = fields(&next);
+            let scale = w.norm_max().max(f.norm_max());
+            // The same affine combination, one evaluated on coordinates and mapped, the other on
+            // the mapped vectors: round-off of sums of a few O(1) terms.
+            assert!((&nw - &w).norm_max() <= 1e-12 * scale, "iteration {it}: W");
+            assert!((&nf - &f).norm_max() <= 1e-12 * scale, "iteration {it}: F");
+            lam = next;
+        }
+        assert!(coordinator.counts.mixed > 3, "{:?}", coordinator.counts);
     }
 }

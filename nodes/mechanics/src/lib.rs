@@ -15,6 +15,7 @@ pub mod linear;
 pub mod local;
 pub mod mesh;
 pub mod model;
+pub mod modes;
 pub mod monolithic;
 pub mod pgd;
 pub mod reference;

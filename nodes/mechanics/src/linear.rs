@@ -138,6 +138,9 @@ pub struct SubdomainSolver {
     pub op: CondensedOperator,
     /// W_d: boundary displacement due to the subdomain's own loads (n_b × (N+1)).
     pub w_d: Mat<f64>,
+    /// Time functions φ of the subdomain's load cases (n_c × (N+1)): W_d = (boundary response to
+    /// each load case) φ.
+    pub load_time: Mat<f64>,
     /// 𝔼: the macro basis vectors of this subdomain's interfaces as columns (n_b × n_m).
     pub e: Mat<f64>,
     /// A_E M k⁻ 𝔼 (n_b × n_m).
@@ -269,6 +272,7 @@ impl SubdomainSolver {
             subdomain: s,
             op,
             w_d,
+            load_time: phi,
             e,
             a_mk_e,
             a_rows,

@@ -36,6 +36,7 @@
 //! within tol² are dropped: the state changes by exactly that admissible part. Frozen macro modes
 //! are never compressed.
 
+use crate::anderson::AndersonHistory;
 use crate::linear::SubdomainSolver;
 use crate::scene::PgdCriterion;
 use faer::linalg::matmul::matmul;
@@ -100,6 +101,12 @@ pub struct PgdStage {
     lambda2: Mat<f64>,
     prev: Mat<f64>,
     sum: Mat<f64>,
+    /// Coordinates λˢ of the current state s − s₀ on the basis (capacity × (N+1)): the relaxed
+    /// or mixed combination of the linear stages' λ¹ + λ² ([`PgdStage::relax_state`], Anderson
+    /// coordinates), rotated with the basis by a compression.
+    state: Mat<f64>,
+    /// First basis column added or changed since [`PgdStage::take_changed`].
+    changed_from: usize,
     /// Residual and M-weighted scratch (n_b × (N+1)).
     resid: Mat<f64>,
     mq: Mat<f64>,
@@ -107,6 +114,8 @@ pub struct PgdStage {
     fit_lam: Vec<f64>,
     /// ‖δ‖ of the last micro 1 (scale of the compression tolerance).
     last_delta1: f64,
+    /// U_k of the last compression (free modes before × kept), for the Anderson coordinates.
+    rotation: Option<Mat<f64>>,
     /// Floating-point operations of this stage's own kernels ([`PgdStage::flops`]).
     flops: u64,
 }
@@ -152,11 +161,14 @@ impl PgdStage {
             lambda2: Mat::zeros(cap, nt),
             prev: Mat::zeros(cap, nt),
             sum: Mat::zeros(cap, nt),
+            state: Mat::zeros(cap, nt),
+            changed_from: 0,
             resid: Mat::zeros(n_b, nt),
             mq: Mat::zeros(n_b, nt),
             fit_l: vec![0.0; n_b],
             fit_lam: vec![0.0; nt],
             last_delta1: 0.0,
+            rotation: None,
             flops: 0,
         };
         if settings.macro_modes && n_m > 0 {
@@ -214,6 +226,58 @@ impl PgdStage {
     }
     pub fn lambda2(&self) -> MatRef<'_, f64> {
         self.lambda2.as_ref().subrows(0, self.p)
+    }
+
+    /// Coordinates λˢ of the current state on the basis (p × (N+1)): s = s₀ + Σ (Z_k, G_k) λˢ_k.
+    pub fn state(&self) -> MatRef<'_, f64> {
+        self.state.as_ref().subrows(0, self.p)
+    }
+    pub fn state_mut(&mut self) -> MatMut<'_, f64> {
+        self.state.as_mut().subrows_mut(0, self.p)
+    }
+
+    /// Records the state's coordinates λˢ and those of the last linear stage's solution
+    /// s₁ + s₂ (λ¹ + λ²) in `history`, after it recorded the same iterate's fields
+    /// ([`AndersonHistory::record_coordinates`]).
+    pub fn record_coordinates(&mut self, history: &mut AndersonHistory) {
+        let (p, nt) = (self.p, self.sum.ncols());
+        self.count(p * nt);
+        for i in 0..nt {
+            for m in 0..p {
+                self.sum[(m, i)] = self.lambda1[(m, i)] + self.lambda2[(m, i)];
+            }
+        }
+        history.record_coordinates(self.state.as_ref().subrows(0, p), self.sum.as_ref().subrows(0, p));
+    }
+
+    /// The mixing `step` of `history` on the state's coordinates λˢ
+    /// ([`AndersonHistory::apply_coordinates`]).
+    pub fn apply_coordinates(&mut self, history: &mut AndersonHistory, step: &crate::anderson::AndersonStep) {
+        let (p, nt, k) = (self.p, self.state.ncols(), history.len());
+        if let crate::anderson::AndersonStep::Mix(_) = step {
+            self.count(2 * k * p * nt);
+        }
+        history.apply_coordinates(step, self.state.as_mut().subrows_mut(0, p));
+    }
+
+    /// The relaxation in coordinates: λˢ ← μ (λ¹ + λ²) + (1 − μ) λˢ (a new mode's λˢ is 0).
+    pub fn relax_state(&mut self, mu: f64) {
+        let (p, nt) = (self.p, self.state.ncols());
+        self.count(4 * p * nt);
+        for i in 0..nt {
+            for m in 0..p {
+                let image = self.lambda1[(m, i)] + self.lambda2[(m, i)];
+                self.state[(m, i)] = mu * image + (1.0 - mu) * self.state[(m, i)];
+            }
+        }
+    }
+
+    /// The first basis column added or changed since the last call (p when none); the next call
+    /// starts from p.
+    pub fn take_changed(&mut self) -> usize {
+        let first = self.changed_from.min(self.p);
+        self.changed_from = self.p;
+        first
     }
 
     /// Space-time norm² Σ_i w_i Σ_r M_r x_ri² of an n_b × (N+1) field.
@@ -375,6 +439,7 @@ impl PgdStage {
                 own[(m, i)] = c;
                 other[(m, i)] = 0.0;
                 self.prev[(m, i)] = 0.0;
+                self.state[(m, i)] = 0.0;
             }
             r2 = self.norm2(self.resid.as_ref());
             report.new_modes += 1;
@@ -475,6 +540,7 @@ impl PgdStage {
         solver.boundary_response_into(self.l.as_ref().subcols(m, 1), self.z.as_mut().subcols_mut(m, 1));
         self.finish_mode(m);
         self.p += 1;
+        self.changed_from = self.changed_from.min(m);
         true
     }
 
@@ -561,9 +627,16 @@ impl PgdStage {
     /// Compression of the free modes (module docs) with the tolerance ξ₀,₁·‖δ₁‖ of the last
     /// micro 1: the state (w, f), which must lie in the span (W = W_d + Z λ, F = −k⁻W_d + G λ),
     /// loses exactly the truncated admissible part. Returns the number of modes dropped.
-    pub fn compress(&mut self, w: MatMut<'_, f64>, f: MatMut<'_, f64>) -> usize {
+    ///
+    /// The state's coordinates λˢ and, when given, the coordinates an Anderson history mixes
+    /// rotate with the basis: λˢ' = U_kᵀ λˢ on the free modes.
+    pub fn compress(&mut self, w: MatMut<'_, f64>, f: MatMut<'_, f64>, history: Option<&mut AndersonHistory>) -> usize {
         let tol = self.settings.xi1 * self.last_delta1;
-        self.compress_with(w, f, tol)
+        let dropped = self.compress_with(w, f, tol);
+        if let (Some(history), Some(uk)) = (history, self.rotation.take()) {
+            history.rotate_coordinates(self.n_frozen, uk.nrows(), uk.as_ref());
+        }
+        dropped
     }
 
     /// As [`PgdStage::compress`] with an explicit tolerance on the norm of the removed part.
@@ -647,11 +720,14 @@ impl PgdStage {
         }
         let emg = self.emg.as_ref().subcols(f0, pf) * &uk;
         self.emg.as_mut().subcols_mut(f0, keep).copy_from(&emg);
-        for mat in [&mut self.lmke, &mut self.lambda1, &mut self.lambda2] {
+        for mat in [&mut self.lmke, &mut self.lambda1, &mut self.lambda2, &mut self.state] {
             let rotated = uk.transpose() * mat.as_ref().subrows(f0, pf);
             mat.as_mut().subrows_mut(f0, keep).copy_from(&rotated);
         }
+        self.count(2 * keep * pf * nt);
         self.p = f0 + keep;
+        self.changed_from = self.changed_from.min(f0);
+        self.rotation = Some(uk);
         pf - keep
     }
 }
@@ -915,8 +991,22 @@ mod tests {
         // Keeps the two large directions (plus frozen modes), drops the 1e-3 and 1e-5 ones.
         let tol = 1e-2 * norm_q;
         let (w_old, f_old) = (w.clone(), f.clone());
+        // The state's coordinates are those of (w, f): they rotate with the basis.
+        let lambda1 = stage.lambda1().to_owned();
+        stage.state_mut().copy_from(&lambda1);
+        stage.take_changed();
         let dropped = stage.compress_with(w.as_mut(), f.as_mut(), tol);
         assert!(dropped >= 2, "{dropped}");
+        // The compressed state in coordinates is the compressed state; the rotated free modes are
+        // what the next mode-form message must carry again.
+        let (mut ws, mut fs) = (Mat::zeros(n_b, nt), Mat::zeros(n_b, nt));
+        let state = stage.state().to_owned();
+        let p_now = stage.n_modes();
+        stage.lambda1.as_mut().subrows_mut(0, p_now).copy_from(&state);
+        stage.expand_into(solver.w_d.as_ref(), ws.as_mut(), fs.as_mut(), false);
+        assert!(max_abs((&ws - &w).as_ref()) <= 1e-12 * max_abs(w_old.as_ref()));
+        assert!(max_abs((&fs - &f).as_ref()) <= 1e-12 * max_abs(f_old.as_ref()));
+        assert_eq!(stage.take_changed(), stage.n_frozen());
         let q_new = q_of(&w, &f);
         let removed = &q - &q_new;
         let removed_norm = stage.norm2(removed.as_ref()).sqrt();

@@ -3,7 +3,7 @@
 use glissade_messages::SCHEMA_VERSION;
 
 /// (field chunk of the key expression, schema name `glissade.<Payload type>`, payload layout).
-pub const PAYLOAD_FIELDS: [(&str, &str, &str); 12] = [
+pub const PAYLOAD_FIELDS: [(&str, &str, &str); 13] = [
     ("scene", "glissade.Scene", "{ text: String }"),
     (
         "homogenized_operator",
@@ -24,6 +24,12 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 12] = [
         "boundary_state",
         "glissade.BoundaryState",
         "{ subdomain: u32, w: Field, f: Field }",
+    ),
+    (
+        "boundary_modes",
+        "glissade.BoundaryModes",
+        "{ subdomain: u32, particular: Option<ParticularModes { w: Field, f: Field, time: Field }>, first_mode: u32, \
+         z: Field, g: Field, lambda: Field }",
     ),
     (
         "local_directions",

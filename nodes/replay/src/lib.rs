@@ -19,6 +19,8 @@
 //! state, then every message); [`View`] takes messages one at a time, as [`replay`] and a live run
 //! (`glissade run --rerun`) give them.
 
+mod states;
+
 use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator};
 use glissade_mechanics::element::{elasticity, stress, NODE_XI};
 use glissade_mechanics::linear::default_k0;
@@ -30,6 +32,7 @@ use glissade_mechanics::scene::load_str;
 use glissade_messages::{Field, InterfaceSolution, Message, Payload, Stage};
 use glissade_recorder::Recording;
 use nalgebra::SVector;
+pub use states::BoundaryStates;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -83,8 +86,8 @@ pub struct ReplayOptions {
     /// Solve the scene with the monolithic Newton reference first and log each iteration's error
     /// against it (contact tractions and jumps, as `glissade report` measures them).
     pub reference: bool,
-    /// PGD basis sizes to log: (iteration, subdomain, basis size), e.g. from re-executing the
-    /// subdomain nodes of a PGD run (no message carries them).
+    /// PGD basis sizes to log: (iteration, subdomain, basis size), e.g. the time-function counts
+    /// of a PGD run's mode-form states.
     pub basis_sizes: Vec<(u32, u32, usize)>,
 }
 
@@ -348,6 +351,8 @@ pub struct View {
     pending: BTreeMap<u32, (Field, Field)>,
     /// The last boundary state of each subdomain.
     last_states: BTreeMap<u32, (Field, Field)>,
+    /// Mode forms of PGD subdomains (their states arrive as `BoundaryModes`).
+    states: BoundaryStates,
     interfaces: Vec<InterfaceSolution>,
     displacements: BTreeMap<u32, Field>,
     last_iteration: i64,
@@ -436,6 +441,7 @@ impl View {
             diag,
             pending: BTreeMap::new(),
             last_states: BTreeMap::new(),
+            states: BoundaryStates::new(),
             interfaces: Vec::new(),
             displacements: BTreeMap::new(),
             last_iteration: 0,
@@ -446,8 +452,16 @@ impl View {
     /// Takes one message of the run.
     pub fn message(&mut self, msg: &Message) -> Result<(), ReplayError> {
         self.summary.messages += 1;
-        match &msg.payload {
-            Payload::BoundaryState { subdomain, w, f } if msg.envelope.stage != Stage::Final => {
+        if let Some(state) = self.states.fields(&msg.payload) {
+            let (subdomain, w, f) = state.map_err(|detail| ReplayError::Content {
+                path: format!("iteration {}", msg.envelope.iteration),
+                detail,
+            })?;
+            if msg.envelope.stage == Stage::Final {
+                return Ok(());
+            }
+            let (subdomain, w, f) = (&subdomain, w.as_ref(), f.as_ref());
+            {
                 if self.time_point.is_none() {
                     self.time_point = Some(largest_time_point(w));
                 }
@@ -478,6 +492,9 @@ impl View {
                 }
                 self.pending.insert(*subdomain, (w.clone(), f.clone()));
             }
+            return Ok(());
+        }
+        match &msg.payload {
             Payload::Decision(d) => {
                 let n = msg.envelope.iteration as i64;
                 self.last_iteration = n;
@@ -805,14 +822,18 @@ pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySumma
     let mut displacements = BTreeMap::new();
     let mut last_states = BTreeMap::new();
     let mut first_w = None;
+    let mut states = BoundaryStates::new();
     for m in recording.messages() {
-        match decode(&m)?.payload {
-            Payload::BoundaryState { subdomain, w, f } => {
-                if first_w.is_none() {
-                    first_w = Some(largest_time_point(&w));
-                }
-                last_states.insert(subdomain, (w, f));
+        let msg = decode(&m)?;
+        if let Some(state) = states.fields(&msg.payload) {
+            let (subdomain, w, f) = state.map_err(|e| content(format!("message on `{}`: {e}", m.topic)))?;
+            if first_w.is_none() {
+                first_w = Some(largest_time_point(&w));
             }
+            last_states.insert(subdomain, (w.into_owned(), f.into_owned()));
+            continue;
+        }
+        match msg.payload {
             Payload::InterfaceSolution(s) => interfaces.push(s),
             Payload::Displacement { subdomain, u } => {
                 displacements.insert(subdomain, u);

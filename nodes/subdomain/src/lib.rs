@@ -11,16 +11,24 @@
 //! linear stage is a reduction: the node records s and G(s) = s₁ + s₂, sends its `AndersonGram`
 //! partials, and takes the `AndersonStep` the interface node returns (mixed, plain or restart)
 //! before it sends `BoundaryState`. Without acceleration no such message exists.
+//!
+//! With the PGD linear stage the node holds its state in mode form (DESIGN §3 "PGD linear
+//! stage"): the coordinates λˢ of s − s₀ on its basis, relaxed (or mixed, with the same Anderson
+//! coefficients as the fields would be) in coordinates, and sends `BoundaryModes` instead of
+//! `BoundaryState`: the particular part once, each new basis column once, λˢ every iteration. Its
+//! own fields (W, F) are expanded from the same [`ModeForm`] a receiver builds from the messages,
+//! so both hold the same numbers bit for bit.
 
 use faer::Mat;
 use glissade_bus::convert::{copy_into, field_of};
 use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
-use glissade_mechanics::anderson::{AndersonHistory, AndersonStep};
+use glissade_mechanics::anderson::{AndersonHistory, AndersonStep, GramPartials};
 use glissade_mechanics::linear::{relax_into, sum_into, sum_relax_into, SubdomainSolver};
 use glissade_mechanics::model::{Acceleration, Model};
+use glissade_mechanics::modes::ModeForm;
 use glissade_mechanics::pgd::{PgdSettings, PgdStage};
 use glissade_mechanics::scene::PgdCriterion;
-use glissade_messages::{role_field_topic, Field, Message, NodeId, Payload, Role, Stage};
+use glissade_messages::{role_field_topic, Field, Message, NodeId, ParticularModes, Payload, Role, Stage};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -97,8 +105,14 @@ pub struct SubdomainNode {
     /// nodes each send the rows of their interfaces).
     directions_in: Vec<bool>,
     finished: bool,
-    /// PGD linear stage (DESIGN §3), when the scene asks for it.
+    /// PGD linear stage (DESIGN §3), when the scene asks for it, the mode form of the state as
+    /// receivers hold it, and the particular part until the first message carries it.
     pgd: Option<PgdStage>,
+    modes: Option<ModeForm>,
+    particular: Option<ParticularModes>,
+    /// With PGD: (w, f) lag behind the mode form until a consumer needs them
+    /// ([`Self::expand_state`]: Anderson's record, the compression, the displacement).
+    fields_stale: bool,
     log: Option<LinearStageLog>,
     record: LinearStageRecord,
     /// Per boundary slot, the index of the interface node that owns its interface (None: any
@@ -140,6 +154,9 @@ impl SubdomainNode {
             directions_in: vec![false; n_slots],
             finished: false,
             pgd: None,
+            modes: None,
+            particular: None,
+            fields_stale: false,
             log: None,
             record: LinearStageRecord::default(),
             owners: None,
@@ -166,6 +183,27 @@ impl SubdomainNode {
     pub fn with_pgd(mut self, settings: PgdSettings) -> Self {
         let tw = self.model.time.trapezoid_weights();
         self.pgd = Some(PgdStage::new(&mut self.solver, &tw, settings));
+        // s₀ = (W_d, −k⁻W_d) in separated form: the load cases' boundary responses and φ.
+        let k = &self.solver.op.layout.k;
+        let p_w = self.solver.op.load_boundary.as_ref();
+        let particular = ParticularModes {
+            w: field_of(p_w),
+            f: Field::from_fn(p_w.nrows(), p_w.ncols(), |r, c| -k[r] * p_w[(r, c)]),
+            time: field_of(self.solver.load_time.as_ref()),
+        };
+        let (n_b, nt) = (self.solver.n_boundary(), self.model.time.n_points());
+        let form = ModeForm::new(
+            n_b,
+            nt,
+            particular.time.rows(),
+            &particular.w.data,
+            &particular.f.data,
+            &particular.time.data,
+        )
+        .expect("the particular part has the subdomain's sizes");
+        self.modes = Some(form);
+        self.particular = Some(particular);
+        self.anderson = self.anderson.take().map(|h| h.with_coordinates(n_b));
         self
     }
 
@@ -185,6 +223,14 @@ impl SubdomainNode {
             iteration: self.iteration,
             ..LinearStageRecord::default()
         };
+        let compress = self
+            .pgd
+            .as_ref()
+            .is_some_and(|p| self.iteration >= 1 && p.settings.criterion == PgdCriterion::IncrementSvd);
+        if compress {
+            // The compression works on the state's fields.
+            self.expand_state();
+        }
         match self.pgd.as_mut() {
             None => {
                 self.solver
@@ -196,15 +242,13 @@ impl SubdomainNode {
             }
             Some(pgd) => {
                 if self.iteration >= 1 && pgd.settings.criterion == PgdCriterion::IncrementSvd {
-                    self.record.dropped_modes = pgd.compress(self.w.as_mut(), self.f.as_mut());
+                    self.record.dropped_modes = pgd.compress(self.w.as_mut(), self.f.as_mut(), self.anderson.as_mut());
                 }
                 let report = pgd.micro1(&mut self.solver, self.q_hat.as_ref());
                 self.record.new_modes = report.new_modes;
                 self.record.xi1 = report.xi;
                 if coarse {
                     pgd.macro_forces_into(self.macro_forces.as_mut());
-                } else {
-                    pgd.expand_into(self.solver.w_d.as_ref(), self.w1.as_mut(), self.f1.as_mut(), false);
                 }
                 self.record.modes = pgd.n_modes();
             }
@@ -218,8 +262,8 @@ impl SubdomainNode {
         self.solver.flops() + self.pgd.as_ref().map_or(0, PgdStage::flops)
     }
 
-    /// Micro problem 2 into (w2, f2); with PGD, (w1, f1) = s₁ + s₂ expanded from the basis and
-    /// (w2, f2) = 0. Then the linear stage's record goes to the log.
+    /// Micro problem 2 into (w2, f2), or with PGD into the basis' time functions λ². Then the
+    /// linear stage's record goes to the log (with PGD, when the state is sent).
     fn solve_micro2(&mut self) {
         let t0 = Instant::now();
         let flops0 = self.flops();
@@ -229,9 +273,6 @@ impl SubdomainNode {
                 .micro2_into(self.w_tilde.as_ref(), self.w2.as_mut(), self.f2.as_mut()),
             Some(pgd) => {
                 let report = pgd.micro2(&mut self.solver, self.w_tilde.as_ref());
-                pgd.expand_into(self.solver.w_d.as_ref(), self.w1.as_mut(), self.f1.as_mut(), true);
-                self.w2.fill(0.0);
-                self.f2.fill(0.0);
                 self.record.new_modes += report.new_modes;
                 self.record.xi2 = report.xi;
                 self.record.modes = pgd.n_modes();
@@ -239,7 +280,9 @@ impl SubdomainNode {
         }
         self.record.seconds += t0.elapsed().as_secs_f64();
         self.record.flops += self.flops() - flops0;
-        self.log_record();
+        if self.pgd.is_none() {
+            self.log_record();
+        }
     }
 
     fn log_record(&self) {
@@ -278,7 +321,9 @@ impl SubdomainNode {
         } else {
             self.w2.fill(0.0);
             self.f2.fill(0.0);
-            self.log_record();
+            if self.pgd.is_none() {
+                self.log_record();
+            }
             vec![self.finish_linear_stage()]
         }
     }
@@ -292,6 +337,9 @@ impl SubdomainNode {
         } else {
             self.options.relaxation
         };
+        if self.pgd.is_some() {
+            return self.finish_pgd(mu);
+        }
         let Some(history) = self.anderson.as_mut() else {
             // s₁ + s₂ and the relaxation in one pass.
             sum_relax_into(
@@ -317,20 +365,98 @@ impl SubdomainNode {
         }
         if self.iteration >= 2 {
             let p = history.partials();
-            self.phase = Phase::Step;
-            return self.msg(
-                Stage::Linear,
-                Payload::AndersonGram {
-                    subdomain: self.subdomain(),
-                    gram: Field::from_fn(p.k, p.k, |i, j| p.gram[j * p.k + i]),
-                    projection: Field::from_fn(p.k, 1, |i, _| p.projection[i]),
-                    residual2: p.residual2,
-                },
-            );
+            return self.anderson_gram(p);
         }
         relax_into(mu, self.w1.as_ref(), self.f1.as_ref(), self.w.as_mut(), self.f.as_mut());
         self.phase = Phase::Directions;
         self.boundary_state()
+    }
+
+    /// The Gram partials of this iteration's record; the node then waits for the step.
+    fn anderson_gram(&mut self, p: GramPartials) -> Message {
+        self.phase = Phase::Step;
+        self.msg(
+            Stage::Linear,
+            Payload::AndersonGram {
+                subdomain: self.subdomain(),
+                gram: Field::from_fn(p.k, p.k, |i, j| p.gram[j * p.k + i]),
+                projection: Field::from_fn(p.k, 1, |i, _| p.projection[i]),
+                residual2: p.residual2,
+            },
+        )
+    }
+
+    /// [`Self::finish_linear_stage`] in mode form: the relaxation in coordinates, or with
+    /// Anderson from iteration 1 on the record of the iterate (fields for the least-squares
+    /// problem, coordinates for the step) and from iteration 2 on its Gram partials.
+    fn finish_pgd(&mut self, mu: f64) -> Message {
+        let t0 = Instant::now();
+        let flops0 = self.flops();
+        if self.anderson.is_some() && self.iteration >= 1 {
+            self.expand_state();
+        }
+        let pgd = self.pgd.as_mut().expect("PGD stage");
+        match self.anderson.as_mut() {
+            Some(history) if self.iteration >= 1 => {
+                // G(s) = s₁ + s₂ as fields: the least-squares problem is on the forces.
+                pgd.expand_into(self.solver.w_d.as_ref(), self.w1.as_mut(), self.f1.as_mut(), true);
+                history.record(&self.w, &self.f, &self.w1, &self.f1);
+                pgd.record_coordinates(history);
+                if self.iteration >= 2 {
+                    let p = history.partials();
+                    self.record.seconds += t0.elapsed().as_secs_f64();
+                    self.record.flops += self.flops() - flops0;
+                    return self.anderson_gram(p);
+                }
+                pgd.relax_state(mu);
+            }
+            _ => pgd.relax_state(mu),
+        }
+        self.record.seconds += t0.elapsed().as_secs_f64();
+        self.record.flops += self.flops() - flops0;
+        self.phase = Phase::Directions;
+        self.boundary_modes()
+    }
+
+    /// The state in mode form: the basis columns changed since the last message, λˢ, and the
+    /// particular part in the first message; the node's own (W, F) are expanded from the same
+    /// mode form as a receiver's. Ends the linear stage's record.
+    fn boundary_modes(&mut self) -> Message {
+        let t0 = Instant::now();
+        let pgd = self.pgd.as_mut().expect("PGD stage");
+        let form = self.modes.as_mut().expect("mode form with PGD");
+        let first = pgd.take_changed();
+        let p = pgd.n_modes();
+        let z = field_of(pgd.z().subcols(first, p - first));
+        let g = field_of(pgd.g().subcols(first, p - first));
+        let lambda = field_of(pgd.state());
+        form.update(first, &z.data, &g.data, &lambda.data)
+            .expect("the subdomain's own basis fits its mode form");
+        self.fields_stale = true;
+        self.record.seconds += t0.elapsed().as_secs_f64();
+        self.log_record();
+        let particular = self.particular.take();
+        self.msg(
+            Stage::Linear,
+            Payload::BoundaryModes {
+                subdomain: self.subdomain(),
+                particular,
+                first_mode: first as u32,
+                z,
+                g,
+                lambda,
+            },
+        )
+    }
+
+    /// With PGD, (w, f) from the mode form when they lag behind it (the flops go to the current
+    /// linear stage's record).
+    fn expand_state(&mut self) {
+        if let (true, Some(form)) = (self.fields_stale, self.modes.as_ref()) {
+            form.expand_into(self.w.as_mut(), self.f.as_mut());
+            self.record.flops += form.expand_flops();
+            self.fields_stale = false;
+        }
     }
 
     fn boundary_state(&self) -> Message {
@@ -374,7 +500,8 @@ impl SubdomainNode {
         )
     }
 
-    fn displacement(&self) -> Message {
+    fn displacement(&mut self) -> Message {
+        self.expand_state();
         let sub = &self.model.subdomains[self.solver.subdomain];
         let layout = &self.solver.op.layout;
         let nt = self.model.time.n_points();
@@ -561,8 +688,16 @@ impl Node for SubdomainNode {
                         ))
                     }
                 };
-                history.apply(&step, &mut self.w, &mut self.f);
                 self.phase = Phase::Directions;
+                if let Some(pgd) = self.pgd.as_mut() {
+                    let t0 = Instant::now();
+                    let flops0 = pgd.flops();
+                    pgd.apply_coordinates(history, &step);
+                    self.record.flops += pgd.flops() - flops0;
+                    self.record.seconds += t0.elapsed().as_secs_f64();
+                    return Ok(vec![self.boundary_modes()]);
+                }
+                history.apply(&step, &mut self.w, &mut self.f);
                 Ok(vec![self.boundary_state()])
             }
             Payload::Decision(d) => {
