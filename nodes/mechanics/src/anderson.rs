@@ -281,13 +281,7 @@ impl AndersonHistory {
         }
         let image = |a: &[f64], b: &[f64], r: usize| if SUM { a[r] + b[r] } else { a[r] };
         let mu = self.mu;
-        let slot = self.next;
-        let push = self.has_last;
-        if push {
-            self.len = (self.len + 1).min(self.window);
-            self.next = (self.next + 1) % self.window;
-        }
-        let slots: [usize; MAX_SLOTS] = std::array::from_fn(|i| if i < self.len { self.slot(i) } else { 0 });
+        let (slot, push, slots) = self.begin_record();
         let slots = &slots[..if push { self.len } else { 0 }];
         let mut gram_new = [-0.0f64; MAX_SLOTS];
         let mut projection = [-0.0f64; MAX_SLOTS];
@@ -328,14 +322,81 @@ impl AndersonHistory {
                     rf[r] = res;
                 }
             }
-            let (drf, rf) = (self.dr_f[slot].col_as_slice(j), self.r_f.col_as_slice(j));
-            for (i, &other) in slots.iter().enumerate() {
-                let d_other = self.dr_f[other].col_as_slice(j);
-                gram_new[i] += dot(drf, d_other);
-                projection[i] += dot(d_other, rf);
-            }
-            residual2 += dot(rf, rf);
+            self.accumulate_column(j, slot, slots, &mut gram_new, &mut projection, &mut residual2);
         }
+        self.end_record(slot, push, slots, &gram_new, &projection, residual2);
+    }
+
+    /// Records an iterate whose state is mixed in coordinates only ([`Self::record_coordinates`],
+    /// [`Self::apply_coordinates`]; never [`Self::apply`] after it): its force residual
+    /// r_F = G(s)_F − s_F alone, for the least-squares problem, in one pass that also sums the
+    /// new Gram column, the projections and ‖r_F‖².
+    pub fn record_residual(&mut self, r_f: &Mat<f64>) {
+        assert_eq!((r_f.nrows(), r_f.ncols()), (self.rows, self.cols), "residual shape");
+        let (slot, push, slots) = self.begin_record();
+        let slots = &slots[..if push { self.len } else { 0 }];
+        let mut gram_new = [-0.0f64; MAX_SLOTS];
+        let mut projection = [-0.0f64; MAX_SLOTS];
+        let mut residual2 = -0.0f64;
+        for j in 0..self.cols {
+            let new = r_f.col_as_slice(j);
+            let rf = self.r_f.col_as_slice_mut(j);
+            if push {
+                let drf = self.dr_f[slot].col_as_slice_mut(j);
+                for r in 0..self.rows {
+                    drf[r] = new[r] - rf[r];
+                    rf[r] = new[r];
+                }
+            } else {
+                rf.copy_from_slice(new);
+            }
+            self.accumulate_column(j, slot, slots, &mut gram_new, &mut projection, &mut residual2);
+        }
+        self.end_record(slot, push, slots, &gram_new, &projection, residual2);
+    }
+
+    /// The slot a record writes, whether it stores a difference (it has a previous iterate), and
+    /// the stored slots oldest first (the first `len` entries, after this record's).
+    fn begin_record(&mut self) -> (usize, bool, [usize; MAX_SLOTS]) {
+        let slot = self.next;
+        let push = self.has_last;
+        if push {
+            self.len = (self.len + 1).min(self.window);
+            self.next = (self.next + 1) % self.window;
+        }
+        let slots: [usize; MAX_SLOTS] = std::array::from_fn(|i| if i < self.len { self.slot(i) } else { 0 });
+        (slot, push, slots)
+    }
+
+    /// Adds column j's share of the new Gram column Δr_newᵀΔr_i, the projections Δr_iᵀ r and ‖r‖².
+    fn accumulate_column(
+        &self,
+        j: usize,
+        slot: usize,
+        slots: &[usize],
+        gram_new: &mut [f64; MAX_SLOTS],
+        projection: &mut [f64; MAX_SLOTS],
+        residual2: &mut f64,
+    ) {
+        let (drf, rf) = (self.dr_f[slot].col_as_slice(j), self.r_f.col_as_slice(j));
+        for (i, &other) in slots.iter().enumerate() {
+            let d_other = self.dr_f[other].col_as_slice(j);
+            gram_new[i] += dot(drf, d_other);
+            projection[i] += dot(d_other, rf);
+        }
+        *residual2 += dot(rf, rf);
+    }
+
+    /// Stores a record's sums.
+    fn end_record(
+        &mut self,
+        slot: usize,
+        push: bool,
+        slots: &[usize],
+        gram_new: &[f64; MAX_SLOTS],
+        projection: &[f64; MAX_SLOTS],
+        residual2: f64,
+    ) {
         self.has_last = true;
         self.last_slot = push.then_some(slot);
         self.residual2 = residual2;
@@ -749,7 +810,8 @@ mod tests {
 
     /// Coordinates mixed beside the state give the state the fields mix to: fields W = B_W λ,
     /// F = B_F λ of coordinates λ on a basis that grows (new coordinates start at 0) and is once
-    /// rotated (B U, Uᵀ λ: the same fields), under the fixed point λ ↦ A λ + c.
+    /// rotated (B U, Uᵀ λ: the same fields), under the fixed point λ ↦ A λ + c. Recording the
+    /// force residuals alone gives the same sums and steps, bit for bit.
     #[test]
     fn coordinates_mix_as_the_fields_do() {
         let (n, cols, cap, window, mu) = (9, 3, 6, 3, 0.8);
@@ -759,6 +821,8 @@ mod tests {
         let a = r(cap, cap) * 0.1;
         let c = r(cap, cols);
         let mut history = AndersonHistory::new(window, mu, n, cols).with_coordinates(cap);
+        // The same iterates recorded by their force residuals alone.
+        let mut by_residual = AndersonHistory::new(window, mu, n, cols).with_coordinates(cap);
         let mut coordinator = AndersonCoordinator::new(MAX_CONDITION);
         let mut basis = (b_w.clone(), b_f.clone());
         let mut lam = Mat::<f64>::zeros(2, cols);
@@ -774,6 +838,7 @@ mod tests {
             if it == 8 {
                 let q = r(p, p).qr().compute_Q();
                 history.rotate_coordinates(0, p, q.as_ref());
+                by_residual.rotate_coordinates(0, p, q.as_ref());
                 lam = q.transpose() * &lam;
                 basis = (basis.0.as_ref().subcols(0, p) * &q, basis.1.as_ref().subcols(0, p) * &q);
             }
@@ -786,17 +851,18 @@ mod tests {
             let (g_w, g_f) = fields(&image);
             history.record(&s_w, &s_f, &g_w, &g_f);
             history.record_coordinates(lam.as_ref(), image.as_ref());
+            by_residual.record_residual(&(&g_f - &s_f));
+            by_residual.record_coordinates(lam.as_ref(), image.as_ref());
+            assert_eq!(by_residual.partials(), history.partials(), "iteration {it}: same sums");
             let step = coordinator.decide(&history.partials(), false);
             let (mut w, mut f) = (s_w.clone(), s_f.clone());
             history.apply(&step, &mut w, &mut f);
-            // apply restarted the history on a restart step: the coordinates take a plain step.
-            let step = if let AndersonStep::Restart = step {
-                AndersonStep::Plain
-            } else {
-                step
-            };
+            // A restart step restarts a history once: apply_coordinates on `history` repeats it.
             let mut next = Mat::<f64>::zeros(p, cols);
             history.apply_coordinates(&step, next.as_mut());
+            let mut again = Mat::<f64>::zeros(p, cols);
+            by_residual.apply_coordinates(&step, again.as_mut());
+            assert!(again == next, "iteration {it}: same coordinates");
             let (nw, nf) = fields(&next);
             let scale = w.norm_max().max(f.norm_max());
             // The same affine combination, one evaluated on coordinates and mapped, the other on

@@ -236,6 +236,31 @@ impl PgdStage {
         self.state.as_mut().subrows_mut(0, self.p)
     }
 
+    /// The force residual of the state, r_F = F(s₁ + s₂) − F(s) = G (λ¹ + λ² − λˢ)
+    /// (n_b × (N+1)), what Anderson's least-squares problem needs of a state held in mode form:
+    /// the particular parts cancel exactly, and neither state is expanded.
+    pub fn residual_forces_into(&mut self, mut out: MatMut<'_, f64>) {
+        let (p, nt, n_b) = (self.p, self.sum.ncols(), self.g.nrows());
+        self.count(2 * p * nt + 2 * n_b * p * nt);
+        for i in 0..nt {
+            for m in 0..p {
+                self.sum[(m, i)] = self.lambda1[(m, i)] + self.lambda2[(m, i)] - self.state[(m, i)];
+            }
+        }
+        if p == 0 {
+            out.fill(0.0);
+            return;
+        }
+        matmul(
+            out.as_mut(),
+            Accum::Replace,
+            self.g.as_ref().subcols(0, p),
+            self.sum.as_ref().subrows(0, p),
+            1.0,
+            Par::Seq,
+        );
+    }
+
     /// Records the state's coordinates λˢ and those of the last linear stage's solution
     /// s₁ + s₂ (λ¹ + λ²) in `history`, after it recorded the same iterate's fields
     /// ([`AndersonHistory::record_coordinates`]).

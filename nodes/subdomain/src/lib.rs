@@ -111,7 +111,7 @@ pub struct SubdomainNode {
     modes: Option<ModeForm>,
     particular: Option<ParticularModes>,
     /// With PGD: (w, f) lag behind the mode form until a consumer needs them
-    /// ([`Self::expand_state`]: Anderson's record, the compression, the displacement).
+    /// ([`Self::expand_state`]: the compression, the displacement).
     fields_stale: bool,
     log: Option<LinearStageLog>,
     record: LinearStageRecord,
@@ -387,20 +387,17 @@ impl SubdomainNode {
     }
 
     /// [`Self::finish_linear_stage`] in mode form: the relaxation in coordinates, or with
-    /// Anderson from iteration 1 on the record of the iterate (fields for the least-squares
-    /// problem, coordinates for the step) and from iteration 2 on its Gram partials.
+    /// Anderson from iteration 1 on the record of the iterate (its force residual
+    /// G(λ¹ + λ² − λˢ) for the least-squares problem, its coordinates for the step) and from
+    /// iteration 2 on its Gram partials. Neither the state nor its image is expanded.
     fn finish_pgd(&mut self, mu: f64) -> Message {
         let t0 = Instant::now();
         let flops0 = self.flops();
-        if self.anderson.is_some() && self.iteration >= 1 {
-            self.expand_state();
-        }
         let pgd = self.pgd.as_mut().expect("PGD stage");
         match self.anderson.as_mut() {
             Some(history) if self.iteration >= 1 => {
-                // G(s) = s₁ + s₂ as fields: the least-squares problem is on the forces.
-                pgd.expand_into(self.solver.w_d.as_ref(), self.w1.as_mut(), self.f1.as_mut(), true);
-                history.record(&self.w, &self.f, &self.w1, &self.f1);
+                pgd.residual_forces_into(self.f1.as_mut());
+                history.record_residual(&self.f1);
                 pgd.record_coordinates(history);
                 if self.iteration >= 2 {
                     let p = history.partials();
