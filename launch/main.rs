@@ -71,6 +71,10 @@ enum Command {
         /// prints a comparison table).
         #[arg(long, alias = "linear-stages", value_delimiter = ',')]
         variants: Vec<String>,
+        /// Stop each run at the first iteration whose contact-traction error against the
+        /// reference is at most this (e.g. 1e-3), instead of at the tolerance or iteration cap.
+        #[arg(long)]
+        stop_at_error: Option<f64>,
     },
     /// Run a scene in-process and split an iteration's time by stage, against the machine's
     /// measured dense-product rate and memory bandwidth (`<scene>-bench.json`; use a release build).
@@ -333,14 +337,19 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             tolerance,
             max_iterations,
             variants,
-        } if !variants.is_empty() => report_variants(&scene, &out, tolerance, max_iterations, &variants),
-        Command::Report {
-            scene,
-            out,
-            tolerance,
-            max_iterations,
-            ..
-        } => report(&scene, &out, tolerance, max_iterations),
+            stop_at_error,
+        } => {
+            if let Some(e) = stop_at_error {
+                if !(e > 0.0 && e.is_finite()) {
+                    anyhow::bail!("--stop-at-error {e}: must be a positive number");
+                }
+            }
+            if variants.is_empty() {
+                report(&scene, &out, tolerance, max_iterations, stop_at_error)
+            } else {
+                report_variants(&scene, &out, tolerance, max_iterations, &variants, stop_at_error)
+            }
+        }
         Command::Stability { quick, only, list, out } => stability(quick, &only, list, &out),
         Command::Bench {
             scene,
@@ -748,10 +757,11 @@ fn report(
     out: &std::path::Path,
     tolerance: f64,
     max_iterations: Option<usize>,
+    stop_at: Option<f64>,
 ) -> anyhow::Result<ExitCode> {
     let sc = load_with_overrides(scene, out, Some(tolerance), max_iterations)?;
     let run_id = default_run_id()?;
-    let (report, _, _) = build_report(&sc, &run_id)?;
+    let (report, _, _) = build_report(&sc, &run_id, stop_at)?;
     let name = &sc.model.name;
     let j = write_json(out, &format!("{name}-report.json"), &serde_json::to_value(&report)?)?;
     let svg_path = out.join(format!("{name}-report.svg"));
@@ -790,6 +800,7 @@ fn report_variants(
     tolerance: f64,
     max_iterations: Option<usize>,
     names: &[String],
+    stop_at: Option<f64>,
 ) -> anyhow::Result<ExitCode> {
     let variants = names
         .iter()
@@ -801,7 +812,7 @@ fn report_variants(
     let sc = load_with_overrides(scene, out, Some(tolerance), max_iterations)?;
     // In-process runs only: the run id names nothing on a network.
     let run_id = format!("{}-report", sc.model.name);
-    let (reports, _) = glissade::report::build_reports(&sc, &run_id, &variants)?;
+    let (reports, _) = glissade::report::build_reports(&sc, &run_id, &variants, stop_at)?;
     let name = &sc.model.name;
     println!(
         "scene `{name}`: reference {:.2} s ({} Newton iterations), N = {}",

@@ -5,14 +5,15 @@
 //! iteration's messages on the bus and, with PGD, every subdomain's basis size per iteration
 //! (plotted under the errors).
 
-use crate::runner::{run_in_process_logged, AndersonTally, RunOptions, RunResult};
+use crate::runner::{run_in_process_logged_until, AndersonTally, RunOptions, RunResult};
 use glissade_mechanics::local::ReferenceErrors;
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
 use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion};
-use glissade_messages::{encode, Stage};
+use glissade_messages::{encode, Stage, Verdict};
 use glissade_replay::BoundaryStates;
 use serde::Serialize;
+use std::cell::Cell;
 use std::time::Instant;
 
 /// One LATIN iteration of the report.
@@ -84,11 +85,16 @@ pub struct Report {
 
 /// Solves the reference and runs LATIN (with the scene's solver settings), measuring the error at
 /// every iteration.
-pub fn build_report(scene: &LoadedScene, run_id: &str) -> anyhow::Result<(Report, ReferenceSolution, RunResult)> {
+/// `stop_at` as in [`build_reports`].
+pub fn build_report(
+    scene: &LoadedScene,
+    run_id: &str,
+    stop_at: Option<f64>,
+) -> anyhow::Result<(Report, ReferenceSolution, RunResult)> {
     let t0 = Instant::now();
     let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
     let reference_s = t0.elapsed().as_secs_f64();
-    let (report, result) = report_against(scene, run_id, &reference, reference_s)?;
+    let (report, result) = report_against(scene, run_id, &reference, reference_s, stop_at)?;
     Ok((report, reference, result))
 }
 
@@ -134,11 +140,13 @@ impl std::str::FromStr for Variant {
 }
 
 /// One report per variant against one reference solve (back to back in one process, so their
-/// times compare on a shared machine).
+/// times compare on a shared machine). With `stop_at`, each variant stops at the first iteration
+/// whose contact-traction error is at most that (the accuracies below it are then not reached).
 pub fn build_reports(
     scene: &LoadedScene,
     run_id: &str,
     variants: &[Variant],
+    stop_at: Option<f64>,
 ) -> anyhow::Result<(Vec<Report>, ReferenceSolution)> {
     let t0 = Instant::now();
     let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
@@ -151,7 +159,7 @@ pub fn build_reports(
             (Some(Acceleration::Anderson { .. }), Acceleration::Anderson { .. }) | (None, _) => {}
             (Some(a), _) => sc.model.solver.acceleration = a,
         }
-        reports.push(report_against(&sc, run_id, &reference, reference_s)?.0);
+        reports.push(report_against(&sc, run_id, &reference, reference_s, stop_at)?.0);
     }
     Ok((reports, reference))
 }
@@ -170,6 +178,7 @@ fn report_against(
     run_id: &str,
     reference: &ReferenceSolution,
     reference_s: f64,
+    stop_at: Option<f64>,
 ) -> anyhow::Result<(Report, RunResult)> {
     let model = &scene.model;
     let mut tracker = ReferenceErrors::new(model);
@@ -182,10 +191,12 @@ fn report_against(
         run_id: run_id.to_string(),
         interior: false,
     };
-    let (result, records) = run_in_process_logged(
+    // The smallest traction error measured so far (the observer sets it, the decisions read it).
+    let best = Cell::new(f64::INFINITY);
+    let (result, records) = run_in_process_logged_until(
         scene,
         &opts,
-        |_| {},
+        |_| stop_at.is_none_or(|e| best.get() > e),
         |m| {
             let t = Instant::now();
             if !matches!(m.envelope.stage, Stage::Setup | Stage::Final) {
@@ -212,6 +223,7 @@ fn report_against(
                     &reference.interfaces,
                 ) {
                     errors.push((m.envelope.iteration, e_f, e_w));
+                    best.set(best.get().min(e_f));
                 }
             }
             t.elapsed()
@@ -282,7 +294,10 @@ fn report_against(
         reference_max_newton_per_step: reference.newton_iterations.iter().copied().max().unwrap_or(0),
         latin_setup_s: result.setup_s,
         latin_solve_s: result.solve_s,
-        latin_verdict: format!("{:?}", result.verdict),
+        latin_verdict: match (result.verdict.clone(), stop_at) {
+            (Verdict::Continue, Some(e)) => format!("stopped at a traction error ≤ {e:e}"),
+            (v, _) => format!("{v:?}"),
+        },
         acceleration: match model.solver.acceleration {
             Acceleration::None => "none".into(),
             Acceleration::Anderson { window } => format!("anderson({window})"),

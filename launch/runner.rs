@@ -337,7 +337,18 @@ pub fn run_in_process_observed(
     on_iteration: impl FnMut(&IterationRecord),
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<RunResult, RunError> {
-    run_logged(scene, opts, on_iteration, observe, None, None)
+    let mut on_iteration = on_iteration;
+    run_logged(
+        scene,
+        opts,
+        |r| {
+            on_iteration(r);
+            true
+        },
+        observe,
+        None,
+        None,
+    )
 }
 
 /// As [`run_in_process_observed`], and returns every subdomain's linear-stage records (wall
@@ -345,7 +356,22 @@ pub fn run_in_process_observed(
 pub fn run_in_process_logged(
     scene: &LoadedScene,
     opts: &RunOptions,
-    on_iteration: impl FnMut(&IterationRecord),
+    mut on_iteration: impl FnMut(&IterationRecord),
+    observe: impl FnMut(&Message) -> Duration,
+) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
+    let keep_going = |r: &IterationRecord| {
+        on_iteration(r);
+        true
+    };
+    run_in_process_logged_until(scene, opts, keep_going, observe)
+}
+
+/// As [`run_in_process_logged`], and the run stops after the first iteration for which
+/// `keep_going` returns false (its verdict is then that iteration's, usually `Continue`).
+pub fn run_in_process_logged_until(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    on_iteration: impl FnMut(&IterationRecord) -> bool,
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
     let log = LinearStageLog::default();
@@ -359,14 +385,14 @@ pub fn run_in_process_logged(
 /// (what `glissade bench` splits an iteration by).
 pub fn run_in_process_timed(scene: &LoadedScene, opts: &RunOptions) -> Result<(RunResult, Vec<HandleTime>), RunError> {
     let mut times = Vec::new();
-    let result = run_logged(scene, opts, |_| {}, |_| Duration::ZERO, None, Some(&mut times))?;
+    let result = run_logged(scene, opts, |_| true, |_| Duration::ZERO, None, Some(&mut times))?;
     Ok((result, times))
 }
 
 fn run_logged(
     scene: &LoadedScene,
     opts: &RunOptions,
-    mut on_iteration: impl FnMut(&IterationRecord),
+    mut on_iteration: impl FnMut(&IterationRecord) -> bool,
     mut observe: impl FnMut(&Message) -> Duration,
     log: Option<LinearStageLog>,
     timing: Option<&mut Vec<HandleTime>>,
@@ -421,8 +447,9 @@ fn run_logged(
                     elapsed_s: t1.elapsed().saturating_sub(observer_time).as_secs_f64(),
                     decision: d.clone(),
                 };
-                on_iteration(&rec);
+                let keep_going = on_iteration(&rec);
                 iterations.push(rec);
+                return keep_going;
             }
             Payload::InterfaceSolution(s) => interfaces.push(s.clone()),
             Payload::Displacement { subdomain, u } => displacements.push((*subdomain, u.clone())),

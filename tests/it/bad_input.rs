@@ -192,6 +192,12 @@ const CASES: &[Case] = &[
         error: "error: invalid value 'tiny' for '--tolerance <TOLERANCE>': invalid float literal",
     },
     Case {
+        name: "report stop-at-error not positive",
+        args: &["report", "--out", "{out}", "--stop-at-error=-1e-3", "{scene}"],
+        edits: &[],
+        error: "error: --stop-at-error -0.001: must be a positive number",
+    },
+    Case {
         name: "unknown stability case",
         args: &["stability", "--out", "{out}", "--case", "no-such-case"],
         edits: &[],

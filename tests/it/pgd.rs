@@ -200,7 +200,7 @@ fn reports_compare_linear_stages() {
     sc.model.solver.acceleration = Acceleration::None;
     let mut variants = [LinearStage::Condensed, LinearStage::Pgd].map(Variant::from).to_vec();
     variants.push("pgd+anderson".parse().expect("a variant"));
-    let (reports, _) = build_reports(&sc, "pgd-report", &variants).expect("reports");
+    let (reports, _) = build_reports(&sc, "pgd-report", &variants, None).expect("reports");
     let (c, p, pa) = (&reports[0], &reports[1], &reports[2]);
     // The third variant replaces the scene's plain relaxation by Anderson mixing: every iteration
     // from iteration 2 on (iterations 0 and 1 only record) takes one Anderson step (mixed,
@@ -248,6 +248,33 @@ fn reports_compare_linear_stages() {
     assert!(!plot_svg(c).contains("PGD basis size per subdomain"));
 }
 
+/// `glissade report --stop-at-error e`: each run stops at the first iteration whose traction
+/// error is at most e, with the same iterates as the run that goes on (the solver is
+/// deterministic, so the errors agree bit for bit).
+#[test]
+fn reports_stop_at_an_accuracy() {
+    let mut sc = scene_file("two-blocks");
+    sc.model.solver.max_iterations = 60;
+    let variants = [Variant::from(LinearStage::Condensed)];
+    let (full, _) = build_reports(&sc, "stop-full", &variants, None).expect("report");
+    let full = &full[0];
+    assert!(full.points.len() > 20, "{} iterations", full.points.len());
+    // An accuracy the run reaches about a third of the way in.
+    let e = full.points[full.points.len() / 3].traction_error;
+    let k = full.points.iter().position(|p| p.traction_error <= e).expect("reached");
+    let (stopped, _) = build_reports(&sc, "stop-early", &variants, Some(e)).expect("report");
+    let stopped = &stopped[0];
+    assert_eq!(stopped.points.len(), k + 1, "{}", stopped.latin_verdict);
+    for (a, b) in stopped.points.iter().zip(&full.points) {
+        assert_eq!((a.iteration, a.traction_error), (b.iteration, b.traction_error));
+    }
+    assert!(
+        stopped.latin_verdict.starts_with("stopped at a traction error"),
+        "{}",
+        stopped.latin_verdict
+    );
+}
+
 /// Flops of the three linear stages in the report and the run summary: condensed and sparse
 /// make the same products and solves every iteration (their counts per iteration are the
 /// formulas of the solver's kernels, from n_b, n_m, N + 1 and nnz(L)); PGD's vary with its basis.
@@ -261,7 +288,7 @@ fn reports_count_linear_stage_flops() {
     sc.model.solver.max_iterations = 8;
     sc.model.solver.acceleration = Acceleration::None;
     let variants = [LinearStage::Condensed, LinearStage::Sparse, LinearStage::Pgd].map(Variant::from);
-    let (reports, _) = build_reports(&sc, "flops", &variants).expect("reports");
+    let (reports, _) = build_reports(&sc, "flops", &variants, None).expect("reports");
     let model = &sc.model;
     let plan = Plan::new(model).with_scene(&sc);
     assert!(

@@ -295,7 +295,7 @@ fn replay_logs_the_error_against_the_reference_as_the_report_measures_it() {
     let dir = temp_dir("reference");
     let text = scene_text("small-three-layer");
     let path = record(&text, &dir, "rx-ref");
-    let (report, _, _) = glissade::report::build_report(&scene(&text), "rx-ref-report").unwrap();
+    let (report, _, _) = glissade::report::build_report(&scene(&text), "rx-ref-report", None).unwrap();
     let summary = glissade_replay::replay(
         &Recording::open(&path).unwrap(),
         &glissade_replay::ReplayOptions {
