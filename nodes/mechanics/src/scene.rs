@@ -289,10 +289,11 @@ impl LinearStage {
 
     /// The stage a subdomain with n_b boundary entries uses: `Auto` resolves to `Condensed`, the
     /// fastest to a contact-traction error of 1e-3 on every measured case (README "PGD linear
-    /// stage", N = 100, one run per scene): stratified (n_b ≤ 328) condensed 22.2 s, PGD 29.7 s,
-    /// sparse 213.1 s; layered (n_b ≈ 960) condensed 76.0 s, PGD 156.3 s. The PGD basis grows
-    /// to a large fraction of n_b on these scenes, so no boundary size measured favours it; PGD
-    /// was faster only to 1e-2 on layered (7.5 s against 9.8 s), where building A_E dominates.
+    /// stage", with Anderson, N = 100 and N = 1000): stratified (n_b ≤ 328) condensed 2.18 s and
+    /// 14.38 s, PGD 6.73 s and 55.93 s, sparse 29.77 s and 331.96 s; layered (n_b ≈ 960)
+    /// condensed 3.61 s and 62.35 s, PGD 18.93 s and 214.58 s, sparse 30.24 s and 938.30 s. The
+    /// PGD basis grows to a large fraction of n_b on both (188 of 328, 677 of about 960), so no
+    /// boundary size measured favours it; it comes close only to 1e-2 at N = 100.
     pub fn resolve(self, _n_boundary: usize) -> LinearStage {
         match self {
             LinearStage::Auto => LinearStage::Condensed,
