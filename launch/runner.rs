@@ -334,10 +334,9 @@ pub fn run_in_process(
 pub fn run_in_process_observed(
     scene: &LoadedScene,
     opts: &RunOptions,
-    on_iteration: impl FnMut(&IterationRecord),
+    mut on_iteration: impl FnMut(&IterationRecord),
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<RunResult, RunError> {
-    let mut on_iteration = on_iteration;
     run_logged(
         scene,
         opts,

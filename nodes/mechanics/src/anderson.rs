@@ -125,6 +125,19 @@ struct Coordinates {
     p_rows: usize,
 }
 
+/// One record's pass over the columns ([`AndersonHistory::begin_record`]): the slot it writes,
+/// whether it stores a difference, the stored slots it sums against (the first `n_slots`), and
+/// the sums so far.
+struct RecordPass {
+    slot: usize,
+    push: bool,
+    slots: [usize; MAX_SLOTS],
+    n_slots: usize,
+    gram_new: [f64; MAX_SLOTS],
+    projection: [f64; MAX_SLOTS],
+    residual2: f64,
+}
+
 impl AndersonHistory {
     /// A history of `window` ≥ 1 differences of states with W and F of `rows` × `cols`, mixed with
     /// damping `mu`.
@@ -203,7 +216,7 @@ impl AndersonHistory {
     /// differences here (do not call [`Self::apply`] for the same step as well).
     pub fn apply_coordinates(&mut self, step: &AndersonStep, mut out: MatMut<'_, f64>) {
         let gamma = self.begin_step(step);
-        let slots: [usize; MAX_SLOTS] = std::array::from_fn(|i| if i < self.len { self.slot(i) } else { 0 });
+        let slots = self.stored_slots();
         let c = self.coords.as_ref().expect("history without coordinates");
         assert_eq!((out.nrows(), out.ncols()), (c.p_rows, self.cols), "coordinates shape");
         for j in 0..self.cols {
@@ -281,11 +294,8 @@ impl AndersonHistory {
         }
         let image = |a: &[f64], b: &[f64], r: usize| if SUM { a[r] + b[r] } else { a[r] };
         let mu = self.mu;
-        let (slot, push, slots) = self.begin_record();
-        let slots = &slots[..if push { self.len } else { 0 }];
-        let mut gram_new = [-0.0f64; MAX_SLOTS];
-        let mut projection = [-0.0f64; MAX_SLOTS];
-        let mut residual2 = -0.0f64;
+        let mut pass = self.begin_record();
+        let (slot, push) = (pass.slot, pass.push);
         for j in 0..self.cols {
             let (sw, gw, hw) = (s_w.col_as_slice(j), g_w[0].col_as_slice(j), g_w[1].col_as_slice(j));
             let pw = self.p_w.col_as_slice_mut(j);
@@ -322,9 +332,9 @@ impl AndersonHistory {
                     rf[r] = res;
                 }
             }
-            self.accumulate_column(j, slot, slots, &mut gram_new, &mut projection, &mut residual2);
+            self.accumulate_column(j, &mut pass);
         }
-        self.end_record(slot, push, slots, &gram_new, &projection, residual2);
+        self.end_record(&pass);
     }
 
     /// Records an iterate whose state is mixed in coordinates only ([`Self::record_coordinates`],
@@ -333,11 +343,8 @@ impl AndersonHistory {
     /// new Gram column, the projections and ‖r_F‖².
     pub fn record_residual(&mut self, r_f: &Mat<f64>) {
         assert_eq!((r_f.nrows(), r_f.ncols()), (self.rows, self.cols), "residual shape");
-        let (slot, push, slots) = self.begin_record();
-        let slots = &slots[..if push { self.len } else { 0 }];
-        let mut gram_new = [-0.0f64; MAX_SLOTS];
-        let mut projection = [-0.0f64; MAX_SLOTS];
-        let mut residual2 = -0.0f64;
+        let mut pass = self.begin_record();
+        let (slot, push) = (pass.slot, pass.push);
         for j in 0..self.cols {
             let new = r_f.col_as_slice(j);
             let rf = self.r_f.col_as_slice_mut(j);
@@ -350,60 +357,57 @@ impl AndersonHistory {
             } else {
                 rf.copy_from_slice(new);
             }
-            self.accumulate_column(j, slot, slots, &mut gram_new, &mut projection, &mut residual2);
+            self.accumulate_column(j, &mut pass);
         }
-        self.end_record(slot, push, slots, &gram_new, &projection, residual2);
+        self.end_record(&pass);
     }
 
-    /// The slot a record writes, whether it stores a difference (it has a previous iterate), and
-    /// the stored slots oldest first (the first `len` entries, after this record's).
-    fn begin_record(&mut self) -> (usize, bool, [usize; MAX_SLOTS]) {
+    /// The stored slots oldest first (the first `len` entries; the rest 0).
+    fn stored_slots(&self) -> [usize; MAX_SLOTS] {
+        std::array::from_fn(|i| if i < self.len { self.slot(i) } else { 0 })
+    }
+
+    /// Starts a record's pass: advances the ring if the record stores a difference (it has a
+    /// previous iterate), and returns the slot it writes, the stored slots and empty sums.
+    fn begin_record(&mut self) -> RecordPass {
         let slot = self.next;
         let push = self.has_last;
         if push {
             self.len = (self.len + 1).min(self.window);
             self.next = (self.next + 1) % self.window;
         }
-        let slots: [usize; MAX_SLOTS] = std::array::from_fn(|i| if i < self.len { self.slot(i) } else { 0 });
-        (slot, push, slots)
+        RecordPass {
+            slot,
+            push,
+            slots: self.stored_slots(),
+            n_slots: if push { self.len } else { 0 },
+            gram_new: [-0.0; MAX_SLOTS],
+            projection: [-0.0; MAX_SLOTS],
+            residual2: -0.0,
+        }
     }
 
     /// Adds column j's share of the new Gram column Δr_newᵀΔr_i, the projections Δr_iᵀ r and ‖r‖².
-    fn accumulate_column(
-        &self,
-        j: usize,
-        slot: usize,
-        slots: &[usize],
-        gram_new: &mut [f64; MAX_SLOTS],
-        projection: &mut [f64; MAX_SLOTS],
-        residual2: &mut f64,
-    ) {
-        let (drf, rf) = (self.dr_f[slot].col_as_slice(j), self.r_f.col_as_slice(j));
-        for (i, &other) in slots.iter().enumerate() {
+    fn accumulate_column(&self, j: usize, pass: &mut RecordPass) {
+        let (drf, rf) = (self.dr_f[pass.slot].col_as_slice(j), self.r_f.col_as_slice(j));
+        for (i, &other) in pass.slots[..pass.n_slots].iter().enumerate() {
             let d_other = self.dr_f[other].col_as_slice(j);
-            gram_new[i] += dot(drf, d_other);
-            projection[i] += dot(d_other, rf);
+            pass.gram_new[i] += dot(drf, d_other);
+            pass.projection[i] += dot(d_other, rf);
         }
-        *residual2 += dot(rf, rf);
+        pass.residual2 += dot(rf, rf);
     }
 
     /// Stores a record's sums.
-    fn end_record(
-        &mut self,
-        slot: usize,
-        push: bool,
-        slots: &[usize],
-        gram_new: &[f64; MAX_SLOTS],
-        projection: &[f64; MAX_SLOTS],
-        residual2: f64,
-    ) {
+    fn end_record(&mut self, pass: &RecordPass) {
+        let slot = pass.slot;
         self.has_last = true;
-        self.last_slot = push.then_some(slot);
-        self.residual2 = residual2;
-        for (i, &other) in slots.iter().enumerate() {
-            self.gram[slot * self.window + other] = gram_new[i];
-            self.gram[other * self.window + slot] = gram_new[i];
-            self.projection[other] = projection[i];
+        self.last_slot = pass.push.then_some(slot);
+        self.residual2 = pass.residual2;
+        for (i, &other) in pass.slots[..pass.n_slots].iter().enumerate() {
+            self.gram[slot * self.window + other] = pass.gram_new[i];
+            self.gram[other * self.window + slot] = pass.gram_new[i];
+            self.projection[other] = pass.projection[i];
         }
     }
 
