@@ -42,6 +42,9 @@ const EXIT_GRACE: Duration = Duration::from_secs(3);
 const STOP_TIMEOUT: Duration = Duration::from_secs(5);
 /// How long nodes started by hand may take to leave once the run has ended.
 const FINISH_TIMEOUT: Duration = Duration::from_secs(30);
+/// How long a node process whose nodes are finished waits for the launcher's word that it holds
+/// the run's results before it leaves anyway.
+const DONE_TIMEOUT: Duration = Duration::from_secs(30);
 /// Longest wait, once every node process has exited, for its last messages still on their way
 /// through the router.
 const STRAGGLER_TIMEOUT: Duration = Duration::from_secs(5);
@@ -635,6 +638,14 @@ pub fn run_distributed_observed(
     };
 
     let mut got = Collected::default();
+    // The launcher tells the nodes to leave once it holds the final decision and every final
+    // output (a node that closed its session right after its last put could lose it).
+    let final_displacements: usize = if opts.interior {
+        groups.iter().map(Vec::len).sum()
+    } else {
+        0
+    };
+    let mut done_sent = false;
     let mut heard: std::collections::HashSet<u64> = std::collections::HashSet::new();
     let mut traffic = Traffic::default();
     let mut remote_lost: BTreeMap<NodeName, Instant> = BTreeMap::new();
@@ -793,6 +804,14 @@ pub fn run_distributed_observed(
                 if let Some(rec) = got.take(m) {
                     stop_seen |= rec.decision.verdict.is_stop();
                     on_iteration(rec);
+                }
+                if !done_sent
+                    && stop_seen
+                    && got.interfaces.len() == model.interfaces.len()
+                    && got.displacements.len() >= final_displacements
+                {
+                    transport::publish_done(&session, run_id)?;
+                    done_sent = true;
                 }
             }
             Err(_) => {
@@ -1091,6 +1110,7 @@ pub fn run_node_process(
         departure_grace: DEPARTURE_GRACE,
         supervised: supervision.supervised,
         resume: supervision.resume,
+        done_timeout: DONE_TIMEOUT,
     };
     let outcome = transport::run_nodes(&session, &run, nodes, |l| eprintln!("{l}"));
     let _ = session.close().wait();

@@ -11,6 +11,11 @@
 //! 3. the launcher waits until every expected token is alive, then publishes `start`;
 //! 4. only then do nodes call [`Node::start`] and publish.
 //!
+//! End without lost messages: a put returns once the message is queued, so a process that closed
+//! its session right after its last put could lose it. A process whose nodes are finished waits
+//! (bounded) for the launcher's `done`, published once it holds the final decision and every
+//! final output, and only then leaves.
+//!
 //! Failure: every node process watches the liveliness tokens of the run (the launcher's and every
 //! other node's: each node's progress depends on all of them). A token that disappears while this
 //! process still has work stops it with an error naming the peer, after a short grace period in
@@ -84,6 +89,12 @@ pub fn start_key(run_id: &str) -> String {
 /// Key the launcher publishes on to stop every node of a run (payload: the reason, UTF-8).
 pub fn stop_key(run_id: &str) -> String {
     format!("glissade/{run_id}/launcher/0/stop")
+}
+
+/// Key the launcher publishes on once it holds the run's results (the final decision and every
+/// final output): node processes leave only then.
+pub fn done_key(run_id: &str) -> String {
+    format!("glissade/{run_id}/launcher/0/done")
 }
 
 /// Liveliness token of a node (the launcher's is role `launcher`, index 0).
@@ -328,6 +339,9 @@ pub struct NodeRun {
     /// This process replaces one that died mid-run: it rebuilds its nodes' state from the
     /// recorder's log of the run ([`fetch_log`]) instead of waiting for the launcher's start.
     pub resume: bool,
+    /// Longest wait, once this process's nodes are finished, for the launcher's word that it
+    /// holds the run's results ([`publish_done`]); past it the process leaves anyway (logged).
+    pub done_timeout: Duration,
 }
 
 /// What reaches a node process from the bus.
@@ -335,6 +349,8 @@ enum Event {
     Data(String, Vec<u8>),
     Start,
     Stop(String),
+    /// The launcher holds the run's results: leaving is safe.
+    Done,
     /// A liveliness token appeared (true) or disappeared (false).
     Alive(String, bool),
 }
@@ -396,15 +412,15 @@ pub fn run_nodes(
             .map_err(|e| zerr(&format!("subscribe {key}"), e))?;
         subscribers.push(sub);
     }
-    for (key, is_stop) in [(start_key(run_id), false), (stop_key(run_id), true)] {
+    for (key, control) in [(start_key(run_id), 0), (stop_key(run_id), 1), (done_key(run_id), 2)] {
         let tx = tx.clone();
         let sub = session
             .declare_subscriber(key.as_str())
             .callback(move |s| {
-                let _ = tx.send(if is_stop {
-                    Event::Stop(String::from_utf8_lossy(&s.payload().to_bytes()).into_owned())
-                } else {
-                    Event::Start
+                let _ = tx.send(match control {
+                    0 => Event::Start,
+                    1 => Event::Stop(String::from_utf8_lossy(&s.payload().to_bytes()).into_owned()),
+                    _ => Event::Done,
                 });
             })
             .wait()
@@ -531,7 +547,7 @@ pub fn run_nodes(
                     })
                 }
                 Ok(Event::Data(key, bytes)) => early.push_back((key, bytes)),
-                Ok(Event::Alive(..)) => {}
+                Ok(Event::Alive(..)) | Ok(Event::Done) => {}
                 Err(_) => {
                     return Err(TransportError::Protocol(format!(
                         "the launcher did not start the run within {:?}",
@@ -553,6 +569,8 @@ pub fn run_nodes(
     // The peers that left (first first), and when this process gives up on them.
     let mut departed: Vec<String> = Vec::new();
     let mut give_up: Option<Instant> = None;
+    // The launcher may hold every result before a node here has heard the final decision.
+    let mut done = false;
     while !nodes.iter().all(|n| n.is_finished()) {
         let now = Instant::now();
         if give_up.is_some_and(|t| now >= t) {
@@ -588,7 +606,29 @@ pub fn run_nodes(
                 give_up.get_or_insert_with(|| Instant::now() + run.departure_grace);
                 departed.push(key);
             }
+            Ok(Event::Done) => done = true,
             Ok(Event::Alive(..)) | Ok(Event::Start) | Err(_) => {}
+        }
+    }
+    // A put returns once the message is queued, not delivered: closing the session right after
+    // the last one can lose it. Leave once the launcher says it holds the run's results.
+    let deadline = Instant::now() + run.done_timeout;
+    while !done {
+        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok(Event::Done) => done = true,
+            Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
+            Ok(Event::Alive(key, false)) if key == launcher_token => {
+                log("the launcher left before it acknowledged the run's results; leaving");
+                break;
+            }
+            Ok(_) => {}
+            Err(_) => {
+                log(&format!(
+                    "the launcher did not acknowledge the run's results within {:?}; leaving",
+                    run.done_timeout
+                ));
+                break;
+            }
         }
     }
     Ok(())
@@ -669,6 +709,11 @@ fn put_control(session: &Session, key: String, payload: Vec<u8>) -> Result<(), T
 /// Tells every node of a run to start (once all are ready).
 pub fn publish_start(session: &Session, run_id: &str) -> Result<(), TransportError> {
     put_control(session, start_key(run_id), Vec::new())
+}
+
+/// Tells every node of a run that the launcher holds the run's results: they may leave.
+pub fn publish_done(session: &Session, run_id: &str) -> Result<(), TransportError> {
+    put_control(session, done_key(run_id), Vec::new())
 }
 
 /// Tells every node of a run to stop now, with the reason.
@@ -838,6 +883,140 @@ mod tests {
         .unwrap();
         assert_eq!(back, msg);
         drop(router);
+    }
+
+    /// A node that publishes one multi-MB message on start and is then finished.
+    struct OneShot {
+        msg: Message,
+        done: bool,
+    }
+
+    impl Node for OneShot {
+        fn id(&self) -> NodeId {
+            self.msg.envelope.sender
+        }
+        fn subscriptions(&self) -> Vec<String> {
+            Vec::new()
+        }
+        fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+            self.done = true;
+            Ok(vec![self.msg.clone()])
+        }
+        fn handle(&mut self, _: &Message) -> Result<Vec<Message>, NodeError> {
+            Ok(Vec::new())
+        }
+        fn is_finished(&self) -> bool {
+            self.done
+        }
+    }
+
+    /// A process whose nodes are finished leaves only once the launcher says `done` (its last
+    /// put may still be queued), and without it only after its bounded wait, saying so.
+    #[test]
+    fn finished_process_waits_for_the_launchers_done() {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let launcher = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+        let run_id = "done";
+        let expected = Expected {
+            run_id: run_id.into(),
+            scene_fingerprint: 1,
+        };
+        let msg = Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: run_id.into(),
+                scene_fingerprint: 1,
+                iteration: 3,
+                stage: Stage::Final,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index: 0,
+                },
+            },
+            payload: Payload::Displacement {
+                subdomain: 0,
+                u: Field::from_fn(400, 1001, |r, c| (r + 2 * c) as f64),
+            },
+        };
+        let (tx, rx) = mpsc::channel::<Vec<u8>>();
+        let _sub = launcher
+            .declare_subscriber(msg.topic())
+            .callback(move |s| {
+                let _ = tx.send(s.payload().to_bytes().into_owned());
+            })
+            .wait()
+            .unwrap();
+        let (alive_tx, alive_rx) = mpsc::channel::<(String, bool)>();
+        let _alive = watch_tokens(&launcher, run_id, alive_tx, |k, up| (k, up)).unwrap();
+        let _launcher_token = launcher_token(&launcher, run_id).unwrap();
+        let spawn = |done_timeout: Duration| {
+            let (endpoint, expected, msg) = (endpoint.clone(), expected.clone(), msg.clone());
+            std::thread::spawn(move || {
+                let session = open(config("client", &[], &[endpoint], false).unwrap()).unwrap();
+                let run = NodeRun {
+                    run_id: "done".into(),
+                    expected,
+                    token_role: "subdomain".into(),
+                    token_index: 0,
+                    start_timeout: Duration::from_secs(20),
+                    idle_timeout: Duration::from_secs(20),
+                    departure_grace: Duration::from_secs(2),
+                    supervised: false,
+                    resume: false,
+                    done_timeout,
+                };
+                let mut lines = Vec::new();
+                let out = run_nodes(&session, &run, vec![Box::new(OneShot { msg, done: false })], |l| {
+                    lines.push(l.to_string())
+                });
+                let _ = session.close().wait();
+                (out, lines)
+            })
+        };
+        let node_token = alive_key(run_id, "subdomain", 0);
+        let wait_token = || loop {
+            let (k, up) = alive_rx
+                .recv_timeout(Duration::from_secs(20))
+                .expect("the node's token");
+            if k == node_token && up {
+                break;
+            }
+        };
+
+        // Acknowledged: the node is still there a second after its message arrived, and leaves
+        // at once after `done`.
+        let node = spawn(Duration::from_secs(60));
+        wait_token();
+        publish_start(&launcher, run_id).unwrap();
+        let bytes = rx.recv_timeout(Duration::from_secs(20)).expect("the node's output");
+        assert_eq!(decode(&bytes, &expected).unwrap(), msg);
+        std::thread::sleep(Duration::from_secs(1));
+        assert!(!node.is_finished(), "the node left before the launcher's done");
+        let asked = Instant::now();
+        publish_done(&launcher, run_id).unwrap();
+        let (out, lines) = node.join().unwrap();
+        out.unwrap();
+        assert!(asked.elapsed() < Duration::from_secs(10), "{:?}", asked.elapsed());
+        assert!(lines.is_empty(), "{lines:?}");
+
+        // Not acknowledged: the node leaves after its bounded wait and says why.
+        let node = spawn(Duration::from_millis(500));
+        wait_token();
+        publish_start(&launcher, run_id).unwrap();
+        rx.recv_timeout(Duration::from_secs(20)).expect("the node's output");
+        let (out, lines) = node.join().unwrap();
+        out.unwrap();
+        assert!(
+            lines
+                .iter()
+                .any(|l| l.contains("did not acknowledge the run's results")),
+            "{lines:?}"
+        );
     }
 
     /// The recorder's log survives its encoding, and a truncated one is refused with the offset.
