@@ -177,6 +177,9 @@ pub struct Supervision {
     pub supervised: bool,
     /// This process replaces one that died (`glissade node --resume`).
     pub resume: bool,
+    /// Pass fields to processes on this machine through shared memory (`glissade node
+    /// --shared-memory`, the scene's `network.shared_memory`).
+    pub shared_memory: bool,
 }
 
 /// One spawned node process.
@@ -490,13 +493,19 @@ pub fn run_distributed_observed(
         }
     }
     let bus_config = |mode: &str, listen: &[String], connect: &[String]| {
-        transport::secure_config(mode, listen, connect, false, tls.as_ref(), access.as_ref())
-            .context("the bus (the scene's [network] section, --listen, --connect)")
+        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), access.as_ref())
+            .context("the bus (the scene's [network] section, --listen, --connect)")?;
+        transport::set_shared_memory(&mut c, scene.network.shared_memory)?;
+        anyhow::Ok(c)
     };
-    let node_tls = match &scene.network.tls {
+    // How every process joins the bus: TLS, and shared memory when the scene asks for it.
+    let mut node_tls = match &scene.network.tls {
         Some(t) => tls_args(&t.root_ca, t.mutual.then_some((&*t.cert, &*t.key))),
         None => Vec::new(),
     };
+    if scene.network.shared_memory {
+        node_tls.push("--shared-memory".into());
+    }
     // The bus: a router hosted here, or a client of the given router.
     let (session, node_connect, bus) = if net.connect.is_empty() {
         let listen = if net.listen.is_empty() {
@@ -617,6 +626,11 @@ pub fn run_distributed_observed(
             }
             None => Vec::new(),
         };
+        let mut remote_tls = remote_tls;
+        if scene.network.shared_memory {
+            // Only between processes on one machine; across machines Zenoh uses the link.
+            remote_tls.push("--shared-memory".into());
+        }
         for &r in &net.remote {
             eprintln!(
                 "  glissade {}",
@@ -1027,7 +1041,9 @@ pub fn run_node_process(
     if role == NodeRole::Coarse && index != 0 {
         bail!("node {name}: a run has one coarse node, index 0");
     }
-    let config = transport::secure_config("client", &[], connect, false, tls, None).context("--connect, --tls-*")?;
+    let mut config =
+        transport::secure_config("client", &[], connect, false, tls, None).context("--connect, --tls-*")?;
+    transport::set_shared_memory(&mut config, supervision.shared_memory)?;
     let session = transport::open(config).with_context(|| {
         let hint = if tls.is_some() {
             " (TLS: --tls-root-ca must be the run's certificate authority, and with mutual TLS --tls-cert a \

@@ -162,6 +162,10 @@ struct NodeArgs {
     /// Mutual TLS: the private key of `--tls-cert` (PEM).
     #[arg(long, value_name = "PEM", requires = "tls_cert")]
     tls_key: Option<PathBuf>,
+    /// Exchange fields with processes on this machine through shared memory (the launcher passes
+    /// it when the scene says `network.shared_memory = true`).
+    #[arg(long)]
+    shared_memory: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -371,7 +375,13 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     let Some(file) = &args.file else {
                         anyhow::bail!("a recorder node needs --file <recording.mcap>");
                     };
-                    glissade::recording::run_recorder_process(&args.run, &args.connect, tls.as_ref(), file)?;
+                    glissade::recording::run_recorder_process(
+                        &args.run,
+                        &args.connect,
+                        tls.as_ref(),
+                        args.shared_memory,
+                        file,
+                    )?;
                     return Ok(ExitCode::SUCCESS);
                 }
             };
@@ -385,6 +395,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     interior: args.interior,
                     supervised: args.supervised,
                     resume: args.resume,
+                    shared_memory: args.shared_memory,
                 },
                 tls.as_ref(),
             )?;

@@ -350,6 +350,7 @@ pub fn run_recorder_process(
     run_id: &str,
     connect: &[String],
     tls: Option<&glissade_zenoh::Tls>,
+    shared_memory: bool,
     path: &Path,
 ) -> anyhow::Result<()> {
     // SAFETY: the handler only stores to an atomic.
@@ -357,8 +358,9 @@ pub fn run_recorder_process(
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
     }
-    let config =
+    let mut config =
         glissade_zenoh::secure_config("client", &[], connect, false, tls, None).context("--connect, --tls-*")?;
+    glissade_zenoh::set_shared_memory(&mut config, shared_memory)?;
     let session = glissade_zenoh::open(config)?;
     let bytes = glissade_zenoh::fetch_scene(&session, run_id, Duration::from_secs(60))?;
     let fp = glissade_zenoh::scene_fingerprint_of(&bytes, run_id)?;

@@ -320,6 +320,27 @@ fn stratified_over_three_subdomain_processes() {
     assert_identical(&local, &remote);
 }
 
+/// `network.shared_memory = true`: the processes pass their fields (boundary states of about
+/// 160 kB at N = 30, every one above Zenoh's 3 KiB threshold) through shared memory, and the run,
+/// with the displacement fields sent at the end (`interior`: the launcher's `done` then also
+/// waits for them), is bit-identical to the in-process run.
+#[test]
+fn shared_memory_processes_match_in_process_bit_for_bit() {
+    let text = scene_file("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";
+    let sc = scene(&text);
+    assert!(sc.network.shared_memory);
+    let opts = |run_id: &str| RunOptions {
+        run_id: run_id.into(),
+        interior: true,
+    };
+    let local = run_in_process(&sc, &opts("local"), |_| {}).unwrap();
+    let remote = run_multi_process(&sc, &opts("distributed-shm"), exe(), |_| {}).unwrap();
+    assert!(!local.displacements.is_empty());
+    assert_eq!(remote.displacements.len(), local.displacements.len());
+    assert_identical(&local, &remote);
+    assert_eq!(local.displacements, remote.displacements);
+}
+
 /// Two runs of the same scene share one Zenoh router (a stand-in for `zenohd`, the launchers
 /// connect to it as clients) while a third session publishes messages of another run on the
 /// first run's own keys: a stop decision, boundary states, local directions, and a decision of

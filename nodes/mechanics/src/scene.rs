@@ -176,6 +176,9 @@ pub struct Network {
     /// `network.allow`: certificate common names allowed to take part (deny by default); None:
     /// every process the certificate authority vouches for (or any, without TLS).
     pub allow: Option<Vec<String>>,
+    /// `network.shared_memory`: processes on one machine pass fields through shared memory
+    /// instead of loopback sockets (default false).
+    pub shared_memory: bool,
 }
 
 /// `network.tls`: PEM files, as written until [`Network::resolve_files`] makes them relative to
@@ -642,6 +645,7 @@ enum RawInterfaceRef {
 struct RawNetwork {
     tls: Option<RawTls>,
     allow: Option<Vec<String>>,
+    shared_memory: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -1184,6 +1188,7 @@ impl Ctx<'_> {
         Ok(Network {
             tls,
             allow: r.allow.clone(),
+            shared_memory: r.shared_memory.unwrap_or(false),
         })
     }
 
@@ -2943,9 +2948,13 @@ uy = -0.01
                     mutual: true,
                 }),
                 allow: Some(vec!["node-a".into(), "node-b".into()]),
+                shared_memory: false,
             }
         );
         assert!(!load(&net(tls)).unwrap().network.tls.unwrap().mutual);
+        assert!(load(&net("shared_memory = true")).unwrap().network.shared_memory);
+        let e = load(&net("shared_memory = \"yes\"")).unwrap_err().to_string();
+        assert!(e.contains("shared_memory"), "{e}");
         expect_err(&net("allow = [\"node-a\"]"), "network.allow", "it needs network.tls");
         expect_err(
             &net(&format!("{tls}\nallow = [\"node-a\"]")),
@@ -2995,6 +3004,7 @@ uy = -0.01
                 mutual: false,
             }),
             allow: None,
+            shared_memory: false,
         };
         let mut ok = network("tls/node.pem");
         ok.resolve_files(&scene_file).unwrap();

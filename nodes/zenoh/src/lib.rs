@@ -136,7 +136,17 @@ pub fn config(mode: &str, listen: &[String], connect: &[String], multicast: bool
         .map_err(|e| zerr("config connect", e))?;
     c.insert_json5("transport/link/tx/lease", &LEASE.as_millis().to_string())
         .map_err(|e| zerr("config lease", e))?;
+    set_shared_memory(&mut c, false)?;
     Ok(c)
+}
+
+/// Turns Zenoh's shared-memory transport on or off in `c` (off in [`config`]). On, between two
+/// sessions on one machine that both have it on, every payload of 3 KiB or more is copied into a
+/// 16 MiB shared pool and passed by reference instead of through the socket; a payload that
+/// does not fit in the pool, or a peer on another machine, goes over the link.
+pub fn set_shared_memory(c: &mut Config, on: bool) -> Result<(), TransportError> {
+    c.insert_json5("transport/shared_memory/enabled", if on { "true" } else { "false" })
+        .map_err(|e| zerr("config shared_memory", e))
 }
 
 /// TLS of a session (PEM files): links are encrypted and the router's certificate is checked
