@@ -233,8 +233,7 @@ impl Children {
 
 /// A free TCP port on the loopback interface.
 fn free_port() -> anyhow::Result<u16> {
-    let l = std::net::TcpListener::bind("127.0.0.1:0").context("cannot bind a loopback port")?;
-    Ok(l.local_addr()?.port())
+    transport::free_loopback_port().context("cannot bind a loopback port")
 }
 
 /// The endpoint a node on this machine connects to for a router listening on `listen`.
@@ -498,14 +497,14 @@ pub fn run_distributed_observed(
         transport::set_shared_memory(&mut c, scene.network.shared_memory)?;
         anyhow::Ok(c)
     };
-    // How every process joins the bus: TLS, and shared memory when the scene asks for it.
+    // How every process joins the bus: TLS, and shared memory when the scene asks for it (only
+    // between processes on one machine; across machines Zenoh uses the link).
+    let shared_memory_arg = scene.network.shared_memory.then(|| "--shared-memory".to_string());
     let mut node_tls = match &scene.network.tls {
         Some(t) => tls_args(&t.root_ca, t.mutual.then_some((&*t.cert, &*t.key))),
         None => Vec::new(),
     };
-    if scene.network.shared_memory {
-        node_tls.push("--shared-memory".into());
-    }
+    node_tls.extend(shared_memory_arg.clone());
     // The bus: a router hosted here, or a client of the given router.
     let (session, node_connect, bus) = if net.connect.is_empty() {
         let listen = if net.listen.is_empty() {
@@ -609,7 +608,7 @@ pub fn run_distributed_observed(
             remote_timeout.as_secs(),
             net.remote.len()
         );
-        let remote_tls = match &scene.network.tls {
+        let mut remote_tls = match &scene.network.tls {
             Some(t) => {
                 eprintln!(
                     "(TLS: copy {} to the other machine(s){})",
@@ -626,11 +625,7 @@ pub fn run_distributed_observed(
             }
             None => Vec::new(),
         };
-        let mut remote_tls = remote_tls;
-        if scene.network.shared_memory {
-            // Only between processes on one machine; across machines Zenoh uses the link.
-            remote_tls.push("--shared-memory".into());
-        }
+        remote_tls.extend(shared_memory_arg);
         for &r in &net.remote {
             eprintln!(
                 "  glissade {}",

@@ -361,11 +361,7 @@ fn messages_of_another_run_are_ignored() {
         |_| {},
     )
     .unwrap();
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let port = transport::free_loopback_port().unwrap();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let _router =
         transport::open(transport::config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();

@@ -294,11 +294,7 @@ fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String, Scr
     let dir = scratch(name);
     let scene = endless_scene(&dir);
     let run_id = format!("{name}-{}", std::process::id());
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let port = glissade_zenoh::free_loopback_port().unwrap();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let mut cmd = Command::new(exe());
     cmd.arg("run")

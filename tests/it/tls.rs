@@ -29,11 +29,7 @@ fn fixture(name: &str) -> PathBuf {
 }
 
 fn tls_endpoint() -> String {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let port = transport::free_loopback_port().unwrap();
     format!("tls/127.0.0.1:{port}")
 }
 

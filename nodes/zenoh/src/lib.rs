@@ -116,6 +116,12 @@ pub fn node_of_alive_key(key: &str) -> String {
     }
 }
 
+/// A TCP port free on the loopback interface now (the OS picks it; another process could take it
+/// before it is listened on).
+pub fn free_loopback_port() -> std::io::Result<u16> {
+    Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
 /// Session configuration: `mode` ("router", "peer" or "client"), explicit listen and connect
 /// endpoints, multicast scouting off unless asked, link lease [`LEASE`].
 pub fn config(mode: &str, listen: &[String], connect: &[String], multicast: bool) -> Result<Config, TransportError> {
@@ -838,15 +844,24 @@ mod tests {
     use super::*;
     use glissade_messages::{Envelope, Field, NodeId, Payload, Role, Stage, SCHEMA_VERSION};
 
+    /// The payloads `session` receives on `key`, in a channel (keep the subscriber alive).
+    fn received(session: &Session, key: &str) -> (zenoh::pubsub::Subscriber<()>, mpsc::Receiver<Vec<u8>>) {
+        let (tx, rx) = mpsc::channel();
+        let sub = session
+            .declare_subscriber(key)
+            .callback(move |s| {
+                let _ = tx.send(s.payload().to_bytes().into_owned());
+            })
+            .wait()
+            .unwrap();
+        (sub, rx)
+    }
+
     /// A boundary state of several MB (about the size of one subdomain's field at N = 1000)
     /// crosses the router between two client sessions intact, and decodes.
     #[test]
     fn multi_megabyte_message_arrives_intact() {
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
+        let port = free_loopback_port().unwrap();
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let router = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
         let a = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
@@ -870,14 +885,7 @@ mod tests {
                 f: Field::from_fn(rows, cols, |r, c| -((r + c) as f64)),
             },
         };
-        let (tx, rx) = mpsc::channel::<Vec<u8>>();
-        let _sub = b
-            .declare_subscriber(msg.topic())
-            .callback(move |s| {
-                let _ = tx.send(s.payload().to_bytes().into_owned());
-            })
-            .wait()
-            .unwrap();
+        let (_sub, rx) = received(&b, &msg.topic());
         // Let the subscription reach the router before publishing (pub/sub is not durable).
         std::thread::sleep(Duration::from_millis(500));
         publish(&a, &msg).unwrap();
@@ -924,11 +932,7 @@ mod tests {
     /// put may still be queued), and without it only after its bounded wait, saying so.
     #[test]
     fn finished_process_waits_for_the_launchers_done() {
-        let port = std::net::TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
+        let port = free_loopback_port().unwrap();
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let launcher = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
         let run_id = "done";
@@ -953,14 +957,7 @@ mod tests {
                 u: Field::from_fn(400, 1001, |r, c| (r + 2 * c) as f64),
             },
         };
-        let (tx, rx) = mpsc::channel::<Vec<u8>>();
-        let _sub = launcher
-            .declare_subscriber(msg.topic())
-            .callback(move |s| {
-                let _ = tx.send(s.payload().to_bytes().into_owned());
-            })
-            .wait()
-            .unwrap();
+        let (_sub, rx) = received(&launcher, &msg.topic());
         let (alive_tx, alive_rx) = mpsc::channel::<(String, bool)>();
         let _alive = watch_tokens(&launcher, run_id, alive_tx, |k, up| (k, up)).unwrap();
         let _launcher_token = launcher_token(&launcher, run_id).unwrap();
