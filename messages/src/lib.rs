@@ -330,6 +330,40 @@ impl Payload {
         }
     }
 
+    /// Hands the value buffer of every field of the payload to `keep`, e.g. back to its sender's
+    /// pool once the message is delivered (other contents are dropped).
+    pub fn into_buffers(self, mut keep: impl FnMut(Vec<f64>)) {
+        let mut field = |f: Field| keep(f.data);
+        match self {
+            Payload::Scene { .. }
+            | Payload::AndersonStep { .. }
+            | Payload::Decision(_)
+            | Payload::IndicatorPartials { .. } => {}
+            Payload::HomogenizedOperator { l_e, .. } => field(l_e),
+            Payload::MacroForces { forces, .. } => field(forces),
+            Payload::MacroDisplacements { w_tilde, .. } => field(w_tilde),
+            Payload::BoundaryState { w, f, .. } => [w, f].into_iter().for_each(field),
+            Payload::BoundaryModes {
+                particular,
+                z,
+                g,
+                lambda,
+                ..
+            } => {
+                if let Some(p) = particular {
+                    [p.w, p.f, p.time].into_iter().for_each(&mut field);
+                }
+                [z, g, lambda].into_iter().for_each(field);
+            }
+            Payload::LocalDirections { q_hat, .. } => field(q_hat),
+            Payload::AndersonGram { gram, projection, .. } => [gram, projection].into_iter().for_each(field),
+            Payload::InterfaceSolution(s) => [s.w_a, s.w_b, s.f_a, s.f_b, s.w_a_hat, s.w_b_hat, s.f_a_hat, s.f_b_hat]
+                .into_iter()
+                .for_each(field),
+            Payload::Displacement { u, .. } => field(u),
+        }
+    }
+
     /// Subdomain a payload is addressed to, for payloads with one recipient subdomain.
     pub fn destination(&self) -> Option<u32> {
         match self {
@@ -702,6 +736,36 @@ mod tests {
             e.to_string().contains("field `w` declares 3 × 2 values but holds 5"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn into_buffers_hands_back_every_field() {
+        let lengths = |p: Payload| {
+            let mut v = Vec::new();
+            p.into_buffers(|b| v.push(b.len()));
+            v
+        };
+        assert_eq!(lengths(msg().payload), [6, 6]);
+        let modes = Payload::BoundaryModes {
+            subdomain: 2,
+            particular: Some(ParticularModes {
+                w: Field::zeros(3, 1),
+                f: Field::zeros(3, 1),
+                time: Field::zeros(1, 2),
+            }),
+            first_mode: 0,
+            z: Field::zeros(3, 2),
+            g: Field::zeros(3, 2),
+            lambda: Field::zeros(2, 2),
+        };
+        assert_eq!(lengths(modes), [3, 3, 2, 6, 6, 4]);
+        let directions = Payload::LocalDirections {
+            subdomain: 0,
+            interfaces: vec![1],
+            q_hat: Field::zeros(4, 5),
+        };
+        assert_eq!(lengths(directions), [20]);
+        assert!(lengths(Payload::Scene { text: "x".into() }).is_empty());
     }
 
     #[test]

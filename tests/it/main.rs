@@ -2,6 +2,7 @@
 //! analytic references, and the `glissade` binary end to end. One test binary.
 
 mod acceleration;
+mod allocations;
 mod analytic;
 mod bad_input;
 mod bench;
@@ -20,3 +21,6 @@ mod run_id;
 mod stability;
 mod tls;
 mod two_hosts;
+
+#[global_allocator]
+static ALLOCATOR: allocations::Counting = allocations::Counting;

@@ -1,24 +1,201 @@
-//! Conversions between wire fields and faer matrices.
+//! Conversions between wire fields and faer matrices, and the pool that lets a node reuse the
+//! buffers of the fields it sends.
 
-use faer::{Mat, MatRef};
-use glissade_messages::Field;
+use faer::{Mat, MatMut, MatRef};
+use glissade_messages::{Field, Message};
+
+/// Column `j` of a matrix as a slice, when its rows are contiguous.
+fn col(m: MatRef<'_, f64>, j: usize) -> Option<&[f64]> {
+    m.col(j).try_as_col_major().map(|c| c.as_slice())
+}
+
+/// Appends the columns of `m` to `data` (column-major).
+fn extend_columns(data: &mut Vec<f64>, m: MatRef<'_, f64>) {
+    data.reserve(m.nrows() * m.ncols());
+    for j in 0..m.ncols() {
+        match col(m, j) {
+            Some(c) => data.extend_from_slice(c),
+            None => data.extend((0..m.nrows()).map(|r| m[(r, j)])),
+        }
+    }
+}
 
 /// Wire field of a matrix (column-major copy).
 pub fn field_of(m: MatRef<'_, f64>) -> Field {
-    Field::from_fn(m.nrows(), m.ncols(), |r, c| m[(r, c)])
+    let mut data = Vec::new();
+    extend_columns(&mut data, m);
+    Field {
+        rows: m.nrows() as u32,
+        cols: m.ncols() as u32,
+        data,
+    }
 }
 
 /// Matrix of a wire field.
 pub fn mat_of(f: &Field) -> Mat<f64> {
-    Mat::from_fn(f.rows(), f.cols(), |r, c| f.get(r, c))
+    MatRef::from_column_major_slice(&f.data, f.rows(), f.cols()).to_owned()
 }
 
 /// Copies a wire field into a matrix of the same shape.
 pub fn copy_into(f: &Field, m: &mut Mat<f64>) {
-    let rows = f.rows();
-    for c in 0..f.cols() {
-        for r in 0..rows {
-            m[(r, c)] = f.data[c * rows + r];
+    m.copy_from(MatRef::from_column_major_slice(&f.data, f.rows(), f.cols()));
+}
+
+/// Buffers of fields a node sent, back from the bus once their messages were delivered
+/// ([`crate::Node::recycle`]), to hold the same node's next fields: after the first iteration a
+/// node's multi-megabyte fields reuse memory instead of being allocated (and their pages faulted
+/// in) again. A pool holds at most [`FieldPool::CAPACITY`] buffers, and a field takes the
+/// smallest one that fits and is at most twice its size.
+#[derive(Debug, Default)]
+pub struct FieldPool {
+    free: Vec<Vec<f64>>,
+}
+
+impl FieldPool {
+    /// Most buffers kept (an interface node sends one field per subdomain it serves).
+    pub const CAPACITY: usize = 64;
+
+    /// An empty buffer with room for `len` values: the smallest pooled one that fits and is at
+    /// most twice as large (a small field does not take a big field's buffer), or a new one.
+    fn take(&mut self, len: usize) -> Vec<f64> {
+        let best = self
+            .free
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| (len..=2 * len).contains(&b.capacity()))
+            .min_by_key(|(_, b)| b.capacity())
+            .map(|(i, _)| i);
+        match best {
+            Some(i) => {
+                let mut b = self.free.swap_remove(i);
+                b.clear();
+                b
+            }
+            None => Vec::with_capacity(len),
         }
+    }
+
+    /// [`field_of`] into a pooled buffer.
+    pub fn field_of(&mut self, m: MatRef<'_, f64>) -> Field {
+        let mut data = self.take(m.nrows() * m.ncols());
+        extend_columns(&mut data, m);
+        Field {
+            rows: m.nrows() as u32,
+            cols: m.ncols() as u32,
+            data,
+        }
+    }
+
+    /// A `rows` × `cols` field in a pooled buffer, filled by `fill` (which sees it as a matrix of
+    /// zeros): the field is written in place, with no matrix of its own to copy from.
+    pub fn field_with(&mut self, rows: usize, cols: usize, fill: impl FnOnce(MatMut<'_, f64>)) -> Field {
+        let mut data = self.take(rows * cols);
+        data.resize(rows * cols, 0.0);
+        fill(MatMut::from_column_major_slice_mut(&mut data, rows, cols));
+        Field {
+            rows: rows as u32,
+            cols: cols as u32,
+            data,
+        }
+    }
+
+    /// Keeps the field buffers of a delivered message, up to [`Self::CAPACITY`].
+    pub fn recycle(&mut self, msg: Message) {
+        msg.payload.into_buffers(|b| {
+            if self.free.len() < Self::CAPACITY && b.capacity() > 0 {
+                self.free.push(b);
+            }
+        });
+    }
+
+    /// Number of buffers held.
+    pub fn len(&self) -> usize {
+        self.free.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.free.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glissade_messages::{Envelope, NodeId, Payload, Role, Stage, SCHEMA_VERSION};
+
+    fn message(payload: Payload) -> Message {
+        Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: "r".into(),
+                scene_fingerprint: 0,
+                iteration: 0,
+                stage: Stage::Linear,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index: 0,
+                },
+            },
+            payload,
+        }
+    }
+
+    #[test]
+    fn copies_are_column_major_whatever_the_strides() {
+        let m = Mat::from_fn(3, 4, |r, c| (10 * r + c) as f64);
+        let f = field_of(m.as_ref());
+        assert_eq!((f.rows(), f.cols()), (3, 4));
+        assert_eq!(f.data[..4], [0.0, 10.0, 20.0, 1.0]);
+        assert_eq!(mat_of(&f), m);
+        // A transposed view has no contiguous columns: the element-wise path.
+        let t = field_of(m.transpose());
+        assert_eq!((t.rows(), t.cols()), (4, 3));
+        assert_eq!(mat_of(&t), m.transpose().to_owned());
+        let mut back = Mat::zeros(3, 4);
+        copy_into(&f, &mut back);
+        assert_eq!(back, m);
+        let mut pool = FieldPool::default();
+        assert_eq!(pool.field_of(m.transpose()), t);
+    }
+
+    #[test]
+    fn a_recycled_buffer_holds_the_next_field_of_its_size() {
+        let mut pool = FieldPool::default();
+        let big = Mat::from_fn(50, 20, |r, c| (r * c) as f64);
+        let small = Mat::from_fn(5, 20, |r, c| (r + c) as f64);
+        let w = pool.field_of(big.as_ref());
+        let f = pool.field_of(small.as_ref());
+        let (w_at, f_at) = (w.data.as_ptr(), f.data.as_ptr());
+        pool.recycle(message(Payload::BoundaryState { subdomain: 0, w, f }));
+        assert_eq!(pool.len(), 2);
+        // The small field takes the small buffer (the smallest that fits), the big one the other.
+        let f2 = pool.field_of(small.as_ref());
+        let w2 = pool.field_with(50, 20, |mut m| m.copy_from(big.as_ref()));
+        assert_eq!((w2.data.as_ptr(), f2.data.as_ptr()), (w_at, f_at));
+        assert_eq!((mat_of(&w2), mat_of(&f2)), (big.clone(), small));
+        assert!(pool.is_empty());
+        // A field larger than any pooled buffer gets a new one, and so does a field less than
+        // half the size of every pooled buffer; field_with starts from zeros.
+        pool.recycle(message(Payload::MacroForces {
+            subdomain: 0,
+            forces: f2,
+        }));
+        let z = pool.field_with(60, 20, |_| {});
+        assert!(z.data.iter().all(|&v| v == 0.0) && z.data.len() == 1200);
+        let tiny = pool.field_with(2, 20, |_| {});
+        assert_ne!(tiny.data.as_ptr(), f_at);
+        assert_eq!(pool.len(), 1);
+        // Messages without fields give nothing; the pool is bounded.
+        pool.recycle(message(Payload::AndersonStep {
+            gamma: vec![1.0],
+            restart: false,
+        }));
+        assert_eq!(pool.len(), 1);
+        for _ in 0..2 * FieldPool::CAPACITY {
+            let w = pool.field_with(2, 2, |_| {});
+            let f = field_of(big.as_ref());
+            pool.recycle(message(Payload::BoundaryState { subdomain: 0, w, f }));
+        }
+        assert_eq!(pool.len(), FieldPool::CAPACITY);
     }
 }

@@ -91,6 +91,12 @@ pub trait Node: Send {
     fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError>;
     /// The node has nothing more to do.
     fn is_finished(&self) -> bool;
+    /// Takes back a message this node published, once the bus has delivered it (and no longer
+    /// needs it), so that the node can reuse its field buffers ([`convert::FieldPool`]). A bus
+    /// may not return every message; by default the message is dropped.
+    fn recycle(&mut self, msg: Message) {
+        drop(msg);
+    }
 }
 
 /// Errors of a bus run.
@@ -154,7 +160,9 @@ impl InProcessBus {
 
     /// Runs until no message is in flight. `observe` sees every message once, in publication order
     /// (the recorder's and the progress display's view); returning false from it aborts the run.
+    /// A round's messages go back to their senders ([`Node::recycle`]) once it is handled.
     pub fn run(&mut self, mut observe: impl FnMut(&Message) -> bool) -> Result<(), BusError> {
+        let ids: Vec<NodeId> = self.nodes.iter().map(|n| n.id()).collect();
         let mut queue = Vec::new();
         for node in &mut self.nodes {
             queue.extend(node.start()?);
@@ -202,7 +210,11 @@ impl InProcessBus {
                     }
                 }
             }
-            queue = next;
+            for m in std::mem::replace(&mut queue, next) {
+                if let Some(k) = ids.iter().position(|id| *id == m.envelope.sender) {
+                    self.nodes[k].recycle(m);
+                }
+            }
         }
         let unfinished: Vec<String> = self
             .nodes

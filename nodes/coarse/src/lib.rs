@@ -3,7 +3,7 @@
 //! each subdomain its columns of w̃.
 
 use faer::Mat;
-use glissade_bus::convert::{field_of, mat_of};
+use glissade_bus::convert::{copy_into, mat_of, FieldPool};
 use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::coarse::{Contribution, MacroProblem};
 use glissade_messages::{role_field_topic, Message, NodeId, Payload, Role, Stage};
@@ -24,12 +24,19 @@ pub struct CoarseNode {
     operators: BTreeMap<u32, MacroContribution>,
     problem: Option<MacroProblem>,
     columns: BTreeMap<u32, Vec<usize>>,
+    /// Per subdomain, its last macro forces (allocated at its first), and the subdomains whose
+    /// forces of the current iteration arrived.
     forces: BTreeMap<u32, Mat<f64>>,
+    gathered: Vec<u32>,
+    /// The macro problem's right-hand side, then its solution (allocated at the first solve).
+    rhs: Mat<f64>,
     /// Iteration of the macro forces being gathered: the number of macro problems solved.
     iteration: u32,
     /// The last iteration whose decision arrived.
     decided: Option<u32>,
     finished: bool,
+    /// Buffers of the fields this node sent, back from the bus ([`Node::recycle`]).
+    pool: FieldPool,
 }
 
 impl CoarseNode {
@@ -47,9 +54,12 @@ impl CoarseNode {
             problem: None,
             columns: BTreeMap::new(),
             forces: BTreeMap::new(),
+            gathered: Vec::new(),
+            rhs: Mat::new(),
             iteration: 0,
             decided: None,
             finished: false,
+            pool: FieldPool::default(),
         }
     }
 
@@ -85,7 +95,11 @@ impl CoarseNode {
 
     fn solve(&mut self) -> Vec<Message> {
         let problem = self.problem.as_ref().expect("assembled before the first solve");
-        let mut rhs = Mat::<f64>::zeros(problem.n(), self.n_times);
+        if (self.rhs.nrows(), self.rhs.ncols()) != (problem.n(), self.n_times) {
+            self.rhs = Mat::zeros(problem.n(), self.n_times);
+        }
+        let rhs = &mut self.rhs;
+        rhs.fill(0.0);
         for (s, f) in &self.forces {
             for (r, &g) in self.columns[s].iter().enumerate() {
                 for j in 0..self.n_times {
@@ -93,19 +107,22 @@ impl CoarseNode {
                 }
             }
         }
-        problem.solve_in_place(&mut rhs);
+        problem.solve_in_place(rhs);
         let mut out = Vec::with_capacity(self.columns.len());
         for (s, cols) in &self.columns {
-            let w = Mat::from_fn(cols.len(), self.n_times, |r, j| rhs[(cols[r], j)]);
+            let w_tilde = self.pool.field_with(cols.len(), self.n_times, |mut w| {
+                for j in 0..w.ncols() {
+                    for (r, &g) in cols.iter().enumerate() {
+                        w[(r, j)] = rhs[(g, j)];
+                    }
+                }
+            });
             out.push(Message {
                 envelope: self.ctx.envelope(self.id, self.iteration, Stage::Macro),
-                payload: Payload::MacroDisplacements {
-                    subdomain: *s,
-                    w_tilde: field_of(w.as_ref()),
-                },
+                payload: Payload::MacroDisplacements { subdomain: *s, w_tilde },
             });
         }
-        self.forces.clear();
+        self.gathered.clear();
         self.iteration += 1;
         out
     }
@@ -174,7 +191,7 @@ impl Node for CoarseNode {
                 self.operators.insert(*subdomain, (slots, mat_of(l_e)));
                 if self.operators.len() == self.subdomains.len() {
                     self.assemble()?;
-                    if self.forces.len() == self.subdomains.len() {
+                    if self.gathered.len() == self.subdomains.len() {
                         return Ok(self.solve());
                     }
                 }
@@ -191,7 +208,7 @@ impl Node for CoarseNode {
                         ),
                     ));
                 }
-                if self.forces.contains_key(subdomain) {
+                if self.gathered.contains(subdomain) {
                     return Err(NodeError::rejected(
                         self.id,
                         format!("second macro forces of iteration {it} from subdomain {subdomain}"),
@@ -209,8 +226,14 @@ impl Node for CoarseNode {
                     })?;
                 expect_shape(self.id, "forces", forces, n_m, self.n_times)?;
                 expect_finite(self.id, "forces", &format!("subdomain {subdomain}"), forces)?;
-                self.forces.insert(*subdomain, mat_of(forces));
-                if self.forces.len() == self.subdomains.len() && self.problem.is_some() {
+                let n_times = self.n_times;
+                let stored = self
+                    .forces
+                    .entry(*subdomain)
+                    .or_insert_with(|| Mat::zeros(n_m, n_times));
+                copy_into(forces, stored);
+                self.gathered.push(*subdomain);
+                if self.gathered.len() == self.subdomains.len() && self.problem.is_some() {
                     return Ok(self.solve());
                 }
                 Ok(Vec::new())
@@ -252,5 +275,9 @@ impl Node for CoarseNode {
 
     fn is_finished(&self) -> bool {
         self.finished
+    }
+
+    fn recycle(&mut self, msg: Message) {
+        self.pool.recycle(msg);
     }
 }

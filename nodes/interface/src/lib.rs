@@ -21,7 +21,7 @@
 //! the histories.
 
 use faer::Mat;
-use glissade_bus::convert::field_of;
+use glissade_bus::convert::{field_of, FieldPool};
 use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonCoordinator, AndersonStep, GramPartials, MAX_CONDITION};
 use glissade_mechanics::condensed::BoundaryLayout;
@@ -175,6 +175,8 @@ pub struct InterfaceNode {
     reported: bool,
     decider: Option<Decider>,
     finished: bool,
+    /// Buffers of the fields this node sent, back from the bus ([`Node::recycle`]).
+    pool: FieldPool,
 }
 
 /// A PGD subdomain's mode form as this node holds it, and its last state expanded.
@@ -312,6 +314,7 @@ impl InterfaceNode {
             reported: false,
             decider,
             finished: false,
+            pool: FieldPool::default(),
         }
     }
 
@@ -585,19 +588,21 @@ impl InterfaceNode {
                     .filter_map(|sl| self.position[sl.interface].map(|p| (p, sl)))
                     .collect();
                 let rows = mine.iter().map(|(_, sl)| 2 * sl.n_pairs).sum();
-                let mut q = Mat::<f64>::zeros(rows, nt);
-                let mut offset = 0;
-                for (p, sl) in &mine {
-                    self.locals[*p].q_hat_into(sl.side == Side::A, q.as_mut(), offset);
-                    offset += 2 * sl.n_pairs;
-                }
+                // Written in place into the message's field (a buffer of an earlier one).
+                let q_hat = self.pool.field_with(rows, nt, |mut q| {
+                    let mut offset = 0;
+                    for (p, sl) in &mine {
+                        self.locals[*p].q_hat_into(sl.side == Side::A, q.as_mut(), offset);
+                        offset += 2 * sl.n_pairs;
+                    }
+                });
                 out.push(self.msg(
                     Stage::Local,
                     n + 1,
                     Payload::LocalDirections {
                         subdomain: s,
                         interfaces: mine.iter().map(|(_, sl)| sl.interface as u32).collect(),
-                        q_hat: field_of(q.as_ref()),
+                        q_hat,
                     },
                 ));
             }
@@ -911,6 +916,10 @@ impl Node for InterfaceNode {
 
     fn is_finished(&self) -> bool {
         self.finished
+    }
+
+    fn recycle(&mut self, msg: Message) {
+        self.pool.recycle(msg);
     }
 }
 

@@ -20,7 +20,7 @@
 //! so both hold the same numbers bit for bit.
 
 use faer::Mat;
-use glissade_bus::convert::{copy_into, field_of};
+use glissade_bus::convert::{copy_into, field_of, FieldPool};
 use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonHistory, AndersonStep, GramPartials};
 use glissade_mechanics::linear::{relax_into, sum_into, sum_relax_into, SubdomainSolver};
@@ -118,6 +118,8 @@ pub struct SubdomainNode {
     /// Per boundary slot, the index of the interface node that owns its interface (None: any
     /// interface node is taken).
     owners: Option<Vec<u32>>,
+    /// Buffers of the fields this node sent, back from the bus ([`Node::recycle`]).
+    pool: FieldPool,
 }
 
 impl SubdomainNode {
@@ -160,6 +162,7 @@ impl SubdomainNode {
             log: None,
             record: LinearStageRecord::default(),
             owners: None,
+            pool: FieldPool::default(),
         }
     }
 
@@ -311,13 +314,11 @@ impl SubdomainNode {
         self.solve_micro1(coarse);
         if coarse {
             self.phase = Phase::Macro;
-            vec![self.msg(
-                Stage::Micro1,
-                Payload::MacroForces {
-                    subdomain: self.subdomain(),
-                    forces: field_of(self.macro_forces.as_ref()),
-                },
-            )]
+            let payload = Payload::MacroForces {
+                subdomain: self.subdomain(),
+                forces: self.pool.field_of(self.macro_forces.as_ref()),
+            };
+            vec![self.msg(Stage::Micro1, payload)]
         } else {
             self.w2.fill(0.0);
             self.f2.fill(0.0);
@@ -456,15 +457,13 @@ impl SubdomainNode {
         }
     }
 
-    fn boundary_state(&self) -> Message {
-        self.msg(
-            Stage::Linear,
-            Payload::BoundaryState {
-                subdomain: self.subdomain(),
-                w: field_of(self.w.as_ref()),
-                f: field_of(self.f.as_ref()),
-            },
-        )
+    fn boundary_state(&mut self) -> Message {
+        let payload = Payload::BoundaryState {
+            subdomain: self.subdomain(),
+            w: self.pool.field_of(self.w.as_ref()),
+            f: self.pool.field_of(self.f.as_ref()),
+        };
+        self.msg(Stage::Linear, payload)
     }
 
     /// Refuses a message addressed to another subdomain.
@@ -737,5 +736,9 @@ impl Node for SubdomainNode {
 
     fn is_finished(&self) -> bool {
         self.finished
+    }
+
+    fn recycle(&mut self, msg: Message) {
+        self.pool.recycle(msg);
     }
 }

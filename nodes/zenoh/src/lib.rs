@@ -489,6 +489,7 @@ pub fn run_nodes(
                     Ok(outs) => {
                         for out in outs {
                             publish_new(session, &out, published)?;
+                            node.recycle(out);
                         }
                     }
                     // The node refused this message and is unchanged: it is not the run's (a
