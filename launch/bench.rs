@@ -10,9 +10,11 @@
 //! - two models of one iteration: the flops of the condensed linear stage (counted from the
 //!   products it makes) and the bytes its passes move when no boundary field stays in cache from
 //!   one pass to the next (every operator read once, every boundary field read or written once per
-//!   pass listed in [`FIELD_PASSES`]; fusing passes would lower it, cache hits between passes make
-//!   the real traffic lower). Their ratios to the measured rates give the compute and
-//!   memory-traffic bounds the iteration time is compared to.
+//!   pass listed in [`FIELD_PASSES`], and with Anderson acceleration per pass its record and its
+//!   mixing step make, counted from the run's own Gram and step messages:
+//!   [`anderson_record_passes`], [`anderson_step_passes`]; fusing passes would lower it, cache hits
+//!   between passes make the real traffic lower). Their ratios to the measured rates give the
+//!   compute and memory-traffic bounds the iteration time is compared to.
 
 use crate::runner::{run_in_process_timed, Plan, RunOptions, RunResult};
 use faer::linalg::matmul::matmul;
@@ -20,11 +22,11 @@ use faer::{Accum, Mat, Par};
 use glissade_bus::HandleTime;
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::scene::{LinearStage, LoadedScene};
-use glissade_messages::Role;
+use glissade_messages::{Payload, Role};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Passes over full boundary fields (n_b × (N+1)) that one plain iteration makes per subdomain,
 /// each the read or the write of one whole field, in the condensed linear stage with the coarse
@@ -51,6 +53,25 @@ use std::time::Instant;
 /// between the nodes, which the in-process run also makes. Every pass is counted once, as if no
 /// field stayed in cache between two passes.
 pub const FIELD_PASSES: usize = 10 + 1 + 2 + 10 + 4 + 4 + 4 + 3;
+
+/// Passes over full boundary fields that a subdomain's Anderson record makes beyond the plain
+/// iteration's, when it holds `k` stored differences after the record (its `AndersonGram` is
+/// k × k). `AndersonHistory::record_sum` replaces `sum_relax_into` (10 passes): it reads s (2),
+/// s₁ and s₂ (4) and the last record's s + μr and r_F (3), and writes s + μr (2), the new
+/// differences D_W, D_F, Δr_F (3) and r_F (1), then reads the k − 1 other stored Δr_F for the new
+/// Gram column (the new one and r_F are in cache, written in the same column): 14 + (k − 1) − 10
+/// = k + 3 (k ≥ 1: a record that sends partials has stored a difference). Iterations 0 and 1,
+/// which record without partials, are counted as plain ones.
+pub fn anderson_record_passes(k: usize) -> usize {
+    k + 3
+}
+
+/// Passes over full boundary fields of a subdomain's mixing step with `g` coefficients
+/// (`AndersonHistory::apply`; 0 for a plain or restart step): it reads s + μr (2) and the g stored
+/// D_W and D_F (2g), and writes s (2).
+pub fn anderson_step_passes(g: usize) -> usize {
+    4 + 2 * g
+}
 
 /// What the machine does, measured.
 #[derive(Debug, Clone, Serialize)]
@@ -95,6 +116,9 @@ pub struct BenchReport {
     /// rate over the one-thread product rate.
     pub linear_gflops: Option<f64>,
     pub linear_fraction_of_peak: Option<f64>,
+    /// Passes over full boundary fields per iteration and subdomain, mean over the run:
+    /// [`FIELD_PASSES`] and, with Anderson acceleration, its records' and steps'.
+    pub field_passes: f64,
     /// Bytes one iteration's passes move from memory (no cache reuse between passes), and that
     /// over the read bandwidth (ms).
     pub bytes_per_iteration: f64,
@@ -199,11 +223,27 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
         })
         .collect();
     let largest = sizes.iter().map(|x| x.0).max().unwrap_or(0);
+    // Anderson's passes beyond the plain iteration's, summed over the run: per subdomain for its
+    // records, and for every subdomain for each step (all of them take it).
+    let mut record_passes = vec![0usize; model.subdomains.len()];
+    let mut step_passes = 0usize;
     let (result, times): (RunResult, Vec<HandleTime>) = run_in_process_timed(
         scene,
         &RunOptions {
             run_id: run_id.into(),
             interior: false,
+        },
+        |m| {
+            match &m.payload {
+                Payload::AndersonGram { subdomain, gram, .. } => {
+                    if let Some(p) = record_passes.get_mut(*subdomain as usize) {
+                        *p += anderson_record_passes(gram.rows());
+                    }
+                }
+                Payload::AndersonStep { gamma, .. } => step_passes += anderson_step_passes(gamma.len()),
+                _ => {}
+            }
+            Duration::ZERO
         },
     )?;
     let machine = machine_rates(largest, nt);
@@ -238,13 +278,23 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
         .map(|t| t.seconds)
         .sum();
     let linear_gflops = linear_flops.map(|f| f * iterations as f64 / linear_cpu_s.max(1e-12) / 1e9);
+    let passes: Vec<f64> = plan
+        .participants
+        .iter()
+        .map(|&s| {
+            let extra = record_passes[s as usize] + if record_passes[s as usize] > 0 { step_passes } else { 0 };
+            FIELD_PASSES as f64 + extra as f64 / iterations as f64
+        })
+        .collect();
     let bytes: f64 = sizes
         .iter()
-        .map(|&(n_b, n_m, stage)| {
+        .zip(&passes)
+        .map(|(&(n_b, n_m, stage), &p)| {
             let operator = if stage == LinearStage::Condensed { n_b * n_b } else { 0 };
-            8.0 * (operator + 2 * n_b * n_m + FIELD_PASSES * n_b * nt) as f64
+            8.0 * ((operator + 2 * n_b * n_m) as f64 + p * (n_b * nt) as f64)
         })
         .sum();
+    let field_passes = passes.iter().sum::<f64>() / passes.len().max(1) as f64;
     let memory_bound_ms = 1e3 * bytes / (machine.read_gb_s * 1e9);
     let wall_ms = per_it(result.solve_s);
     Ok(BenchReport {
@@ -261,6 +311,7 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
         linear_flops_per_iteration: linear_flops,
         linear_gflops,
         linear_fraction_of_peak: linear_gflops.map(|g| g / machine.gflops_one_thread),
+        field_passes,
         bytes_per_iteration: bytes,
         memory_bound_ms,
         wall_over_memory_bound: wall_ms / memory_bound_ms,
@@ -325,9 +376,10 @@ pub fn render(r: &BenchReport) -> String {
     }
     let _ = writeln!(
         s,
-        "memory traffic: {:.1} MB per iteration ({} boundary-field passes from memory + operators), {:.2} ms at {:.1} GB/s; \
-         measured iteration = {:.1} × that bound",
+        "memory traffic: {:.1} MB per iteration ({:.1} boundary-field passes from memory per subdomain, {} of them the plain \
+         iteration's, + operators), {:.2} ms at {:.1} GB/s; measured iteration = {:.1} × that bound",
         r.bytes_per_iteration / 1e6,
+        r.field_passes,
         FIELD_PASSES,
         r.memory_bound_ms,
         r.machine.read_gb_s,

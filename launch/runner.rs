@@ -380,11 +380,15 @@ pub fn run_in_process_logged_until(
     Ok((result, records))
 }
 
-/// As [`run_in_process`], with every node's handling time summed per (role, message field)
-/// (what `glissade bench` splits an iteration by).
-pub fn run_in_process_timed(scene: &LoadedScene, opts: &RunOptions) -> Result<(RunResult, Vec<HandleTime>), RunError> {
+/// As [`run_in_process_observed`], with every node's handling time summed per (role, message
+/// field) (what `glissade bench` splits an iteration by).
+pub fn run_in_process_timed(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    observe: impl FnMut(&Message) -> Duration,
+) -> Result<(RunResult, Vec<HandleTime>), RunError> {
     let mut times = Vec::new();
-    let result = run_logged(scene, opts, |_| true, |_| Duration::ZERO, None, Some(&mut times))?;
+    let result = run_logged(scene, opts, |_| true, observe, None, Some(&mut times))?;
     Ok((result, times))
 }
 

@@ -2,7 +2,8 @@
 //! every message the nodes handled.
 
 use crate::common::{run, scene};
-use glissade::bench::{bench, render};
+use glissade::bench::{anderson_record_passes, anderson_step_passes, bench, render, FIELD_PASSES};
+use glissade_mechanics::model::Acceleration;
 
 #[test]
 fn bench_splits_an_unchanged_run_by_stage() {
@@ -60,4 +61,25 @@ fn bench_splits_an_unchanged_run_by_stage() {
     let flops = report.linear_flops_per_iteration.expect("condensed stage");
     assert!(flops >= 2.0 * (report.largest_boundary.pow(2) * report.time_points) as f64);
     assert!(report.memory_bound_ms > 0.0 && report.wall_over_memory_bound.is_finite());
+    // The scene runs Anderson (window 5): its records and steps add passes to the plain
+    // iteration's, at most those of a full window's mixed step every iteration (38 + 8 + 14).
+    let (full_record, full_step) = (anderson_record_passes(5), anderson_step_passes(5));
+    assert_eq!(FIELD_PASSES + full_record + full_step, 60);
+    assert!(
+        report.field_passes > FIELD_PASSES as f64
+            && report.field_passes < (FIELD_PASSES + full_record + full_step) as f64,
+        "{}",
+        render(&report)
+    );
+    // Plain relaxation: exactly the plain iteration's passes, and less traffic.
+    let mut plain_scene = sc.clone();
+    plain_scene.model.solver.acceleration = Acceleration::None;
+    let plain_report = bench(&plain_scene, "test").expect("bench");
+    assert_eq!(
+        plain_report.field_passes,
+        FIELD_PASSES as f64,
+        "{}",
+        render(&plain_report)
+    );
+    assert!(plain_report.bytes_per_iteration < report.bytes_per_iteration);
 }
