@@ -6,6 +6,7 @@
 //! (plotted under the errors).
 
 use crate::runner::{run_in_process_logged_until, AndersonTally, RunOptions, RunResult};
+use glissade_bus::convert::view;
 use glissade_mechanics::local::ReferenceErrors;
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
@@ -218,8 +219,8 @@ fn report_against(
                 if let Some((e_f, e_w)) = tracker.boundary_state(
                     &model.interfaces,
                     subdomain as usize,
-                    |r, c| w.get(r, c),
-                    |r, c| f.get(r, c),
+                    view(&w),
+                    view(&f),
                     &reference.interfaces,
                 ) {
                     errors.push((m.envelope.iteration, e_f, e_w));

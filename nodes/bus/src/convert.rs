@@ -31,14 +31,19 @@ pub fn field_of(m: MatRef<'_, f64>) -> Field {
     }
 }
 
+/// A wire field seen as a matrix (no copy).
+pub fn view(f: &Field) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(&f.data, f.rows(), f.cols())
+}
+
 /// Matrix of a wire field.
 pub fn mat_of(f: &Field) -> Mat<f64> {
-    MatRef::from_column_major_slice(&f.data, f.rows(), f.cols()).to_owned()
+    view(f).to_owned()
 }
 
 /// Copies a wire field into a matrix of the same shape.
 pub fn copy_into(f: &Field, m: &mut Mat<f64>) {
-    m.copy_from(MatRef::from_column_major_slice(&f.data, f.rows(), f.cols()));
+    m.copy_from(view(f));
 }
 
 /// Buffers of fields a node sent, back from the bus once their messages were delivered

@@ -20,8 +20,8 @@
 //! every subdomain. A search-direction update changes the fixed-point map: the next step restarts
 //! the histories.
 
-use faer::Mat;
-use glissade_bus::convert::{field_of, FieldPool};
+use faer::{Mat, MatRef};
+use glissade_bus::convert::{field_of, view, FieldPool};
 use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonCoordinator, AndersonStep, GramPartials, MAX_CONDITION};
 use glissade_mechanics::condensed::BoundaryLayout;
@@ -370,11 +370,11 @@ impl InterfaceNode {
         format!("boundary entry {row}")
     }
 
-    fn store(&mut self, s: u32, w: impl Fn(usize, usize) -> f64, f: impl Fn(usize, usize) -> f64) {
+    fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
         let layout = self.layouts[s as usize].as_ref().expect("participant");
         for slot in &layout.slots {
             if let Some(p) = self.position[slot.interface] {
-                self.fields[p].set_side(slot.side, slot.offset, &w, &f);
+                self.fields[p].set_side(slot.side, slot.offset, w, f);
             }
         }
     }
@@ -893,7 +893,7 @@ impl Node for InterfaceNode {
                     return Ok(self.report(Vec::new(), Some(detail)));
                 }
             }
-            self.store(s, |r, c| w.get(r, c), |r, c| f.get(r, c));
+            self.store(s, view(w), view(f));
         } else {
             let receiver = self.take_modes(s, &msg.payload)?;
             self.received.insert(s);
@@ -905,7 +905,7 @@ impl Node for InterfaceNode {
                 self.modes[s as usize] = Some(receiver);
                 return Ok(self.report(Vec::new(), Some(detail)));
             }
-            self.store(s, |r, c| receiver.w[(r, c)], |r, c| receiver.f[(r, c)]);
+            self.store(s, receiver.w.as_ref(), receiver.f.as_ref());
             self.modes[s as usize] = Some(receiver);
         }
         if self.received.len() == self.participants.len() {

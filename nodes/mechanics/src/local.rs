@@ -7,7 +7,7 @@
 use crate::laws::{self, ContactPoint, PairState, Status};
 use crate::model::{Interface, InterfaceKind};
 use faer::reborrow::ReborrowMut;
-use faer::{Mat, MatMut};
+use faer::{Mat, MatMut, MatRef};
 
 /// Traces W and forces F of both sides of an interface over all time points (mm, N/mm).
 #[derive(Debug, Clone, PartialEq)]
@@ -53,25 +53,16 @@ impl InterfaceFields {
 }
 
 impl InterfaceFields {
-    /// Writes one side's trace and force from accessors of a subdomain's boundary fields
-    /// (`get_w(row, col)`, `get_f(row, col)`), rows `offset..offset + 2·n_pairs`.
-    pub fn set_side(
-        &mut self,
-        side: crate::model::Side,
-        offset: usize,
-        get_w: impl Fn(usize, usize) -> f64,
-        get_f: impl Fn(usize, usize) -> f64,
-    ) {
-        let (w, f) = match side {
+    /// Writes one side's trace and force from a subdomain's boundary fields (n_b × (N+1)), rows
+    /// `offset..offset + 2·n_pairs`.
+    pub fn set_side(&mut self, side: crate::model::Side, offset: usize, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
+        let (to_w, to_f) = match side {
             crate::model::Side::A => (&mut self.w_a, &mut self.f_a),
             crate::model::Side::B => (&mut self.w_b, &mut self.f_b),
         };
-        for j in 0..w.ncols() {
-            for (e, (w, f)) in w.col_as_slice_mut(j).iter_mut().zip(f.col_as_slice_mut(j)).enumerate() {
-                *w = get_w(offset + e, j);
-                *f = get_f(offset + e, j);
-            }
-        }
+        let rows = to_w.nrows();
+        to_w.copy_from(w.subrows(offset, rows));
+        to_f.copy_from(f.subrows(offset, rows));
     }
 }
 
@@ -134,18 +125,18 @@ impl ReferenceErrors {
         }
     }
 
-    /// Takes subdomain `subdomain`'s boundary state (accessors `w(row, col)`, `f(row, col)`);
-    /// returns (e_F, e_W) against `reference` once the iteration's states are all in.
+    /// Takes subdomain `subdomain`'s boundary state (W, F); returns (e_F, e_W) against
+    /// `reference` once the iteration's states are all in.
     pub fn boundary_state(
         &mut self,
         interfaces: &[Interface],
         subdomain: usize,
-        w: impl Fn(usize, usize) -> f64,
-        f: impl Fn(usize, usize) -> f64,
+        w: MatRef<'_, f64>,
+        f: MatRef<'_, f64>,
         reference: &[InterfaceFields],
     ) -> Option<(f64, f64)> {
         for slot in &self.layouts.get(subdomain)?.slots {
-            self.fields[slot.interface].set_side(slot.side, slot.offset, &w, &f);
+            self.fields[slot.interface].set_side(slot.side, slot.offset, w, f);
         }
         self.seen.insert(subdomain);
         if self.seen.len() < self.participants {

@@ -21,6 +21,7 @@
 
 mod states;
 
+use faer::MatRef;
 use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator};
 use glissade_mechanics::element::{elasticity, stress, NODE_XI};
 use glissade_mechanics::linear::default_k0;
@@ -470,8 +471,8 @@ impl View {
                     t.boundary_state(
                         &self.model.interfaces,
                         *subdomain as usize,
-                        |r, c| w.get(r, c),
-                        |r, c| f.get(r, c),
+                        MatRef::from_column_major_slice(&w.data, w.rows(), w.cols()),
+                        MatRef::from_column_major_slice(&f.data, f.rows(), f.cols()),
                         reference,
                     )
                 }) {

@@ -170,13 +170,7 @@ impl Latin {
         lap(3, &mut self.stage_time);
         for (solver, x) in self.solvers.iter().zip(&self.fields) {
             for slot in &solver.op.layout.slots {
-                let (w, f) = (&x.w, &x.f);
-                self.interface_fields[slot.interface].set_side(
-                    slot.side,
-                    slot.offset,
-                    |r, c| w[(r, c)],
-                    |r, c| f[(r, c)],
-                );
+                self.interface_fields[slot.interface].set_side(slot.side, slot.offset, x.w.as_ref(), x.f.as_ref());
             }
         }
         lap(5, &mut self.stage_time);
