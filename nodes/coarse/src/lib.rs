@@ -28,7 +28,7 @@ pub struct CoarseNode {
     /// forces of the current iteration arrived.
     forces: BTreeMap<u32, Mat<f64>>,
     gathered: Vec<u32>,
-    /// The macro problem's right-hand side, then its solution (allocated at the first solve).
+    /// The macro problem's right-hand side, then its solution (allocated with the problem).
     rhs: Mat<f64>,
     /// Iteration of the macro forces being gathered: the number of macro problems solved.
     iteration: u32,
@@ -89,15 +89,13 @@ impl CoarseNode {
         for (s, (slots, _)) in &self.operators {
             self.columns.insert(*s, problem.columns_of(slots));
         }
+        self.rhs = Mat::zeros(problem.n(), self.n_times);
         self.problem = Some(problem);
         Ok(())
     }
 
     fn solve(&mut self) -> Vec<Message> {
         let problem = self.problem.as_ref().expect("assembled before the first solve");
-        if (self.rhs.nrows(), self.rhs.ncols()) != (problem.n(), self.n_times) {
-            self.rhs = Mat::zeros(problem.n(), self.n_times);
-        }
         let rhs = &mut self.rhs;
         rhs.fill(0.0);
         for (s, f) in &self.forces {

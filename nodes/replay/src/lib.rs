@@ -21,7 +21,7 @@
 
 mod states;
 
-use faer::MatRef;
+use glissade_bus::convert::view;
 use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator};
 use glissade_mechanics::element::{elasticity, stress, NODE_XI};
 use glissade_mechanics::linear::default_k0;
@@ -468,13 +468,7 @@ impl View {
                 }
                 let it = msg.envelope.iteration;
                 if let Some((e_f, e_w)) = self.errors.as_mut().and_then(|(reference, t)| {
-                    t.boundary_state(
-                        &self.model.interfaces,
-                        *subdomain as usize,
-                        MatRef::from_column_major_slice(&w.data, w.rows(), w.cols()),
-                        MatRef::from_column_major_slice(&f.data, f.rows(), f.cols()),
-                        reference,
-                    )
+                    t.boundary_state(&self.model.interfaces, *subdomain as usize, view(w), view(f), reference)
                 }) {
                     self.summary.errors.push((it, e_f, e_w));
                     let rec = &self.rec;
