@@ -12,7 +12,9 @@ use serde::{Deserialize, Serialize};
 pub const SCHEMA_VERSION: u32 = 3;
 
 /// Role of a node on the bus.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, bincode::Encode, bincode::Decode,
+)]
 pub enum Role {
     Subdomain,
     Interface,
@@ -35,7 +37,9 @@ impl Role {
 }
 
 /// Sender of a message: its role and index (a subdomain index for subdomain messages).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, bincode::Encode, bincode::Decode,
+)]
 pub struct NodeId {
     pub role: Role,
     pub index: u32,
@@ -48,7 +52,9 @@ impl std::fmt::Display for NodeId {
 }
 
 /// Stage of the LATIN iteration a message belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, bincode::Encode, bincode::Decode,
+)]
 pub enum Stage {
     Setup,
     /// Micro problem 1 and its macro forces.
@@ -64,7 +70,7 @@ pub enum Stage {
 }
 
 /// Header of every message.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub struct Envelope {
     pub schema_version: u32,
     pub run_id: String,
@@ -144,7 +150,46 @@ impl Field {
 }
 
 /// How a run ended, or that it goes on.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// The wire form of a field is that of serde's derive (rows, cols, the value count as a u64, the
+// values as little-endian f64), written and read here as one block of bytes instead of value by
+// value: on a little-endian machine the values' memory is their wire form.
+impl bincode::Encode for Field {
+    fn encode<E: bincode::enc::Encoder>(&self, e: &mut E) -> Result<(), bincode::error::EncodeError> {
+        use bincode::enc::write::Writer;
+        self.rows.encode(e)?;
+        self.cols.encode(e)?;
+        self.data.len().encode(e)?;
+        if cfg!(target_endian = "little") {
+            e.writer().write(bytemuck::cast_slice(&self.data))
+        } else {
+            self.data.iter().try_for_each(|v| v.encode(e))
+        }
+    }
+}
+
+impl<C> bincode::Decode<C> for Field {
+    fn decode<D: bincode::de::Decoder<Context = C>>(d: &mut D) -> Result<Self, bincode::error::DecodeError> {
+        use bincode::de::read::Reader;
+        let rows = u32::decode(d)?;
+        let cols = u32::decode(d)?;
+        let len = usize::decode(d)?;
+        // Counted against the codec's size limit before anything is allocated.
+        d.claim_container_read::<f64>(len)?;
+        let mut data = vec![0.0f64; len];
+        if cfg!(target_endian = "little") {
+            d.reader().read(bytemuck::cast_slice_mut(&mut data))?;
+        } else {
+            for v in &mut data {
+                *v = f64::decode(d)?;
+            }
+        }
+        Ok(Field { rows, cols, data })
+    }
+}
+
+bincode::impl_borrow_decode!(Field);
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub enum Verdict {
     Continue,
     /// η (and the contact indicator, if required) reached the tolerance.
@@ -167,7 +212,7 @@ impl Verdict {
 }
 
 /// Indicators of one iteration and the stop decision (interface node → everyone).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub struct Decision {
     /// LATIN indicator η (eq. 10).
     pub eta: f64,
@@ -185,7 +230,7 @@ pub struct Decision {
 
 /// One interface's indicator sums after a local stage (the terms of η, e_F, e_W and the contact
 /// counts, DESIGN §3) and whether its search direction was updated.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub struct InterfaceIndicators {
     pub interface: u32,
     pub eta_num: f64,
@@ -201,7 +246,7 @@ pub struct InterfaceIndicators {
 
 /// The particular part s₀ = (W_d, −k⁻W_d) of a subdomain's state in separated form: the boundary
 /// responses to its load cases and their time functions, W_d = `w` φ, −k⁻W_d = `f` φ.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub struct ParticularModes {
     /// n_b × n_c each.
     pub w: Field,
@@ -212,7 +257,7 @@ pub struct ParticularModes {
 
 /// One interface's fields at the end of a run: s (last linear stage) and ŝ (last local stage),
 /// and the contact status per (pair, time) at index p + n_pairs·i (0 separated, 1 stick, 2 slip).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub struct InterfaceSolution {
     pub interface: u32,
     pub w_a: Field,
@@ -227,7 +272,7 @@ pub struct InterfaceSolution {
 }
 
 /// The payloads of DESIGN §4.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub enum Payload {
     /// The scene file's text, so that remote nodes need no file.
     Scene {
@@ -579,11 +624,11 @@ pub fn encode(msg: &Message) -> Vec<u8> {
     // Sized first, then written once into a buffer of that size: a multi-MB field is copied
     // once, not regrown and moved as it is written.
     let mut size = bincode::enc::write::SizeWriter::default();
-    bincode::serde::encode_into_writer(&msg.envelope, &mut size, config()).expect("sizing cannot fail");
-    bincode::serde::encode_into_writer(&msg.payload, &mut size, config()).expect("sizing cannot fail");
+    bincode::encode_into_writer(&msg.envelope, &mut size, config()).expect("sizing cannot fail");
+    bincode::encode_into_writer(&msg.payload, &mut size, config()).expect("sizing cannot fail");
     let mut out = Vec::with_capacity(size.bytes_written);
-    bincode::serde::encode_into_std_write(&msg.envelope, &mut out, config()).expect("encoding into a Vec cannot fail");
-    bincode::serde::encode_into_std_write(&msg.payload, &mut out, config()).expect("encoding into a Vec cannot fail");
+    bincode::encode_into_std_write(&msg.envelope, &mut out, config()).expect("encoding into a Vec cannot fail");
+    bincode::encode_into_std_write(&msg.payload, &mut out, config()).expect("encoding into a Vec cannot fail");
     out
 }
 
@@ -591,7 +636,7 @@ pub fn encode(msg: &Message) -> Vec<u8> {
 /// returns it with the number of bytes it used.
 fn decode_envelope(bytes: &[u8], run_id: &str) -> Result<(Envelope, usize), DecodeError> {
     let (envelope, used): (Envelope, usize) =
-        bincode::serde::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Malformed {
+        bincode::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Malformed {
             part: "envelope",
             detail: e.to_string(),
         })?;
@@ -627,7 +672,7 @@ pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError>
     }
     let rest = &bytes[used..];
     let (payload, used): (Payload, usize) =
-        bincode::serde::decode_from_slice(rest, config()).map_err(|e| DecodeError::Malformed {
+        bincode::decode_from_slice(rest, config()).map_err(|e| DecodeError::Malformed {
             part: "payload",
             detail: e.to_string(),
         })?;

@@ -5,7 +5,8 @@
 //!
 //! Inputs: valid messages of every payload kind with random contents, then damaged the ways a bus
 //! or a disk damages bytes (bit flips, overwritten bytes, truncation, extension, a cut-and-splice
-//! of two messages), and plain random bytes.
+//! of two messages), and plain random bytes. Every valid message's encoding is also checked to be
+//! serde's form through bincode, the wire form of the recordings.
 
 use glissade_messages::{
     decode, encode, Decision, Envelope, Expected, Field, InterfaceIndicators, InterfaceSolution, Message, NodeId,
@@ -310,6 +311,12 @@ proptest! {
     #[test]
     fn damaged_messages_never_panic_nor_decode_wrongly(m in message(), other in message(), d in damage()) {
         let bytes = encode(&m);
+        // The wire form is serde's derive through bincode, whatever the codec's own code does
+        // (recordings written with either read the same).
+        let config = bincode::config::standard().with_little_endian().with_fixed_int_encoding();
+        let mut serde_form = bincode::serde::encode_to_vec(&m.envelope, config).unwrap();
+        serde_form.extend(bincode::serde::encode_to_vec(&m.payload, config).unwrap());
+        prop_assert_eq!(&bytes, &serde_form, "the wire form changed");
         // The undamaged message round-trips (NaN payloads compare by bytes, not by value).
         let back = decode(&bytes, &expected()).expect("a valid message decodes");
         prop_assert_eq!(encode(&back), bytes.clone());
