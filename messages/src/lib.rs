@@ -640,6 +640,12 @@ fn decode_envelope(bytes: &[u8], run_id: &str) -> Result<(Envelope, usize), Deco
             part: "envelope",
             detail: e.to_string(),
         })?;
+    check_envelope(&envelope, run_id)?;
+    Ok((envelope, used))
+}
+
+/// The schema version and the run of a decoded envelope.
+fn check_envelope(envelope: &Envelope, run_id: &str) -> Result<(), DecodeError> {
     if envelope.schema_version != SCHEMA_VERSION {
         return Err(DecodeError::SchemaVersion {
             got: envelope.schema_version,
@@ -648,11 +654,11 @@ fn decode_envelope(bytes: &[u8], run_id: &str) -> Result<(Envelope, usize), Deco
     }
     if envelope.run_id != run_id {
         return Err(DecodeError::OtherRun {
-            got: envelope.run_id,
+            got: envelope.run_id.clone(),
             expected: run_id.to_string(),
         });
     }
-    Ok((envelope, used))
+    Ok(())
 }
 
 /// Decodes only the envelope, checking the schema version and the run (for a receiver that
@@ -681,6 +687,60 @@ pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError>
     }
     payload.check()?;
     Ok(Message { envelope, payload })
+}
+
+/// [`decode`] from a reader holding exactly `len` bytes (e.g. a transport's fragmented payload,
+/// read without first copying it into one buffer): the same checks, the same errors.
+pub fn decode_from_reader(reader: impl std::io::Read, len: usize, expected: &Expected) -> Result<Message, DecodeError> {
+    let mut r = Bounded {
+        inner: reader,
+        left: len,
+    };
+    let malformed = |part| {
+        move |e: bincode::error::DecodeError| DecodeError::Malformed {
+            part,
+            detail: e.to_string(),
+        }
+    };
+    let envelope: Envelope = bincode::decode_from_reader(&mut r, config()).map_err(malformed("envelope"))?;
+    check_envelope(&envelope, &expected.run_id)?;
+    if envelope.scene_fingerprint != expected.scene_fingerprint {
+        return Err(DecodeError::OtherScene {
+            got: envelope.scene_fingerprint,
+            expected: expected.scene_fingerprint,
+        });
+    }
+    let payload: Payload = bincode::decode_from_reader(&mut r, config()).map_err(malformed("payload"))?;
+    if r.left != 0 {
+        return Err(DecodeError::TrailingBytes(r.left));
+    }
+    payload.check()?;
+    Ok(Message { envelope, payload })
+}
+
+/// A reader of `left` more bytes, that refuses a read past them as the slice decoder does
+/// (`UnexpectedEnd`, with the bytes missing).
+struct Bounded<R> {
+    inner: R,
+    left: usize,
+}
+
+impl<R: std::io::Read> bincode::de::read::Reader for Bounded<R> {
+    fn read(&mut self, bytes: &mut [u8]) -> Result<(), bincode::error::DecodeError> {
+        if bytes.len() > self.left {
+            return Err(bincode::error::DecodeError::UnexpectedEnd {
+                additional: bytes.len() - self.left,
+            });
+        }
+        self.inner
+            .read_exact(bytes)
+            .map_err(|inner| bincode::error::DecodeError::Io {
+                inner,
+                additional: bytes.len(),
+            })?;
+        self.left -= bytes.len();
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -28,7 +28,7 @@
 //! bounded by a timeout.
 
 use glissade_bus::{Node, NodeError};
-use glissade_messages::{decode, encode, DecodeError, Expected, Message};
+use glissade_messages::{decode, decode_from_reader, encode, DecodeError, Expected, Message};
 use std::collections::{BTreeSet, HashSet, VecDeque};
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
@@ -362,13 +362,60 @@ pub struct NodeRun {
 
 /// What reaches a node process from the bus.
 enum Event {
-    Data(String, Vec<u8>),
+    Data(Box<Received>),
     Start,
     Stop(String),
     /// The launcher holds the run's results: leaving is safe.
     Done,
     /// A liveliness token appeared (true) or disappeared (false).
     Alive(String, bool),
+}
+
+/// A message as it arrived: its key, its hash ([`message_hash`]: repeats are recognised by it),
+/// and the message decoded, or why it was not.
+struct Received {
+    key: String,
+    hash: u64,
+    message: Result<Message, DecodeError>,
+}
+
+impl Received {
+    fn from_bytes(key: String, bytes: &[u8], expected: &Expected) -> Self {
+        Self {
+            hash: message_hash(&key, bytes),
+            message: decode(bytes, expected),
+            key,
+        }
+    }
+
+    /// Decodes a sample's payload where it lies, fragments and all (a large message over TCP
+    /// arrives in many), instead of first copying it into one buffer.
+    fn from_payload(key: String, payload: &zenoh::bytes::ZBytes, expected: &Expected) -> Self {
+        let len = payload.len();
+        let slices: Vec<&[u8]> = payload.slices().collect();
+        let end = |from_back: bool| {
+            let mut out = Vec::with_capacity(len.min(HASHED_END));
+            let mut take = |s: &[u8]| {
+                let n = (HASHED_END - out.len()).min(s.len());
+                if from_back {
+                    out.splice(0..0, s[s.len() - n..].iter().copied());
+                } else {
+                    out.extend_from_slice(&s[..n]);
+                }
+            };
+            if from_back {
+                slices.iter().rev().for_each(|s| take(s));
+            } else {
+                slices.iter().for_each(|s| take(s));
+            }
+            out
+        };
+        Self {
+            hash: hash_parts(&key, len, &end(false), &end(true)),
+            message: decode_from_reader(payload.reader(), len, expected),
+            key,
+        }
+    }
 }
 
 /// Declares a liveliness subscriber on every token of `run_id` (with the tokens already alive)
@@ -415,14 +462,16 @@ pub fn run_nodes(
     keys.dedup();
     let mut subscribers = Vec::new();
     for key in &keys {
-        let tx = tx.clone();
+        let (tx, expected) = (tx.clone(), expected.clone());
         let sub = session
             .declare_subscriber(key.as_str())
             .callback(move |sample| {
-                let _ = tx.send(Event::Data(
-                    sample.key_expr().as_str().to_string(),
-                    sample.payload().to_bytes().into_owned(),
-                ));
+                let key = sample.key_expr().as_str().to_string();
+                let _ = tx.send(Event::Data(Box::new(Received::from_payload(
+                    key,
+                    sample.payload(),
+                    &expected,
+                ))));
             })
             .wait()
             .map_err(|e| zerr(&format!("subscribe {key}"), e))?;
@@ -454,13 +503,13 @@ pub fn run_nodes(
     // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
     let mut seen: HashSet<u64> = HashSet::new();
     let mut published: HashSet<u64> = HashSet::new();
-    let mut handle = |key: String,
-                      bytes: Vec<u8>,
+    let mut handle = |received: Box<Received>,
                       nodes: &mut Vec<Box<dyn Node>>,
                       published: &HashSet<u64>,
                       log: &mut dyn FnMut(&str)|
      -> Result<(), TransportError> {
-        let msg = match decode(&bytes, expected) {
+        let Received { key, hash, message } = *received;
+        let msg = match message {
             Ok(m) => m,
             Err(e) => {
                 log(&format!("ignored a message on {key}: {e}"));
@@ -474,7 +523,6 @@ pub fn run_nodes(
             ));
             return Ok(());
         }
-        let hash = message_hash(&key, &bytes);
         if seen.contains(&hash) {
             log(&format!(
                 "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
@@ -544,7 +592,12 @@ pub fn run_nodes(
             }
         }
         for (key, bytes) in inputs {
-            handle(key, bytes, &mut nodes, &published, &mut log)?;
+            handle(
+                Box::new(Received::from_bytes(key, &bytes, expected)),
+                &mut nodes,
+                &published,
+                &mut log,
+            )?;
         }
         log("resumed: state rebuilt, continuing on the bus");
     } else {
@@ -563,7 +616,7 @@ pub fn run_nodes(
                         others: Vec::new(),
                     })
                 }
-                Ok(Event::Data(key, bytes)) => early.push_back((key, bytes)),
+                Ok(Event::Data(received)) => early.push_back(received),
                 Ok(Event::Alive(..)) | Ok(Event::Done) => {}
                 Err(_) => {
                     return Err(TransportError::Protocol(format!(
@@ -578,8 +631,8 @@ pub fn run_nodes(
                 publish(session, &m)?;
             }
         }
-        while let Some((key, bytes)) = early.pop_front() {
-            handle(key, bytes, &mut nodes, &published, &mut log)?;
+        while let Some(received) = early.pop_front() {
+            handle(received, &mut nodes, &published, &mut log)?;
         }
     }
     let mut last_message = Instant::now();
@@ -608,9 +661,9 @@ pub fn run_nodes(
             wait = wait.min(t.saturating_duration_since(now));
         }
         match rx.recv_timeout(wait) {
-            Ok(Event::Data(key, bytes)) => {
+            Ok(Event::Data(received)) => {
                 last_message = Instant::now();
-                handle(key, bytes, &mut nodes, &published, &mut log)?;
+                handle(received, &mut nodes, &published, &mut log)?;
             }
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
             Ok(Event::Alive(key, false)) if run.supervised && key != own_token && key != launcher_token => {
@@ -752,12 +805,25 @@ pub fn log_key(run_id: &str) -> String {
 /// A 64-bit hash of a message's key and bytes (its envelope and up to 4 KiB at each end, and its
 /// length: a re-sent message is byte-identical, since nodes are deterministic).
 pub fn message_hash(key: &str, bytes: &[u8]) -> u64 {
+    let n = bytes.len();
+    hash_parts(
+        key,
+        n,
+        &bytes[..n.min(HASHED_END)],
+        &bytes[n.saturating_sub(HASHED_END)..],
+    )
+}
+
+/// Bytes of each end of a message that [`message_hash`] reads.
+const HASHED_END: usize = 4096;
+
+/// [`message_hash`] of a message of `len` bytes from its first and last (up to) [`HASHED_END`].
+fn hash_parts(key: &str, len: usize, head: &[u8], tail: &[u8]) -> u64 {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     key.hash(&mut h);
-    bytes.len().hash(&mut h);
-    let n = bytes.len();
-    bytes[..n.min(4096)].hash(&mut h);
-    bytes[n.saturating_sub(4096)..].hash(&mut h);
+    len.hash(&mut h);
+    head.hash(&mut h);
+    tail.hash(&mut h);
     h.finish()
 }
 
@@ -902,6 +968,62 @@ mod tests {
         .unwrap();
         assert_eq!(back, msg);
         drop(router);
+    }
+
+    /// A payload in many fragments (as a large message arrives over TCP) decodes and hashes as
+    /// its bytes do in one piece; damaged, it is refused for the same reason.
+    #[test]
+    fn a_fragmented_payload_decodes_and_hashes_as_its_bytes() {
+        let msg = Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: "frag".into(),
+                scene_fingerprint: 3,
+                iteration: 2,
+                stage: Stage::Linear,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index: 1,
+                },
+            },
+            payload: Payload::BoundaryState {
+                subdomain: 1,
+                w: Field::from_fn(40, 101, |r, c| (r * 101 + c) as f64 * 1e-3),
+                f: Field::from_fn(40, 101, |r, c| -((r + c) as f64)),
+            },
+        };
+        let expected = Expected {
+            run_id: "frag".into(),
+            scene_fingerprint: 3,
+        };
+        let fragmented = |bytes: &[u8], size: usize| {
+            let mut w = zenoh::bytes::ZBytes::writer();
+            for chunk in bytes.chunks(size) {
+                w.append(zenoh::bytes::ZBytes::from(chunk.to_vec()));
+            }
+            w.finish()
+        };
+        let bytes = encode(&msg);
+        let key = msg.topic();
+        // Fragments smaller than, equal to and larger than the 4 KiB ends the hash reads.
+        for size in [1000, 4096, 5000, bytes.len()] {
+            let z = fragmented(&bytes, size);
+            assert_eq!(z.slices().count(), bytes.len().div_ceil(size));
+            let (a, b) = (
+                Received::from_payload(key.clone(), &z, &expected),
+                Received::from_bytes(key.clone(), &bytes, &expected),
+            );
+            assert_eq!(a.hash, b.hash, "fragments of {size}");
+            assert_eq!(a.message.unwrap(), msg);
+        }
+        let cut = &bytes[..bytes.len() - 100];
+        let (a, b) = (
+            Received::from_payload(key.clone(), &fragmented(cut, 1000), &expected),
+            Received::from_bytes(key.clone(), cut, &expected),
+        );
+        assert_eq!(a.hash, b.hash);
+        let (ea, eb) = (a.message.unwrap_err(), b.message.unwrap_err());
+        assert_eq!(ea, eb, "{ea} / {eb}");
     }
 
     /// A node that publishes one multi-MB message on start and is then finished.
