@@ -5,6 +5,7 @@
 //! the schema version, the run and the scene before it reads a payload whose layout may differ.
 
 use serde::{Deserialize, Serialize};
+use std::sync::{Arc, Mutex};
 
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
 /// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
@@ -150,6 +151,97 @@ impl Field {
 }
 
 /// How a run ended, or that it goes on.
+/// Buffers of fields to hold new fields: a node's sent fields once delivered, or a receiver's
+/// decoded fields once handled, so that multi-megabyte fields reuse memory instead of being
+/// allocated (and their pages faulted in) at every iteration. At most [`BufferPool::CAPACITY`]
+/// buffers are kept; a field takes the smallest one that fits and is at most twice its size (a
+/// small field does not take a big field's buffer).
+#[derive(Debug, Default)]
+pub struct BufferPool {
+    free: Vec<Vec<f64>>,
+}
+
+impl BufferPool {
+    /// Most buffers kept (an interface node sends and receives one field per subdomain it serves).
+    pub const CAPACITY: usize = 64;
+
+    /// The pooled buffer for `len` values, if one fits.
+    fn best(&mut self, len: usize) -> Option<Vec<f64>> {
+        let i = self
+            .free
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| (len..=2 * len).contains(&b.capacity()))
+            .min_by_key(|(_, b)| b.capacity())
+            .map(|(i, _)| i)?;
+        Some(self.free.swap_remove(i))
+    }
+
+    /// An empty buffer with room for `len` values: pooled, or new.
+    pub fn take_empty(&mut self, len: usize) -> Vec<f64> {
+        match self.best(len) {
+            Some(mut b) => {
+                b.clear();
+                b
+            }
+            None => Vec::with_capacity(len),
+        }
+    }
+
+    /// A buffer of `len` values whatever they are, for a caller that overwrites them all: pooled
+    /// (its old values, written only where it was shorter), or new (zeros).
+    pub fn take_any(&mut self, len: usize) -> Vec<f64> {
+        match self.best(len) {
+            Some(mut b) => {
+                b.truncate(len);
+                b.resize(len, 0.0);
+                b
+            }
+            None => vec![0.0; len],
+        }
+    }
+
+    /// Keeps a buffer, if there is room.
+    pub fn put(&mut self, buffer: Vec<f64>) {
+        if self.free.len() < Self::CAPACITY && buffer.capacity() > 0 {
+            self.free.push(buffer);
+        }
+    }
+
+    /// Keeps the field buffers of a message's payload (delivered, or handled), up to the bound.
+    pub fn recycle(&mut self, payload: Payload) {
+        payload.into_buffers(|b| self.put(b));
+    }
+
+    /// Number of buffers held.
+    pub fn len(&self) -> usize {
+        self.free.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.free.is_empty()
+    }
+}
+
+/// Where the decoder takes the buffers of the fields it decodes (bincode's decoding context):
+/// a shared [`BufferPool`], or none (new buffers).
+#[derive(Debug, Clone, Default)]
+pub struct DecodeBuffers(Option<Arc<Mutex<BufferPool>>>);
+
+impl DecodeBuffers {
+    pub fn pooled(pool: Arc<Mutex<BufferPool>>) -> Self {
+        Self(Some(pool))
+    }
+
+    fn take(&self, len: usize) -> Vec<f64> {
+        match &self.0 {
+            // A poisoned pool (a panic while it was held) still holds valid buffers.
+            Some(pool) => pool.lock().unwrap_or_else(|e| e.into_inner()).take_any(len),
+            None => vec![0.0; len],
+        }
+    }
+}
+
 // The wire form of a field is that of serde's derive (rows, cols, the value count as a u64, the
 // values as little-endian f64), written and read here as one block of bytes instead of value by
 // value: on a little-endian machine the values' memory is their wire form.
@@ -167,15 +259,17 @@ impl bincode::Encode for Field {
     }
 }
 
-impl<C> bincode::Decode<C> for Field {
-    fn decode<D: bincode::de::Decoder<Context = C>>(d: &mut D) -> Result<Self, bincode::error::DecodeError> {
+impl bincode::Decode<DecodeBuffers> for Field {
+    fn decode<D: bincode::de::Decoder<Context = DecodeBuffers>>(
+        d: &mut D,
+    ) -> Result<Self, bincode::error::DecodeError> {
         use bincode::de::read::Reader;
         let rows = u32::decode(d)?;
         let cols = u32::decode(d)?;
         let len = usize::decode(d)?;
         // Counted against the codec's size limit before anything is allocated.
         d.claim_container_read::<f64>(len)?;
-        let mut data = vec![0.0f64; len];
+        let mut data = d.context().take(len);
         if cfg!(target_endian = "little") {
             d.reader().read(bytemuck::cast_slice_mut(&mut data))?;
         } else {
@@ -187,7 +281,7 @@ impl<C> bincode::Decode<C> for Field {
     }
 }
 
-bincode::impl_borrow_decode!(Field);
+bincode::impl_borrow_decode_with_context!(Field, DecodeBuffers);
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub enum Verdict {
@@ -247,6 +341,7 @@ pub struct InterfaceIndicators {
 /// The particular part s₀ = (W_d, −k⁻W_d) of a subdomain's state in separated form: the boundary
 /// responses to its load cases and their time functions, W_d = `w` φ, −k⁻W_d = `f` φ.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+#[bincode(decode_context = "DecodeBuffers")]
 pub struct ParticularModes {
     /// n_b × n_c each.
     pub w: Field,
@@ -258,6 +353,7 @@ pub struct ParticularModes {
 /// One interface's fields at the end of a run: s (last linear stage) and ŝ (last local stage),
 /// and the contact status per (pair, time) at index p + n_pairs·i (0 separated, 1 stick, 2 slip).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+#[bincode(decode_context = "DecodeBuffers")]
 pub struct InterfaceSolution {
     pub interface: u32,
     pub w_a: Field,
@@ -273,6 +369,7 @@ pub struct InterfaceSolution {
 
 /// The payloads of DESIGN §4.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+#[bincode(decode_context = "DecodeBuffers")]
 pub enum Payload {
     /// The scene file's text, so that remote nodes need no file.
     Scene {
@@ -678,9 +775,11 @@ pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError>
     }
     let rest = &bytes[used..];
     let (payload, used): (Payload, usize) =
-        bincode::decode_from_slice(rest, config()).map_err(|e| DecodeError::Malformed {
-            part: "payload",
-            detail: e.to_string(),
+        bincode::decode_from_slice_with_context(rest, config(), DecodeBuffers::default()).map_err(|e| {
+            DecodeError::Malformed {
+                part: "payload",
+                detail: e.to_string(),
+            }
         })?;
     if used != rest.len() {
         return Err(DecodeError::TrailingBytes(rest.len() - used));
@@ -691,7 +790,13 @@ pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError>
 
 /// [`decode`] from a reader holding exactly `len` bytes (e.g. a transport's fragmented payload,
 /// read without first copying it into one buffer): the same checks, the same errors.
-pub fn decode_from_reader(reader: impl std::io::Read, len: usize, expected: &Expected) -> Result<Message, DecodeError> {
+/// The fields' buffers come from `buffers`.
+pub fn decode_from_reader(
+    reader: impl std::io::Read,
+    len: usize,
+    expected: &Expected,
+    buffers: DecodeBuffers,
+) -> Result<Message, DecodeError> {
     let mut r = Bounded {
         inner: reader,
         left: len,
@@ -710,7 +815,8 @@ pub fn decode_from_reader(reader: impl std::io::Read, len: usize, expected: &Exp
             expected: expected.scene_fingerprint,
         });
     }
-    let payload: Payload = bincode::decode_from_reader(&mut r, config()).map_err(malformed("payload"))?;
+    let mut decoder = bincode::de::DecoderImpl::new(&mut r, config(), buffers);
+    let payload = <Payload as bincode::Decode<DecodeBuffers>>::decode(&mut decoder).map_err(malformed("payload"))?;
     if r.left != 0 {
         return Err(DecodeError::TrailingBytes(r.left));
     }
@@ -841,6 +947,50 @@ mod tests {
             e.to_string().contains("field `w` declares 3 × 2 values but holds 5"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_pooled_decode_reuses_the_buffers_of_handled_messages() {
+        let m = msg();
+        let bytes = encode(&m);
+        let pool = Arc::new(Mutex::new(BufferPool::default()));
+        let decode_pooled = || {
+            decode_from_reader(
+                &bytes[..],
+                bytes.len(),
+                &expected(),
+                DecodeBuffers::pooled(pool.clone()),
+            )
+            .unwrap()
+        };
+        let first = decode_pooled();
+        assert_eq!(first, m);
+        // Handled: its buffers go back, dirty (and one longer than the field it will hold); the
+        // next message's fields are decoded into them.
+        let mut dirty = first.payload;
+        if let Payload::BoundaryState { w, .. } = &mut dirty {
+            w.data.iter_mut().for_each(|v| *v = f64::NAN);
+            w.data.push(f64::NAN);
+        }
+        let at: Vec<*const f64> = match &dirty {
+            Payload::BoundaryState { w, f, .. } => vec![w.data.as_ptr(), f.data.as_ptr()],
+            _ => unreachable!(),
+        };
+        pool.lock().unwrap().recycle(dirty);
+        assert_eq!(pool.lock().unwrap().len(), 2);
+        let second = decode_pooled();
+        assert_eq!(second, m);
+        match &second.payload {
+            Payload::BoundaryState { w, f, .. } => {
+                let mut now = vec![w.data.as_ptr(), f.data.as_ptr()];
+                now.sort();
+                let mut before = at.clone();
+                before.sort();
+                assert_eq!(now, before);
+            }
+            _ => unreachable!(),
+        }
+        assert!(pool.lock().unwrap().is_empty());
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! buffers of the fields it sends.
 
 use faer::{Mat, MatMut, MatRef};
-use glissade_messages::{Field, Message};
+use glissade_messages::{BufferPool, Field, Message};
 
 /// Column `j` of a matrix as a slice, when its rows are contiguous.
 fn col(m: MatRef<'_, f64>, j: usize) -> Option<&[f64]> {
@@ -49,40 +49,20 @@ pub fn copy_into(f: &Field, m: &mut Mat<f64>) {
 /// Buffers of fields a node sent, back from the bus once their messages were delivered
 /// ([`crate::Node::recycle`]), to hold the same node's next fields: after the first iteration a
 /// node's multi-megabyte fields reuse memory instead of being allocated (and their pages faulted
-/// in) again. A pool holds at most [`FieldPool::CAPACITY`] buffers, and a field takes the
-/// smallest one that fits and is at most twice its size.
+/// in) again. The buffers are a [`BufferPool`] (bounded; a field takes the smallest buffer that
+/// fits and is at most twice its size).
 #[derive(Debug, Default)]
 pub struct FieldPool {
-    free: Vec<Vec<f64>>,
+    buffers: BufferPool,
 }
 
 impl FieldPool {
     /// Most buffers kept (an interface node sends one field per subdomain it serves).
-    pub const CAPACITY: usize = 64;
-
-    /// An empty buffer with room for `len` values: the smallest pooled one that fits and is at
-    /// most twice as large (a small field does not take a big field's buffer), or a new one.
-    fn take(&mut self, len: usize) -> Vec<f64> {
-        let best = self
-            .free
-            .iter()
-            .enumerate()
-            .filter(|(_, b)| (len..=2 * len).contains(&b.capacity()))
-            .min_by_key(|(_, b)| b.capacity())
-            .map(|(i, _)| i);
-        match best {
-            Some(i) => {
-                let mut b = self.free.swap_remove(i);
-                b.clear();
-                b
-            }
-            None => Vec::with_capacity(len),
-        }
-    }
+    pub const CAPACITY: usize = BufferPool::CAPACITY;
 
     /// [`field_of`] into a pooled buffer.
     pub fn field_of(&mut self, m: MatRef<'_, f64>) -> Field {
-        let mut data = self.take(m.nrows() * m.ncols());
+        let mut data = self.buffers.take_empty(m.nrows() * m.ncols());
         extend_columns(&mut data, m);
         Field {
             rows: m.nrows() as u32,
@@ -94,7 +74,7 @@ impl FieldPool {
     /// A `rows` × `cols` field in a pooled buffer, filled by `fill` (which sees it as a matrix of
     /// zeros): the field is written in place, with no matrix of its own to copy from.
     pub fn field_with(&mut self, rows: usize, cols: usize, fill: impl FnOnce(MatMut<'_, f64>)) -> Field {
-        let mut data = self.take(rows * cols);
+        let mut data = self.buffers.take_empty(rows * cols);
         data.resize(rows * cols, 0.0);
         fill(MatMut::from_column_major_slice_mut(&mut data, rows, cols));
         Field {
@@ -106,20 +86,16 @@ impl FieldPool {
 
     /// Keeps the field buffers of a delivered message, up to [`Self::CAPACITY`].
     pub fn recycle(&mut self, msg: Message) {
-        msg.payload.into_buffers(|b| {
-            if self.free.len() < Self::CAPACITY && b.capacity() > 0 {
-                self.free.push(b);
-            }
-        });
+        self.buffers.recycle(msg.payload);
     }
 
     /// Number of buffers held.
     pub fn len(&self) -> usize {
-        self.free.len()
+        self.buffers.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.free.is_empty()
+        self.buffers.is_empty()
     }
 }
 

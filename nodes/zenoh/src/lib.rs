@@ -28,11 +28,14 @@
 //! bounded by a timeout.
 
 use glissade_bus::{Node, NodeError};
-use glissade_messages::{decode, decode_from_reader, encode, DecodeError, Expected, Message};
+use glissade_messages::{
+    decode, decode_from_reader, encode, BufferPool, DecodeBuffers, DecodeError, Expected, Message,
+};
 use std::collections::{BTreeSet, HashSet, VecDeque};
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::qos::CongestionControl;
 use zenoh::sample::SampleKind;
@@ -390,7 +393,7 @@ impl Received {
 
     /// Decodes a sample's payload where it lies, fragments and all (a large message over TCP
     /// arrives in many), instead of first copying it into one buffer.
-    fn from_payload(key: String, payload: &zenoh::bytes::ZBytes, expected: &Expected) -> Self {
+    fn from_payload(key: String, payload: &zenoh::bytes::ZBytes, expected: &Expected, buffers: DecodeBuffers) -> Self {
         let len = payload.len();
         let slices: Vec<&[u8]> = payload.slices().collect();
         let end = |from_back: bool| {
@@ -412,7 +415,7 @@ impl Received {
         };
         Self {
             hash: hash_parts(&key, len, &end(false), &end(true)),
-            message: decode_from_reader(payload.reader(), len, expected),
+            message: decode_from_reader(payload.reader(), len, expected, buffers),
             key,
         }
     }
@@ -461,8 +464,11 @@ pub fn run_nodes(
     keys.sort();
     keys.dedup();
     let mut subscribers = Vec::new();
+    // The received fields' buffers: filled by the subscribers' decoding, given back once the
+    // nodes have handled their message.
+    let buffers = Arc::new(Mutex::new(BufferPool::default()));
     for key in &keys {
-        let (tx, expected) = (tx.clone(), expected.clone());
+        let (tx, expected, pooled) = (tx.clone(), expected.clone(), DecodeBuffers::pooled(buffers.clone()));
         let sub = session
             .declare_subscriber(key.as_str())
             .callback(move |sample| {
@@ -471,6 +477,7 @@ pub fn run_nodes(
                     key,
                     sample.payload(),
                     &expected,
+                    pooled.clone(),
                 ))));
             })
             .wait()
@@ -555,6 +562,7 @@ pub fn run_nodes(
         if taken {
             seen.insert(hash);
         }
+        buffers.lock().unwrap_or_else(|e| e.into_inner()).recycle(msg.payload);
         Ok(())
     };
     if run.resume {
@@ -1010,7 +1018,7 @@ mod tests {
             let z = fragmented(&bytes, size);
             assert_eq!(z.slices().count(), bytes.len().div_ceil(size));
             let (a, b) = (
-                Received::from_payload(key.clone(), &z, &expected),
+                Received::from_payload(key.clone(), &z, &expected, DecodeBuffers::default()),
                 Received::from_bytes(key.clone(), &bytes, &expected),
             );
             assert_eq!(a.hash, b.hash, "fragments of {size}");
@@ -1018,7 +1026,7 @@ mod tests {
         }
         let cut = &bytes[..bytes.len() - 100];
         let (a, b) = (
-            Received::from_payload(key.clone(), &fragmented(cut, 1000), &expected),
+            Received::from_payload(key.clone(), &fragmented(cut, 1000), &expected, DecodeBuffers::default()),
             Received::from_bytes(key.clone(), cut, &expected),
         );
         assert_eq!(a.hash, b.hash);
