@@ -16,7 +16,8 @@
 //!   between passes make the real traffic lower). Their ratios to the measured rates give the
 //!   compute and memory-traffic bounds the iteration time is compared to.
 
-use crate::runner::{run_in_process_timed, Plan, RunOptions, RunResult};
+use crate::distributed::{run_distributed, Network};
+use crate::runner::{run_in_process, run_in_process_timed, Plan, RunOptions, RunResult};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
 use glissade_bus::HandleTime;
@@ -26,6 +27,7 @@ use glissade_messages::{Payload, Role};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// Passes over full boundary fields (n_b × (N+1)) that one plain iteration makes per subdomain,
@@ -384,6 +386,128 @@ pub fn render(r: &BenchReport) -> String {
         r.memory_bound_ms,
         r.machine.read_gb_s,
         r.wall_over_memory_bound
+    );
+    s
+}
+
+/// One round of [`compare_processes`]: the iteration loop's wall time (s) of the same run
+/// in-process, as processes over loopback TCP, and as processes through shared memory.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProcessRound {
+    pub in_process_s: f64,
+    pub tcp_s: f64,
+    pub shared_memory_s: f64,
+}
+
+/// The scene as processes against in-process, in alternating rounds (so that a drift of the
+/// machine's speed shows in every column alike).
+#[derive(Debug, Clone, Serialize)]
+pub struct ProcessComparison {
+    pub scene: String,
+    pub iterations: usize,
+    pub rounds: Vec<ProcessRound>,
+    /// Medians over the rounds of each round's ratio to its in-process time.
+    pub tcp_over_in_process: f64,
+    pub shared_memory_over_in_process: f64,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Runs `scene` `rounds` times in-process, as processes over TCP and as processes through shared
+/// memory (node processes started from `exe`, the launcher's router on a loopback port, no
+/// recording), one after the other in each round. Every run must be the same run: the same
+/// iterations and bit-identical decisions, or this is an error. `run_id` names each run.
+pub fn compare_processes(
+    scene: &LoadedScene,
+    exe: &Path,
+    rounds: usize,
+    mut run_id: impl FnMut() -> anyhow::Result<String>,
+) -> anyhow::Result<ProcessComparison> {
+    anyhow::ensure!(rounds >= 1, "at least one round");
+    anyhow::ensure!(
+        !scene.model.interfaces.is_empty(),
+        "scene `{}` has no interface: it runs in one process only",
+        scene.model.name
+    );
+    // The first run's decisions and verdict: every other run must repeat them.
+    let mut reference = None;
+    let mut same_run = |what: &str, r: RunResult| -> anyhow::Result<f64> {
+        let decisions: Vec<_> = r.iterations.iter().map(|i| i.decision.clone()).collect();
+        match &reference {
+            None => reference = Some((decisions, r.verdict)),
+            Some((first, verdict)) => anyhow::ensure!(
+                *first == decisions && *verdict == r.verdict,
+                "the run {what} differs from the first in-process run ({} against {} iterations): not the same run",
+                decisions.len(),
+                first.len()
+            ),
+        }
+        Ok(r.solve_s)
+    };
+    let mut out = Vec::with_capacity(rounds);
+    for _ in 0..rounds {
+        let opts = |id: String| RunOptions {
+            run_id: id,
+            interior: false,
+        };
+        let in_process = same_run("in-process", run_in_process(scene, &opts(run_id()?), |_| {})?)?;
+        let mut times = [0.0; 2];
+        for (t, shm) in times.iter_mut().zip([false, true]) {
+            let mut sc = scene.clone();
+            sc.network.shared_memory = shm;
+            let (r, _) = run_distributed(&sc, &opts(run_id()?), exe, &Network::default(), |_| {})?;
+            *t = same_run(if shm { "through shared memory" } else { "over TCP" }, r)?;
+        }
+        out.push(ProcessRound {
+            in_process_s: in_process,
+            tcp_s: times[0],
+            shared_memory_s: times[1],
+        });
+    }
+    let ratio = |f: fn(&ProcessRound) -> f64| median(out.iter().map(|r| f(r) / r.in_process_s).collect());
+    Ok(ProcessComparison {
+        scene: scene.model.name.clone(),
+        iterations: reference.map_or(0, |(d, _)| d.len()),
+        tcp_over_in_process: ratio(|r| r.tcp_s),
+        shared_memory_over_in_process: ratio(|r| r.shared_memory_s),
+        rounds: out,
+    })
+}
+
+/// The comparison as text: one row per round, then the median ratios.
+pub fn render_processes(c: &ProcessComparison) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "\nprocesses against in-process, {} iterations, iteration loop wall time (s):\n",
+        c.iterations
+    );
+    let _ = writeln!(s, "| round | in-process | processes, TCP | processes, shared memory |");
+    let _ = writeln!(s, "|---:|---:|---:|---:|");
+    for (i, r) in c.rounds.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} | {:.2} ({:.2}×) | {:.2} ({:.2}×) |",
+            i + 1,
+            r.in_process_s,
+            r.tcp_s,
+            r.tcp_s / r.in_process_s,
+            r.shared_memory_s,
+            r.shared_memory_s / r.in_process_s
+        );
+    }
+    let _ = writeln!(
+        s,
+        "median ratio to in-process: TCP {:.2}×, shared memory {:.2}×",
+        c.tcp_over_in_process, c.shared_memory_over_in_process
     );
     s
 }

@@ -87,6 +87,10 @@ enum Command {
         /// LATIN iteration cap (overrides the scene's).
         #[arg(long)]
         max_iterations: Option<usize>,
+        /// Then run the scene this many rounds in-process, as processes over TCP and as processes
+        /// through shared memory (alternating, no recording) and report the ratios.
+        #[arg(long, value_name = "ROUNDS")]
+        processes: Option<usize>,
     },
     /// Load a recording into Rerun (an .rrd file by default, or a live viewer), or re-execute
     /// nodes from their recorded inputs and check their outputs bit for bit (`--node`).
@@ -359,7 +363,8 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             scene,
             out,
             max_iterations,
-        } => bench(&scene, &out, max_iterations),
+            processes,
+        } => bench(&scene, &out, max_iterations, processes),
         Command::Replay(args) => replay(args),
         Command::Node(args) => {
             let tls = glissade::distributed::node_tls(
@@ -749,16 +754,27 @@ fn load_with_overrides(
     Ok(sc)
 }
 
-fn bench(scene: &std::path::Path, out: &std::path::Path, max_iterations: Option<usize>) -> anyhow::Result<ExitCode> {
+fn bench(
+    scene: &std::path::Path,
+    out: &std::path::Path,
+    max_iterations: Option<usize>,
+    processes: Option<usize>,
+) -> anyhow::Result<ExitCode> {
+    if processes == Some(0) {
+        anyhow::bail!("--processes 0: must be at least 1 round");
+    }
     let sc = load_with_overrides(scene, out, None, max_iterations)?;
     let run_id = default_run_id()?;
     let report = glissade::bench::bench(&sc, &run_id)?;
     print!("{}", glissade::bench::render(&report));
-    let j = write_json(
-        out,
-        &format!("{}-bench.json", sc.model.name),
-        &serde_json::to_value(&report)?,
-    )?;
+    let mut json = serde_json::to_value(&report)?;
+    if let Some(rounds) = processes {
+        let exe = std::env::current_exe().context("the path of this program, to start node processes")?;
+        let c = glissade::bench::compare_processes(&sc, &exe, rounds, default_run_id)?;
+        print!("{}", glissade::bench::render_processes(&c));
+        json["processes"] = serde_json::to_value(&c)?;
+    }
+    let j = write_json(out, &format!("{}-bench.json", sc.model.name), &json)?;
     println!("bench: {}", j.display());
     Ok(ExitCode::SUCCESS)
 }

@@ -1,9 +1,13 @@
 //! `glissade bench`: timing the nodes does not change the run, and the stage split accounts for
-//! every message the nodes handled.
+//! every message the nodes handled; the process comparison runs the same run every time.
 
 use crate::common::{run, scene};
-use glissade::bench::{anderson_record_passes, anderson_step_passes, bench, render, FIELD_PASSES};
+use glissade::bench::{
+    anderson_record_passes, anderson_step_passes, bench, compare_processes, render, render_processes, ProcessRound,
+    FIELD_PASSES,
+};
 use glissade_mechanics::model::Acceleration;
+use std::path::Path;
 
 #[test]
 fn bench_splits_an_unchanged_run_by_stage() {
@@ -82,4 +86,43 @@ fn bench_splits_an_unchanged_run_by_stage() {
         render(&plain_report)
     );
     assert!(plain_report.bytes_per_iteration < report.bytes_per_iteration);
+}
+
+/// `glissade bench --processes`: every round runs the same run in-process, over TCP and through
+/// shared memory, and the ratios are those of the rounds' times.
+#[test]
+fn bench_compares_processes_with_the_same_run_in_process() {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/launch/scenes/small-three-layer.toml"
+    ))
+    .expect("scene file");
+    let sc = scene(&text);
+    let plain = run(&sc);
+    let mut k = 0;
+    let c = compare_processes(&sc, Path::new(env!("CARGO_BIN_EXE_glissade")), 2, || {
+        k += 1;
+        Ok(format!("bench-processes-{}-{k}", std::process::id()))
+    })
+    .expect("comparison");
+    // Six runs, each with its own run id; all of them the plain run (the comparison checks the
+    // decisions bit for bit).
+    assert_eq!(k, 6);
+    assert_eq!(c.iterations, plain.iterations.len());
+    assert_eq!(c.rounds.len(), 2);
+    for r in &c.rounds {
+        assert!(
+            r.in_process_s > 0.0 && r.tcp_s > 0.0 && r.shared_memory_s > 0.0,
+            "{r:?}"
+        );
+    }
+    // The median of two ratios is their mean.
+    let mean = |f: fn(&ProcessRound) -> f64| c.rounds.iter().map(|r| f(r) / r.in_process_s).sum::<f64>() / 2.0;
+    assert!((c.tcp_over_in_process - mean(|r| r.tcp_s)).abs() <= 1e-12 * c.tcp_over_in_process);
+    assert!(
+        (c.shared_memory_over_in_process - mean(|r| r.shared_memory_s)).abs()
+            <= 1e-12 * c.shared_memory_over_in_process
+    );
+    let text = render_processes(&c);
+    assert!(text.contains("median ratio to in-process"), "{text}");
 }
