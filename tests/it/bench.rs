@@ -6,11 +6,13 @@ use glissade::bench::{
     anderson_record_passes, anderson_step_passes, bench, compare_processes, render, render_processes, ProcessRound,
     FIELD_PASSES,
 };
+use glissade::runner::RunResult;
 use glissade_mechanics::model::Acceleration;
+use glissade_mechanics::scene::LoadedScene;
 use std::path::Path;
 
-#[test]
-fn bench_splits_an_unchanged_run_by_stage() {
+/// The small three-layer scene and its plain in-process run.
+fn small_three_layer() -> (LoadedScene, RunResult) {
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/launch/scenes/small-three-layer.toml"
@@ -18,6 +20,12 @@ fn bench_splits_an_unchanged_run_by_stage() {
     .expect("scene file");
     let sc = scene(&text);
     let plain = run(&sc);
+    (sc, plain)
+}
+
+#[test]
+fn bench_splits_an_unchanged_run_by_stage() {
+    let (sc, plain) = small_three_layer();
     let report = bench(&sc, "test").expect("bench");
     // Timing only reads clocks around the handlers: the run is the same run.
     assert_eq!(report.iterations, plain.iterations.len());
@@ -92,13 +100,7 @@ fn bench_splits_an_unchanged_run_by_stage() {
 /// shared memory, and the ratios are those of the rounds' times.
 #[test]
 fn bench_compares_processes_with_the_same_run_in_process() {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/launch/scenes/small-three-layer.toml"
-    ))
-    .expect("scene file");
-    let sc = scene(&text);
-    let plain = run(&sc);
+    let (sc, plain) = small_three_layer();
     let mut k = 0;
     let c = compare_processes(&sc, Path::new(env!("CARGO_BIN_EXE_glissade")), 2, || {
         k += 1;

@@ -932,21 +932,14 @@ mod tests {
         (sub, rx)
     }
 
-    /// A boundary state of several MB (about the size of one subdomain's field at N = 1000)
-    /// crosses the router between two client sessions intact, and decodes.
-    #[test]
-    fn multi_megabyte_message_arrives_intact() {
-        let port = free_loopback_port().unwrap();
-        let endpoint = format!("tcp/127.0.0.1:{port}");
-        let router = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
-        let a = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
-        let b = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
-        let (rows, cols) = (320, 1001);
-        let msg = Message {
+    /// Subdomain 0's boundary state of iteration 0 in run `run_id`, `rows` × `cols` fields of
+    /// distinct values.
+    fn boundary_state(run_id: &str, scene_fingerprint: u64, rows: usize, cols: usize) -> Message {
+        Message {
             envelope: Envelope {
                 schema_version: SCHEMA_VERSION,
-                run_id: "mb".into(),
-                scene_fingerprint: 1,
+                run_id: run_id.into(),
+                scene_fingerprint,
                 iteration: 0,
                 stage: Stage::Linear,
                 sender: NodeId {
@@ -959,7 +952,19 @@ mod tests {
                 w: Field::from_fn(rows, cols, |r, c| (r * cols + c) as f64 * 1e-3),
                 f: Field::from_fn(rows, cols, |r, c| -((r + c) as f64)),
             },
-        };
+        }
+    }
+
+    /// A boundary state of several MB (about the size of one subdomain's field at N = 1000)
+    /// crosses the router between two client sessions intact, and decodes.
+    #[test]
+    fn multi_megabyte_message_arrives_intact() {
+        let port = free_loopback_port().unwrap();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let router = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+        let a = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
+        let b = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
+        let msg = boundary_state("mb", 1, 320, 1001);
         let (_sub, rx) = received(&b, &msg.topic());
         // Let the subscription reach the router before publishing (pub/sub is not durable).
         std::thread::sleep(Duration::from_millis(500));
@@ -982,24 +987,7 @@ mod tests {
     /// its bytes do in one piece; damaged, it is refused for the same reason.
     #[test]
     fn a_fragmented_payload_decodes_and_hashes_as_its_bytes() {
-        let msg = Message {
-            envelope: Envelope {
-                schema_version: SCHEMA_VERSION,
-                run_id: "frag".into(),
-                scene_fingerprint: 3,
-                iteration: 2,
-                stage: Stage::Linear,
-                sender: NodeId {
-                    role: Role::Subdomain,
-                    index: 1,
-                },
-            },
-            payload: Payload::BoundaryState {
-                subdomain: 1,
-                w: Field::from_fn(40, 101, |r, c| (r * 101 + c) as f64 * 1e-3),
-                f: Field::from_fn(40, 101, |r, c| -((r + c) as f64)),
-            },
-        };
+        let msg = boundary_state("frag", 3, 40, 101);
         let expected = Expected {
             run_id: "frag".into(),
             scene_fingerprint: 3,
