@@ -89,8 +89,8 @@ enum Command {
         max_iterations: Option<usize>,
         /// Then run the scene this many rounds in-process, as processes over TCP and as processes
         /// through shared memory (alternating, no recording) and report the ratios.
-        #[arg(long, value_name = "ROUNDS")]
-        processes: Option<usize>,
+        #[arg(long, value_name = "ROUNDS", value_parser = clap::value_parser!(u32).range(1..))]
+        processes: Option<u32>,
     },
     /// Load a recording into Rerun (an .rrd file by default, or a live viewer), or re-execute
     /// nodes from their recorded inputs and check their outputs bit for bit (`--node`).
@@ -758,23 +758,23 @@ fn bench(
     scene: &std::path::Path,
     out: &std::path::Path,
     max_iterations: Option<usize>,
-    processes: Option<usize>,
+    processes: Option<u32>,
 ) -> anyhow::Result<ExitCode> {
-    if processes == Some(0) {
-        anyhow::bail!("--processes 0: must be at least 1 round");
-    }
     let sc = load_with_overrides(scene, out, None, max_iterations)?;
     let run_id = default_run_id()?;
     let report = glissade::bench::bench(&sc, &run_id)?;
     print!("{}", glissade::bench::render(&report));
+    let name = format!("{}-bench.json", sc.model.name);
+    // Written before the process rounds, so that a failing round loses nothing already measured.
     let mut json = serde_json::to_value(&report)?;
+    let mut j = write_json(out, &name, &json)?;
     if let Some(rounds) = processes {
         let exe = std::env::current_exe().context("the path of this program, to start node processes")?;
-        let c = glissade::bench::compare_processes(&sc, &exe, rounds, default_run_id)?;
+        let c = glissade::bench::compare_processes(&sc, &exe, rounds as usize, default_run_id)?;
         print!("{}", glissade::bench::render_processes(&c));
         json["processes"] = serde_json::to_value(&c)?;
+        j = write_json(out, &name, &json)?;
     }
-    let j = write_json(out, &format!("{}-bench.json", sc.model.name), &json)?;
     println!("bench: {}", j.display());
     Ok(ExitCode::SUCCESS)
 }

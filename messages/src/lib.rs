@@ -1,5 +1,7 @@
 //! Wire types of glissade (DESIGN §4): every message is an [`Envelope`] plus a [`Payload`],
-//! encoded with serde + bincode 2. Key expressions come only from the functions of this crate.
+//! encoded with bincode 2 (its own Encode/Decode; the wire form is that of serde's derive
+//! through bincode, which the decoder fuzz test checks). Key expressions come only from the
+//! functions of this crate.
 //!
 //! Encoding: the envelope and the payload are encoded one after the other, so a decoder checks
 //! the schema version, the run and the scene before it reads a payload whose layout may differ.
@@ -150,7 +152,6 @@ impl Field {
     }
 }
 
-/// How a run ended, or that it goes on.
 /// Buffers of fields to hold new fields: a node's sent fields once delivered, or a receiver's
 /// decoded fields once handled, so that multi-megabyte fields reuse memory instead of being
 /// allocated (and their pages faulted in) at every iteration. At most [`BufferPool::CAPACITY`]
@@ -226,15 +227,36 @@ impl BufferPool {
 /// Where the decoder takes the buffers of the fields it decodes (bincode's decoding context):
 /// a shared [`BufferPool`], or none (new buffers).
 #[derive(Debug, Clone, Default)]
-pub struct DecodeBuffers(Option<Arc<Mutex<BufferPool>>>);
+pub struct DecodeBuffers {
+    pool: Option<Arc<Mutex<BufferPool>>>,
+    /// Bytes of the payload being decoded: no field may claim more values than they hold (set by
+    /// the decoder before it reads the payload).
+    payload_bytes: usize,
+}
 
 impl DecodeBuffers {
     pub fn pooled(pool: Arc<Mutex<BufferPool>>) -> Self {
-        Self(Some(pool))
+        Self {
+            pool: Some(pool),
+            payload_bytes: 0,
+        }
     }
 
+    /// Refuses a field of `len` values that the payload is too short to hold (a damaged length),
+    /// before its buffer is allocated.
+    fn check(&self, len: usize) -> Result<(), bincode::error::DecodeError> {
+        if len.saturating_mul(8) > self.payload_bytes {
+            return Err(bincode::error::DecodeError::OtherString(format!(
+                "a field declares {len} values but the payload holds {} bytes",
+                self.payload_bytes
+            )));
+        }
+        Ok(())
+    }
+
+    /// A buffer for a field of `len` values.
     fn take(&self, len: usize) -> Vec<f64> {
-        match &self.0 {
+        match &self.pool {
             // A poisoned pool (a panic while it was held) still holds valid buffers.
             Some(pool) => pool.lock().unwrap_or_else(|e| e.into_inner()).take_any(len),
             None => vec![0.0; len],
@@ -243,8 +265,9 @@ impl DecodeBuffers {
 }
 
 // The wire form of a field is that of serde's derive (rows, cols, the value count as a u64, the
-// values as little-endian f64), written and read here as one block of bytes instead of value by
-// value: on a little-endian machine the values' memory is their wire form.
+// values as little-endian f64: `config` is little-endian), written and read here as one block of
+// bytes instead of value by value: on a little-endian machine the values' memory is their wire
+// form (elsewhere, value by value).
 impl bincode::Encode for Field {
     fn encode<E: bincode::enc::Encoder>(&self, e: &mut E) -> Result<(), bincode::error::EncodeError> {
         use bincode::enc::write::Writer;
@@ -267,7 +290,9 @@ impl bincode::Decode<DecodeBuffers> for Field {
         let rows = u32::decode(d)?;
         let cols = u32::decode(d)?;
         let len = usize::decode(d)?;
-        // Counted against the codec's size limit before anything is allocated.
+        // Checked against the payload's size and counted against the codec's limit before
+        // anything is allocated.
+        d.context().check(len)?;
         d.claim_container_read::<f64>(len)?;
         let mut data = d.context().take(len);
         if cfg!(target_endian = "little") {
@@ -283,6 +308,7 @@ impl bincode::Decode<DecodeBuffers> for Field {
 
 bincode::impl_borrow_decode_with_context!(Field, DecodeBuffers);
 
+/// How a run ended, or that it goes on.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub enum Verdict {
     Continue,
@@ -766,36 +792,17 @@ pub fn peek_envelope(bytes: &[u8], run_id: &str) -> Result<Envelope, DecodeError
 
 /// Decodes and checks a message: schema version, run, scene, trailing bytes, field sizes.
 pub fn decode(bytes: &[u8], expected: &Expected) -> Result<Message, DecodeError> {
-    let (envelope, used) = decode_envelope(bytes, &expected.run_id)?;
-    if envelope.scene_fingerprint != expected.scene_fingerprint {
-        return Err(DecodeError::OtherScene {
-            got: envelope.scene_fingerprint,
-            expected: expected.scene_fingerprint,
-        });
-    }
-    let rest = &bytes[used..];
-    let (payload, used): (Payload, usize) =
-        bincode::decode_from_slice_with_context(rest, config(), DecodeBuffers::default()).map_err(|e| {
-            DecodeError::Malformed {
-                part: "payload",
-                detail: e.to_string(),
-            }
-        })?;
-    if used != rest.len() {
-        return Err(DecodeError::TrailingBytes(rest.len() - used));
-    }
-    payload.check()?;
-    Ok(Message { envelope, payload })
+    decode_from_reader(bytes, bytes.len(), expected, DecodeBuffers::default())
 }
 
 /// [`decode`] from a reader holding exactly `len` bytes (e.g. a transport's fragmented payload,
-/// read without first copying it into one buffer): the same checks, the same errors.
-/// The fields' buffers come from `buffers`.
+/// read where it lies instead of first being copied into one buffer), the fields' buffers taken
+/// from `buffers`: the same checks, the same errors.
 pub fn decode_from_reader(
     reader: impl std::io::Read,
     len: usize,
     expected: &Expected,
-    buffers: DecodeBuffers,
+    mut buffers: DecodeBuffers,
 ) -> Result<Message, DecodeError> {
     let mut r = Bounded {
         inner: reader,
@@ -815,6 +822,7 @@ pub fn decode_from_reader(
             expected: expected.scene_fingerprint,
         });
     }
+    buffers.payload_bytes = r.left;
     let mut decoder = bincode::de::DecoderImpl::new(&mut r, config(), buffers);
     let payload = <Payload as bincode::Decode<DecodeBuffers>>::decode(&mut decoder).map_err(malformed("payload"))?;
     if r.left != 0 {
@@ -991,6 +999,27 @@ mod tests {
             _ => unreachable!(),
         }
         assert!(pool.lock().unwrap().is_empty());
+    }
+
+    #[test]
+    fn a_damaged_field_length_is_refused_before_anything_is_allocated() {
+        let m = msg();
+        let mut bytes = encode(&m);
+        // The payload: variant (u32), subdomain (u32), then w's rows and cols (u32 each) and its
+        // value count (u64): claim 2^27 or 2^28 values (1 or 2 GiB) in a message of under 200
+        // bytes.
+        let envelope = bincode::serde::encode_to_vec(&m.envelope, config()).unwrap().len();
+        let at = envelope + 4 + 4 + 4 + 4;
+        assert_eq!(bytes[at..at + 8], 6u64.to_le_bytes());
+        for claim in [1u64 << 27, 1 << 28] {
+            bytes[at..at + 8].copy_from_slice(&claim.to_le_bytes());
+            let e = decode(&bytes, &expected()).unwrap_err();
+            let said = format!(
+                "a field declares {claim} values but the payload holds {} bytes",
+                bytes.len() - envelope
+            );
+            assert!(e.to_string().contains(&said), "{e}");
+        }
     }
 
     #[test]

@@ -297,9 +297,8 @@ thread_local! {
 
 /// Decoding `bytes` does not panic, and an accepted message is exactly what the bytes encode.
 fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
-    // The reader decoder (a transport's fragmented payload) takes and refuses what the slice
-    // decoder does, with the same error.
-    // Its fields go into buffers of earlier cases' messages, with their old values.
+    // Decoding into buffers of earlier cases' messages (with their old values), as a node
+    // process does, takes and refuses what decoding into new buffers does, with the same error.
     let sliced = decode(bytes, &expected());
     let pooled = POOL.with(|p| DecodeBuffers::pooled(p.clone()));
     match (&sliced, decode_from_reader(bytes, bytes.len(), &expected(), pooled)) {
@@ -308,7 +307,7 @@ fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
             POOL.with(|p| p.lock().unwrap().recycle(b.payload));
         }
         (Err(a), Err(b)) => prop_assert_eq!(a, &b),
-        (a, b) => prop_assert!(false, "slice decoder {:?}, reader decoder {:?}", a.is_ok(), b.is_ok()),
+        (a, b) => prop_assert!(false, "new buffers: {:?}; pooled buffers: {:?}", a, b),
     }
     if let Ok(m) = sliced {
         prop_assert_eq!(&m.envelope.run_id, RUN);

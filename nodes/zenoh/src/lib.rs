@@ -523,11 +523,14 @@ pub fn run_nodes(
                 return Ok(());
             }
         };
+        // A handled or ignored message's buffers hold the next ones.
+        let recycle = |msg: Message| buffers.lock().unwrap_or_else(|e| e.into_inner()).recycle(msg.payload);
         if msg.topic() != key {
             log(&format!(
                 "ignored a message on {key}: its envelope and payload belong on {}",
                 msg.topic()
             ));
+            recycle(msg);
             return Ok(());
         }
         if seen.contains(&hash) {
@@ -535,6 +538,7 @@ pub fn run_nodes(
                 "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
                 msg.envelope.iteration, msg.envelope.stage
             ));
+            recycle(msg);
             return Ok(());
         }
         let mut taken = true;
@@ -562,7 +566,7 @@ pub fn run_nodes(
         if taken {
             seen.insert(hash);
         }
-        buffers.lock().unwrap_or_else(|e| e.into_inner()).recycle(msg.payload);
+        recycle(msg);
         Ok(())
     };
     if run.resume {
@@ -999,19 +1003,24 @@ mod tests {
             }
             w.finish()
         };
-        let bytes = encode(&msg);
-        let key = msg.topic();
-        // Fragments smaller than, equal to and larger than the 4 KiB ends the hash reads.
-        for size in [1000, 4096, 5000, bytes.len()] {
-            let z = fragmented(&bytes, size);
-            assert_eq!(z.slices().count(), bytes.len().div_ceil(size));
-            let (a, b) = (
-                Received::from_payload(key.clone(), &z, &expected, DecodeBuffers::default()),
-                Received::from_bytes(key.clone(), &bytes, &expected),
-            );
-            assert_eq!(a.hash, b.hash, "fragments of {size}");
-            assert_eq!(a.message.unwrap(), msg);
+        // Fragments smaller than, equal to and larger than the 4 KiB ends the hash reads, of a
+        // large message and of one shorter than those ends (its head and tail overlap).
+        let small = boundary_state("frag", 3, 3, 20);
+        for msg in [&msg, &small] {
+            let bytes = encode(msg);
+            let key = msg.topic();
+            for size in [7, 1000, 4096, 5000, bytes.len()] {
+                let z = fragmented(&bytes, size);
+                assert_eq!(z.slices().count(), bytes.len().div_ceil(size));
+                let (a, b) = (
+                    Received::from_payload(key.clone(), &z, &expected, DecodeBuffers::default()),
+                    Received::from_bytes(key.clone(), &bytes, &expected),
+                );
+                assert_eq!(a.hash, b.hash, "fragments of {size}");
+                assert_eq!(&a.message.unwrap(), msg);
+            }
         }
+        let (bytes, key) = (encode(&msg), msg.topic());
         let cut = &bytes[..bytes.len() - 100];
         let (a, b) = (
             Received::from_payload(key.clone(), &fragmented(cut, 1000), &expected, DecodeBuffers::default()),
