@@ -2,7 +2,7 @@
 //! plain relaxation, the reduction's messages only when it is on, and the multi-process run
 //! bit-identical to the in-process one with it on.
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use glissade::distributed::run_multi_process;
 use glissade::runner::{run_in_process, run_in_process_observed, RunOptions, RunResult};
 use glissade_mechanics::local::error_against_reference;
@@ -11,10 +11,6 @@ use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::{InterfaceSolution, Payload, Verdict};
 use std::path::Path;
 use std::time::Duration;
-
-fn scene_file(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
-}
 
 fn opts(run_id: &str) -> RunOptions {
     RunOptions {
@@ -68,7 +64,7 @@ fn solve(sc: &LoadedScene, acceleration: Acceleration, tolerance: f64, k0_factor
 #[test]
 fn anderson_reaches_the_plain_limit() {
     for (name, k0) in [("two-blocks", 3.0), ("hertz-slip", 10.0), ("small-three-layer", 1.0)] {
-        let sc = scene(&scene_file(name));
+        let sc = scene(&scene_text(name));
         let (plain, plain_grams, plain_steps) = solve(&sc, Acceleration::None, 1e-12, k0);
         let (mixed, grams, steps) = solve(&sc, Acceleration::Anderson { window: 5 }, 1e-12, k0);
         let weights = sc.model.time.trapezoid_weights();
@@ -103,7 +99,7 @@ fn anderson_reaches_the_plain_limit() {
 
 #[test]
 fn processes_match_in_process_bit_for_bit_with_anderson() {
-    let text = scene_file("small-three-layer").replace("[solver]", "[solver]\nacceleration = \"anderson\"");
+    let text = scene_text("small-three-layer").replace("[solver]", "[solver]\nacceleration = \"anderson\"");
     let sc = scene(&text);
     assert!(matches!(sc.model.solver.acceleration, Acceleration::Anderson { .. }));
     assert!(sc.deployment.subdomain_nodes >= 2);

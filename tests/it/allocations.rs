@@ -5,7 +5,7 @@
 //! counted in a process that runs this test alone). Two runs that differ only in their iteration
 //! count must make the same number of them.
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use glissade::runner::{run_in_process, RunOptions};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -50,12 +50,7 @@ const N: usize = 172;
 /// Field-sized allocations of an in-process run of the small three-layer scene (6 subdomains,
 /// coarse problem, Anderson) capped at `iterations`.
 fn field_allocations(iterations: u32) -> (u64, usize) {
-    let text = std::fs::read_to_string(format!(
-        "{}/launch/scenes/small-three-layer.toml",
-        env!("CARGO_MANIFEST_DIR")
-    ))
-    .expect("scene file")
-    .replace("N = 10\n", &format!("N = {N}\n"));
+    let text = scene_text("small-three-layer").replace("N = 10\n", &format!("N = {N}\n"));
     let mut sc = scene(&text);
     assert_eq!(sc.model.time.n_points(), N + 1);
     sc.model.solver.tolerance = 1e-300;

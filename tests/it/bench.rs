@@ -1,7 +1,7 @@
 //! `glissade bench`: timing the nodes does not change the run, and the stage split accounts for
 //! every message the nodes handled; the process comparison runs the same run every time.
 
-use crate::common::{run, scene};
+use crate::common::{run, scene, scene_text};
 use glissade::bench::{
     anderson_record_passes, anderson_step_passes, bench, compare_processes, render, render_processes, ProcessRound,
     FIELD_PASSES,
@@ -13,12 +13,7 @@ use std::path::Path;
 
 /// The small three-layer scene and its plain in-process run.
 fn small_three_layer() -> (LoadedScene, RunResult) {
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/launch/scenes/small-three-layer.toml"
-    ))
-    .expect("scene file");
-    let sc = scene(&text);
+    let sc = scene(&scene_text("small-three-layer"));
     let plain = run(&sc);
     (sc, plain)
 }

@@ -3,6 +3,11 @@
 use glissade::runner::{run_in_process, RunOptions, RunResult};
 use glissade_mechanics::scene::{load_str, LoadedScene};
 
+/// The text of scene `launch/scenes/<name>.toml`.
+pub fn scene_text(name: &str) -> String {
+    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
+}
+
 pub fn scene(text: &str) -> LoadedScene {
     match load_str(text, "test.toml") {
         Ok(s) => s,

@@ -1,17 +1,13 @@
 //! Nodes as separate processes over Zenoh (loopback, launcher-hosted router, multicast scouting
 //! off): the same scene run in-process and as processes gives bit-identical results.
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use glissade::distributed::{run_distributed, run_multi_process, Network};
 use glissade::runner::{run_in_process, RunOptions, RunResult};
 use glissade_zenoh as transport;
 use std::path::Path;
 use std::time::Duration;
 use zenoh::Wait;
-
-fn scene_file(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
-}
 
 fn exe() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_glissade"))
@@ -83,7 +79,7 @@ fn in_process_with_partials(sc: &glissade_mechanics::scene::LoadedScene) -> (Run
 /// decision); then as processes.
 #[test]
 fn several_interface_nodes_match_one_bit_for_bit() {
-    let base = scene_file("small-three-layer");
+    let base = scene_text("small-three-layer");
     let anderson = base.replace(
         "[solver]\n",
         "[solver]\nacceleration = \"anderson\"\nsearch_direction_update = true\n",
@@ -152,7 +148,7 @@ fn several_interface_nodes_match_one_bit_for_bit() {
 /// the in-process one-interface-node run bit for bit.
 #[test]
 fn stratified_over_three_interface_processes() {
-    let text = scene_file("stratified").replace("N = 100", "N = 10");
+    let text = scene_text("stratified").replace("N = 100", "N = 10");
     let one = crate::common::run(&scene(&text));
     let sc = scene(&with_deployment(&text, "interface_nodes = 3"));
     let groups = sc.deployment.interface_groups(&sc.model);
@@ -183,7 +179,7 @@ fn stratified_over_three_interface_processes() {
 /// by `acceleration::processes_match_in_process_bit_for_bit_with_anderson`.
 #[test]
 fn processes_match_in_process_bit_for_bit() {
-    let text = scene_file("small-three-layer").replace("[solver]\n", "[solver]\nacceleration = \"none\"\n");
+    let text = scene_text("small-three-layer").replace("[solver]\n", "[solver]\nacceleration = \"none\"\n");
     let sc = scene(&text);
     assert_eq!(
         sc.model.solver.acceleration,
@@ -229,7 +225,7 @@ fn processes_match_in_process_bit_for_bit() {
 fn pgd_mode_form_processes_match_in_process_bit_for_bit() {
     use glissade_messages::Payload;
     use std::collections::BTreeMap;
-    let text = scene_file("small-three-layer")
+    let text = scene_text("small-three-layer")
         .replace("[solver]\n", "[solver]\nlinear_stage = \"pgd\"\n")
         .replace(
             "[deployment]\n",
@@ -285,7 +281,7 @@ fn pgd_mode_form_processes_match_in_process_bit_for_bit() {
 /// coarse node (N = 10 to keep the debug-profile test short).
 #[test]
 fn stratified_over_three_subdomain_processes() {
-    let text = scene_file("stratified").replace("N = 100", "N = 10");
+    let text = scene_text("stratified").replace("N = 100", "N = 10");
     let sc = scene(&text);
     assert_eq!(sc.deployment.subdomain_nodes, 3);
     let local = run_in_process(
@@ -326,7 +322,7 @@ fn stratified_over_three_subdomain_processes() {
 /// waits for them), is bit-identical to the in-process run.
 #[test]
 fn shared_memory_processes_match_in_process_bit_for_bit() {
-    let text = scene_file("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";
+    let text = scene_text("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";
     let sc = scene(&text);
     assert!(sc.network.shared_memory);
     let opts = |run_id: &str| RunOptions {
@@ -351,7 +347,7 @@ fn messages_of_another_run_are_ignored() {
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::Arc;
 
-    let sc = scene(&scene_file("small-three-layer"));
+    let sc = scene(&scene_text("small-three-layer"));
     let local = run_in_process(
         &sc,
         &RunOptions {

@@ -15,6 +15,7 @@
 //! genuine messages only, must publish bit for bit what the undisturbed run publishes: a refused
 //! message leaves the node as it was.
 
+use crate::common::scene_text;
 use glissade::runner::{build_nodes, Plan, Selection};
 use glissade_bus::{Node, NodeError, RunContext};
 use glissade_mechanics::scene::{load_str, LoadedScene};
@@ -32,8 +33,7 @@ const AFTER: usize = 100;
 /// The small three-layer scene with `solver` keys added (a tolerance the run does not reach, so
 /// that it ends at max_iterations) and `deployment` keys.
 fn scene(solver: &str, deployment: &str) -> LoadedScene {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/launch/scenes/small-three-layer.toml");
-    let text = std::fs::read_to_string(path).expect("scene file");
+    let text = scene_text("small-three-layer");
     let fuzzed = text
         .replace(
             "[solver]\ntolerance = 1e-4\n",

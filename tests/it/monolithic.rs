@@ -1,20 +1,16 @@
 //! LATIN against this project's monolithic Newton reference (same discrete problem): converged
 //! LATIN and the reference agree on contact tractions and jumps.
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use glissade::runner::{run_in_process, RunOptions};
 use glissade_bus::convert::mat_of;
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
 use glissade_messages::Verdict;
 
-fn scene_file(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
-}
-
 /// (traction error, jump error) of LATIN's s at η ≤ `tolerance` against the reference.
 fn latin_vs_reference(name: &str, tolerance: f64, k0_factor: f64) -> (f64, f64) {
-    let mut sc = scene(&scene_file(name));
+    let mut sc = scene(&scene_text(name));
     sc.model.solver.tolerance = tolerance;
     sc.model.solver.k0_factor = k0_factor;
     sc.model.solver.max_iterations = 20000;

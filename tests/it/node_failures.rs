@@ -1,6 +1,7 @@
 //! A multi-process run without restarts stops within 10 s, naming the node, when any one node is
 //! killed, and stops every node when the launcher gets Ctrl-C; no node process of the run remains.
 
+use crate::common::scene_text;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -16,11 +17,7 @@ fn exe() -> &'static Path {
 
 /// The small three-layer scene with stop rules that never end the run (it runs until stopped).
 fn endless_scene(dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(format!(
-        "{}/launch/scenes/small-three-layer.toml",
-        env!("CARGO_MANIFEST_DIR")
-    ))
-    .expect("scene file");
+    let text = scene_text("small-three-layer");
     let solver = "[solver]\ntolerance = 1e-4\n";
     assert!(text.contains(solver), "the scene's solver section changed");
     let text = text.replace(

@@ -3,7 +3,7 @@
 //! multi-process recorder records the same messages as the in-process one; a recorder killed with
 //! SIGKILL leaves every chunk it wrote readable.
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use glissade::recording::run_in_process_recorded;
 use glissade::runner::{run_in_process_observed, RunOptions};
 use glissade_recorder::Recording;
@@ -12,10 +12,6 @@ use std::io::BufRead;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn scene_text(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
-}
 
 /// A fresh empty folder under the system's temporary folder.
 fn temp_dir(tag: &str) -> PathBuf {

@@ -2,7 +2,7 @@
 //! replacement rebuilds its state from the recorder's log, and the run ends bit-identical to an
 //! undisturbed one; a node that keeps dying stops the run after `deployment.restarts` restarts.
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use crate::distributed::assert_identical;
 use crate::node_failures::{processes_with, scratch, Scratch};
 use glissade::distributed::{run_distributed, Network};
@@ -14,11 +14,7 @@ fn exe() -> &'static Path {
 }
 
 fn small_three_layer(deployment: &str) -> String {
-    let text = std::fs::read_to_string(format!(
-        "{}/launch/scenes/small-three-layer.toml",
-        env!("CARGO_MANIFEST_DIR")
-    ))
-    .expect("scene file");
+    let text = scene_text("small-three-layer");
     assert!(text.contains("\n[deployment]\n"), "the scene has a deployment section");
     text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{deployment}\n"), 1)
 }

@@ -1,7 +1,7 @@
 //! LATIN against the independent GetFEM 5.4.2 solutions of tests/reference/ (same discrete
 //! problem: QUA8, node-to-node contact weighted by the lumped edge mass, backward-Euler Coulomb).
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use glissade::runner::{run_in_process, RunOptions};
 use glissade_messages::Verdict;
 use serde_json::Value;
@@ -9,10 +9,6 @@ use serde_json::Value;
 fn reference(name: &str) -> Value {
     let path = format!("{}/tests/reference/{name}.json", env!("CARGO_MANIFEST_DIR"));
     serde_json::from_str(&std::fs::read_to_string(&path).expect("reference file")).expect("reference json")
-}
-
-fn scene_file(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
 }
 
 /// Largest deviation of LATIN's contact forces and jumps from the reference, relative to the
@@ -27,7 +23,7 @@ fn compare_with(
     tolerance: f64,
     adjust: impl FnOnce(&mut glissade_mechanics::model::Model),
 ) -> ([f64; 4], glissade::runner::RunResult) {
-    let mut sc = scene(&scene_file(name));
+    let mut sc = scene(&scene_text(name));
     adjust(&mut sc.model);
     sc.model.solver.tolerance = tolerance;
     sc.model.solver.max_iterations = 20000;

@@ -4,7 +4,7 @@
 //! refuses to re-execute the nodes that need the thinned fields; `glissade replay` writes an .rrd
 //! the pinned Rerun CLI accepts, and `glissade run --rerun <file.rrd>` streams a live run's view.
 
-use crate::common::scene;
+use crate::common::{scene, scene_text};
 use glissade::recording::run_in_process_recorded;
 use glissade::reexecute::{parse_node, recorded_nodes, reexecute};
 use glissade::runner::RunOptions;
@@ -12,10 +12,6 @@ use glissade_messages::{encode, Payload, Role, Stage};
 use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn scene_text(name: &str) -> String {
-    std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
-}
 
 fn temp_dir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("glissade-replay-{tag}-{}", std::process::id()));

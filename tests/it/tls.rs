@@ -81,9 +81,7 @@ fn three_layers_over_mutual_tls_with_access_control_match_in_process() {
     for f in ["ca.pem", "node.pem", "node.key"] {
         std::fs::copy(fixture(f), dir.join("certs").join(f)).unwrap();
     }
-    let base =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("launch/scenes/small-three-layer.toml"))
-            .unwrap();
+    let base = crate::common::scene_text("small-three-layer");
     let text = format!(
         "{base}\n[network]\ntls = {{ root_ca = \"certs/ca.pem\", cert = \"certs/node.pem\", key = \"certs/node.key\", \
          mutual = true }}\nallow = [\"glissade-node\"]\n"
