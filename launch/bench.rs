@@ -407,6 +407,8 @@ pub struct ProcessRound {
 pub struct ProcessComparison {
     pub scene: String,
     pub iterations: usize,
+    /// The scene's links are TLS (`[network] tls`): in both process columns.
+    pub tls: bool,
     pub rounds: Vec<ProcessRound>,
     /// Medians over the rounds of each round's ratio to its in-process time.
     pub tcp_over_in_process: f64,
@@ -485,6 +487,7 @@ pub fn compare_processes(
     Ok(ProcessComparison {
         scene: scene.model.name.clone(),
         iterations: reference.map_or(0, |d| d.len()),
+        tls: scene.network.tls.is_some(),
         tcp_over_in_process: ratio(|r| r.tcp_s),
         shared_memory_over_in_process: ratio(|r| r.shared_memory_s),
         rounds: out,
@@ -500,7 +503,11 @@ pub fn render_processes(c: &ProcessComparison) -> String {
          processes: until every node process has exited):\n",
         c.iterations
     );
-    let _ = writeln!(s, "| round | in-process | processes, TCP | processes, shared memory |");
+    let link = if c.tls { "TCP with TLS" } else { "TCP" };
+    let _ = writeln!(
+        s,
+        "| round | in-process | processes, {link} | processes, shared memory |"
+    );
     let _ = writeln!(s, "|---:|---:|---:|---:|");
     for (i, r) in c.rounds.iter().enumerate() {
         let _ = writeln!(
@@ -516,7 +523,7 @@ pub fn render_processes(c: &ProcessComparison) -> String {
     }
     let _ = writeln!(
         s,
-        "median ratio to in-process: TCP {:.2}×, shared memory {:.2}×",
+        "median ratio to in-process: {link} {:.2}×, shared memory {:.2}×",
         c.tcp_over_in_process, c.shared_memory_over_in_process
     );
     s

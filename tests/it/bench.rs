@@ -3,8 +3,8 @@
 
 use crate::common::{run, scene, scene_text};
 use glissade::bench::{
-    anderson_record_passes, anderson_step_passes, bench, compare_processes, render, render_processes, ProcessRound,
-    FIELD_PASSES,
+    anderson_record_passes, anderson_step_passes, bench, compare_processes, render, render_processes,
+    ProcessComparison, ProcessRound, FIELD_PASSES,
 };
 use glissade::runner::RunResult;
 use glissade_mechanics::model::Acceleration;
@@ -121,5 +121,11 @@ fn bench_compares_processes_with_the_same_run_in_process() {
             <= 1e-12 * c.shared_memory_over_in_process
     );
     let text = render_processes(&c);
-    assert!(text.contains("median ratio to in-process"), "{text}");
+    assert!(!c.tls && text.contains("| processes, TCP |"), "{text}");
+    assert!(text.contains("median ratio to in-process: TCP"), "{text}");
+    // A scene with TLS links says so in both places.
+    let with_tls = ProcessComparison { tls: true, ..c };
+    let text = render_processes(&with_tls);
+    assert!(text.contains("| processes, TCP with TLS |"), "{text}");
+    assert!(text.contains("median ratio to in-process: TCP with TLS"), "{text}");
 }
