@@ -755,20 +755,17 @@ pub fn encode(msg: &Message) -> Vec<u8> {
     out
 }
 
-/// Decodes the envelope at the start of `bytes`, checking the schema version and the run;
-/// returns it with the number of bytes it used.
-fn decode_envelope(bytes: &[u8], run_id: &str) -> Result<(Envelope, usize), DecodeError> {
-    let (envelope, used): (Envelope, usize) =
-        bincode::decode_from_slice(bytes, config()).map_err(|e| DecodeError::Malformed {
-            part: "envelope",
-            detail: e.to_string(),
-        })?;
-    check_envelope(&envelope, run_id)?;
-    Ok((envelope, used))
+/// A decoding error of `part` ("envelope" or "payload").
+fn malformed(part: &'static str) -> impl Fn(bincode::error::DecodeError) -> DecodeError {
+    move |e| DecodeError::Malformed {
+        part,
+        detail: e.to_string(),
+    }
 }
 
-/// The schema version and the run of a decoded envelope.
-fn check_envelope(envelope: &Envelope, run_id: &str) -> Result<(), DecodeError> {
+/// Reads the envelope at the start of `r`, checking the schema version and the run.
+fn read_envelope<R: std::io::Read>(r: &mut Bounded<R>, run_id: &str) -> Result<Envelope, DecodeError> {
+    let envelope: Envelope = bincode::decode_from_reader(r, config()).map_err(malformed("envelope"))?;
     if envelope.schema_version != SCHEMA_VERSION {
         return Err(DecodeError::SchemaVersion {
             got: envelope.schema_version,
@@ -777,17 +774,23 @@ fn check_envelope(envelope: &Envelope, run_id: &str) -> Result<(), DecodeError> 
     }
     if envelope.run_id != run_id {
         return Err(DecodeError::OtherRun {
-            got: envelope.run_id.clone(),
+            got: envelope.run_id,
             expected: run_id.to_string(),
         });
     }
-    Ok(())
+    Ok(envelope)
 }
 
 /// Decodes only the envelope, checking the schema version and the run (for a receiver that
 /// learns the scene fingerprint from the scene message itself).
 pub fn peek_envelope(bytes: &[u8], run_id: &str) -> Result<Envelope, DecodeError> {
-    decode_envelope(bytes, run_id).map(|(envelope, _)| envelope)
+    read_envelope(
+        &mut Bounded {
+            inner: bytes,
+            left: bytes.len(),
+        },
+        run_id,
+    )
 }
 
 /// Decodes and checks a message: schema version, run, scene, trailing bytes, field sizes.
@@ -808,14 +811,7 @@ pub fn decode_from_reader(
         inner: reader,
         left: len,
     };
-    let malformed = |part| {
-        move |e: bincode::error::DecodeError| DecodeError::Malformed {
-            part,
-            detail: e.to_string(),
-        }
-    };
-    let envelope: Envelope = bincode::decode_from_reader(&mut r, config()).map_err(malformed("envelope"))?;
-    check_envelope(&envelope, &expected.run_id)?;
+    let envelope = read_envelope(&mut r, &expected.run_id)?;
     if envelope.scene_fingerprint != expected.scene_fingerprint {
         return Err(DecodeError::OtherScene {
             got: envelope.scene_fingerprint,
@@ -832,8 +828,8 @@ pub fn decode_from_reader(
     Ok(Message { envelope, payload })
 }
 
-/// A reader of `left` more bytes, that refuses a read past them as the slice decoder does
-/// (`UnexpectedEnd`, with the bytes missing).
+/// A reader of `left` more bytes, that refuses a read past them before reading
+/// (`UnexpectedEnd`, with the bytes missing, as bincode's slice reader words it).
 struct Bounded<R> {
     inner: R,
     left: usize,

@@ -395,26 +395,19 @@ impl Received {
     /// arrives in many), instead of first copying it into one buffer.
     fn from_payload(key: String, payload: &zenoh::bytes::ZBytes, expected: &Expected, buffers: DecodeBuffers) -> Self {
         let len = payload.len();
+        // The ends the hash reads, gathered across fragments.
         let slices: Vec<&[u8]> = payload.slices().collect();
-        let end = |from_back: bool| {
-            let mut out = Vec::with_capacity(len.min(HASHED_END));
-            let mut take = |s: &[u8]| {
-                let n = (HASHED_END - out.len()).min(s.len());
-                if from_back {
-                    out.splice(0..0, s[s.len() - n..].iter().copied());
-                } else {
-                    out.extend_from_slice(&s[..n]);
-                }
-            };
-            if from_back {
-                slices.iter().rev().for_each(|s| take(s));
-            } else {
-                slices.iter().for_each(|s| take(s));
-            }
-            out
-        };
+        let head: Vec<u8> = slices.iter().flat_map(|s| s.iter()).take(HASHED_END).copied().collect();
+        let mut tail: Vec<u8> = slices
+            .iter()
+            .rev()
+            .flat_map(|s| s.iter().rev())
+            .take(HASHED_END)
+            .copied()
+            .collect();
+        tail.reverse();
         Self {
-            hash: hash_parts(&key, len, &end(false), &end(true)),
+            hash: hash_parts(&key, len, &head, &tail),
             message: decode_from_reader(payload.reader(), len, expected, buffers),
             key,
         }
