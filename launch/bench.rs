@@ -100,6 +100,8 @@ pub struct StageTime {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {
+    /// The vector extension the element-wise kernels ran with ([`glissade_mechanics::simd`]).
+    pub kernels: &'static str,
     pub scene: String,
     pub subdomains: usize,
     pub largest_boundary: usize,
@@ -169,7 +171,9 @@ fn product_rate(m: usize, n: usize, threads: usize) -> f64 {
     }
 }
 
-/// Read bandwidth (GB/s) of a 512 MiB buffer summed by all threads; best of three passes.
+/// Read bandwidth (GB/s) of a 512 MiB buffer summed by all threads, each in 16 partial sums
+/// ([`glissade_mechanics::simd::sum`]: one chain of additions would measure the add's latency,
+/// about 9 GB/s per thread, not the memory); best of three passes.
 fn read_bandwidth() -> f64 {
     let n: usize = 64 << 20; // f64s
     let buf: Vec<f64> = (0..n).map(|i| (i % 13) as f64).collect();
@@ -177,7 +181,7 @@ fn read_bandwidth() -> f64 {
     let mut best = 0.0f64;
     for _ in 0..3 {
         let t = Instant::now();
-        let sum: f64 = buf.par_chunks(chunk).map(|c| c.iter().sum::<f64>()).sum();
+        let sum: f64 = buf.par_chunks(chunk).map(glissade_mechanics::simd::sum).sum();
         let s = t.elapsed().as_secs_f64();
         std::hint::black_box(sum);
         best = best.max((n * 8) as f64 / s / 1e9);
@@ -318,6 +322,7 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
         memory_bound_ms,
         wall_over_memory_bound: wall_ms / memory_bound_ms,
         machine,
+        kernels: glissade_mechanics::simd::level().name(),
     })
 }
 
@@ -331,8 +336,9 @@ pub fn render(r: &BenchReport) -> String {
     );
     let _ = writeln!(
         s,
-        "machine: {} threads; dense product {}×{} · {}×{}: {:.1} GFLOP/s on one thread, {:.1} on all; read bandwidth {:.1} GB/s",
+        "machine: {} threads, element-wise kernels {}; dense product {}×{} · {}×{}: {:.1} GFLOP/s on one thread, {:.1} on all; read bandwidth {:.1} GB/s",
         r.machine.threads,
+        r.kernels,
         r.machine.product_shape[0],
         r.machine.product_shape[1],
         r.machine.product_shape[1],

@@ -91,6 +91,12 @@ enum Command {
         /// through shared memory (alternating, no recording) and report the ratios.
         #[arg(long, value_name = "ROUNDS", value_parser = clap::value_parser!(u32).range(1..))]
         processes: Option<u32>,
+        /// Vector extension of the element-wise kernels (default: the widest this CPU has; a
+        /// wider one than the CPU has falls back to the widest it has, and the report says which
+        /// ran). Results are the same bit for bit at every level. In-process only: node
+        /// processes pick their own, so it does not go with --processes.
+        #[arg(long, value_enum, conflicts_with = "processes")]
+        kernels: Option<KernelsArg>,
     },
     /// Load a recording into Rerun (an .rrd file by default, or a live viewer), or re-execute
     /// nodes from their recorded inputs and check their outputs bit for bit (`--node`).
@@ -114,6 +120,13 @@ enum Command {
         #[arg(long, default_value = "recordings")]
         out: PathBuf,
     },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum KernelsArg {
+    Baseline,
+    Avx2,
+    Avx512,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -364,7 +377,16 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             out,
             max_iterations,
             processes,
-        } => bench(&scene, &out, max_iterations, processes),
+            kernels,
+        } => {
+            use glissade_mechanics::simd::{set_process_level, Level};
+            set_process_level(kernels.map(|k| match k {
+                KernelsArg::Baseline => Level::Baseline,
+                KernelsArg::Avx2 => Level::Avx2,
+                KernelsArg::Avx512 => Level::Avx512,
+            }));
+            bench(&scene, &out, max_iterations, processes)
+        }
         Command::Replay(args) => replay(args),
         Command::Node(args) => {
             let tls = glissade::distributed::node_tls(

@@ -24,6 +24,12 @@ const RUN: &[&str] = &["run", "--in-process", "--quiet", "--out", "{out}", "{sce
 
 const CASES: &[Case] = &[
     Case {
+        name: "bench kernels with processes",
+        args: &["bench", "--kernels", "baseline", "--processes", "1", "--out", "{out}", "{scene}"],
+        edits: &[],
+        error: "the argument '--kernels <KERNELS>' cannot be used with '--processes <ROUNDS>'",
+    },
+    Case {
         name: "scene file missing",
         args: &["run", "--in-process", "--out", "{out}", "{dir}/no-such-scene.toml"],
         edits: &[],

@@ -129,3 +129,40 @@ fn bench_compares_processes_with_the_same_run_in_process() {
     assert!(text.contains("| processes, TCP with TLS |"), "{text}");
     assert!(text.contains("median ratio to in-process: TCP with TLS"), "{text}");
 }
+
+/// `glissade bench --kernels baseline` runs the element-wise kernels without wide vectors and
+/// says so in its text and its JSON; the run takes as many iterations as at the CPU's widest
+/// level (that the kernels give the same bits at every level is the numerics crate's test).
+#[test]
+fn bench_kernels_level_changes_the_code_not_the_run() {
+    let dir = std::env::temp_dir().join(format!("glissade-bench-kernels-{}", std::process::id()));
+    let scene = dir.join("small-three-layer.toml");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    std::fs::write(&scene, scene_text("small-three-layer")).expect("scene file");
+    let widest = glissade_mechanics::simd::detected().name();
+    let mut decisions = Vec::new();
+    for (arg, name) in [(Some("baseline"), "baseline"), (None, widest)] {
+        let out = dir.join(name);
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"));
+        cmd.args(["bench", "--out"]).arg(&out).arg(&scene);
+        if let Some(a) = arg {
+            cmd.args(["--kernels", a]);
+        }
+        let output = cmd.output().expect("spawn glissade");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "{stdout}{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        assert!(stdout.contains(&format!("element-wise kernels {name};")), "{stdout}");
+        let json: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("small-three-layer-bench.json")).expect("bench json"),
+        )
+        .expect("bench json");
+        assert_eq!(json["kernels"], name);
+        decisions.push(json["iterations"].clone());
+    }
+    assert_eq!(decisions[0], decisions[1]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

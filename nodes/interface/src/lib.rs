@@ -470,8 +470,7 @@ impl InterfaceNode {
             .zip(self.owned.par_iter())
             .map(|((local, fields), &i)| {
                 let itf = &model.interfaces[i];
-                local.local_stage(itf, fields);
-                let sums = local.indicator_sums(itf, weights, fields, n == 0);
+                let sums = local.local_stage_with_sums(itf, weights, fields, n == 0);
                 let updated = model.solver.search_direction_update
                     && local.update_directions(itf, model.solver.alpha, model.solver.i0);
                 indicators_of(i, &sums, updated)

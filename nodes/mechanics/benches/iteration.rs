@@ -3,7 +3,8 @@
 //! with the machine's one-thread dense-product rate and read bandwidth measured in the same run.
 //!
 //! Run: `cargo bench -p glissade-mechanics --bench iteration -- [scene.toml] [points=N+1]
-//! [iterations=K]` (release build). The first two iterations (μ = 1, first touch of every buffer)
+//! [iterations=K] [kernels=baseline|avx2|avx512]` (release build; the element-wise kernels at
+//! the CPU's widest vector extension unless `kernels=` lowers it). The first two iterations (μ = 1, first touch of every buffer)
 //! are left out of the figures.
 
 #[path = "../tests/support/latin.rs"]
@@ -43,7 +44,7 @@ fn read_bandwidth() -> f64 {
     let mut best = 0.0f64;
     for _ in 0..3 {
         let t = Instant::now();
-        let sum: f64 = buf.chunks(8).map(|c| c.iter().sum::<f64>()).sum();
+        let sum = glissade_mechanics::simd::sum(&buf);
         let s = t.elapsed().as_secs_f64();
         std::hint::black_box(sum);
         best = best.max((n * 8) as f64 / s / 1e9);
@@ -59,6 +60,14 @@ fn main() {
             points = Some(v.parse::<usize>().expect("points=N+1, an integer ≥ 2"));
         } else if let Some(v) = arg.strip_prefix("iterations=") {
             iterations = v.parse::<usize>().expect("iterations=K, an integer ≥ 3");
+        } else if let Some(v) = arg.strip_prefix("kernels=") {
+            use glissade_mechanics::simd::{set_process_level, Level};
+            set_process_level(Some(match v {
+                "baseline" => Level::Baseline,
+                "avx2" => Level::Avx2,
+                "avx512" => Level::Avx512,
+                _ => panic!("kernels=baseline|avx2|avx512, not `{v}`"),
+            }));
         } else {
             scene = arg;
         }
@@ -122,7 +131,14 @@ fn main() {
             s.contact_indicator()
         );
     }
-    println!("{:<40} {:>12}", "stage (one thread)", "ms/iteration");
+    println!(
+        "{:<40} {:>12}",
+        format!(
+            "stage (one thread, {} kernels)",
+            glissade_mechanics::simd::level().name()
+        ),
+        "ms/iteration"
+    );
     for (name, t) in STAGES.iter().zip(latin.stage_time) {
         println!("{name:<40} {:>12.3}", ms(t));
     }

@@ -80,6 +80,7 @@ pub enum AndersonStep {
     Restart,
 }
 
+#[inline(always)]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -263,6 +264,7 @@ impl AndersonHistory {
     }
 
     /// Slot of the i-th stored difference, oldest first.
+    #[inline(always)]
     fn slot(&self, i: usize) -> usize {
         (self.next + self.window - self.len + i) % self.window
     }
@@ -273,15 +275,16 @@ impl AndersonHistory {
     /// pass, column by column while the column is in cache (each dot product is the sum over
     /// columns of the columns' dot products, as [`Self::partials`] reports them).
     pub fn record(&mut self, s_w: &Mat<f64>, s_f: &Mat<f64>, g_w: &Mat<f64>, g_f: &Mat<f64>) {
-        self.record_with::<false>(s_w, s_f, [g_w, g_w], [g_f, g_f]);
+        record_kernel(self, s_w, s_f, [g_w, g_w], [g_f, g_f], false);
     }
 
     /// [`Self::record`] with the image given in two parts, G(s) = g + h (s₁ + s₂ of the linear
     /// stage), added on the fly instead of in a pass of its own.
     pub fn record_sum(&mut self, s_w: &Mat<f64>, s_f: &Mat<f64>, g_w: [&Mat<f64>; 2], g_f: [&Mat<f64>; 2]) {
-        self.record_with::<true>(s_w, s_f, g_w, g_f);
+        record_kernel(self, s_w, s_f, g_w, g_f, true);
     }
 
+    #[inline(always)]
     fn record_with<const SUM: bool>(
         &mut self,
         s_w: &Mat<f64>,
@@ -388,6 +391,7 @@ impl AndersonHistory {
     }
 
     /// Adds column j's share of the new Gram column Δr_newᵀΔr_i, the projections Δr_iᵀ r and ‖r‖².
+    #[inline(always)]
     fn accumulate_column(&self, j: usize, pass: &mut RecordPass) {
         let (drf, rf) = (self.dr_f[pass.slot].col_as_slice(j), self.r_f.col_as_slice(j));
         for (i, &other) in pass.slots[..pass.n_slots].iter().enumerate() {
@@ -450,6 +454,11 @@ impl AndersonHistory {
     /// Writes the next iterate into (s_w, s_f) for `step` (of the last recorded iterate).
     pub fn apply(&mut self, step: &AndersonStep, s_w: &mut Mat<f64>, s_f: &mut Mat<f64>) {
         let gamma = self.begin_step(step);
+        apply_kernel(self, gamma, s_w, s_f);
+    }
+
+    #[inline(always)]
+    fn apply_with(&self, gamma: &[f64], s_w: &mut Mat<f64>, s_f: &mut Mat<f64>) {
         // s = s + μ r − Σ γ_i D_i, oldest difference first, column by column (the column of s
         // stays in cache over the k differences).
         for j in 0..self.cols {
@@ -463,6 +472,32 @@ impl AndersonHistory {
                 }
             }
         }
+    }
+}
+
+crate::multiversion! {
+    /// [`AndersonHistory::record`] (`sum` false) or [`AndersonHistory::record_sum`], compiled for
+    /// the CPU's widest vector extension.
+    fn record_kernel(
+        h: &mut AndersonHistory,
+        s_w: &Mat<f64>,
+        s_f: &Mat<f64>,
+        g_w: [&Mat<f64>; 2],
+        g_f: [&Mat<f64>; 2],
+        sum: bool,
+    ) {
+        if sum {
+            h.record_with::<true>(s_w, s_f, g_w, g_f);
+        } else {
+            h.record_with::<false>(s_w, s_f, g_w, g_f);
+        }
+    }
+}
+
+crate::multiversion! {
+    /// The pass of [`AndersonHistory::apply`], compiled for the CPU's widest vector extension.
+    fn apply_kernel(h: &AndersonHistory, gamma: &[f64], s_w: &mut Mat<f64>, s_f: &mut Mat<f64>) {
+        h.apply_with(gamma, s_w, s_f);
     }
 }
 

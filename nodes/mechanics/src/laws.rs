@@ -31,7 +31,7 @@ pub struct PairHat {
     pub f_a: [f64; 2],
 }
 
-#[inline]
+#[inline(always)]
 fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[0] + a[1] * b[1]
 }
@@ -82,7 +82,7 @@ pub struct ContactResult {
 /// C_N = ½k_N([W]·n + g0) + ½(F_A − F_B)·n, C_T = ½k_T([W]·t − ĝ_T(t_{i−1})) + ½(F_A − F_B)·t;
 /// C_N > 0 → separation, F̂ = 0; else F̂_A·n = C_N and stick (|C_T| < f|C_N|: F̂_A·t = C_T) or
 /// slip (F̂_A·t = f|C_N| sign C_T); then Ŵ from E⁺ on each side.
-#[inline]
+#[inline(always)]
 pub fn contact(p: &ContactPoint, s: &PairState) -> ContactResult {
     let (n, t) = (p.normal, p.tangent);
     let jump = [s.w_b[0] - s.w_a[0], s.w_b[1] - s.w_a[1]];

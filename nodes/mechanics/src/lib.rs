@@ -20,3 +20,4 @@ pub mod monolithic;
 pub mod pgd;
 pub mod reference;
 pub mod scene;
+pub mod simd;

@@ -398,18 +398,13 @@ impl SubdomainSolver {
             .map(|(ms, slot)| 2 * (2 * slot.n_pairs) * ms.n_modes)
             .sum();
         self.flops += (per_col * f.ncols()) as u64;
-        for j in 0..f.ncols() {
-            let (fj, oj) = (col(f, j), col_mut(&mut out, j));
-            for (ms, slot) in self.macro_slots.iter().zip(&self.op.layout.slots) {
-                let rows = slot.offset..slot.offset + 2 * slot.n_pairs;
-                for (m, o) in oj[ms.first_col..ms.first_col + ms.n_modes].iter_mut().enumerate() {
-                    *o = dot(
-                        &self.m_e.col_as_slice(ms.first_col + m)[rows.clone()],
-                        &fj[rows.clone()],
-                    );
-                }
-            }
-        }
+        macro_forces_kernel(
+            self.m_e.as_ref(),
+            &self.macro_slots,
+            &self.op.layout.slots,
+            f,
+            out.rb_mut(),
+        );
     }
 
     /// Micro problem 2: W₂ = A_E M k⁻ 𝔼 w̃, F₂ = k⁻(𝔼 w̃ − W₂), for w̃ (n_m × (N+1)): two
@@ -455,7 +450,31 @@ impl SubdomainSolver {
     }
 }
 
+crate::multiversion! {
+    /// [`SubdomainSolver::macro_forces_into`]'s dot products, compiled for the CPU's widest
+    /// vector extension.
+    fn macro_forces_kernel(
+        m_e: MatRef<'_, f64>,
+        macro_slots: &[MacroSlot],
+        slots: &[crate::condensed::InterfaceSlot],
+        f: MatRef<'_, f64>,
+        out: MatMut<'_, f64>,
+    ) {
+        let mut out = out;
+        for j in 0..f.ncols() {
+            let (fj, oj) = (col(f, j), col_mut(&mut out, j));
+            for (ms, slot) in macro_slots.iter().zip(slots) {
+                let rows = slot.offset..slot.offset + 2 * slot.n_pairs;
+                for (m, o) in oj[ms.first_col..ms.first_col + ms.n_modes].iter_mut().enumerate() {
+                    *o = dot(&col(m_e, ms.first_col + m)[rows.clone()], &fj[rows.clone()]);
+                }
+            }
+        }
+    }
+}
+
 /// Column `j` of a matrix with unit row stride (every field here), as a slice.
+#[inline(always)]
 fn col(m: MatRef<'_, f64>, j: usize) -> &[f64] {
     m.col(j)
         .try_as_col_major()
@@ -463,6 +482,7 @@ fn col(m: MatRef<'_, f64>, j: usize) -> &[f64] {
         .as_slice()
 }
 
+#[inline(always)]
 fn col_mut<'a>(m: &'a mut MatMut<'_, f64>, j: usize) -> &'a mut [f64] {
     m.rb_mut()
         .col_mut(j)
@@ -472,6 +492,7 @@ fn col_mut<'a>(m: &'a mut MatMut<'_, f64>, j: usize) -> &'a mut [f64] {
 }
 
 /// Σ a[r] b[r], in eight interleaved partial sums (so that it vectorises).
+#[inline(always)]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 8];
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
@@ -485,15 +506,32 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// out[r] = d[r] · x[r].
+#[inline(always)]
 fn scale_into(out: &mut [f64], d: &[f64], x: &[f64]) {
     for ((o, d), x) in out.iter_mut().zip(d).zip(x) {
         *o = d * x;
     }
 }
 
-/// End of the linear stage: s_new = s₁ + s₂ into (w1, f1), then the relaxation
-/// s ← μ s_new + (1 − μ) s into (w, f), in one pass.
-pub fn sum_relax_into(
+crate::multiversion! {
+    /// End of the linear stage: s_new = s₁ + s₂ into (w1, f1), then the relaxation
+    /// s ← μ s_new + (1 − μ) s into (w, f), in one pass (compiled for the CPU's widest vector
+    /// extension).
+    pub fn sum_relax_into(
+        mu: f64,
+        w1: MatMut<'_, f64>,
+        f1: MatMut<'_, f64>,
+        w2: MatRef<'_, f64>,
+        f2: MatRef<'_, f64>,
+        w: MatMut<'_, f64>,
+        f: MatMut<'_, f64>,
+    ) {
+        sum_relax_inline(mu, w1, f1, w2, f2, w, f);
+    }
+}
+
+#[inline(always)]
+fn sum_relax_inline(
     mu: f64,
     mut w1: MatMut<'_, f64>,
     mut f1: MatMut<'_, f64>,

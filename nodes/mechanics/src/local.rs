@@ -30,7 +30,7 @@ impl InterfaceFields {
     }
 
     /// Column i of (W_A, W_B, F_A, F_B).
-    #[inline]
+    #[inline(always)]
     fn columns(&self, i: usize) -> [&[f64]; 4] {
         [
             self.w_a.col_as_slice(i),
@@ -41,7 +41,7 @@ impl InterfaceFields {
     }
 
     /// Column i of (W_A, W_B, F_A, F_B), to write.
-    #[inline]
+    #[inline(always)]
     fn columns_mut(&mut self, i: usize) -> [&mut [f64]; 4] {
         [
             self.w_a.col_as_slice_mut(i),
@@ -277,6 +277,83 @@ impl IndicatorSums {
     }
 }
 
+crate::multiversion! {
+    /// [`InterfaceLocal::march`], compiled for the CPU's widest vector extension.
+    fn local_stage_kernel(
+        local: &mut InterfaceLocal,
+        itf: &Interface,
+        s: &InterfaceFields,
+        sums: Option<(&[f64], &mut IndicatorSums)>,
+    ) {
+        local.march(itf, s, sums);
+    }
+}
+
+/// [`add_column_sums`] of time point i when the sums are wanted (`sums`: the time weights and
+/// the sums so far).
+#[inline(always)]
+fn column_sums(
+    sums: &mut Option<(&[f64], &mut IndicatorSums)>,
+    itf: &Interface,
+    k: f64,
+    s: &InterfaceFields,
+    hat: &InterfaceFields,
+    i: usize,
+) {
+    if let Some((weights, out)) = sums.as_mut() {
+        let n = 2 * itf.n_pairs();
+        add_column_sums(
+            out,
+            &itf.weights,
+            k,
+            weights[i],
+            itf.is_contact(),
+            s.columns(i),
+            hat.columns(i),
+            n,
+        );
+    }
+}
+
+/// Adds time point i's share of the indicator sums of one interface: `s` and `h` are column i of
+/// (W_A, W_B, F_A, F_B) of s and ŝ, `n` = 2·n_pairs entries each, `wt` the time weight of t_i,
+/// `pair_weights` the lumped mass of each pair.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn add_column_sums(
+    out: &mut IndicatorSums,
+    pair_weights: &[f64],
+    k: f64,
+    wt: f64,
+    contact: bool,
+    s: [&[f64]; 4],
+    h: [&[f64]; 4],
+    n: usize,
+) {
+    let sq = |x: f64| x * x;
+    let [sw_a, sw_b, sf_a, sf_b] = s;
+    let [hw_a, hw_b, hf_a, hf_b] = h;
+    let (sw_a, sw_b, sf_a, sf_b) = (&sw_a[..n], &sw_b[..n], &sf_a[..n], &sf_b[..n]);
+    let (hw_a, hw_b, hf_a, hf_b) = (&hw_a[..n], &hw_b[..n], &hf_a[..n], &hf_b[..n]);
+    for e in 0..n {
+        let m = pair_weights[e / 2] * wt;
+        let dw = sq(sw_a[e] - hw_a[e]) + sq(sw_b[e] - hw_b[e]);
+        let df = sq(sf_a[e] - hf_a[e]) + sq(sf_b[e] - hf_b[e]);
+        out.eta_num += m * (k * dw + df / k);
+        let sw = sq(sw_a[e]) + sq(sw_b[e]) + sq(hw_a[e]) + sq(hw_b[e]);
+        let sf = sq(sf_a[e]) + sq(sf_b[e]) + sq(hf_a[e]) + sq(hf_b[e]);
+        out.eta_den += m * (k * sw + sf / k);
+        if contact {
+            out.force_num += m * df;
+            out.force_den += m * (sq(hf_a[e]) + sq(hf_b[e]));
+            let jump = sw_b[e] - sw_a[e];
+            let jump_hat = hw_b[e] - hw_a[e];
+            out.jump_num += m * sq(jump - jump_hat);
+            out.jump_den += m * (sq(jump_hat) + 0.5 * (sq(hw_a[e]) + sq(hw_b[e])));
+        }
+    }
+}
+
 /// Local-stage state of one interface: the last ŝ, contact statuses, and the search directions.
 #[derive(Debug, Clone)]
 pub struct InterfaceLocal {
@@ -333,6 +410,33 @@ impl InterfaceLocal {
     /// t_{i−1} enters t_i) only when friction is positive. Time points are visited in order and
     /// pairs within a time point, so that every pass reads and writes whole columns.
     pub fn local_stage(&mut self, itf: &Interface, s: &InterfaceFields) {
+        local_stage_kernel(self, itf, s, None);
+    }
+
+    /// [`Self::local_stage`] and then [`Self::indicator_sums`] in one pass over the time points:
+    /// each column of s and ŝ is summed as soon as ŝ's column is written, while both are in
+    /// cache, instead of in a second pass that reads all eight fields again. The sums are added
+    /// in the same order, so they are the same bit for bit. Compiled for the CPU's widest vector
+    /// extension ([`crate::simd`]).
+    pub fn local_stage_with_sums(
+        &mut self,
+        itf: &Interface,
+        time_weights: &[f64],
+        s: &InterfaceFields,
+        first: bool,
+    ) -> IndicatorSums {
+        assert_eq!(time_weights.len(), s.w_a.ncols(), "one time weight per time point");
+        let mut out = IndicatorSums::default();
+        local_stage_kernel(self, itf, s, Some((time_weights, &mut out)));
+        self.add_status_counts(&mut out, first);
+        out
+    }
+
+    /// The local stage; with `sums`, adds each time point's indicator sums once ŝ's column is
+    /// written (time order, so in the order [`Self::indicator_sums`] adds them).
+    #[inline(always)]
+    fn march(&mut self, itf: &Interface, s: &InterfaceFields, mut sums: Option<(&[f64], &mut IndicatorSums)>) {
+        let k0 = self.k0;
         let np = itf.n_pairs();
         let nt = s.w_a.ncols();
         match &itf.kind {
@@ -353,6 +457,7 @@ impl InterfaceLocal {
                         h_fa[e] = f;
                         h_fb[e] = -f;
                     }
+                    column_sums(&mut sums, itf, k0, s, &self.hat, i);
                 }
             }
             InterfaceKind::Contact { friction, gap } => {
@@ -400,6 +505,7 @@ impl InterfaceLocal {
                         c_n[p] = r.c_n;
                         c_t[p] = r.c_t_excess;
                     }
+                    column_sums(&mut sums, itf, k0, s, &self.hat, i);
                 }
             }
         }
@@ -468,43 +574,34 @@ impl InterfaceLocal {
         s: &InterfaceFields,
         first: bool,
     ) -> IndicatorSums {
+        assert_eq!(time_weights.len(), s.w_a.ncols(), "one time weight per time point");
         let mut out = IndicatorSums::default();
-        let k = self.k0;
-        let h = &self.hat;
-        let np = itf.n_pairs();
-        let contact = itf.is_contact();
-        let sq = |x: f64| x * x;
+        let (k, n, contact) = (self.k0, 2 * itf.n_pairs(), itf.is_contact());
         for (i, &wt) in time_weights.iter().enumerate() {
-            let [sw_a, sw_b, sf_a, sf_b] = s.columns(i);
-            let [hw_a, hw_b, hf_a, hf_b] = h.columns(i);
-            let n = 2 * np;
-            let (sw_a, sw_b, sf_a, sf_b) = (&sw_a[..n], &sw_b[..n], &sf_a[..n], &sf_b[..n]);
-            let (hw_a, hw_b, hf_a, hf_b) = (&hw_a[..n], &hw_b[..n], &hf_a[..n], &hf_b[..n]);
-            for e in 0..n {
-                let m = itf.weights[e / 2] * wt;
-                let dw = sq(sw_a[e] - hw_a[e]) + sq(sw_b[e] - hw_b[e]);
-                let df = sq(sf_a[e] - hf_a[e]) + sq(sf_b[e] - hf_b[e]);
-                out.eta_num += m * (k * dw + df / k);
-                let sw = sq(sw_a[e]) + sq(sw_b[e]) + sq(hw_a[e]) + sq(hw_b[e]);
-                let sf = sq(sf_a[e]) + sq(sf_b[e]) + sq(hf_a[e]) + sq(hf_b[e]);
-                out.eta_den += m * (k * sw + sf / k);
-                if contact {
-                    out.force_num += m * df;
-                    out.force_den += m * (sq(hf_a[e]) + sq(hf_b[e]));
-                    let jump = sw_b[e] - sw_a[e];
-                    let jump_hat = hw_b[e] - hw_a[e];
-                    out.jump_num += m * sq(jump - jump_hat);
-                    out.jump_den += m * (sq(jump_hat) + 0.5 * (sq(hw_a[e]) + sq(hw_b[e])));
-                }
-            }
+            add_column_sums(
+                &mut out,
+                &itf.weights,
+                k,
+                wt,
+                contact,
+                s.columns(i),
+                self.hat.columns(i),
+                n,
+            );
         }
+        self.add_status_counts(&mut out, first);
+        out
+    }
+
+    /// Counts the contact points per status and, after the first local stage, those whose status
+    /// changed.
+    fn add_status_counts(&self, out: &mut IndicatorSums, first: bool) {
         for (k, st) in self.status.iter().enumerate() {
             out.counts[*st as usize] += 1;
             if !first && *st != self.prev_status[k] {
                 out.status_changes += 1;
             }
         }
-        out
     }
 
     /// q̂ = F̂ + k⁻Ŵ of one side, written into rows `offset..offset + 2·n_pairs` of `out`.
@@ -613,5 +710,44 @@ uy = "-0.01*t"
             (sums_a.eta() - sums_b.eta()).abs() > 1e-3 * sums_a.eta(),
             "η depends on k"
         );
+
+        // The fused pass gives the same ŝ, statuses and sums as the local stage followed by the
+        // indicator pass, bit for bit (same operations, same order), on a second iteration too
+        // (status changes counted against the first).
+        let mut fused = InterfaceLocal::new(0, itf, 250.0, nt);
+        let mut apart = InterfaceLocal::new(0, itf, 250.0, nt);
+        for (round, first) in [(0, true), (1, false)] {
+            if round == 1 {
+                for m in [&mut s.f_a, &mut s.f_b] {
+                    for j in 0..nt {
+                        for r in 0..m.nrows() {
+                            m[(r, j)] += 5.0 * rnd();
+                        }
+                    }
+                }
+            }
+            let one = fused.local_stage_with_sums(itf, &w, &s, first);
+            apart.local_stage(itf, &s);
+            let two = apart.indicator_sums(itf, &w, &s, first);
+            assert_eq!(fused.hat, apart.hat);
+            assert_eq!(fused.status, apart.status);
+            assert_eq!(format!("{one:?}"), format!("{two:?}"));
+            assert!(one.eta_num > 0.0 && one.force_num > 0.0 && one.jump_num > 0.0);
+        }
+        assert!(fused.local_stage_with_sums(itf, &w, &s, false).status_changes == 0);
+
+        // And on a perfect interface.
+        let mut glued = itf.clone();
+        glued.kind = InterfaceKind::Perfect;
+        let mut fused = InterfaceLocal::new(0, &glued, 250.0, nt);
+        let mut apart = InterfaceLocal::new(0, &glued, 250.0, nt);
+        let one = fused.local_stage_with_sums(&glued, &w, &s, true);
+        apart.local_stage(&glued, &s);
+        assert_eq!(fused.hat, apart.hat);
+        assert_eq!(
+            format!("{one:?}"),
+            format!("{:?}", apart.indicator_sums(&glued, &w, &s, true))
+        );
+        assert!(one.eta_num > 0.0 && one.force_num == 0.0);
     }
 }

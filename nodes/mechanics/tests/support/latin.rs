@@ -178,8 +178,7 @@ impl Latin {
         let solver_params = &self.model.solver;
         for (i, (local, s)) in self.locals.iter_mut().zip(&self.interface_fields).enumerate() {
             let itf = &self.model.interfaces[i];
-            local.local_stage(itf, s);
-            sums.add(&local.indicator_sums(itf, &self.time_weights, s, n == 0));
+            sums.add(&local.local_stage_with_sums(itf, &self.time_weights, s, n == 0));
             if solver_params.search_direction_update {
                 local.update_directions(itf, solver_params.alpha, solver_params.i0);
             }

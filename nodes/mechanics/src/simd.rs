@@ -1,0 +1,272 @@
+//! Runtime choice of the CPU's widest vector extension for the element-wise kernels.
+//!
+//! The crate is compiled for the baseline of its target (x86-64: SSE2), so that one binary runs
+//! on every machine of a distributed run. Kernels that are not a faer product (the local stage
+//! and its indicators, the macro forces, the relaxation, Anderson's passes) run through
+//! [`widest`], which calls them inside a function compiled for AVX-512 or AVX2 + FMA when the
+//! CPU has them. Everything such a kernel calls in its loops is `#[inline(always)]`, so that it
+//! is compiled into that function with the wider instructions.
+//!
+//! The numbers do not depend on the extension: Rust never contracts `a * b + c` into a fused
+//! multiply-add nor reorders a sum unless asked to, so the wider code makes the same operations
+//! in the same order, lane by lane. A run gives the same results, bit for bit, on every machine.
+
+/// Which code [`multiversion!`] functions run on this CPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Level {
+    Baseline,
+    Avx2,
+    Avx512,
+}
+
+thread_local! {
+    static FORCED: std::cell::Cell<Option<Level>> = const { std::cell::Cell::new(None) };
+}
+
+/// The process-wide level set by [`set_process_level`] (0: none, else 1 + the level's index).
+static PROCESS: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+const LEVELS: [Level; 3] = [Level::Baseline, Level::Avx2, Level::Avx512];
+
+impl Level {
+    pub fn name(self) -> &'static str {
+        match self {
+            Level::Baseline => "baseline",
+            Level::Avx2 => "AVX2",
+            Level::Avx512 => "AVX-512",
+        }
+    }
+}
+
+/// `level` if the CPU has it, else the widest level below it that it has.
+fn capped(level: Level) -> Level {
+    match (level, detected()) {
+        (Level::Avx512, Level::Avx512) => Level::Avx512,
+        (Level::Avx512 | Level::Avx2, Level::Avx512 | Level::Avx2) => Level::Avx2,
+        _ => Level::Baseline,
+    }
+}
+
+/// Runs every thread's kernels at `level` (capped at what the CPU has) from now on, or at
+/// [`detected`] again with `None`: for benchmarks that compare the levels in one run.
+pub fn set_process_level(level: Option<Level>) {
+    let code = level.map_or(0, |l| {
+        1 + LEVELS.iter().position(|x| *x == capped(l)).expect("a level") as u8
+    });
+    PROCESS.store(code, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The widest extension of this CPU that the kernels use: AVX-512 (F, VL, DQ) with AVX2 and FMA,
+/// AVX2 with FMA, or the baseline. Detected by std, which caches it.
+pub fn detected() -> Level {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            return Level::Avx512;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            return Level::Avx2;
+        }
+    }
+    Level::Baseline
+}
+
+/// The level the kernels of this thread run at: [`detected`], unless [`with_level`] (this
+/// thread) or [`set_process_level`] (every thread) lowered it.
+#[inline]
+pub fn level() -> Level {
+    FORCED
+        .with(|f| f.get())
+        .unwrap_or_else(|| match PROCESS.load(std::sync::atomic::Ordering::Relaxed) {
+            0 => detected(),
+            code => LEVELS[code as usize - 1],
+        })
+}
+
+/// Runs `f` with this thread's kernels at `level`, capped at what the CPU has (a test compares
+/// the levels' results; the baseline always runs).
+pub fn with_level<R>(level: Level, f: impl FnOnce() -> R) -> R {
+    let before = FORCED.with(|c| c.replace(Some(capped(level))));
+    let out = f();
+    FORCED.with(|c| c.set(before));
+    out
+}
+
+/// Defines a function whose body is compiled three times, for AVX-512, for AVX2 + FMA and for
+/// the baseline, and runs the copy of [`level`]. Everything the body calls in its loops must be
+/// `#[inline(always)]` to be compiled into each copy. Arguments are plain `name: Type` pairs
+/// (elided lifetimes only, no generics).
+#[macro_export]
+macro_rules! multiversion {
+    ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
+        $(#[$meta])*
+        $vis fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[inline(always)]
+            fn inline($($arg: $ty),*) $(-> $ret)? $body
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
+            fn avx512($($arg: $ty),*) $(-> $ret)? {
+                inline($($arg),*)
+            }
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2,fma")]
+            fn avx2($($arg: $ty),*) $(-> $ret)? {
+                inline($($arg),*)
+            }
+            match $crate::simd::level() {
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: `level` says the CPU has AVX-512 F/VL/DQ, AVX2 and FMA.
+                $crate::simd::Level::Avx512 => unsafe { avx512($($arg),*) },
+                #[cfg(target_arch = "x86_64")]
+                // SAFETY: `level` says the CPU has AVX2 and FMA.
+                $crate::simd::Level::Avx2 => unsafe { avx2($($arg),*) },
+                _ => inline($($arg),*),
+            }
+        }
+    };
+}
+
+crate::multiversion! {
+    /// Σ values in 16 interleaved partial sums: a pass that the memory limits, not the latency
+    /// of one chain of additions (a plain `iter().sum()` adds one value per add latency, about
+    /// 9 GB/s at 3.5 GHz, below what one core reads). Used to measure the read bandwidth.
+    pub fn sum(values: &[f64]) -> f64 {
+        let mut acc = [0.0f64; 16];
+        let chunks = values.chunks_exact(16);
+        let tail: f64 = chunks.remainder().iter().sum();
+        for c in chunks {
+            for l in 0..16 {
+                acc[l] += c[l];
+            }
+        }
+        acc.iter().sum::<f64>() + tail
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::anderson::{AndersonHistory, AndersonStep};
+    use crate::linear::flop_tests::model_and_solver;
+    use crate::linear::sum_relax_into;
+    use crate::local::{InterfaceFields, InterfaceLocal};
+    use faer::Mat;
+
+    fn random(seed: &mut u64, rows: usize, cols: usize, scale: f64) -> Mat<f64> {
+        Mat::from_fn(rows, cols, |_, _| {
+            *seed ^= *seed << 13;
+            *seed ^= *seed >> 7;
+            *seed ^= *seed << 17;
+            scale * ((*seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
+        })
+    }
+
+    fn bits(m: &Mat<f64>, out: &mut Vec<u64>) {
+        for j in 0..m.ncols() {
+            out.extend(m.col_as_slice(j).iter().map(|v| v.to_bits()));
+        }
+    }
+
+    /// Every kernel's outputs, as bits, from the same random inputs: the local stage with its
+    /// indicator sums on every interface of small-three-layer (contact with friction and
+    /// perfect, two iterations), a subdomain's macro forces, the sum and relaxation, and four
+    /// Anderson records with a mixing step.
+    fn outputs() -> Vec<u64> {
+        let (model, mut solver) = model_and_solver(true);
+        let nt = model.time.n_points();
+        let weights = model.time.trapezoid_weights();
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut out = Vec::new();
+        for (i, itf) in model.interfaces.iter().enumerate() {
+            let mut local = InterfaceLocal::new(i, itf, 300.0, nt);
+            for first in [true, false] {
+                let rows = 2 * itf.n_pairs();
+                let s = InterfaceFields {
+                    w_a: random(&mut seed, rows, nt, 0.02),
+                    w_b: random(&mut seed, rows, nt, 0.02),
+                    f_a: random(&mut seed, rows, nt, 20.0),
+                    f_b: random(&mut seed, rows, nt, 20.0),
+                };
+                let sums = local.local_stage_with_sums(itf, &weights, &s, first);
+                for m in [&local.hat.w_a, &local.hat.w_b, &local.hat.f_a, &local.hat.f_b] {
+                    bits(m, &mut out);
+                }
+                out.extend(format!("{sums:?}").bytes().map(u64::from));
+            }
+        }
+        let n_b = solver.n_boundary();
+        let f = random(&mut seed, n_b, nt, 10.0);
+        let mut forces = Mat::zeros(solver.n_macro(), nt);
+        solver.macro_forces_into(f.as_ref(), forces.as_mut());
+        bits(&forces, &mut out);
+        let [mut w1, mut f1, w2, f2, mut w, mut f] = std::array::from_fn(|_| random(&mut seed, n_b, nt, 1.0));
+        sum_relax_into(
+            0.8,
+            w1.as_mut(),
+            f1.as_mut(),
+            w2.as_ref(),
+            f2.as_ref(),
+            w.as_mut(),
+            f.as_mut(),
+        );
+        for m in [&w1, &f1, &w, &f] {
+            bits(m, &mut out);
+        }
+        let mut history = AndersonHistory::new(3, 0.8, n_b, nt);
+        for _ in 0..4 {
+            let [g_w, g_f, h_w, h_f] = std::array::from_fn(|_| random(&mut seed, n_b, nt, 1.0));
+            history.record_sum(&w, &f, [&g_w, &h_w], [&g_f, &h_f]);
+            let p = history.partials();
+            out.extend(p.gram.iter().chain(&p.projection).map(|v| v.to_bits()));
+            out.push(p.residual2.to_bits());
+            let gamma = (0..history.len()).map(|i| 0.1 * (i as f64 + 1.0)).collect();
+            history.apply(&AndersonStep::Mix(gamma), &mut w, &mut f);
+            bits(&w, &mut out);
+            bits(&f, &mut out);
+        }
+        out
+    }
+
+    /// The kernels give the same bits at every level this CPU has (Rust neither contracts nor
+    /// reorders floating-point operations, so wider vectors only run the same operations side
+    /// by side). On a CPU without AVX2 only the baseline runs and the test says so.
+    #[test]
+    fn kernels_give_the_same_bits_at_every_level() {
+        let base = with_level(Level::Baseline, outputs);
+        assert!(base.len() > 10_000, "the kernels produced {} values", base.len());
+        let mut compared = Vec::new();
+        for level in [Level::Avx2, Level::Avx512] {
+            if capped(level) != level {
+                continue;
+            }
+            assert_eq!(
+                with_level(level, || (self::level(), outputs())),
+                (level, base.clone()),
+                "{level:?}"
+            );
+            compared.push(level.name());
+        }
+        eprintln!("compared the baseline with: {compared:?} (detected {:?})", detected());
+    }
+
+    #[test]
+    fn sum_adds_every_value() {
+        for n in [0usize, 1, 15, 16, 17, 1000] {
+            let v: Vec<f64> = (0..n).map(|i| i as f64).collect();
+            assert_eq!(sum(&v), (n * n.saturating_sub(1) / 2) as f64, "n = {n}");
+        }
+    }
+
+    #[test]
+    fn levels_are_capped_at_the_cpu() {
+        let have = detected();
+        assert_eq!(with_level(Level::Baseline, level), Level::Baseline);
+        assert_eq!(with_level(Level::Avx512, level), have);
+        assert_eq!(level(), have);
+    }
+}
