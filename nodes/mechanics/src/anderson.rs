@@ -80,9 +80,20 @@ pub enum AndersonStep {
     Restart,
 }
 
+/// Σ a[r] b[r] in eight interleaved partial sums, added pairwise at the end: independent chains
+/// of additions that vector instructions run side by side (one chain waits on the add's latency
+/// at every value). The same operations in the same order at every vector extension.
 #[inline(always)]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let mut acc = [0.0; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    ((acc[0] + acc[4]) + (acc[2] + acc[6])) + ((acc[1] + acc[5]) + (acc[3] + acc[7])) + tail
 }
 
 /// One part's history: ring buffers of m differences, allocated once.
