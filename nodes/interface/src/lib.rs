@@ -370,11 +370,18 @@ impl InterfaceNode {
         format!("boundary entry {row}")
     }
 
+    /// Copies subdomain `s`'s rows of W and F into its interfaces' fields: the traces on one
+    /// thread and the forces on another (the other nodes wait for the local stage).
     fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
         let layout = self.layouts[s as usize].as_ref().expect("participant");
         for slot in &layout.slots {
             if let Some(p) = self.position[slot.interface] {
-                self.fields[p].set_side(slot.side, slot.offset, w, f);
+                let (to_w, to_f) = self.fields[p].side_mut(slot.side);
+                let rows = to_w.nrows();
+                rayon::join(
+                    || to_w.copy_from(w.subrows(slot.offset, rows)),
+                    || to_f.copy_from(f.subrows(slot.offset, rows)),
+                );
             }
         }
     }
@@ -886,8 +893,10 @@ impl Node for InterfaceNode {
             expect_shape(self.id, "w", w, n_b, nt)?;
             expect_shape(self.id, "f", f, n_b, nt)?;
             self.received.insert(s);
-            for (name, field) in [("W", w), ("F", f)] {
-                if let Some(at) = field.first_non_finite() {
+            // Both fields checked on two threads; W's non-finite value is named first.
+            let (bad_w, bad_f) = rayon::join(|| w.first_non_finite(), || f.first_non_finite());
+            for (name, bad) in [("W", bad_w), ("F", bad_f)] {
+                if let Some(at) = bad {
                     let detail = self.non_finite_detail(s, name, at);
                     return Ok(self.report(Vec::new(), Some(detail)));
                 }

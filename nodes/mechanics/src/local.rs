@@ -53,13 +53,18 @@ impl InterfaceFields {
 }
 
 impl InterfaceFields {
+    /// One side's trace and force, to write.
+    pub fn side_mut(&mut self, side: crate::model::Side) -> (&mut Mat<f64>, &mut Mat<f64>) {
+        match side {
+            crate::model::Side::A => (&mut self.w_a, &mut self.f_a),
+            crate::model::Side::B => (&mut self.w_b, &mut self.f_b),
+        }
+    }
+
     /// Writes one side's trace and force from a subdomain's boundary fields (n_b × (N+1)), rows
     /// `offset..offset + 2·n_pairs`.
     pub fn set_side(&mut self, side: crate::model::Side, offset: usize, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
-        let (to_w, to_f) = match side {
-            crate::model::Side::A => (&mut self.w_a, &mut self.f_a),
-            crate::model::Side::B => (&mut self.w_b, &mut self.f_b),
-        };
+        let (to_w, to_f) = self.side_mut(side);
         let rows = to_w.nrows();
         to_w.copy_from(w.subrows(offset, rows));
         to_f.copy_from(f.subrows(offset, rows));
