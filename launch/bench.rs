@@ -46,15 +46,15 @@ use std::time::{Duration, Instant};
 ///   back into s₁ and writes the relaxed s (14–23).
 /// - `InterfaceFields::set_side` (4), gathering s: 24–25 read W and F, 26–27 write the
 ///   interface's copies.
-/// - `InterfaceLocal::local_stage` (4): 28–29 read W and F, 30–31 write Ŵ and F̂.
-/// - `InterfaceLocal::indicator_sums` (4): 32–35 read W, F, Ŵ and F̂.
-/// - `InterfaceLocal::q_hat_into` (3): 36–37 read Ŵ and F̂, 38 writes q̂.
+/// - `InterfaceLocal::local_stage_with_sums` (4): 28–29 read W and F, 30–31 write Ŵ and F̂; the
+///   indicator sums read each time point's columns of W, F, Ŵ and F̂ right after, from cache.
+/// - `InterfaceLocal::q_hat_into` (3): 32–33 read Ŵ and F̂, 34 writes q̂.
 ///
 /// Not counted: fields of n_m × (N+1) (macro forces, w̃) and of one value per contact pair
 /// (statuses, C_N, 𝒯), the operators (counted apart), and the messages' copies and encoding
 /// between the nodes, which the in-process run also makes. Every pass is counted once, as if no
 /// field stayed in cache between two passes.
-pub const FIELD_PASSES: usize = 10 + 1 + 2 + 10 + 4 + 4 + 4 + 3;
+pub const FIELD_PASSES: usize = 10 + 1 + 2 + 10 + 4 + 4 + 3;
 
 /// Passes over full boundary fields that a subdomain's Anderson record makes beyond the plain
 /// iteration's, when it holds `k` stored differences after the record (its `AndersonGram` is
