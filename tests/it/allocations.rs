@@ -20,7 +20,7 @@ fn count(size: usize) {
     let w = WATCH.load(Ordering::Relaxed);
     // At least two rows: one time series alone (a row of a time grid, a time-function vector)
     // is not a field.
-    if w != 0 && size >= 2 * w && size % w == 0 {
+    if w != 0 && size >= 2 * w && size.is_multiple_of(w) {
         COUNT.fetch_add(1, Ordering::Relaxed);
     }
 }
