@@ -44,8 +44,8 @@ use std::time::{Duration, Instant};
 /// - `SubdomainSolver::micro2_into` (2): 12 writes W₂, 13 writes F₂ (two products with w̃).
 /// - `sum_relax_into` (10): for W and for F, reads s₁, s₂ and the previous s, writes s₁ + s₂
 ///   back into s₁ and writes the relaxed s (14–23).
-/// - `InterfaceFields::set_side` (4), gathering s: 24–25 read W and F, 26–27 write the
-///   interface's copies.
+/// - `InterfaceNode::store` (4), gathering s: 24–25 read W and F, 26–27 write the interface's
+///   copies.
 /// - `InterfaceLocal::local_stage_with_sums` (4): 28–29 read W and F, 30–31 write Ŵ and F̂; the
 ///   indicator sums read each time point's columns of W, F, Ŵ and F̂ right after, from cache.
 /// - `InterfaceLocal::q_hat_into` (3): 32–33 read Ŵ and F̂, 34 writes q̂.
@@ -53,7 +53,8 @@ use std::time::{Duration, Instant};
 /// Not counted: fields of n_m × (N+1) (macro forces, w̃) and of one value per contact pair
 /// (statuses, C_N, 𝒯), the operators (counted apart), and the messages' copies and encoding
 /// between the nodes, which the in-process run also makes. Every pass is counted once, as if no
-/// field stayed in cache between two passes.
+/// field stayed in cache from one call to the next (within a call, a column read again right
+/// after it is written, as by the indicator sums, is not counted again).
 pub const FIELD_PASSES: usize = 10 + 1 + 2 + 10 + 4 + 4 + 3;
 
 /// Passes over full boundary fields that a subdomain's Anderson record makes beyond the plain

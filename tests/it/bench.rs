@@ -139,9 +139,9 @@ fn bench_kernels_level_changes_the_code_not_the_run() {
     let scene = dir.join("small-three-layer.toml");
     std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(&scene, scene_text("small-three-layer")).expect("scene file");
-    let widest = glissade_mechanics::simd::detected().name();
+    let detected = glissade_mechanics::simd::detected().name();
     let mut decisions = Vec::new();
-    for (arg, name) in [(Some("baseline"), "baseline"), (None, widest)] {
+    for (arg, name) in [(Some("baseline"), "baseline"), (None, detected)] {
         let out = dir.join(name);
         let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"));
         cmd.args(["bench", "--out"]).arg(&out).arg(&scene);

@@ -18,7 +18,8 @@ use std::time::{Duration, Instant};
 /// Full boundary fields (n_b × (N+1)) one plain iteration moves per subdomain: the count of
 /// `glissade bench` (`FIELD_PASSES` there, derived call by call), whose calls are this loop's
 /// (`tests/support/latin.rs`: micro 1, macro forces, micro 2, sum and relaxation, gathering,
-/// local stage, indicators, q̂). Without Anderson acceleration, which this loop does not run.
+/// local stage with its indicators, q̂). Without Anderson acceleration, which this loop does not
+/// run.
 const FIELD_PASSES: usize = 34;
 
 /// One-thread GFLOP/s of (m × m) · (m × n), best of repeated timings over ≥ 0.3 s.

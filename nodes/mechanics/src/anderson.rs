@@ -22,6 +22,7 @@
 //!   last mixed step made the residual grow (the safeguard), or a restart of every history when
 //!   the least-squares problem is ill-conditioned.
 
+use crate::simd::dot;
 use faer::{Mat, MatMut, MatRef};
 
 /// Largest condition number of the Gram matrix, scaled to a unit diagonal, that the coordinator
@@ -78,22 +79,6 @@ pub enum AndersonStep {
     /// s ← s + μ r and every history forgets its differences: the least-squares problem is
     /// ill-conditioned (or not finite, or the fixed-point map changed).
     Restart,
-}
-
-/// Σ a[r] b[r] in eight interleaved partial sums, added pairwise at the end: independent chains
-/// of additions that vector instructions run side by side (one chain waits on the add's latency
-/// at every value). The same operations in the same order at every vector extension.
-#[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    ((acc[0] + acc[4]) + (acc[2] + acc[6])) + ((acc[1] + acc[5]) + (acc[3] + acc[7])) + tail
 }
 
 /// One part's history: ring buffers of m differences, allocated once.

@@ -8,6 +8,7 @@
 use crate::assembly::AssemblyError;
 use crate::condensed::{BoundaryLayout, CondensedOperator};
 use crate::model::{Interface, Model};
+use crate::simd::dot;
 use faer::linalg::matmul::matmul;
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef, Par};
@@ -489,20 +490,6 @@ fn col_mut<'a>(m: &'a mut MatMut<'_, f64>, j: usize) -> &'a mut [f64] {
         .try_as_col_major_mut()
         .expect("fields have unit row stride")
         .as_slice_mut()
-}
-
-/// Σ a[r] b[r], in eight interleaved partial sums (so that it vectorises).
-#[inline(always)]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
-    for (x, y) in ca.zip(cb) {
-        for l in 0..8 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    ((acc[0] + acc[4]) + (acc[2] + acc[6])) + ((acc[1] + acc[5]) + (acc[3] + acc[7])) + tail
 }
 
 /// out[r] = d[r] · x[r].

@@ -446,7 +446,7 @@ impl InterfaceLocal {
         let nt = s.w_a.ncols();
         match &itf.kind {
             InterfaceKind::Perfect => {
-                let k = self.k0;
+                let k = k0;
                 for i in 0..nt {
                     let [w_a, w_b, f_a, f_b] = s.columns(i);
                     let [h_wa, h_wb, h_fa, h_fb] = self.hat.columns_mut(i);

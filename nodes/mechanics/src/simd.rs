@@ -1,15 +1,19 @@
 //! Runtime choice of the CPU's widest vector extension for the element-wise kernels.
 //!
 //! The crate is compiled for the baseline of its target (x86-64: SSE2), so that one binary runs
-//! on every machine of a distributed run. Kernels that are not a faer product (the local stage
-//! and its indicators, the macro forces, the relaxation, Anderson's passes) run through
-//! [`widest`], which calls them inside a function compiled for AVX-512 or AVX2 + FMA when the
-//! CPU has them. Everything such a kernel calls in its loops is `#[inline(always)]`, so that it
-//! is compiled into that function with the wider instructions.
+//! on every machine of a distributed run. The kernels defined with
+//! [`multiversion!`](crate::multiversion) are compiled three times, for AVX-512, for AVX2 + FMA
+//! and for the baseline, and each call runs the copy [`level`] allows: the local stage with its
+//! indicator sums, the macro forces, the sum and relaxation, Anderson's record and step (the
+//! passes that measurably gained; the others, e.g. micro problem 1's scaling and F₁ = q̂ − k⁻W₁,
+//! q̂'s scatter or PGD's residual record, stay at the baseline). What their loops call is
+//! `#[inline(always)]` or small enough to be inlined, so that it is compiled into each copy.
 //!
-//! The numbers do not depend on the extension: Rust never contracts `a * b + c` into a fused
-//! multiply-add nor reorders a sum unless asked to, so the wider code makes the same operations
-//! in the same order, lane by lane. A run gives the same results, bit for bit, on every machine.
+//! These kernels' numbers do not depend on the level: Rust never contracts `a * b + c` into a
+//! fused multiply-add nor reorders a sum unless asked to, so the wider code makes the same
+//! operations in the same order, lane by lane. faer's products choose their own kernels at run
+//! time too, and those may round differently on CPUs of different extensions: runs on one
+//! machine repeat bit for bit, runs on two different CPUs need not.
 
 /// Which code [`multiversion!`] functions run on this CPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -91,10 +95,15 @@ pub fn level() -> Level {
 /// Runs `f` with this thread's kernels at `level`, capped at what the CPU has (a test compares
 /// the levels' results; the baseline always runs).
 pub fn with_level<R>(level: Level, f: impl FnOnce() -> R) -> R {
-    let before = FORCED.with(|c| c.replace(Some(capped(level))));
-    let out = f();
-    FORCED.with(|c| c.set(before));
-    out
+    /// Puts the thread's previous level back, also when `f` panics.
+    struct Restore(Option<Level>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            FORCED.with(|c| c.set(self.0));
+        }
+    }
+    let _restore = Restore(FORCED.with(|c| c.replace(Some(capped(level)))));
+    f()
 }
 
 /// Defines a function whose body is compiled three times, for AVX-512, for AVX2 + FMA and for
@@ -107,16 +116,16 @@ macro_rules! multiversion {
         $(#[$meta])*
         $vis fn $name($($arg: $ty),*) $(-> $ret)? {
             #[inline(always)]
-            fn inline($($arg: $ty),*) $(-> $ret)? $body
+            fn body($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
             #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx2,fma")]
             fn avx512($($arg: $ty),*) $(-> $ret)? {
-                inline($($arg),*)
+                body($($arg),*)
             }
             #[cfg(target_arch = "x86_64")]
             #[target_feature(enable = "avx2,fma")]
             fn avx2($($arg: $ty),*) $(-> $ret)? {
-                inline($($arg),*)
+                body($($arg),*)
             }
             match $crate::simd::level() {
                 #[cfg(target_arch = "x86_64")]
@@ -125,27 +134,43 @@ macro_rules! multiversion {
                 #[cfg(target_arch = "x86_64")]
                 // SAFETY: `level` says the CPU has AVX2 and FMA.
                 $crate::simd::Level::Avx2 => unsafe { avx2($($arg),*) },
-                _ => inline($($arg),*),
+                _ => body($($arg),*),
             }
         }
     };
 }
 
-crate::multiversion! {
-    /// Σ values in 16 interleaved partial sums: a pass that the memory limits, not the latency
-    /// of one chain of additions (a plain `iter().sum()` adds one value per add latency, about
-    /// 9 GB/s at 3.5 GHz, below what one core reads). Used to measure the read bandwidth.
-    pub fn sum(values: &[f64]) -> f64 {
-        let mut acc = [0.0f64; 16];
-        let chunks = values.chunks_exact(16);
-        let tail: f64 = chunks.remainder().iter().sum();
-        for c in chunks {
-            for l in 0..16 {
-                acc[l] += c[l];
-            }
+/// Σ values in 16 interleaved partial sums: a pass that the memory limits, not the latency of
+/// one chain of additions (a plain `iter().sum()` adds one value per add latency, about 9 GB/s at
+/// 3.5 GHz, below what one core reads). Used to measure the read bandwidth; not multiversioned,
+/// so that `--kernels` does not change the measurement (the baseline copy already reads as fast
+/// as the AVX-512 one: 26.7 against 25.1 GB/s on one thread of the EPYC in the README).
+pub fn sum(values: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 16];
+    let chunks = values.chunks_exact(16);
+    let tail: f64 = chunks.remainder().iter().sum();
+    for c in chunks {
+        for l in 0..16 {
+            acc[l] += c[l];
         }
-        acc.iter().sum::<f64>() + tail
     }
+    acc.iter().sum::<f64>() + tail
+}
+
+/// Σ a[r] b[r] in eight interleaved partial sums, added pairwise at the end: independent chains
+/// of additions that vector instructions run side by side (one chain waits on the add's latency
+/// at every value). The same operations in the same order at every level.
+#[inline(always)]
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
+    for (x, y) in ca.zip(cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    ((acc[0] + acc[4]) + (acc[2] + acc[6])) + ((acc[1] + acc[5]) + (acc[3] + acc[7])) + tail
 }
 
 #[cfg(test)]
@@ -154,7 +179,7 @@ mod tests {
     use crate::anderson::{AndersonHistory, AndersonStep};
     use crate::linear::flop_tests::model_and_solver;
     use crate::linear::sum_relax_into;
-    use crate::local::{InterfaceFields, InterfaceLocal};
+    use crate::local::{ContactDirections, InterfaceFields, InterfaceLocal};
     use faer::Mat;
 
     fn random(seed: &mut u64, rows: usize, cols: usize, scale: f64) -> Mat<f64> {
@@ -174,9 +199,11 @@ mod tests {
 
     /// Every kernel's outputs, as bits, from the same random inputs: the local stage with its
     /// indicator sums on every interface of small-three-layer (contact with friction and
-    /// perfect, two iterations), a subdomain's macro forces, the sum and relaxation, and four
-    /// Anderson records with a mixing step.
-    fn outputs() -> Vec<u64> {
+    /// perfect, two iterations, the second along updated search directions), a subdomain's
+    /// macro forces, the sum and relaxation, and Anderson's records (plain and summed) with
+    /// mixing steps. Also returns the contact points counted per status.
+    fn outputs() -> (Vec<u64>, [u64; 3]) {
+        let mut statuses = [0u64; 3];
         let (model, mut solver) = model_and_solver(true);
         let nt = model.time.n_points();
         let weights = model.time.trapezoid_weights();
@@ -192,7 +219,19 @@ mod tests {
                     f_a: random(&mut seed, rows, nt, 20.0),
                     f_b: random(&mut seed, rows, nt, 20.0),
                 };
+                if !first && itf.is_contact() {
+                    let np = itf.n_pairs();
+                    let k_n = random(&mut seed, np, nt, 300.0);
+                    let k_t = random(&mut seed, np, nt, 300.0);
+                    local.directions = Some(ContactDirections {
+                        k_n: Mat::from_fn(np, nt, |p, i| 300.0 + k_n[(p, i)]),
+                        k_t: Mat::from_fn(np, nt, |p, i| 300.0 + k_t[(p, i)]),
+                    });
+                }
                 let sums = local.local_stage_with_sums(itf, &weights, &s, first);
+                for (total, c) in statuses.iter_mut().zip(sums.counts) {
+                    *total += c;
+                }
                 for m in [&local.hat.w_a, &local.hat.w_b, &local.hat.f_a, &local.hat.f_b] {
                     bits(m, &mut out);
                 }
@@ -218,9 +257,13 @@ mod tests {
             bits(m, &mut out);
         }
         let mut history = AndersonHistory::new(3, 0.8, n_b, nt);
-        for _ in 0..4 {
+        for record in 0..5 {
             let [g_w, g_f, h_w, h_f] = std::array::from_fn(|_| random(&mut seed, n_b, nt, 1.0));
-            history.record_sum(&w, &f, [&g_w, &h_w], [&g_f, &h_f]);
+            if record < 2 {
+                history.record(&w, &f, &g_w, &g_f);
+            } else {
+                history.record_sum(&w, &f, [&g_w, &h_w], [&g_f, &h_f]);
+            }
             let p = history.partials();
             out.extend(p.gram.iter().chain(&p.projection).map(|v| v.to_bits()));
             out.push(p.residual2.to_bits());
@@ -229,7 +272,7 @@ mod tests {
             bits(&w, &mut out);
             bits(&f, &mut out);
         }
-        out
+        (out, statuses)
     }
 
     /// The kernels give the same bits at every level this CPU has (Rust neither contracts nor
@@ -237,18 +280,18 @@ mod tests {
     /// by side). On a CPU without AVX2 only the baseline runs and the test says so.
     #[test]
     fn kernels_give_the_same_bits_at_every_level() {
-        let base = with_level(Level::Baseline, outputs);
+        let (base, statuses) = with_level(Level::Baseline, outputs);
         assert!(base.len() > 10_000, "the kernels produced {} values", base.len());
+        // Separated, sticking and slipping points all occur: every branch of the contact law ran.
+        assert!(statuses.iter().all(|&c| c > 0), "points per status: {statuses:?}");
         let mut compared = Vec::new();
         for level in [Level::Avx2, Level::Avx512] {
             if capped(level) != level {
                 continue;
             }
-            assert_eq!(
-                with_level(level, || (self::level(), outputs())),
-                (level, base.clone()),
-                "{level:?}"
-            );
+            let (at_level, (bits, _)) = with_level(level, || (self::level(), outputs()));
+            assert_eq!(at_level, level);
+            assert!(bits == base, "{level:?} differs from the baseline");
             compared.push(level.name());
         }
         eprintln!("compared the baseline with: {compared:?} (detected {:?})", detected());
