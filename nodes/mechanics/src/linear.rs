@@ -513,28 +513,16 @@ crate::multiversion! {
         w: MatMut<'_, f64>,
         f: MatMut<'_, f64>,
     ) {
-        sum_relax_inline(mu, w1, f1, w2, f2, w, f);
-    }
-}
-
-#[inline(always)]
-fn sum_relax_inline(
-    mu: f64,
-    mut w1: MatMut<'_, f64>,
-    mut f1: MatMut<'_, f64>,
-    w2: MatRef<'_, f64>,
-    f2: MatRef<'_, f64>,
-    mut w: MatMut<'_, f64>,
-    mut f: MatMut<'_, f64>,
-) {
-    for j in 0..w.ncols() {
-        for (s1, s2, s) in [
-            (col_mut(&mut w1, j), col(w2, j), col_mut(&mut w, j)),
-            (col_mut(&mut f1, j), col(f2, j), col_mut(&mut f, j)),
-        ] {
-            for ((s1, s2), s) in s1.iter_mut().zip(s2).zip(s) {
-                *s1 += s2;
-                *s = mu * *s1 + (1.0 - mu) * *s;
+        let (mut w1, mut f1, mut w, mut f) = (w1, f1, w, f);
+        for j in 0..w.ncols() {
+            for (s1, s2, s) in [
+                (col_mut(&mut w1, j), col(w2, j), col_mut(&mut w, j)),
+                (col_mut(&mut f1, j), col(f2, j), col_mut(&mut f, j)),
+            ] {
+                for ((s1, s2), s) in s1.iter_mut().zip(s2).zip(s) {
+                    *s1 += s2;
+                    *s = mu * *s1 + (1.0 - mu) * *s;
+                }
             }
         }
     }

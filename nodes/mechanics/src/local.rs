@@ -581,18 +581,9 @@ impl InterfaceLocal {
     ) -> IndicatorSums {
         assert_eq!(time_weights.len(), s.w_a.ncols(), "one time weight per time point");
         let mut out = IndicatorSums::default();
-        let (k, n, contact) = (self.k0, 2 * itf.n_pairs(), itf.is_contact());
-        for (i, &wt) in time_weights.iter().enumerate() {
-            add_column_sums(
-                &mut out,
-                &itf.weights,
-                k,
-                wt,
-                contact,
-                s.columns(i),
-                self.hat.columns(i),
-                n,
-            );
+        let mut sums = Some((time_weights, &mut out));
+        for i in 0..time_weights.len() {
+            column_sums(&mut sums, itf, self.k0, s, &self.hat, i);
         }
         self.add_status_counts(&mut out, first);
         out
