@@ -30,32 +30,9 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-/// Passes over full boundary fields (n_b × (N+1)) that one plain iteration makes per subdomain,
-/// each the read or the write of one whole field, in the condensed linear stage with the coarse
-/// problem and the local stage, call by call in the order the nodes make them (the same as
-/// `nodes/mechanics/tests/support/latin.rs`). The interface-side fields count on the subdomain's
-/// rows: every row of an interface's fields belongs to one side, that is one subdomain.
-///
-/// - `SubdomainSolver::micro1_into` (10): 1 reads q̂ and 2 writes M q̂ (`scale_into`, into the
-///   scratch block); 3 reads W_d and 4 writes W₁ (`copy_from`); 5 reads M q̂, 6 reads W₁ and
-///   7 writes W₁ (the product A_E · M q̂ added into W₁); 8 reads q̂, 9 reads W₁ and 10 writes F₁
-///   (F₁ = q̂ − k⁻W₁).
-/// - `SubdomainSolver::macro_forces_into` (1): 11 reads F₁ (dot products with the columns of M𝔼).
-/// - `SubdomainSolver::micro2_into` (2): 12 writes W₂, 13 writes F₂ (two products with w̃).
-/// - `sum_relax_into` (10): for W and for F, reads s₁, s₂ and the previous s, writes s₁ + s₂
-///   back into s₁ and writes the relaxed s (14–23).
-/// - `InterfaceNode::store` (4), gathering s: 24–25 read W and F, 26–27 write the interface's
-///   copies.
-/// - `InterfaceLocal::local_stage_with_sums` (4): 28–29 read W and F, 30–31 write Ŵ and F̂; the
-///   indicator sums read each time point's columns of W, F, Ŵ and F̂ right after, from cache.
-/// - `InterfaceLocal::q_hat_into` (3): 32–33 read Ŵ and F̂, 34 writes q̂.
-///
-/// Not counted: fields of n_m × (N+1) (macro forces, w̃) and of one value per contact pair
-/// (statuses, C_N, 𝒯), the operators (counted apart), and the messages' copies and encoding
-/// between the nodes, which the in-process run also makes. Every pass is counted once, as if no
-/// field stayed in cache from one call to the next (within a call, a column read again right
-/// after it is written, as by the indicator sums, is not counted again).
-pub const FIELD_PASSES: usize = 10 + 1 + 2 + 10 + 4 + 4 + 3;
+/// Passes over full boundary fields that one plain iteration makes per subdomain
+/// ([`glissade_mechanics::FIELD_PASSES`], derived call by call there).
+pub use glissade_mechanics::FIELD_PASSES;
 
 /// Passes over full boundary fields that a subdomain's Anderson record makes beyond the plain
 /// iteration's, when it holds `k` stored differences after the record (its `AndersonGram` is

@@ -4,8 +4,8 @@
 //!
 //! Run: `cargo bench -p glissade-mechanics --bench iteration -- [scene.toml] [points=N+1]
 //! [iterations=K] [kernels=baseline|avx2|avx512]` (release build; the element-wise kernels at
-//! the CPU's widest vector extension unless `kernels=` lowers it). The first two iterations (μ = 1, first touch of every buffer)
-//! are left out of the figures.
+//! the CPU's widest vector extension unless `kernels=` lowers it). The first two iterations
+//! (μ = 1, first touch of every buffer) are left out of the figures.
 
 #[path = "../tests/support/latin.rs"]
 mod latin;
@@ -15,12 +15,10 @@ use faer::{Accum, Mat, Par};
 use latin::{Latin, STAGES};
 use std::time::{Duration, Instant};
 
-/// Full boundary fields (n_b × (N+1)) one plain iteration moves per subdomain: the count of
-/// `glissade bench` (`FIELD_PASSES` there, derived call by call), whose calls are this loop's
-/// (`tests/support/latin.rs`: micro 1, macro forces, micro 2, sum and relaxation, gathering,
-/// local stage with its indicators, q̂). Without Anderson acceleration, which this loop does not
-/// run.
-const FIELD_PASSES: usize = 34;
+// Full boundary fields one plain iteration moves per subdomain, the count `glissade bench` uses
+// too, derived call by call where it is defined; this loop makes the same calls
+// (`tests/support/latin.rs`), without Anderson acceleration, which it does not run.
+use glissade_mechanics::FIELD_PASSES;
 
 /// One-thread GFLOP/s of (m × m) · (m × n), best of repeated timings over ≥ 0.3 s.
 fn product_rate(m: usize, n: usize) -> f64 {
