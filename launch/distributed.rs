@@ -447,6 +447,19 @@ pub fn run_distributed_observed(
     let t0 = Instant::now();
     let run_id = &opts.run_id;
     let plan = Plan::new(model).with_scene(scene);
+    // A time-coarse start's coarse solve runs here, in-process, before the nodes start; its
+    // initial local directions follow `start` on the bus.
+    let time_start = crate::runner::time_start(
+        scene,
+        &RunContext {
+            run_id: run_id.clone(),
+            scene_fingerprint: scene.fingerprint,
+        },
+        &plan,
+    )?;
+    if let Some(t) = &time_start {
+        eprintln!("run {run_id}: {}", t.describe());
+    }
     let groups = plan.groups(scene.deployment.subdomain_nodes);
     let all_nodes = run_nodes_of(&plan, groups.len());
     for r in &net.remote {
@@ -768,6 +781,9 @@ pub fn run_distributed_observed(
                 .collect();
             if missing.is_empty() && recorder_ready {
                 transport::publish_start(&session, run_id)?;
+                for m in time_start.iter().flat_map(|t| &t.messages) {
+                    transport::publish(&session, m)?;
+                }
                 got.setup_s = t0.elapsed().as_secs_f64();
                 got.started = Some(Instant::now());
                 last_message = Instant::now();

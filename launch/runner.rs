@@ -2,7 +2,8 @@
 //! node per subdomain, the deployment's interface nodes, one coarse node when the scene needs one, on the
 //! in-process bus; subdomain work within a round runs in parallel on all cores.
 
-use glissade_bus::convert::mat_of;
+use faer::{Mat, MatRef};
+use glissade_bus::convert::{field_of, mat_of, view};
 use glissade_bus::{BusError, HandleTime, InProcessBus, Node, RunContext};
 use glissade_coarse::CoarseNode;
 use glissade_interface::InterfaceNode;
@@ -10,11 +11,11 @@ use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::linear::{default_k0, macro_bases, SubdomainSolver};
 use glissade_mechanics::local::InterfaceFields;
-use glissade_mechanics::model::Model;
+use glissade_mechanics::model::{Model, Side, TimeGrid};
 use glissade_mechanics::monolithic::solve_glued;
 use glissade_mechanics::pgd::PgdSettings;
 use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdParams};
-use glissade_messages::{Decision, Field, InterfaceSolution, Message, Payload, Verdict};
+use glissade_messages::{Decision, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict};
 use glissade_subdomain::{LinearStageLog, LinearStageRecord, SubdomainNode, SubdomainOptions};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -117,6 +118,8 @@ pub enum RunError {
     Glued(AssemblyError),
     #[error("node selection: {0}")]
     Selection(String),
+    #[error("time-coarse start (solver.time_coarsening): {0}")]
+    TimeStart(String),
 }
 
 /// What a scene's run needs: k₀ and macro bases per interface, the subdomains that take part
@@ -300,6 +303,7 @@ pub fn build_nodes(
         if let Some(log) = &plan.log {
             node = node.with_log(log.clone());
         }
+
         nodes.push(Box::new(node));
     }
     if selection.interface {
@@ -431,8 +435,17 @@ fn run_logged(
     };
     let mut plan = Plan::new(&model).with_scene(scene);
     plan.log = log;
-    let nodes = build_nodes(&model, &ctx, opts.interior, &plan, &Selection::everything(&plan))?;
-    let (names, left_out) = plan.describe(&model, 1);
+    let mut nodes = build_nodes(&model, &ctx, opts.interior, &plan, &Selection::everything(&plan))?;
+    let mut names_extra = Vec::new();
+    if let Some(start) = time_start(scene, &ctx, &plan)? {
+        names_extra.push(start.describe());
+        nodes.push(Box::new(LauncherNode {
+            id: launcher_id(),
+            out: start.messages,
+        }));
+    }
+    let (mut names, left_out) = plan.describe(&model, 1);
+    names.extend(names_extra);
     let k0 = plan.k0.clone();
     let setup_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
@@ -480,4 +493,157 @@ fn run_logged(
         nodes: names,
         left_out,
     })
+}
+
+fn launcher_id() -> NodeId {
+    NodeId {
+        role: Role::Launcher,
+        index: 0,
+    }
+}
+
+/// The coarse solve of a time-coarse start (`solver.time_coarsening`, [`TimeStart`]) and the
+/// messages it gives.
+#[derive(Debug)]
+pub struct TimeStartRun {
+    pub coarse_steps: usize,
+    pub iterations: usize,
+    pub eta: f64,
+    pub verdict: Verdict,
+    /// Wall time of the coarse solve, setup included.
+    pub seconds: f64,
+    /// One `local_directions` message per subdomain of the run, from launcher:0 at iteration 0,
+    /// stage local (the stage of every `local_directions`): q̂ = F̂ + k⁻Ŵ over its whole boundary, from the coarse solve's ŝ interpolated
+    /// linearly in time.
+    pub messages: Vec<Message>,
+}
+
+impl TimeStartRun {
+    /// One line for the run's node list.
+    pub fn describe(&self) -> String {
+        format!(
+            "launcher: time-coarse start, {} steps solved in-process in {:.2} s ({} iterations, η = {:.3e}, {:?})",
+            self.coarse_steps, self.seconds, self.iterations, self.eta, self.verdict
+        )
+    }
+}
+
+/// Solves `scene` on its coarse time grid when it asks for a time-coarse start (None otherwise)
+/// and builds the fine run's initial local directions. A coarse solve that diverges is an error;
+/// one that stops short of its tolerance (iteration cap, stagnation) still gives its state, and
+/// its verdict is reported.
+pub fn time_start(scene: &LoadedScene, ctx: &RunContext, plan: &Plan) -> Result<Option<TimeStartRun>, RunError> {
+    let Some(ts) = scene.model.solver.time_start else {
+        return Ok(None);
+    };
+    let t0 = Instant::now();
+    let model = &scene.model;
+    let mut coarse = scene.clone();
+    coarse.model.time.n_steps = model.time.n_steps / ts.coarsening;
+    coarse.model.solver.tolerance = ts.tolerance;
+    coarse.model.solver.contact_tolerance = None;
+    coarse.model.solver.time_start = None;
+    let opts = RunOptions {
+        run_id: format!("{}-coarse", ctx.run_id),
+        interior: false,
+    };
+    let on_iteration: fn(&IterationRecord) -> bool = |_| true;
+    let observe: fn(&Message) -> Duration = |_| Duration::ZERO;
+    let r = run_logged(&coarse, &opts, on_iteration, observe, None, None)?;
+    let last = r.iterations.last().map(|i| i.decision.clone());
+    let (eta, verdict) = last.map_or((f64::NAN, Verdict::MaxIterations), |d| (d.eta, d.verdict));
+    if matches!(verdict, Verdict::Diverged { .. }) || r.interfaces.len() != model.interfaces.len() {
+        return Err(RunError::TimeStart(format!(
+            "the coarse solve on {} steps ended {verdict:?} after {} iterations (η = {eta:.3e}) without a usable state",
+            coarse.model.time.n_steps,
+            r.iterations.len()
+        )));
+    }
+    let messages = plan
+        .participants
+        .iter()
+        .map(|&s| {
+            let layout = BoundaryLayout::new(model, s as usize, &plan.k0);
+            let q = coarse_directions(model, &coarse.model.time, &layout, &r.interfaces);
+            Message {
+                envelope: ctx.envelope(launcher_id(), 0, Stage::Local),
+                payload: Payload::LocalDirections {
+                    subdomain: s,
+                    interfaces: layout.slots.iter().map(|sl| sl.interface as u32).collect(),
+                    q_hat: field_of(q.as_ref()),
+                },
+            }
+        })
+        .collect();
+    Ok(Some(TimeStartRun {
+        coarse_steps: coarse.model.time.n_steps,
+        iterations: r.iterations.len(),
+        eta,
+        verdict,
+        seconds: t0.elapsed().as_secs_f64(),
+        messages,
+    }))
+}
+
+/// q̂ = F̂ + k⁻Ŵ of one subdomain's boundary at the fine time points, from the coarse solve's
+/// ŝ (its interface solutions) interpolated linearly in time: the coarse grid's points are
+/// every c-th fine point, so the fine points between two coarse ones take the chord.
+fn coarse_directions(
+    model: &Model,
+    coarse: &TimeGrid,
+    layout: &BoundaryLayout,
+    solutions: &[InterfaceSolution],
+) -> Mat<f64> {
+    let nt = model.time.n_points();
+    let c = model.time.n_steps / coarse.n_steps;
+    let mut q = Mat::<f64>::zeros(layout.dofs.len(), nt);
+    for slot in &layout.slots {
+        let sol = &solutions[slot.interface];
+        debug_assert_eq!(sol.interface as usize, slot.interface);
+        let (w, f) = match slot.side {
+            Side::A => (view(&sol.w_a_hat), view(&sol.f_a_hat)),
+            Side::B => (view(&sol.w_b_hat), view(&sol.f_b_hat)),
+        };
+        for i in 0..nt {
+            // Fine point i lies between coarse points j and j + 1, at fraction a.
+            let j = (i / c).min(coarse.n_steps - 1);
+            let a = (i - j * c) as f64 / c as f64;
+            for r in 0..2 * slot.n_pairs {
+                let row = slot.offset + r;
+                let at = |m: MatRef<'_, f64>| (1.0 - a) * m[(r, j)] + a * m[(r, j + 1)];
+                q[(row, i)] = at(f) + layout.k[row] * at(w);
+            }
+        }
+    }
+    q
+}
+
+/// The launcher's part of an in-process run: the messages it publishes at the start (a
+/// time-coarse start's initial local directions), as a node of the bus, so that they are
+/// observed and recorded like every other message.
+struct LauncherNode {
+    id: NodeId,
+    out: Vec<Message>,
+}
+
+impl Node for LauncherNode {
+    fn id(&self) -> NodeId {
+        self.id
+    }
+
+    fn subscriptions(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    fn start(&mut self) -> Result<Vec<Message>, glissade_bus::NodeError> {
+        Ok(std::mem::take(&mut self.out))
+    }
+
+    fn handle(&mut self, _msg: &Message) -> Result<Vec<Message>, glissade_bus::NodeError> {
+        Ok(Vec::new())
+    }
+
+    fn is_finished(&self) -> bool {
+        true
+    }
 }

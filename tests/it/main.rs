@@ -19,6 +19,7 @@ mod reference;
 mod replay;
 mod run_id;
 mod stability;
+mod time_start;
 mod tls;
 mod two_hosts;
 

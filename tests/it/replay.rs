@@ -67,6 +67,29 @@ fn every_node_of_a_recorded_run_reexecutes_bit_identically() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// With a time-coarse start the subdomains' first inputs are the launcher's local directions:
+/// they are recorded, so every node still re-executes bit for bit.
+#[test]
+fn a_time_coarse_start_recording_reexecutes_bit_identically() {
+    let dir = temp_dir("reexec-time-start");
+    let text = scene_text("small-three-layer").replace("[solver]", "[solver]\ntime_coarsening = 2");
+    let path = record(&text, &dir, "rx-ts");
+    let recording = Recording::open(&path).unwrap();
+    let nodes = recorded_nodes(&recording).unwrap();
+    assert_eq!(
+        nodes.iter().filter(|n| n.role == Role::Subdomain).count(),
+        6,
+        "{nodes:?}"
+    );
+    assert!(!nodes.iter().any(|n| n.role == Role::Launcher), "{nodes:?}");
+    for id in nodes {
+        let r = reexecute(&recording, id).unwrap();
+        assert_eq!(r.mismatch, None, "node {id}");
+        assert_eq!(r.outputs, r.recorded_outputs, "node {id}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_tampered_recording_names_the_first_differing_message_and_field() {
     let dir = temp_dir("tamper");

@@ -226,7 +226,24 @@ pub struct SolverParams {
     /// Polynomial degree of the macro basis on every interface ([`crate::linear::macro_basis`]);
     /// `None` (the default) chooses per interface ([`crate::linear::macro_degree`]).
     pub macro_degree: Option<usize>,
+    /// Start from a solve on a coarser time grid ([`TimeStart`]); None: from ŝ = 0.
+    pub time_start: Option<TimeStart>,
 }
+
+/// Time-coarse start: the scene is first solved on every `coarsening`-th time point (N/c steps,
+/// same settings) until η ≤ `tolerance`, and the fine iteration starts from that solve's ŝ,
+/// interpolated linearly in time, instead of ŝ = 0. The start changes the path, not the limit:
+/// the fixed point of the fine iteration does not depend on where it starts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeStart {
+    /// c ≥ 2, dividing N.
+    pub coarsening: usize,
+    /// η at which the coarse solve stops (> 0).
+    pub tolerance: f64,
+}
+
+/// `solver.time_coarsening_tolerance` when a scene sets `time_coarsening` only.
+pub const DEFAULT_TIME_START_TOLERANCE: f64 = 1e-4;
 
 impl SolverParams {
     /// Largest α the search-direction update is stable with under relaxation μ: a mode of the
@@ -256,6 +273,7 @@ impl Default for SolverParams {
                 window: DEFAULT_ANDERSON_WINDOW,
             },
             macro_degree: None,
+            time_start: None,
         }
     }
 }

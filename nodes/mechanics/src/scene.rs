@@ -75,6 +75,10 @@
 //! acceleration = "anderson"  # "anderson" (Anderson mixing, damping = relaxation: the default; same
 //!                            # limit, fewer iterations on contact scenes) | "none" (plain relaxation)
 //! anderson_window = 5        # 1..=50: iterates mixed (only with acceleration = "anderson")
+//! time_coarsening = 5        # optional, ≥ 2, divides time.N: first solve on every 5th time
+//!                            # point and start from that solve's ŝ, interpolated in time
+//!                            # (model::TimeStart; not with the PGD stage); default: from ŝ = 0
+//! time_coarsening_tolerance = 1e-4  # η at which that coarse solve stops (> 0)
 //! linear_stage = "condensed" # "condensed" (dense A_E) | "sparse" (sparse factors, all time points
 //!                            # in one multi-right-hand-side solve: the paper's baseline) | "pgd" |
 //!                            # "auto" (LinearStage::Auto); default "pgd" when solver.pgd.enabled
@@ -139,7 +143,7 @@ use crate::expr::Expr;
 use crate::mesh::{BlockSide, Mesh};
 use crate::model::{
     interpolate, Acceleration, Interface, InterfaceKind, LoadCase, Material, Model, Plane, SolverParams, Subdomain,
-    TimeFunction, TimeGrid,
+    TimeFunction, TimeGrid, TimeStart, DEFAULT_TIME_START_TOLERANCE,
 };
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -583,6 +587,8 @@ struct RawSolver {
     macro_degree: Option<RawDegree>,
     acceleration: Option<RawAcceleration>,
     anderson_window: Option<usize>,
+    time_coarsening: Option<usize>,
+    time_coarsening_tolerance: Option<f64>,
     linear_stage: Option<RawLinearStage>,
     pgd: Option<RawPgd>,
 }
@@ -922,6 +928,19 @@ impl Ctx<'_> {
         let solver = self.solver(&raw.solver)?;
         let pgd = self.pgd(raw.solver.pgd.as_ref())?;
         let linear_stage = self.linear_stage(&raw.solver)?;
+        if let Some(ts) = solver.time_start {
+            self.check(time.n_steps % ts.coarsening == 0, "solver.time_coarsening", || {
+                format!(
+                    "{} does not divide time.N = {} (the coarse grid takes every {}-th time point)",
+                    ts.coarsening, time.n_steps, ts.coarsening
+                )
+            })?;
+            self.check(linear_stage != LinearStage::Pgd, "solver.time_coarsening", || {
+                "is not available with the PGD linear stage (its basis is built from ŝ = 0); \
+                 use linear_stage = \"condensed\" or \"sparse\""
+                    .to_string()
+            })?;
+        }
         let recording = self.recording(&raw.recording)?;
         let materials = self.materials(&raw.materials)?;
         self.blocks(raw, &materials)?;
@@ -1015,6 +1034,7 @@ impl Ctx<'_> {
                 }
             },
             acceleration: self.acceleration(r, d.acceleration)?,
+            time_start: self.time_start(r)?,
         };
         let positive = |v: f64| v > 0.0 && v.is_finite();
         self.check(positive(s.k0_factor), "solver.k0_factor", || {
@@ -1055,6 +1075,32 @@ impl Ctx<'_> {
         }
         self.check(positive(s.i0), "solver.i0", || format!("{} must be > 0", s.i0))?;
         Ok(s)
+    }
+
+    /// `time_coarsening` and its tolerance; N is checked against the coarsening in [`Self::build`].
+    fn time_start(&self, r: &RawSolver) -> Result<Option<TimeStart>, SceneError> {
+        let Some(c) = r.time_coarsening else {
+            return match r.time_coarsening_tolerance {
+                Some(t) => Err(self.err(
+                    "solver.time_coarsening_tolerance",
+                    format!("{t} is set but solver.time_coarsening is not (set time_coarsening = 5, say)"),
+                )),
+                None => Ok(None),
+            };
+        };
+        self.check(c >= 2, "solver.time_coarsening", || {
+            format!("{c} must be ≥ 2 (the coarse grid takes every c-th time point)")
+        })?;
+        let tolerance = r.time_coarsening_tolerance.unwrap_or(DEFAULT_TIME_START_TOLERANCE);
+        self.check(
+            tolerance > 0.0 && tolerance.is_finite(),
+            "solver.time_coarsening_tolerance",
+            || format!("{tolerance} must be > 0"),
+        )?;
+        Ok(Some(TimeStart {
+            coarsening: c,
+            tolerance,
+        }))
     }
 
     fn acceleration(&self, r: &RawSolver, default: Acceleration) -> Result<Acceleration, SceneError> {
@@ -2882,6 +2928,55 @@ uy = -0.01
             "must be ≥ 1",
         );
         assert!(load(&with("linear_stage = \"dense\"")).is_err());
+    }
+
+    #[test]
+    fn time_coarsening_keys() {
+        let with = |s: &str| format!("{TWO_BLOCKS}[solver]\n{s}\n");
+        let n = load(TWO_BLOCKS).unwrap().model.time.n_steps;
+        assert_eq!(load(TWO_BLOCKS).unwrap().model.solver.time_start, None);
+        assert_eq!(
+            load(&with("time_coarsening = 2")).unwrap().model.solver.time_start,
+            Some(TimeStart {
+                coarsening: 2,
+                tolerance: DEFAULT_TIME_START_TOLERANCE
+            })
+        );
+        assert_eq!(
+            load(&with(&format!(
+                "time_coarsening = {n}\ntime_coarsening_tolerance = 1e-6"
+            )))
+            .unwrap()
+            .model
+            .solver
+            .time_start,
+            Some(TimeStart {
+                coarsening: n,
+                tolerance: 1e-6
+            })
+        );
+        expect_err(&with("time_coarsening = 1"), "solver.time_coarsening", "must be ≥ 2");
+        expect_err(
+            &with(&format!("time_coarsening = {}", n + 1)),
+            "solver.time_coarsening",
+            &format!("does not divide time.N = {n}"),
+        );
+        expect_err(
+            &with("time_coarsening_tolerance = 1e-5"),
+            "solver.time_coarsening_tolerance",
+            "solver.time_coarsening is not",
+        );
+        expect_err(
+            &with("time_coarsening = 2\ntime_coarsening_tolerance = 0.0"),
+            "solver.time_coarsening_tolerance",
+            "must be > 0",
+        );
+        expect_err(
+            &with("time_coarsening = 2\nlinear_stage = \"pgd\""),
+            "solver.time_coarsening",
+            "not available with the PGD linear stage",
+        );
+        assert!(load(&with("time_coarsening = -2")).is_err());
     }
 
     #[test]

@@ -120,6 +120,10 @@ pub struct SubdomainNode {
     owners: Option<Vec<u32>>,
     /// Buffers of the fields this node sent, back from the bus ([`Node::recycle`]).
     pool: FieldPool,
+    /// Time-coarse start (`solver.time_coarsening`): iteration 0 waits for q̂ from the launcher
+    /// instead of starting from ŝ = 0; `started` once it has run.
+    time_start: bool,
+    started: bool,
 }
 
 impl SubdomainNode {
@@ -127,6 +131,7 @@ impl SubdomainNode {
         let s = solver.subdomain;
         let (n_b, n_m, nt) = (solver.n_boundary(), solver.n_macro(), model.time.n_points());
         let n_slots = solver.op.layout.slots.len();
+        let time_start = model.solver.time_start.is_some();
         let z = |r: usize| Mat::<f64>::zeros(r, nt);
         Self {
             id: NodeId {
@@ -163,6 +168,8 @@ impl SubdomainNode {
             record: LinearStageRecord::default(),
             owners: None,
             pool: FieldPool::default(),
+            time_start,
+            started: false,
         }
     }
 
@@ -467,6 +474,49 @@ impl SubdomainNode {
     }
 
     /// Refuses a message addressed to another subdomain.
+    /// Iteration 0 of a time-coarse start: q̂ over the whole boundary (every interface of the
+    /// layout, in layout order) from the launcher, checked in full before it is taken.
+    fn initial_directions(
+        &mut self,
+        msg: &Message,
+        subdomain: u32,
+        interfaces: &[u32],
+        q_hat: &Field,
+    ) -> Result<Vec<Message>, NodeError> {
+        expect_origin(self.id, msg, Role::Launcher, Some(0))?;
+        self.expect_recipient("initial local directions", subdomain)?;
+        if !self.time_start {
+            return Err(NodeError::rejected(
+                self.id,
+                "initial local directions from the launcher, but the scene has no solver.time_coarsening",
+            ));
+        }
+        if self.started || msg.envelope.iteration != 0 || msg.envelope.stage != Stage::Local {
+            return Err(self.out_of_turn("initial local directions", msg.envelope.iteration));
+        }
+        let layout: Vec<u32> = self
+            .solver
+            .op
+            .layout
+            .slots
+            .iter()
+            .map(|sl| sl.interface as u32)
+            .collect();
+        if interfaces != layout.as_slice() {
+            return Err(NodeError::rejected(
+                self.id,
+                format!(
+                    "initial local directions over interfaces {interfaces:?}; this subdomain's boundary has {layout:?}"
+                ),
+            ));
+        }
+        expect_shape(self.id, "q_hat", q_hat, self.q_hat.nrows(), self.q_hat.ncols())?;
+        expect_finite(self.id, "q_hat", "launcher:0", q_hat)?;
+        copy_into(q_hat, &mut self.q_hat);
+        self.started = true;
+        Ok(self.micro1())
+    }
+
     fn expect_recipient(&self, what: &str, subdomain: u32) -> Result<(), NodeError> {
         if subdomain != self.subdomain() {
             return Err(NodeError::rejected(
@@ -483,6 +533,7 @@ impl SubdomainNode {
     /// The rejection of a message that is not the one this node waits for.
     fn out_of_turn(&self, what: &str, it: u32) -> NodeError {
         let waits = match self.phase {
+            Phase::Directions if !self.started => "the launcher's initial local directions (iteration 0)".to_string(),
             Phase::Directions => format!("local directions of iteration {}", self.iteration + 1),
             Phase::Macro => format!("macro displacements of iteration {}", self.iteration),
             Phase::Step => format!("the Anderson step of iteration {}", self.iteration),
@@ -538,6 +589,9 @@ impl Node for SubdomainNode {
         if self.anderson.is_some() {
             subs.push(role_field_topic(run, Role::Interface, "anderson_step", None));
         }
+        if self.time_start {
+            subs.push(role_field_topic(run, Role::Launcher, "local_directions", s));
+        }
         subs
     }
 
@@ -559,9 +613,13 @@ impl Node for SubdomainNode {
                 },
             ));
         }
-        // Iteration 0: linear stage from ŝ = 0.
-        self.q_hat.fill(0.0);
-        out.extend(self.micro1());
+        // Iteration 0: linear stage from ŝ = 0, or, with a time-coarse start, from the q̂ the
+        // launcher sends (`initial_directions`).
+        if !self.time_start {
+            self.q_hat.fill(0.0);
+            self.started = true;
+            out.extend(self.micro1());
+        }
         Ok(out)
     }
 
@@ -578,10 +636,17 @@ impl Node for SubdomainNode {
                 subdomain,
                 interfaces,
                 q_hat,
+            } if msg.envelope.sender.role == Role::Launcher => {
+                self.initial_directions(msg, *subdomain, interfaces, q_hat)
+            }
+            Payload::LocalDirections {
+                subdomain,
+                interfaces,
+                q_hat,
             } => {
                 expect_origin(self.id, msg, Role::Interface, None)?;
                 self.expect_recipient("local directions", *subdomain)?;
-                if it != self.iteration + 1 || self.phase != Phase::Directions {
+                if it != self.iteration + 1 || self.phase != Phase::Directions || !self.started {
                     return Err(self.out_of_turn("local directions", it));
                 }
                 // One interface node's rows: its interfaces' slots, one after the other.
