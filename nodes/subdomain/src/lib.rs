@@ -483,14 +483,17 @@ impl SubdomainNode {
         interfaces: &[u32],
         q_hat: &Field,
     ) -> Result<Vec<Message>, NodeError> {
-        expect_origin(self.id, msg, Role::Launcher, Some(0))?;
-        self.expect_recipient("initial local directions", subdomain)?;
-        if !self.time_start {
+        if self.started {
             return Err(NodeError::rejected(
                 self.id,
-                "initial local directions from the launcher, but the scene has no solver.time_coarsening",
+                format!(
+                    "local directions of iteration {} sent by {}: after the start only interface nodes send them",
+                    msg.envelope.iteration, msg.envelope.sender
+                ),
             ));
         }
+        expect_origin(self.id, msg, Role::Launcher, Some(0))?;
+        self.expect_recipient("initial local directions", subdomain)?;
         if self.started || msg.envelope.iteration != 0 || msg.envelope.stage != Stage::Local {
             return Err(self.out_of_turn("initial local directions", msg.envelope.iteration));
         }
