@@ -303,7 +303,6 @@ pub fn build_nodes(
         if let Some(log) = &plan.log {
             node = node.with_log(log.clone());
         }
-
         nodes.push(Box::new(node));
     }
     if selection.interface {
@@ -436,16 +435,14 @@ fn run_logged(
     let mut plan = Plan::new(&model).with_scene(scene);
     plan.log = log;
     let mut nodes = build_nodes(&model, &ctx, opts.interior, &plan, &Selection::everything(&plan))?;
-    let mut names_extra = Vec::new();
+    let (mut names, left_out) = plan.describe(&model, 1);
     if let Some(start) = time_start(scene, &ctx, &plan)? {
-        names_extra.push(start.describe());
+        names.push(start.describe());
         nodes.push(Box::new(LauncherNode {
             id: launcher_id(),
             out: start.messages,
         }));
     }
-    let (mut names, left_out) = plan.describe(&model, 1);
-    names.extend(names_extra);
     let k0 = plan.k0.clone();
     let setup_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
@@ -513,8 +510,8 @@ pub struct TimeStartRun {
     /// Wall time of the coarse solve, setup included.
     pub seconds: f64,
     /// One `local_directions` message per subdomain of the run, from launcher:0 at iteration 0,
-    /// stage local (the stage of every `local_directions`): q̂ = F̂ + k⁻Ŵ over its whole boundary, from the coarse solve's ŝ interpolated
-    /// linearly in time.
+    /// stage local (the stage of every `local_directions`): q̂ = F̂ + k⁻Ŵ over its whole
+    /// boundary, from the coarse solve's ŝ interpolated linearly in time.
     pub messages: Vec<Message>,
 }
 

@@ -120,9 +120,8 @@ pub struct SubdomainNode {
     owners: Option<Vec<u32>>,
     /// Buffers of the fields this node sent, back from the bus ([`Node::recycle`]).
     pool: FieldPool,
-    /// Time-coarse start (`solver.time_coarsening`): iteration 0 waits for q̂ from the launcher
-    /// instead of starting from ŝ = 0; `started` once it has run.
-    time_start: bool,
+    /// Iteration 0 has run (at once from ŝ = 0, or with a time-coarse start once the launcher's
+    /// q̂ arrived: [`Self::time_start`]).
     started: bool,
 }
 
@@ -131,7 +130,6 @@ impl SubdomainNode {
         let s = solver.subdomain;
         let (n_b, n_m, nt) = (solver.n_boundary(), solver.n_macro(), model.time.n_points());
         let n_slots = solver.op.layout.slots.len();
-        let time_start = model.solver.time_start.is_some();
         let z = |r: usize| Mat::<f64>::zeros(r, nt);
         Self {
             id: NodeId {
@@ -168,7 +166,6 @@ impl SubdomainNode {
             record: LinearStageRecord::default(),
             owners: None,
             pool: FieldPool::default(),
-            time_start,
             started: false,
         }
     }
@@ -473,7 +470,12 @@ impl SubdomainNode {
         self.msg(Stage::Linear, payload)
     }
 
-    /// Refuses a message addressed to another subdomain.
+    /// Time-coarse start (`solver.time_coarsening`): iteration 0 waits for q̂ from the launcher
+    /// instead of starting from ŝ = 0.
+    fn time_start(&self) -> bool {
+        self.model.solver.time_start.is_some()
+    }
+
     /// Iteration 0 of a time-coarse start: q̂ over the whole boundary (every interface of the
     /// layout, in layout order) from the launcher, checked in full before it is taken.
     fn initial_directions(
@@ -520,6 +522,7 @@ impl SubdomainNode {
         Ok(self.micro1())
     }
 
+    /// Refuses a message addressed to another subdomain.
     fn expect_recipient(&self, what: &str, subdomain: u32) -> Result<(), NodeError> {
         if subdomain != self.subdomain() {
             return Err(NodeError::rejected(
@@ -592,7 +595,7 @@ impl Node for SubdomainNode {
         if self.anderson.is_some() {
             subs.push(role_field_topic(run, Role::Interface, "anderson_step", None));
         }
-        if self.time_start {
+        if self.time_start() {
             subs.push(role_field_topic(run, Role::Launcher, "local_directions", s));
         }
         subs
@@ -618,7 +621,7 @@ impl Node for SubdomainNode {
         }
         // Iteration 0: linear stage from ŝ = 0, or, with a time-coarse start, from the q̂ the
         // launcher sends (`initial_directions`).
-        if !self.time_start {
+        if !self.time_start() {
             self.q_hat.fill(0.0);
             self.started = true;
             out.extend(self.micro1());
@@ -639,7 +642,7 @@ impl Node for SubdomainNode {
                 subdomain,
                 interfaces,
                 q_hat,
-            } if msg.envelope.sender.role == Role::Launcher => {
+            } if self.time_start() && msg.envelope.sender.role == Role::Launcher => {
                 self.initial_directions(msg, *subdomain, interfaces, q_hat)
             }
             Payload::LocalDirections {
