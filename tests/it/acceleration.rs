@@ -3,12 +3,13 @@
 //! bit-identical to the in-process one with it on.
 
 use crate::common::{scene, scene_text};
+use crate::distributed::assert_identical;
 use glissade::distributed::run_multi_process;
 use glissade::runner::{run_in_process, run_in_process_observed, RunOptions, RunResult};
 use glissade_mechanics::local::error_against_reference;
 use glissade_mechanics::model::Acceleration;
 use glissade_mechanics::scene::LoadedScene;
-use glissade_messages::{InterfaceSolution, Payload, Verdict};
+use glissade_messages::{Payload, Verdict};
 use std::path::Path;
 use std::time::Duration;
 
@@ -117,21 +118,5 @@ fn processes_match_in_process_bit_for_bit_with_anderson() {
         remote.iterations.len()
     );
     assert_eq!(local.verdict, Verdict::Converged);
-    assert_eq!(local.iterations.len(), remote.iterations.len(), "iteration counts");
-    for (x, y) in local.iterations.iter().zip(&remote.iterations) {
-        assert_eq!(x.decision, y.decision, "decision of iteration {}", x.iteration);
-    }
-    assert_eq!(local.interfaces.len(), remote.interfaces.len());
-    for (x, y) in local.interfaces.iter().zip(&remote.interfaces) {
-        let fields = |s: &InterfaceSolution| {
-            [
-                &s.w_a, &s.w_b, &s.f_a, &s.f_b, &s.w_a_hat, &s.w_b_hat, &s.f_a_hat, &s.f_b_hat,
-            ]
-            .iter()
-            .flat_map(|f| f.data.iter().map(|v| v.to_bits()))
-            .collect::<Vec<u64>>()
-        };
-        assert!(fields(x) == fields(y), "interface {} differs", x.interface);
-        assert_eq!(x.status, y.status);
-    }
+    assert_identical(&local, &remote);
 }
