@@ -456,6 +456,7 @@ pub fn run_distributed_observed(
             scene_fingerprint: scene.fingerprint,
         },
         &plan,
+        None,
     )?;
     if let Some(t) = &time_start {
         eprintln!("run {run_id}: {}", t.describe());

@@ -259,15 +259,20 @@ pub fn build_nodes(
     plan: &Plan,
     selection: &Selection,
 ) -> Result<Vec<Box<dyn Node>>, RunError> {
-    for s in &selection.subdomains {
+    let solvers = build_solvers(model, plan, &selection.subdomains)?;
+    build_nodes_with(model, ctx, interior, plan, selection, solvers)
+}
+
+/// The linear-stage operators of `subdomains`, built in parallel.
+pub fn build_solvers(model: &Model, plan: &Plan, subdomains: &[u32]) -> Result<Vec<SubdomainSolver>, RunError> {
+    for s in subdomains {
         if !plan.participants.contains(s) {
             return Err(RunError::Selection(format!(
                 "subdomain {s} has no interface or does not exist"
             )));
         }
     }
-    let solvers: Vec<SubdomainSolver> = selection
-        .subdomains
+    subdomains
         .par_iter()
         .map(|&s| {
             // A_E only for the condensed stage; the sparse and PGD stages use the sparse factors.
@@ -279,7 +284,23 @@ pub fn build_nodes(
                 }
             })
         })
-        .collect::<Result<_, _>>()?;
+        .collect()
+}
+
+/// As [`build_nodes`], with the operators of `selection`'s subdomains already built (in its
+/// order).
+pub fn build_nodes_with(
+    model: &Arc<Model>,
+    ctx: &RunContext,
+    interior: bool,
+    plan: &Plan,
+    selection: &Selection,
+    solvers: Vec<SubdomainSolver>,
+) -> Result<Vec<Box<dyn Node>>, RunError> {
+    debug_assert!(solvers
+        .iter()
+        .map(|s| s.subdomain as u32)
+        .eq(selection.subdomains.iter().copied()));
     let options = SubdomainOptions {
         coarse: plan.coarse,
         relaxation: model.solver.relaxation,
@@ -350,6 +371,7 @@ pub fn run_in_process_observed(
         observe,
         None,
         None,
+        None,
     )
 }
 
@@ -377,7 +399,7 @@ pub fn run_in_process_logged_until(
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
     let log = LinearStageLog::default();
-    let result = run_logged(scene, opts, on_iteration, observe, Some(log.clone()), None)?;
+    let result = run_logged(scene, opts, on_iteration, observe, Some(log.clone()), None, None)?;
     let mut records = log.lock().map(|v| v.clone()).unwrap_or_default();
     records.sort_by_key(|r| (r.iteration, r.subdomain));
     Ok((result, records))
@@ -391,7 +413,7 @@ pub fn run_in_process_timed(
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<(RunResult, Vec<HandleTime>), RunError> {
     let mut times = Vec::new();
-    let result = run_logged(scene, opts, |_| true, observe, None, Some(&mut times))?;
+    let result = run_logged(scene, opts, |_| true, observe, None, Some(&mut times), None)?;
     Ok((result, times))
 }
 
@@ -402,6 +424,7 @@ fn run_logged(
     mut observe: impl FnMut(&Message) -> Duration,
     log: Option<LinearStageLog>,
     timing: Option<&mut Vec<HandleTime>>,
+    solvers: Option<Vec<SubdomainSolver>>,
 ) -> Result<RunResult, RunError> {
     let model = Arc::new(scene.model.clone());
     let t0 = Instant::now();
@@ -434,9 +457,15 @@ fn run_logged(
     };
     let mut plan = Plan::new(&model).with_scene(scene);
     plan.log = log;
-    let mut nodes = build_nodes(&model, &ctx, opts.interior, &plan, &Selection::everything(&plan))?;
+    let selection = Selection::everything(&plan);
+    let solvers = match solvers {
+        Some(s) => s,
+        None => build_solvers(&model, &plan, &selection.subdomains)?,
+    };
+    let start = time_start(scene, &ctx, &plan, Some(&solvers))?;
+    let mut nodes = build_nodes_with(&model, &ctx, opts.interior, &plan, &selection, solvers)?;
     let (mut names, left_out) = plan.describe(&model, 1);
-    if let Some(start) = time_start(scene, &ctx, &plan)? {
+    if let Some(start) = start {
         names.push(start.describe());
         nodes.push(Box::new(LauncherNode {
             id: launcher_id(),
@@ -528,8 +557,15 @@ impl TimeStartRun {
 /// Solves `scene` on its coarse time grid when it asks for a time-coarse start (None otherwise)
 /// and builds the fine run's initial local directions. A coarse solve that diverges is an error;
 /// one that stops short of its tolerance (iteration cap, stagnation) still gives its state, and
-/// its verdict is reported.
-pub fn time_start(scene: &LoadedScene, ctx: &RunContext, plan: &Plan) -> Result<Option<TimeStartRun>, RunError> {
+/// its verdict is reported. `fine`: the fine run's operators of every participant, if built,
+/// which the coarse solve then reuses on its own time grid ([`SubdomainSolver::retimed`])
+/// instead of building them again.
+pub fn time_start(
+    scene: &LoadedScene,
+    ctx: &RunContext,
+    plan: &Plan,
+    fine: Option<&[SubdomainSolver]>,
+) -> Result<Option<TimeStartRun>, RunError> {
     let Some(ts) = scene.model.solver.time_start else {
         return Ok(None);
     };
@@ -546,7 +582,8 @@ pub fn time_start(scene: &LoadedScene, ctx: &RunContext, plan: &Plan) -> Result<
     };
     let on_iteration: fn(&IterationRecord) -> bool = |_| true;
     let observe: fn(&Message) -> Duration = |_| Duration::ZERO;
-    let r = run_logged(&coarse, &opts, on_iteration, observe, None, None)?;
+    let solvers = fine.map(|f| f.iter().map(|s| s.retimed(&coarse.model)).collect());
+    let r = run_logged(&coarse, &opts, on_iteration, observe, None, None, solvers)?;
     let last = r.iterations.last().map(|i| i.decision.clone());
     let (eta, verdict) = last.map_or((f64::NAN, Verdict::MaxIterations), |d| (d.eta, d.verdict));
     if matches!(verdict, Verdict::Diverged { .. }) || r.interfaces.len() != model.interfaces.len() {

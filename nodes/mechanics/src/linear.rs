@@ -12,6 +12,7 @@ use crate::simd::dot;
 use faer::linalg::matmul::matmul;
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef, Par};
+use std::sync::Arc;
 
 /// Default search direction per interface: k₀ = k0_factor · E/L_Γ, with E the geometric mean of
 /// the two sides' [`Material::interface_modulus`] √(2G·M) (≈ Young's modulus for ν ≤ 0.3, the
@@ -125,6 +126,26 @@ pub fn macro_bases(model: &Model) -> Vec<Vec<Vec<f64>>> {
         .collect()
 }
 
+/// The time functions φ of subdomain `s`'s load cases on `model`'s time grid (n_c × (N+1)) and
+/// W_d = (boundary response to each load case) φ (n_b × (N+1)).
+fn load_responses(model: &Model, s: usize, op: &CondensedOperator) -> (Mat<f64>, Mat<f64>) {
+    let sub = &model.subdomains[s];
+    let nt = model.time.n_points();
+    let phi = Mat::from_fn(sub.loads.len(), nt, |j, i| sub.loads[j].time.eval(model.time.t(i)));
+    let mut w_d = Mat::<f64>::zeros(op.layout.len(), nt);
+    if !sub.loads.is_empty() {
+        matmul(
+            w_d.as_mut(),
+            Accum::Replace,
+            op.load_boundary.as_ref(),
+            phi.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+    }
+    (phi, w_d)
+}
+
 /// Columns of one interface's macro modes in a subdomain's 𝔼.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MacroSlot {
@@ -136,7 +157,9 @@ pub struct MacroSlot {
 /// Everything one subdomain needs for its linear stages, built once.
 pub struct SubdomainSolver {
     pub subdomain: usize,
-    pub op: CondensedOperator,
+    /// The condensed operator (shared by [`SubdomainSolver::retimed`] copies: it does not depend
+    /// on time).
+    pub op: Arc<CondensedOperator>,
     /// W_d: boundary displacement due to the subdomain's own loads (n_b × (N+1)).
     pub w_d: Mat<f64>,
     /// Time functions φ of the subdomain's load cases (n_c × (N+1)): W_d = (boundary response to
@@ -193,18 +216,7 @@ impl SubdomainSolver {
         let layout = &op.layout;
         let n_b = layout.len();
         let nt = model.time.n_points();
-        let phi = Mat::from_fn(sub.loads.len(), nt, |j, i| sub.loads[j].time.eval(model.time.t(i)));
-        let mut w_d = Mat::<f64>::zeros(n_b, nt);
-        if !sub.loads.is_empty() {
-            matmul(
-                w_d.as_mut(),
-                Accum::Replace,
-                op.load_boundary.as_ref(),
-                phi.as_ref(),
-                1.0,
-                Par::Seq,
-            );
-        }
+        let (phi, w_d) = load_responses(model, s, &op);
         let mut macro_slots = Vec::new();
         let mut n_m = 0;
         for slot in &layout.slots {
@@ -271,7 +283,7 @@ impl SubdomainSolver {
         }
         Ok(Self {
             subdomain: s,
-            op,
+            op: Arc::new(op),
             w_d,
             load_time: phi,
             e,
@@ -286,6 +298,38 @@ impl SubdomainSolver {
             sparse_rhs,
             flops: 0,
         })
+    }
+
+    /// This solver on the time grid of `model`, the same model otherwise (a time-coarse start's
+    /// coarse solve): the condensed operator is shared and 𝔼, A_E M k⁻ 𝔼 and L_E are copied, as
+    /// none depends on time; W_d, the load time functions and the scratch are built for
+    /// `model.time`. The same numbers as [`SubdomainSolver::with_dense`] on `model`, without
+    /// its factorisation and boundary solves.
+    pub fn retimed(&self, model: &Model) -> Self {
+        let (load_time, w_d) = load_responses(model, self.subdomain, &self.op);
+        let width = model.time.n_points().max(self.e.ncols()).max(1);
+        let n_b = self.n_boundary();
+        Self {
+            subdomain: self.subdomain,
+            op: self.op.clone(),
+            w_d,
+            load_time,
+            e: self.e.clone(),
+            a_mk_e: self.a_mk_e.clone(),
+            a_rows: self.a_rows.clone(),
+            m_e: self.m_e.clone(),
+            f2_of_w: self.f2_of_w.clone(),
+            l_e: self.l_e.clone(),
+            macro_slots: self.macro_slots.clone(),
+            dense: self.dense,
+            scratch: Mat::zeros(n_b, width),
+            sparse_rhs: if self.dense {
+                Mat::zeros(0, 0)
+            } else {
+                Mat::zeros(self.op.n_free(), width)
+            },
+            flops: 0,
+        }
     }
 
     /// Floating-point operations made by [`SubdomainSolver::micro1_into`],
@@ -621,6 +665,53 @@ pub(crate) mod flop_tests {
         let total = s.flops();
         assert_eq!(stage_counts(&mut s), counts);
         assert_eq!(s.flops(), 2 * total);
+    }
+
+    /// A solver moved to another time grid (the time-coarse start's coarse solve) is the solver
+    /// built on that grid, bit for bit: its linear stage gives the same fields, dense or sparse.
+    #[test]
+    fn retimed_is_the_solver_built_on_that_grid() {
+        for dense in [true, false] {
+            let (model, fine) = model_and_solver(dense);
+            let mut coarse_model = model.clone();
+            coarse_model.time.n_steps = model.time.n_steps / 2;
+            assert!(coarse_model.time.n_steps >= 2);
+            let mut moved = fine.retimed(&coarse_model);
+            let mut built = SubdomainSolver::with_dense(
+                &coarse_model,
+                SUB,
+                &default_k0(&coarse_model),
+                &macro_bases(&coarse_model),
+                dense,
+            )
+            .unwrap();
+            // The operator is shared, not rebuilt.
+            assert!(Arc::ptr_eq(&moved.op, &fine.op));
+            assert_eq!(moved.w_d, built.w_d);
+            assert_eq!(moved.load_time, built.load_time);
+            assert_eq!(
+                (moved.e.clone(), moved.a_mk_e.clone()),
+                (built.e.clone(), built.a_mk_e.clone())
+            );
+            assert_eq!(moved.l_e, built.l_e);
+            assert_eq!(moved.w_d.ncols(), coarse_model.time.n_points());
+            // The grids differ, so W_d does too (the loads vary in time).
+            assert_ne!(moved.w_d.ncols(), fine.w_d.ncols());
+            let (a, b) = (stage_fields(&mut moved), stage_fields(&mut built));
+            assert!(a == b, "dense {dense}: the linear stage differs");
+            assert_eq!(moved.flops(), built.flops());
+        }
+    }
+
+    /// W₁, F₁, the macro forces, W₂ and F₂ of one linear stage from fixed inputs.
+    fn stage_fields(s: &mut SubdomainSolver) -> [Mat<f64>; 5] {
+        let (n_b, n_m, nt) = (s.n_boundary(), s.n_macro(), s.w_d.ncols());
+        let (mut w1, mut f1, mut mf) = (Mat::zeros(n_b, nt), Mat::zeros(n_b, nt), Mat::zeros(n_m, nt));
+        let (mut w2, mut f2) = (Mat::zeros(n_b, nt), Mat::zeros(n_b, nt));
+        s.micro1_into(ramp(n_b, nt).as_ref(), w1.as_mut(), f1.as_mut());
+        s.macro_forces_into(f1.as_ref(), mf.as_mut());
+        s.micro2_into(ramp(n_m, nt).as_ref(), w2.as_mut(), f2.as_mut());
+        [w1, f1, mf, w2, f2]
     }
 
     #[test]
