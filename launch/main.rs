@@ -66,7 +66,9 @@ enum Command {
         #[arg(long)]
         max_iterations: Option<usize>,
         /// Compare solver variants against one reference solve: linear stages, each optionally
-        /// with `+anderson` or `+plain`, e.g. `condensed,condensed+anderson,pgd+anderson` or
+        /// with `+anderson` or `+plain` and with `+start<c>` (a time-coarse start on every c-th
+        /// time point) or `+zero` (from ŝ = 0), e.g.
+        /// `condensed+plain,condensed+anderson,condensed+anderson+start10,pgd+anderson` or
         /// `condensed,sparse,pgd` (writes `<scene>-<variant>-report.json` / `.svg` each, and
         /// prints a comparison table).
         #[arg(long, alias = "linear-stages", value_delimiter = ',')]

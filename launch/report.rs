@@ -8,7 +8,7 @@
 use crate::runner::{run_in_process_logged_until, AndersonTally, RunOptions, RunResult};
 use glissade_bus::convert::view;
 use glissade_mechanics::local::ReferenceErrors;
-use glissade_mechanics::model::Acceleration;
+use glissade_mechanics::model::{Acceleration, TimeStart, DEFAULT_TIME_START_TOLERANCE};
 use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
 use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion};
 use glissade_messages::{encode, Stage, Verdict};
@@ -77,6 +77,9 @@ pub struct Report {
     pub anderson_steps: [u32; 3],
     /// The linear stage (`condensed`, `sparse`, `auto`, or `pgd(criterion, ξ₀,₁/ξ₀,₂, macro modes)`).
     pub linear_stage: String,
+    /// Where the iteration started: from ŝ = 0, or a time-coarse start (its coarse solve is in
+    /// `latin_setup_s`).
+    pub start: String,
     pub points: Vec<ReportPoint>,
     /// (threshold, LATIN wall time incl. setup to reach traction error ≤ threshold, iterations).
     pub time_to_accuracy: Vec<(f64, Option<f64>, Option<u32>)>,
@@ -99,12 +102,26 @@ pub fn build_report(
     Ok((report, reference, result))
 }
 
-/// A solver variant of a report comparison: a linear stage and, if given, an acceleration that
-/// replaces the scene's (`glissade report --variants condensed,condensed+anderson,pgd+anderson`).
+/// A solver variant of a report comparison: a linear stage and, if given, an acceleration and a
+/// start that replace the scene's
+/// (`glissade report --variants condensed,condensed+anderson,condensed+anderson+start10,pgd+anderson`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Variant {
     pub stage: LinearStage,
     pub acceleration: Option<Acceleration>,
+    pub start: StartChoice,
+}
+
+/// Where a report variant's iteration starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StartChoice {
+    /// As the scene says (`solver.time_coarsening` or ŝ = 0).
+    Scene,
+    /// From ŝ = 0 whatever the scene says (`+zero`).
+    Zero,
+    /// A time-coarse start on every c-th time point (`+start<c>`), at the scene's
+    /// `time_coarsening_tolerance` if it has one, else the default.
+    Coarse(usize),
 }
 
 impl From<LinearStage> for Variant {
@@ -112,6 +129,7 @@ impl From<LinearStage> for Variant {
         Self {
             stage,
             acceleration: None,
+            start: StartChoice::Scene,
         }
     }
 }
@@ -119,57 +137,128 @@ impl From<LinearStage> for Variant {
 impl std::str::FromStr for Variant {
     type Err = String;
 
-    /// `<stage>` or `<stage>+anderson` / `<stage>+plain` (stage: condensed, sparse, pgd, auto);
-    /// `+anderson` uses the scene's window if it has one, else the default window.
+    /// `<stage>` followed by any of `+anderson` / `+plain` and `+start<c>` / `+zero` (stage:
+    /// condensed, sparse, pgd, auto); `+anderson` uses the scene's window if it has one, else
+    /// the default window.
     fn from_str(name: &str) -> Result<Self, String> {
-        let (stage, accel) = name.split_once('+').map_or((name, None), |(a, b)| (a, Some(b)));
+        let mut parts = name.split('+');
+        let stage = parts.next().unwrap_or_default();
         let Some(stage) = LinearStage::ALL.into_iter().find(|s| s.key() == stage) else {
             return Err(format!(
                 "`{stage}` is not a linear stage (condensed, sparse, pgd, auto)"
             ));
         };
-        let acceleration = match accel {
-            None => None,
-            Some("plain") => Some(Acceleration::None),
-            Some("anderson") => Some(Acceleration::Anderson {
-                window: glissade_mechanics::scene::DEFAULT_ANDERSON_WINDOW,
-            }),
-            Some(other) => return Err(format!("`+{other}` is not an acceleration (+anderson, +plain)")),
-        };
-        Ok(Self { stage, acceleration })
+        let mut v = Self::from(stage);
+        for part in parts {
+            let (accel, start) = (v.acceleration.is_some(), v.start != StartChoice::Scene);
+            match part {
+                "plain" | "anderson" if accel => return Err(format!("`{name}` names two accelerations")),
+                "plain" => v.acceleration = Some(Acceleration::None),
+                "anderson" => {
+                    v.acceleration = Some(Acceleration::Anderson {
+                        window: glissade_mechanics::scene::DEFAULT_ANDERSON_WINDOW,
+                    })
+                }
+                p if start && (p == "zero" || p.starts_with("start")) => {
+                    return Err(format!("`{name}` names two starts"))
+                }
+                "zero" => v.start = StartChoice::Zero,
+                p if p.starts_with("start") => match p["start".len()..].parse::<usize>() {
+                    Ok(c) if c >= 2 => v.start = StartChoice::Coarse(c),
+                    _ => {
+                        return Err(format!(
+                            "`+{p}`: a time-coarse start is `+start<c>` with an integer c ≥ 2 (e.g. +start10)"
+                        ))
+                    }
+                },
+                other => {
+                    return Err(format!(
+                        "`+{other}` is neither an acceleration (+anderson, +plain) nor a start (+start<c>, +zero)"
+                    ))
+                }
+            }
+        }
+        Ok(v)
     }
+}
+
+/// `scene` with a variant's linear stage, acceleration and start; an error names a start the
+/// scene cannot take (c must divide N; not with the PGD stage, as `solver.time_coarsening`).
+pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> anyhow::Result<LoadedScene> {
+    let mut sc = scene.clone();
+    sc.linear_stage = v.stage;
+    match (v.acceleration, scene.model.solver.acceleration) {
+        (Some(Acceleration::Anderson { .. }), Acceleration::Anderson { .. }) | (None, _) => {}
+        (Some(a), _) => sc.model.solver.acceleration = a,
+    }
+    let solver = &mut sc.model.solver;
+    match v.start {
+        StartChoice::Scene => {}
+        StartChoice::Zero => solver.time_start = None,
+        StartChoice::Coarse(c) => {
+            let n = sc.model.time.n_steps;
+            anyhow::ensure!(
+                n.is_multiple_of(c),
+                "+start{c}: {c} does not divide the scene's N = {n}"
+            );
+            solver.time_start = Some(TimeStart {
+                coarsening: c,
+                tolerance: solver.time_start.map_or(DEFAULT_TIME_START_TOLERANCE, |t| t.tolerance),
+            });
+        }
+    }
+    anyhow::ensure!(
+        sc.model.solver.time_start.is_none() || v.stage != LinearStage::Pgd,
+        "a time-coarse start does not go with the PGD stage (use +zero, or another stage)"
+    );
+    Ok(sc)
 }
 
 /// One report per variant against one reference solve (back to back in one process, so their
 /// times compare on a shared machine). With `stop_at`, each variant stops at the first iteration
 /// whose contact-traction error is at most that (the accuracies below it are then not reached).
+/// Every variant is checked before the reference is solved.
 pub fn build_reports(
     scene: &LoadedScene,
     run_id: &str,
     variants: &[Variant],
     stop_at: Option<f64>,
 ) -> anyhow::Result<(Vec<Report>, ReferenceSolution)> {
+    let scenes = variants
+        .iter()
+        .map(|v| variant_scene(scene, v))
+        .collect::<anyhow::Result<Vec<_>>>()?;
     let t0 = Instant::now();
     let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
     let reference_s = t0.elapsed().as_secs_f64();
     let mut reports = Vec::with_capacity(variants.len());
-    for v in variants {
-        let mut sc = scene.clone();
-        sc.linear_stage = v.stage;
-        match (v.acceleration, scene.model.solver.acceleration) {
-            (Some(Acceleration::Anderson { .. }), Acceleration::Anderson { .. }) | (None, _) => {}
-            (Some(a), _) => sc.model.solver.acceleration = a,
-        }
-        reports.push(report_against(&sc, run_id, &reference, reference_s, stop_at)?.0);
+    for sc in &scenes {
+        reports.push(report_against(sc, run_id, &reference, reference_s, stop_at)?.0);
     }
     Ok((reports, reference))
 }
 
-/// The variant a report ran: its linear stage, and its acceleration if any.
+/// The variant a report ran: its linear stage, its acceleration if any, and its start if not
+/// from ŝ = 0.
 pub fn variant_name(report: &Report) -> String {
-    match report.acceleration.as_str() {
-        "none" => report.linear_stage.clone(),
-        a => format!("{} + {a}", report.linear_stage),
+    let mut name = report.linear_stage.clone();
+    if report.acceleration != "none" {
+        name += &format!(" + {}", report.acceleration);
+    }
+    if report.start != ZERO_START {
+        name += &format!(" + {}", report.start);
+    }
+    name
+}
+
+/// [`Report::start`] of a run from ŝ = 0.
+const ZERO_START: &str = "from ŝ = 0";
+
+/// A run's start as a report names it.
+fn start_name(model: &glissade_mechanics::model::Model) -> String {
+    match model.solver.time_start {
+        None => ZERO_START.into(),
+        Some(t) => format!("time-coarse start (c = {}, η ≤ {:e})", t.coarsening, t.tolerance),
     }
 }
 
@@ -310,6 +399,7 @@ fn report_against(
             anderson.restarted,
         ],
         linear_stage: linear_stage_name(scene),
+        start: start_name(model),
         points,
         time_to_accuracy,
         accuracy,

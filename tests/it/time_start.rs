@@ -131,3 +131,78 @@ fn time_coarse_start_processes_match_in_process_bit_for_bit() {
     assert_eq!(local.verdict, Verdict::Converged);
     assert_identical(&local, &remote);
 }
+
+/// `glissade report --variants …+start<c>` / `+zero`: one reference, a run from ŝ = 0 and one
+/// from a time-coarse start, named as such; a start the scene cannot take is refused.
+#[test]
+fn report_variants_switch_the_time_coarse_start() {
+    use glissade::report::{build_reports, comparison_table, Variant};
+    let mut sc = scene(&scene_text("two-blocks"));
+    sc.model.solver.max_iterations = 40;
+    let n = sc.model.time.n_steps;
+    assert_eq!(n % 4, 0);
+    let variants: Vec<Variant> = ["condensed+plain+zero", "condensed+plain+start4"]
+        .iter()
+        .map(|v| v.parse().expect("a variant"))
+        .collect();
+    let (reports, _) = build_reports(&sc, "report-start", &variants, None).expect("reports");
+    let (cold, warm) = (&reports[0], &reports[1]);
+    assert_eq!(cold.start, "from ŝ = 0");
+    assert_eq!(warm.start, "time-coarse start (c = 4, η ≤ 1e-4)");
+    let table = comparison_table(&reports);
+    assert!(
+        table.contains("condensed + time-coarse start (c = 4, η ≤ 1e-4): iterations"),
+        "{table}"
+    );
+    // The start is closer to the reference than ŝ = 0 at the first iteration.
+    assert!(
+        warm.points[0].traction_error < cold.points[0].traction_error,
+        "{} against {}",
+        warm.points[0].traction_error,
+        cold.points[0].traction_error
+    );
+    // `+zero` overrides a scene's own start.
+    let mut with_start = sc.clone();
+    with_start.model.solver.time_start = Some(TimeStart {
+        coarsening: 2,
+        tolerance: 1e-3,
+    });
+    let zero: Variant = "condensed+zero".parse().unwrap();
+    let z = glissade::report::variant_scene(&with_start, &zero).unwrap();
+    assert_eq!(z.model.solver.time_start, None);
+    // `+start<c>` keeps the scene's coarse tolerance.
+    let s8: Variant = "condensed+start8".parse().unwrap();
+    let s = glissade::report::variant_scene(&with_start, &s8).unwrap();
+    assert_eq!(
+        s.model.solver.time_start,
+        Some(TimeStart {
+            coarsening: 8,
+            tolerance: 1e-3
+        })
+    );
+    for bad in [
+        "condensed+start",
+        "condensed+start1",
+        "condensed+startx",
+        "condensed+zero+start4",
+        "condensed+plain+anderson",
+        "condensed+cold",
+    ] {
+        assert!(bad.parse::<Variant>().is_err(), "{bad}");
+    }
+    // Refused before the reference solve: c must divide N, and not with PGD.
+    for (v, words) in [
+        (
+            format!("condensed+start{}", n + 1),
+            format!("does not divide the scene's N = {n}"),
+        ),
+        ("pgd+start4".to_string(), "PGD".to_string()),
+    ] {
+        let v: Variant = v.parse().unwrap();
+        let Err(e) = build_reports(&sc, "bad-start", &[Variant::from(sc.linear_stage), v], None) else {
+            panic!("a start the scene cannot take was run");
+        };
+        let e = e.to_string();
+        assert!(e.contains(&words), "{e}");
+    }
+}
