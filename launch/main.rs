@@ -759,23 +759,19 @@ fn load_with_overrides(
     tolerance: Option<f64>,
     max_iterations: Option<usize>,
 ) -> anyhow::Result<glissade_mechanics::scene::LoadedScene> {
-    let mut sc = load_scene(scene)?;
+    let sc = load_scene(scene)?;
     if let Some(tolerance) = tolerance {
         if !(tolerance > 0.0 && tolerance.is_finite()) {
             anyhow::bail!("--tolerance {tolerance}: must be a positive number");
         }
     }
+    if max_iterations == Some(0) {
+        anyhow::bail!("--max-iterations 0: must be at least 1");
+    }
     ensure_writable(out)?;
-    if let Some(tolerance) = tolerance {
-        sc.model.solver.tolerance = tolerance;
-    }
-    if let Some(m) = max_iterations {
-        if m == 0 {
-            anyhow::bail!("--max-iterations 0: must be at least 1");
-        }
-        sc.model.solver.max_iterations = m;
-    }
-    Ok(sc)
+    // Into the scene text, not only this process's model: node processes (`bench --processes`)
+    // build their model from the text, and a recording attaches it.
+    Ok(sc.with_solver_overrides(&scene.display().to_string(), tolerance, max_iterations)?)
 }
 
 fn bench(

@@ -166,3 +166,45 @@ fn bench_kernels_level_changes_the_code_not_the_run() {
     assert_eq!(decisions[0], decisions[1]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `glissade bench --max-iterations m --processes 1`: the node processes run the iteration cap of
+/// the command line too (they build their model from the scene text the launcher serves, which
+/// carries the override), so every run stops after m iterations and repeats the in-process run.
+#[test]
+fn bench_processes_run_the_command_line_iteration_cap() {
+    let dir = std::env::temp_dir().join(format!("glissade-bench-cap-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let scene_file = dir.join("small-three-layer.toml");
+    std::fs::write(&scene_file, scene_text("small-three-layer")).expect("scene file");
+    // Far below the scene's own run (which the cap must cut short for the test to mean anything).
+    let cap = 6;
+    let (_, plain) = small_three_layer();
+    assert!(
+        plain.iterations.len() > 2 * cap,
+        "{} iterations",
+        plain.iterations.len()
+    );
+    let out = dir.join("out");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args([
+            "bench",
+            "--max-iterations",
+            &cap.to_string(),
+            "--processes",
+            "1",
+            "--out",
+        ])
+        .arg(&out)
+        .arg(&scene_file)
+        .output()
+        .expect("spawn glissade");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("small-three-layer-bench.json")).expect("bench json"))
+            .expect("bench json parses");
+    assert_eq!(json["iterations"], cap, "{json}");
+    assert_eq!(json["processes"]["iterations"], cap, "{json}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

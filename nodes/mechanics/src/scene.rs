@@ -449,6 +449,55 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
     })
 }
 
+impl LoadedScene {
+    /// This scene with `[solver] tolerance` and/or `max_iterations` set as if written in its
+    /// file: the scene text is rewritten with them (a first comment line says so), so that its
+    /// fingerprint, the text that node processes fetch from the bus and the text a recording
+    /// attaches all describe the run, not only this process's model. `file` names the scene in
+    /// errors and gives the default model name, as in [`load_str`]; the network settings (TLS
+    /// paths already resolved against the scene's folder) are kept. An invalid value is the
+    /// scene error the file would give.
+    pub fn with_solver_overrides(
+        &self,
+        file: &str,
+        tolerance: Option<f64>,
+        max_iterations: Option<usize>,
+    ) -> Result<LoadedScene, SceneError> {
+        if tolerance.is_none() && max_iterations.is_none() {
+            return Ok(self.clone());
+        }
+        let mut table: toml::Table = self.text.parse().map_err(|e| toml_error(&self.text, file, &e, true))?;
+        let err = |key: &str, problem: String| SceneError {
+            file: file.to_string(),
+            key: key.to_string(),
+            problem,
+        };
+        let solver = table
+            .entry("solver")
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+            .as_table_mut()
+            .ok_or_else(|| err("solver", "is not a table".into()))?;
+        let mut said = Vec::new();
+        if let Some(t) = tolerance {
+            solver.insert("tolerance".into(), toml::Value::Float(t));
+            said.push(format!("tolerance = {t:e}"));
+        }
+        if let Some(m) = max_iterations {
+            let m = i64::try_from(m).map_err(|_| err("solver.max_iterations", format!("{m} is too large")))?;
+            solver.insert("max_iterations".into(), toml::Value::Integer(m));
+            said.push(format!("max_iterations = {m}"));
+        }
+        let body = toml::to_string(&table).map_err(|e| err("(syntax)", format!("cannot write the scene back: {e}")))?;
+        let text = format!(
+            "# {file} with [solver] {} set on the command line\n{body}",
+            said.join(", ")
+        );
+        let mut scene = load_str(&text, file)?;
+        scene.network = self.network.clone();
+        Ok(scene)
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Raw (as written) structures.
 
@@ -2228,6 +2277,56 @@ uy = -0.01
     fn replaced(from: &str, to: &str) -> String {
         assert!(TWO_BLOCKS.contains(from), "{from}");
         TWO_BLOCKS.replacen(from, to, 1)
+    }
+
+    /// Command-line overrides of the solver's tolerance and iteration cap go into the scene
+    /// text: the text alone (what node processes and recordings get) builds the overridden
+    /// model, and its fingerprint is not the original's.
+    #[test]
+    fn solver_overrides_rewrite_the_scene_text() {
+        let s = load(TWO_BLOCKS).unwrap();
+        assert_eq!(
+            s.with_solver_overrides("scenes/test.toml", None, None).unwrap().text,
+            s.text
+        );
+        let o = s
+            .with_solver_overrides("scenes/test.toml", Some(2.5e-9), Some(7))
+            .unwrap();
+        assert_eq!((o.model.solver.tolerance, o.model.solver.max_iterations), (2.5e-9, 7));
+        assert_ne!(o.fingerprint, s.fingerprint);
+        assert!(
+            o.text
+                .starts_with("# scenes/test.toml with [solver] tolerance = 2.5e-9, max_iterations = 7 set"),
+            "{}",
+            o.text
+        );
+        let again = load(&o.text).unwrap();
+        assert_eq!(
+            (again.model.solver.tolerance, again.model.solver.max_iterations),
+            (2.5e-9, 7)
+        );
+        // Everything else is the scene as written.
+        assert_eq!(again.model.name, "two");
+        let unchanged = |m: &Model| {
+            let mut m = m.clone();
+            m.solver.tolerance = 0.0;
+            m.solver.max_iterations = 0;
+            format!("{m:?}")
+        };
+        assert_eq!(unchanged(&again.model), unchanged(&s.model));
+        // A scene with a [solver] table keeps its other keys; an invalid value is the scene's
+        // own error.
+        let with_solver = load(&format!("{TWO_BLOCKS}[solver]\nrelaxation = 0.5\n")).unwrap();
+        let o = with_solver
+            .with_solver_overrides("scenes/test.toml", None, Some(3))
+            .unwrap();
+        assert_eq!((o.model.solver.relaxation, o.model.solver.max_iterations), (0.5, 3));
+        let e = s.with_solver_overrides("scenes/test.toml", None, Some(0)).unwrap_err();
+        assert_eq!(e.key, "solver.max_iterations", "{e}");
+        let e = s
+            .with_solver_overrides("scenes/test.toml", Some(-1.0), None)
+            .unwrap_err();
+        assert_eq!(e.key, "solver.tolerance", "{e}");
     }
 
     #[test]
