@@ -770,7 +770,7 @@ fn load_with_overrides(
     }
     ensure_writable(out)?;
     // Into the scene text, not only this process's model: node processes (`bench --processes`)
-    // build their model from the text, and a recording attaches it.
+    // build their model from the text.
     Ok(sc.with_solver_overrides(&scene.display().to_string(), tolerance, max_iterations)?)
 }
 
