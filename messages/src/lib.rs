@@ -746,13 +746,26 @@ fn config() -> impl bincode::config::Config {
 pub fn encode(msg: &Message) -> Vec<u8> {
     // Sized first, then written once into a buffer of that size: a multi-MB field is copied
     // once, not regrown and moved as it is written.
-    let mut size = bincode::enc::write::SizeWriter::default();
-    bincode::encode_into_writer(&msg.envelope, &mut size, config()).expect("sizing cannot fail");
-    bincode::encode_into_writer(&msg.payload, &mut size, config()).expect("sizing cannot fail");
-    let mut out = Vec::with_capacity(size.bytes_written);
+    let mut out = Vec::with_capacity(encoded_len(msg));
     bincode::encode_into_std_write(&msg.envelope, &mut out, config()).expect("encoding into a Vec cannot fail");
     bincode::encode_into_std_write(&msg.payload, &mut out, config()).expect("encoding into a Vec cannot fail");
     out
+}
+
+/// The size of [`encode`]'s bytes, without encoding.
+pub fn encoded_len(msg: &Message) -> usize {
+    let mut size = bincode::enc::write::SizeWriter::default();
+    bincode::encode_into_writer(&msg.envelope, &mut size, config()).expect("sizing cannot fail");
+    bincode::encode_into_writer(&msg.payload, &mut size, config()).expect("sizing cannot fail");
+    size.bytes_written
+}
+
+/// Writes [`encode`]'s bytes into `out` (a buffer the caller already has, e.g. in shared memory)
+/// and returns how many; None if `out` is shorter than [`encoded_len`].
+pub fn encode_into(msg: &Message, out: &mut [u8]) -> Option<usize> {
+    let n = bincode::encode_into_slice(&msg.envelope, out, config()).ok()?;
+    let m = bincode::encode_into_slice(&msg.payload, &mut out[n..], config()).ok()?;
+    Some(n + m)
 }
 
 /// A decoding error of `part` ("envelope" or "payload").
@@ -909,6 +922,21 @@ mod tests {
             "glissade/r1/*/*/local_directions/4",
             "glissade/r1/interface/0/local_directions/40"
         ));
+    }
+
+    #[test]
+    fn encoding_into_a_given_buffer_writes_the_same_bytes() {
+        let m = msg();
+        let bytes = encode(&m);
+        assert_eq!(encoded_len(&m), bytes.len());
+        // A buffer with room to spare (a shared-memory chunk may be rounded up): the same bytes
+        // at its start, and the count of them.
+        let mut out = vec![0xAA_u8; bytes.len() + 5];
+        assert_eq!(encode_into(&m, &mut out), Some(bytes.len()));
+        assert_eq!(&out[..bytes.len()], &bytes[..]);
+        assert!(out[bytes.len()..].iter().all(|&b| b == 0xAA));
+        // One byte short: refused, not truncated.
+        assert_eq!(encode_into(&m, &mut vec![0u8; bytes.len() - 1]), None);
     }
 
     #[test]

@@ -301,12 +301,41 @@ pub fn open(config: Config) -> Result<Session, TransportError> {
     zenoh::open(config).wait().map_err(|e| zerr("open session", e))
 }
 
-/// Publishes one message on its topic, blocking rather than dropping under congestion.
+/// Publishes one message on its topic, blocking rather than dropping under congestion. With
+/// shared memory on ([`set_shared_memory`]), a message of [`SHARED_ENCODING_MIN`] bytes or more is
+/// encoded straight into a buffer of the session's shared-memory pool; otherwise, or when the pool
+/// has no room, into a buffer of its own, which Zenoh copies into the pool (or sends over the link).
 pub fn publish(session: &Session, msg: &Message) -> Result<(), TransportError> {
-    put_bytes(session, &msg.topic(), encode(msg))
+    let key = msg.topic();
+    match encode_shared(session, msg) {
+        Some(bytes) => put_bytes(session, &key, bytes),
+        None => put_bytes(session, &key, encode(msg)),
+    }
 }
 
-fn put_bytes(session: &Session, key: &str, bytes: Vec<u8>) -> Result<(), TransportError> {
+/// Smallest message encoded straight into shared memory: the boundary fields (MBs) and the macro
+/// data (tens of kB) are, the small control messages are not.
+pub const SHARED_ENCODING_MIN: usize = 64 << 10;
+
+/// `msg` encoded into a buffer of the session's shared-memory pool, or None: shared memory off or
+/// not ready yet, a small message, or no room in the pool after collecting the buffers receivers
+/// released. Saves the copy of an encoded buffer into the pool that Zenoh makes otherwise.
+fn encode_shared(session: &Session, msg: &Message) -> Option<zenoh::bytes::ZBytes> {
+    use zenoh::shm::GarbageCollect;
+    let len = glissade_messages::encoded_len(msg);
+    if len < SHARED_ENCODING_MIN {
+        return None;
+    }
+    let provider = session.get_shm_provider().into_option()?;
+    let mut buffer = provider.alloc(len).with_policy::<GarbageCollect>().wait().ok()?;
+    // A message's bytes are exactly its encoding (decoding refuses trailing bytes).
+    if buffer.len() != len || glissade_messages::encode_into(msg, &mut buffer) != Some(len) {
+        return None;
+    }
+    Some(buffer.into())
+}
+
+fn put_bytes(session: &Session, key: &str, bytes: impl Into<zenoh::bytes::ZBytes>) -> Result<(), TransportError> {
     session
         .put(key, bytes)
         .congestion_control(CongestionControl::Block)
@@ -978,6 +1007,60 @@ mod tests {
         .unwrap();
         assert_eq!(back, msg);
         drop(router);
+    }
+
+    /// With shared memory on, a large message is encoded straight into the session's pool (its
+    /// bytes are a shared-memory buffer holding exactly `encode`'s bytes), and arrives through
+    /// the router as such and intact; a small message, or a session without shared memory, takes
+    /// the encoded-buffer path.
+    #[test]
+    fn large_messages_are_encoded_into_shared_memory() {
+        let port = free_loopback_port().unwrap();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let shm_config = |mode: &str, listen: &[String], connect: &[String]| {
+            let mut c = config(mode, listen, connect, false).unwrap();
+            set_shared_memory(&mut c, true).unwrap();
+            c
+        };
+        let router = open(shm_config("router", std::slice::from_ref(&endpoint), &[])).unwrap();
+        let a = open(shm_config("client", &[], std::slice::from_ref(&endpoint))).unwrap();
+        let b = open(shm_config("client", &[], std::slice::from_ref(&endpoint))).unwrap();
+        let plain = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
+        let msg = boundary_state("shm", 1, 300, 1001);
+        // The pool is set up on first use, in the background.
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let shared = loop {
+            if let Some(bytes) = encode_shared(&a, &msg) {
+                break bytes;
+            }
+            assert!(Instant::now() < deadline, "no shared-memory pool within 20 s");
+            std::thread::sleep(Duration::from_millis(50));
+        };
+        assert!(shared.as_shm().is_some(), "not a shared-memory buffer");
+        assert_eq!(shared.to_bytes().as_ref(), &encode(&msg)[..]);
+        let small = boundary_state("shm", 1, 2, 3);
+        assert!(encode(&small).len() < SHARED_ENCODING_MIN);
+        assert!(encode_shared(&a, &small).is_none());
+        assert!(encode_shared(&plain, &msg).is_none());
+
+        let (tx, rx) = mpsc::channel();
+        let _sub = b
+            .declare_subscriber(msg.topic())
+            .callback(move |s| {
+                let _ = tx.send((s.payload().as_shm().is_some(), s.payload().to_bytes().into_owned()));
+            })
+            .wait()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+        publish(&a, &msg).unwrap();
+        let (in_shm, bytes) = rx.recv_timeout(Duration::from_secs(20)).expect("the message arrived");
+        assert!(in_shm, "the message did not arrive through shared memory");
+        let expected = Expected {
+            run_id: "shm".into(),
+            scene_fingerprint: 1,
+        };
+        assert_eq!(decode(&bytes, &expected).unwrap(), msg);
+        drop((plain, router));
     }
 
     /// A payload in many fragments (as a large message arrives over TCP) decodes and hashes as
