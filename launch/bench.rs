@@ -18,11 +18,11 @@
 
 use crate::distributed::{run_distributed, Network};
 use crate::runner::{run_in_process, run_in_process_timed, Plan, RunOptions, RunResult};
-use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
 use glissade_bus::HandleTime;
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::scene::{LinearStage, LoadedScene};
+use glissade_mechanics::simd::matmul;
 use glissade_messages::{Payload, Role};
 use rayon::prelude::*;
 use serde::Serialize;

@@ -10,8 +10,8 @@
 #[path = "../tests/support/latin.rs"]
 mod latin;
 
-use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
+use glissade_mechanics::simd::matmul;
 use latin::{Latin, STAGES};
 use std::time::{Duration, Instant};
 

@@ -10,13 +10,13 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
 use glissade_mechanics::assembly::{stiffness_triplets, SparseSpd};
 use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator, InterfaceSlot};
 use glissade_mechanics::element;
 use glissade_mechanics::mesh::{BlockSide, Mesh};
 use glissade_mechanics::model::{Material, Plane, Side, Subdomain};
+use glissade_mechanics::simd::matmul;
 
 /// Minimum wall time of `runs` calls of `f` (after one warm-up call).
 fn min_time<T>(runs: usize, mut f: impl FnMut() -> T) -> Duration {
@@ -122,6 +122,49 @@ fn main() {
         rhs[(0, 0)]
     });
 
+    // The same n_b-column solve as A_E's, right after a small dense product: faer's own product
+    // (its AVX-512 kernels leave the vector registers' upper halves in use, and the solve's
+    // baseline SSE code then runs with a dependency on them) against the crate's `matmul`, which
+    // clears them (`simd::clear_upper_state`). Interleaved, min over rounds.
+    let small_a = Mat::<f64>::from_fn(64, 64, |i, j| ((i + j) % 5) as f64);
+    let small_b = Mat::<f64>::from_fn(64, 8, |i, j| ((i * j) % 3) as f64);
+    let mut small_c = Mat::<f64>::zeros(64, 8);
+    let mut cols = Mat::<f64>::zeros(n_dofs, n_b);
+    let mut solve_after = |clear: bool| {
+        min_time(5, || {
+            if clear {
+                matmul(
+                    small_c.as_mut(),
+                    Accum::Replace,
+                    small_a.as_ref(),
+                    small_b.as_ref(),
+                    1.0,
+                    Par::Seq,
+                );
+            } else {
+                faer::linalg::matmul::matmul(
+                    small_c.as_mut(),
+                    Accum::Replace,
+                    small_a.as_ref(),
+                    small_b.as_ref(),
+                    1.0,
+                    Par::Seq,
+                );
+            }
+            cols.fill(0.0);
+            for (c, &d) in layout.dofs.iter().enumerate() {
+                cols[(d, c)] = 1.0;
+            }
+            factor.solve_in_place(&mut cols);
+            cols[(0, 0)]
+        })
+    };
+    let (mut t_dirty, mut t_clean) = (Duration::MAX, Duration::MAX);
+    for _ in 0..5 {
+        t_dirty = t_dirty.min(solve_after(false));
+        t_clean = t_clean.min(solve_after(true));
+    }
+
     // Machine's dense product rate: 1000 × 1000 × 1000, sequential.
     let n = 1000;
     let a = Mat::<f64>::from_fn(n, n, |i, j| ((i + 3 * j) % 11) as f64 - 5.0);
@@ -185,9 +228,25 @@ fn main() {
         ms(t_peak),
         rate_peak
     );
+    println!(
+        "{:<46} {:>10.3} {:>10}",
+        format!("{n_b}-column solve after faer's matmul"),
+        ms(t_dirty),
+        ""
+    );
+    println!(
+        "{:<46} {:>10.3} {:>10}",
+        format!("{n_b}-column solve after simd::matmul"),
+        ms(t_clean),
+        ""
+    );
     println!("A_E product rate / dense peak rate = {:.2}", rate_apply / rate_peak);
     println!(
         "sparse-solve linear stage / A_E product time = {:.1}×",
         t_sparse.as_secs_f64() / t_apply.as_secs_f64()
+    );
+    println!(
+        "solve after faer's matmul / after simd::matmul (upper halves cleared) = {:.2}×",
+        t_dirty.as_secs_f64() / t_clean.as_secs_f64()
     );
 }

@@ -107,6 +107,7 @@ impl SparseSpd {
                 detail: format!("{e:?}"),
             }
         })?;
+        crate::simd::clear_upper_state();
         Ok(Self { n, llt, nnz_l })
     }
 
@@ -130,11 +131,13 @@ impl SparseSpd {
     /// Solves in place for every column of `rhs` (n × k).
     pub fn solve_in_place(&self, rhs: &mut Mat<f64>) {
         self.llt.solve_in_place(rhs.as_mut());
+        crate::simd::clear_upper_state();
     }
 
     /// Solves in place for every column of a view (n × k).
     pub fn solve_view_in_place(&self, rhs: MatMut<'_, f64>) {
         self.llt.solve_in_place(rhs);
+        crate::simd::clear_upper_state();
     }
 
     /// Solves for one right-hand side, in place.

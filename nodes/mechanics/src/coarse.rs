@@ -67,6 +67,7 @@ impl MacroProblem {
             what: "the structure".into(),
             ratio: 0.0,
         })?;
+        crate::simd::clear_upper_state();
         let lf = llt.L();
         let min_pivot = (0..n).map(|i| lf[(i, i)] * lf[(i, i)]).fold(f64::INFINITY, f64::min);
         let ratio = if n == 0 { 1.0 } else { min_pivot / max_diag };
@@ -105,6 +106,7 @@ impl MacroProblem {
     pub fn solve_in_place(&self, rhs: &mut Mat<f64>) {
         if self.n > 0 {
             self.llt.solve_in_place(rhs.as_mut());
+            crate::simd::clear_upper_state();
         }
     }
 }

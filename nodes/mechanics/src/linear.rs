@@ -8,8 +8,7 @@
 use crate::assembly::AssemblyError;
 use crate::condensed::{BoundaryLayout, CondensedOperator};
 use crate::model::{Interface, Model};
-use crate::simd::dot;
-use faer::linalg::matmul::matmul;
+use crate::simd::{dot, matmul};
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use std::sync::Arc;

@@ -13,7 +13,7 @@
 //! [`ModeForm::expand_into`] from buffers of the same layout, so the subdomain's own state and a
 //! receiver's copy are equal bit for bit.
 
-use faer::linalg::matmul::matmul;
+use crate::simd::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
 /// Why a mode-form update cannot be applied.

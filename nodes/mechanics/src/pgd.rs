@@ -39,7 +39,7 @@
 use crate::anderson::AndersonHistory;
 use crate::linear::SubdomainSolver;
 use crate::scene::PgdCriterion;
-use faer::linalg::matmul::matmul;
+use crate::simd::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 
 /// Settings of a PGD linear stage.

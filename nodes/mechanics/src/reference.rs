@@ -795,6 +795,7 @@ impl<'m> Problem<'m> {
                 let lu = Lu::try_new_with_symbolic(pat.lu_symbolic.clone(), mat.as_ref()).ok()?;
                 let mut rhs = Mat::from_fn(r.len(), 1, |i, _| -r[i]);
                 lu.solve_in_place(rhs.as_mut());
+                crate::simd::clear_upper_state();
                 for (i, ri) in r.iter_mut().enumerate() {
                     *ri = rhs[(i, 0)];
                 }
@@ -838,6 +839,7 @@ impl<'m> Problem<'m> {
                 }
                 let lu = faer::linalg::solvers::PartialPivLu::new(s_t.as_ref());
                 lu.solve_transpose_in_place(rhs.as_mut());
+                crate::simd::clear_upper_state();
                 // Δu = K_ff⁻¹(−R_u − Bᵀ Δλ).
                 let mut b: Vec<f64> = r[..n_free].iter().map(|v| -v).collect();
                 for (m, mp) in self.pairs.iter().enumerate() {
