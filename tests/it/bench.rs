@@ -120,8 +120,24 @@ fn bench_compares_processes_with_the_same_run_in_process() {
         (c.shared_memory_over_in_process - mean(|r| r.shared_memory_s)).abs()
             <= 1e-12 * c.shared_memory_over_in_process
     );
+    // The same with the set-up: every set-up is measured, and the ratios are those of the
+    // rounds' set-up + iterations.
+    for r in &c.rounds {
+        assert!(
+            r.in_process_setup_s > 0.0 && r.tcp_setup_s > 0.0 && r.shared_memory_setup_s > 0.0,
+            "{r:?}"
+        );
+    }
+    let total = |k: usize| c.rounds.iter().map(|r| r.totals()[k] / r.totals()[0]).sum::<f64>() / 2.0;
+    assert!((c.tcp_total_over_in_process - total(1)).abs() <= 1e-12 * c.tcp_total_over_in_process);
+    assert!((c.shared_memory_total_over_in_process - total(2)).abs() <= 1e-12 * c.shared_memory_total_over_in_process);
+    assert_eq!(c.rounds[0].totals()[1], c.rounds[0].tcp_setup_s + c.rounds[0].tcp_s);
     let text = render_processes(&c);
     assert!(!c.tls && text.contains("| processes, TCP |"), "{text}");
+    assert!(
+        text.contains("median ratio to in-process, set-up + iterations: TCP"),
+        "{text}"
+    );
     assert!(text.contains("median ratio to in-process: TCP"), "{text}");
     // A scene with TLS links says so in both places.
     let with_tls = ProcessComparison { tls: true, ..c };
