@@ -375,7 +375,7 @@ pub fn render(r: &BenchReport) -> String {
 }
 
 /// One round of [`compare_processes`]: the wall time (s) of the same run from its first
-/// iteration to its end (for processes: until every node process has exited), in-process, as
+/// iteration to its end (for processes: until the launcher holds every result), in-process, as
 /// processes over loopback TCP (with TLS if the scene asks for it), and as processes through
 /// shared memory; and the set-up before that first iteration (`*_setup_s`: operators, a
 /// time-coarse start's coarse solve, for processes also starting them and their bus), so that
@@ -509,7 +509,7 @@ pub fn render_processes(c: &ProcessComparison) -> String {
     let _ = writeln!(
         s,
         "\nprocesses against in-process, {} iterations, wall time from the first iteration to the end of the run (s; \
-         processes: until every node process has exited):\n",
+         processes: until the launcher holds every result):\n",
         c.iterations
     );
     let link = if c.tls { "TCP with TLS" } else { "TCP" };

@@ -43,7 +43,9 @@ pub struct IterationRecord {
 pub struct RunResult {
     /// Building operators (s).
     pub setup_s: f64,
-    /// The iteration loop (s).
+    /// The iteration loop (s), until every result is held (as processes: until the launcher
+    /// holds every final field; the node processes' exit after that is not counted, as an
+    /// in-process run's release of its nodes after the loop is not).
     pub solve_s: f64,
     pub iterations: Vec<IterationRecord>,
     pub verdict: Verdict,
