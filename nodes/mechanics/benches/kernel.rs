@@ -11,7 +11,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use faer::{Accum, Mat, Par};
-use glissade_mechanics::assembly::{stiffness_triplets, SparseSpd};
+use glissade_mechanics::assembly::{stiffness_triplets, SparseSpd, SupernodalThreshold};
 use glissade_mechanics::condensed::{BoundaryLayout, CondensedOperator, InterfaceSlot};
 use glissade_mechanics::element;
 use glissade_mechanics::mesh::{BlockSide, Mesh};
@@ -95,8 +95,10 @@ fn main() {
     for (b, &d) in layout.dofs.iter().enumerate() {
         triplets.push((d, d, layout.k[b] * layout.mass[b]));
     }
-    let t_factor = min_time(10, || SparseSpd::factorize(n_dofs, &triplets, "bench").expect("SPD"));
-    let factor = SparseSpd::factorize(n_dofs, &triplets, "bench").expect("SPD");
+    let t_factor = min_time(10, || {
+        SparseSpd::factorize_supernodal(n_dofs, &triplets, "bench").expect("SPD")
+    });
+    let factor = SparseSpd::factorize_supernodal(n_dofs, &triplets, "bench").expect("SPD");
 
     // A_E construction (assembly + factorisation + n_b-column solve + gather).
     let t_condense = min_time(5, || {
@@ -122,10 +124,18 @@ fn main() {
         rhs[(0, 0)]
     });
 
-    // The same n_b-column solve as A_E's, right after a small dense product: faer's own product
-    // (its AVX-512 kernels leave the vector registers' upper halves in use, and the solve's
-    // baseline SSE code then runs with a dependency on them) against the crate's `matmul`, which
-    // clears them (`simd::clear_upper_state`). Interleaved, min over rounds.
+    // The same factorisation and solve with faer's simplicial variant (its own choice for this
+    // matrix, `SparseSpd::factorize`) against the supernodal one the condensed operator uses.
+    let simplicial =
+        || SparseSpd::factorize_with(n_dofs, &triplets, "bench", SupernodalThreshold::FORCE_SIMPLICIAL).expect("SPD");
+    let t_factor_simplicial = min_time(10, simplicial);
+    let factor_simplicial = simplicial();
+    assert!(factor.is_supernodal() && !factor_simplicial.is_supernodal());
+    // The same n_b-column solve as A_E's with the simplicial factor (faer's sparse sweeps,
+    // baseline SSE code), right after a small dense product: faer's own product (its AVX-512
+    // kernels leave the vector registers' upper halves in use, and SSE code then runs with a
+    // dependency on them) against the crate's `matmul`, which clears them
+    // (`simd::clear_upper_state`). Interleaved, min over rounds.
     let small_a = Mat::<f64>::from_fn(64, 64, |i, j| ((i + j) % 5) as f64);
     let small_b = Mat::<f64>::from_fn(64, 8, |i, j| ((i * j) % 3) as f64);
     let mut small_c = Mat::<f64>::zeros(64, 8);
@@ -155,7 +165,7 @@ fn main() {
             for (c, &d) in layout.dofs.iter().enumerate() {
                 cols[(d, c)] = 1.0;
             }
-            factor.solve_in_place(&mut cols);
+            factor_simplicial.solve_in_place(&mut cols);
             cols[(0, 0)]
         })
     };
@@ -163,6 +173,23 @@ fn main() {
     for _ in 0..5 {
         t_dirty = t_dirty.min(solve_after(false));
         t_clean = t_clean.min(solve_after(true));
+    }
+    let mut t_solve_simplicial = Duration::MAX;
+    let mut t_solve_supernodal = Duration::MAX;
+    for _ in 0..5 {
+        for (f, t) in [
+            (&factor_simplicial, &mut t_solve_simplicial),
+            (&factor, &mut t_solve_supernodal),
+        ] {
+            *t = (*t).min(min_time(3, || {
+                cols.fill(0.0);
+                for (c, &d) in layout.dofs.iter().enumerate() {
+                    cols[(d, c)] = 1.0;
+                }
+                f.solve_in_place(&mut cols);
+                cols[(0, 0)]
+            }));
+        }
     }
 
     // Machine's dense product rate: 1000 × 1000 × 1000, sequential.
@@ -200,7 +227,7 @@ fn main() {
     );
     println!(
         "{:<46} {:>10.3} {:>10}",
-        "factorisation (SparseSpd::factorize)",
+        "factorisation (SparseSpd::factorize_supernodal)",
         ms(t_factor),
         ""
     );
@@ -230,14 +257,32 @@ fn main() {
     );
     println!(
         "{:<46} {:>10.3} {:>10}",
-        format!("{n_b}-column solve after faer's matmul"),
+        format!("{n_b}-column simplicial solve after faer's matmul"),
         ms(t_dirty),
         ""
     );
     println!(
         "{:<46} {:>10.3} {:>10}",
-        format!("{n_b}-column solve after simd::matmul"),
+        format!("{n_b}-column simplicial solve after simd::matmul"),
         ms(t_clean),
+        ""
+    );
+    println!(
+        "{:<46} {:>10.3} {:>10}",
+        "factorisation, faer's simplicial variant",
+        ms(t_factor_simplicial),
+        ""
+    );
+    println!(
+        "{:<46} {:>10.3} {:>10}",
+        format!("{n_b}-column solve, simplicial"),
+        ms(t_solve_simplicial),
+        ""
+    );
+    println!(
+        "{:<46} {:>10.3} {:>10}",
+        format!("{n_b}-column solve, supernodal"),
+        ms(t_solve_supernodal),
         ""
     );
     println!("A_E product rate / dense peak rate = {:.2}", rate_apply / rate_peak);
@@ -248,5 +293,9 @@ fn main() {
     println!(
         "solve after faer's matmul / after simd::matmul (upper halves cleared) = {:.2}×",
         t_dirty.as_secs_f64() / t_clean.as_secs_f64()
+    );
+    println!(
+        "{n_b}-column solve simplicial / supernodal = {:.2}×",
+        t_solve_simplicial.as_secs_f64() / t_solve_supernodal.as_secs_f64()
     );
 }

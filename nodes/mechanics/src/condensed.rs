@@ -121,7 +121,9 @@ impl CondensedOperator {
                 trip.push((free[d], free[d], layout.k[b] * layout.mass[b]));
             }
         }
-        let factor = SparseSpd::factorize(n_free, &trip, &format!("subdomain `{}` (K_E + Bᵀk⁻MB)", sub.name))?;
+        // Supernodal: A_E's n_b columns (and the sparse linear stage's N + 1) are solved at once.
+        let factor =
+            SparseSpd::factorize_supernodal(n_free, &trip, &format!("subdomain `{}` (K_E + Bᵀk⁻MB)", sub.name))?;
 
         // A_E: solve for each distinct free boundary dof, then expand to the copies.
         let n_b = layout.len();
