@@ -177,14 +177,26 @@ impl SparseSpd {
         self.solve_view_in_place(rhs.as_mut());
     }
 
-    /// Solves in place for every column of a view (n × k).
+    /// Solves in place for every column of a view (n × k), with scratch of its own.
     pub fn solve_view_in_place(&self, rhs: MatMut<'_, f64>) {
-        let scratch = self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), Par::Seq);
+        let mut scratch = self.solve_scratch(rhs.ncols());
+        self.solve_view_in_place_with(rhs, &mut scratch);
+    }
+
+    /// Scratch for [`SparseSpd::solve_view_in_place_with`] of up to `ncols` right-hand sides,
+    /// to allocate once outside a loop.
+    pub fn solve_scratch(&self, ncols: usize) -> MemBuffer {
+        MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, Par::Seq))
+    }
+
+    /// Solves in place for every column of a view (n × k) without allocating: `scratch` comes
+    /// from [`SparseSpd::solve_scratch`] of at least k columns (faer panics on less).
+    pub fn solve_view_in_place_with(&self, rhs: MatMut<'_, f64>, scratch: &mut MemBuffer) {
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
             Conj::No,
             rhs,
             Par::Seq,
-            MemStack::new(&mut MemBuffer::new(scratch)),
+            MemStack::new(scratch),
         );
         crate::simd::clear_upper_state();
     }

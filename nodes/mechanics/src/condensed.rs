@@ -196,9 +196,6 @@ impl CondensedOperator {
         self.factor.n()
     }
 
-    /// w = B (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q (= A_E M q) for every column of q (n_b × m, N/mm²), by one
-    /// multi-right-hand-side solve with the sparse factors; `rhs` is caller-owned scratch of at
-    /// least n_free × m. Constrained boundary entries get 0 (as A_E's zero rows).
     /// Floating-point operations of [`CondensedOperator::sparse_response_into`] per column:
     /// the right-hand side M q on the free boundary entries (a multiply and an add each) and one
     /// forward and backward substitution ([`SparseSpd::solve_flops`]).
@@ -207,7 +204,23 @@ impl CondensedOperator {
         2 * free_boundary as u64 + self.factor.solve_flops()
     }
 
-    pub fn sparse_response_into(&self, q: MatRef<'_, f64>, rhs: MatMut<'_, f64>, mut w: MatMut<'_, f64>) {
+    /// Scratch of the sparse solves of [`CondensedOperator::sparse_response_into`] for up to
+    /// `ncols` columns.
+    pub fn sparse_scratch(&self, ncols: usize) -> faer::dyn_stack::MemBuffer {
+        self.factor.solve_scratch(ncols)
+    }
+
+    /// w = B (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q (= A_E M q) for every column of q (n_b × m, N/mm²), by one
+    /// multi-right-hand-side solve with the sparse factors; `rhs` is caller-owned scratch of at
+    /// least n_free × m, `scratch` that of the solve ([`CondensedOperator::sparse_scratch`] of at
+    /// least m columns). Constrained boundary entries get 0 (as A_E's zero rows).
+    pub fn sparse_response_into(
+        &self,
+        q: MatRef<'_, f64>,
+        rhs: MatMut<'_, f64>,
+        mut w: MatMut<'_, f64>,
+        scratch: &mut faer::dyn_stack::MemBuffer,
+    ) {
         let m = q.ncols();
         let mut rhs = rhs.subcols_mut(0, m);
         rhs.fill(0.0);
@@ -218,7 +231,7 @@ impl CondensedOperator {
                 }
             }
         }
-        self.factor.solve_view_in_place(rhs.rb_mut());
+        self.factor.solve_view_in_place_with(rhs.rb_mut(), scratch);
         for j in 0..m {
             for (b, &d) in self.layout.dofs.iter().enumerate() {
                 w[(b, j)] = if self.free[d] == usize::MAX {

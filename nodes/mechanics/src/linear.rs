@@ -188,6 +188,8 @@ pub struct SubdomainSolver {
     scratch: Mat<f64>,
     /// Scratch right-hand sides of the sparse solves (n_free × (N+1); 0 × 0 when dense).
     sparse_rhs: Mat<f64>,
+    /// Scratch of the sparse solves themselves (for N + 1 columns; for none when dense).
+    sparse_scratch: faer::dyn_stack::MemBuffer,
     /// Floating-point operations of the linear-stage kernels called since construction
     /// ([`SubdomainSolver::flops`]).
     flops: u64,
@@ -239,6 +241,7 @@ impl SubdomainSolver {
         let mut a_mk_e = Mat::<f64>::zeros(n_b, n_m);
         let width = nt.max(n_m).max(1);
         let mut sparse_rhs = Mat::<f64>::zeros(if dense { 0 } else { op.n_free() }, if dense { 0 } else { width });
+        let mut sparse_scratch = op.sparse_scratch(if dense { 0 } else { width });
         if dense {
             matmul(
                 a_mk_e.as_mut(),
@@ -250,7 +253,7 @@ impl SubdomainSolver {
             );
         } else {
             let k_e = Mat::from_fn(n_b, n_m, |r, c| layout.k[r] * e[(r, c)]);
-            op.sparse_response_into(k_e.as_ref(), sparse_rhs.as_mut(), a_mk_e.as_mut());
+            op.sparse_response_into(k_e.as_ref(), sparse_rhs.as_mut(), a_mk_e.as_mut(), &mut sparse_scratch);
         }
         let a_rows = op.a.transpose().to_owned();
         let mut l_e = Mat::<f64>::zeros(n_m, n_m);
@@ -295,6 +298,7 @@ impl SubdomainSolver {
             dense,
             scratch: Mat::zeros(n_b, width),
             sparse_rhs,
+            sparse_scratch,
             flops: 0,
         })
     }
@@ -327,6 +331,7 @@ impl SubdomainSolver {
             } else {
                 Mat::zeros(self.op.n_free(), width)
             },
+            sparse_scratch: self.op.sparse_scratch(if self.dense { 0 } else { width }),
             flops: 0,
         }
     }
@@ -387,7 +392,8 @@ impl SubdomainSolver {
             self.dense_response(q, out, Accum::Replace);
         } else {
             self.flops += m as u64 * self.op.sparse_response_flops();
-            self.op.sparse_response_into(q, self.sparse_rhs.as_mut(), out);
+            self.op
+                .sparse_response_into(q, self.sparse_rhs.as_mut(), out, &mut self.sparse_scratch);
         }
     }
 
@@ -413,7 +419,7 @@ impl SubdomainSolver {
             // The sparse response, then + W_d.
             self.flops += nt as u64 * (self.op.sparse_response_flops() + n_b);
             self.op
-                .sparse_response_into(q_hat, self.sparse_rhs.as_mut(), w1.rb_mut());
+                .sparse_response_into(q_hat, self.sparse_rhs.as_mut(), w1.rb_mut(), &mut self.sparse_scratch);
             for j in 0..nt {
                 for (w, d) in col_mut(&mut w1, j).iter_mut().zip(self.w_d.col_as_slice(j)) {
                     *w += d;
@@ -470,6 +476,7 @@ impl SubdomainSolver {
                 self.scratch.as_ref().subcols(0, nt),
                 self.sparse_rhs.as_mut(),
                 w2.rb_mut(),
+                &mut self.sparse_scratch,
             );
             let k = &self.op.layout.k;
             for j in 0..nt {

@@ -53,6 +53,17 @@ fn calls() -> u64 {
 /// kernels' thread-local buffers), then `measured` more, and returns the allocator calls of the
 /// setup and of the measured iterations, and whether some interface updated its directions.
 fn allocations(scene: &str, search_direction_update: bool, warm_up: usize, measured: usize) -> (u64, u64, bool) {
+    allocations_with(scene, search_direction_update, true, warm_up, measured)
+}
+
+/// As [`allocations`], with the condensed linear stage (`dense`) or the sparse one.
+fn allocations_with(
+    scene: &str,
+    search_direction_update: bool,
+    dense: bool,
+    warm_up: usize,
+    measured: usize,
+) -> (u64, u64, bool) {
     let path = format!("{}/../../launch/scenes/{scene}", env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(&path).expect("scene file");
     let before_setup = calls();
@@ -60,7 +71,7 @@ fn allocations(scene: &str, search_direction_update: bool, warm_up: usize, measu
         .expect("valid scene")
         .model;
     model.solver.search_direction_update = search_direction_update;
-    let mut run = latin::Latin::new(model);
+    let mut run = latin::Latin::with_dense(model, dense);
     for _ in 0..warm_up {
         run.iterate();
     }
@@ -108,5 +119,21 @@ fn iterations_with_the_search_direction_update_do_not_allocate() {
     assert_eq!(
         during, 0,
         "allocator calls during 60 iterations with the search-direction update"
+    );
+}
+
+#[test]
+fn sparse_linear_stage_iterations_do_not_allocate() {
+    // The sparse linear stage (`linear_stage = "sparse"`): each micro problem is one solve with
+    // the sparse factors for all time points, its right-hand sides and the solve's own scratch
+    // allocated with the subdomain.
+    let (setup, during, _) = allocations_with("small-three-layer.toml", false, false, 3, 10);
+    assert!(
+        setup > 100,
+        "the counting allocator saw only {setup} calls during the setup"
+    );
+    assert_eq!(
+        during, 0,
+        "allocator calls during 10 iterations of the sparse linear stage"
     );
 }

@@ -55,11 +55,16 @@ impl Latin {
     /// Builds every subdomain's solver (condensed linear stage), the macro problem and the
     /// interfaces' local-stage state, as the runner does.
     pub fn new(model: Model) -> Self {
+        Self::with_dense(model, true)
+    }
+
+    /// As [`Latin::new`], with the condensed linear stage (`dense`) or the sparse one.
+    pub fn with_dense(model: Model, dense: bool) -> Self {
         let k0 = default_k0(&model);
         let bases = macro_bases(&model);
         let nt = model.time.n_points();
         let solvers: Vec<SubdomainSolver> = (0..model.subdomains.len())
-            .map(|s| SubdomainSolver::new(&model, s, &k0, &bases).expect("subdomain operator"))
+            .map(|s| SubdomainSolver::with_dense(&model, s, &k0, &bases, dense).expect("subdomain operator"))
             .collect();
         let n_modes: Vec<usize> = bases.iter().map(|b| b.len()).collect();
         let slots: Vec<Vec<(usize, usize)>> = solvers
