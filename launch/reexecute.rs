@@ -218,6 +218,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
         }
     };
     keep(node.start().with_context(|| format!("node {id}: start"))?);
+    keep(std::iter::from_fn(|| node.next_output()).collect());
     for (i, msg) in &inputs {
         let out = node.handle(msg).with_context(|| {
             format!(
@@ -228,6 +229,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
             )
         })?;
         keep(out);
+        keep(std::iter::from_fn(|| node.next_output()).collect());
     }
 
     // Compare, topic by topic, in order; keep the mismatch of the earliest recorded message.

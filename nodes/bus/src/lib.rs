@@ -89,6 +89,14 @@ pub trait Node: Send {
     fn start(&mut self) -> Result<Vec<Message>, NodeError>;
     /// Consumes one message and returns the messages it publishes in reply.
     fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError>;
+    /// The next of the messages this node publishes after those its last `start` or `handle`
+    /// returned, or None when there is none left. A bus asks for them one at a time, after it has
+    /// published the ones before (and given them back, [`Node::recycle`]), so that a node's large
+    /// final outputs can be written one after the other into the same memory instead of all
+    /// existing at once. By default a node has none.
+    fn next_output(&mut self) -> Option<Message> {
+        None
+    }
     /// The node has nothing more to do.
     fn is_finished(&self) -> bool;
     /// Takes back a message this node published, once the bus has delivered it (and no longer
@@ -166,6 +174,7 @@ impl InProcessBus {
         let mut queue = Vec::new();
         for node in &mut self.nodes {
             queue.extend(node.start()?);
+            queue.extend(std::iter::from_fn(|| node.next_output()));
         }
         while !queue.is_empty() {
             for m in &queue {
@@ -187,6 +196,7 @@ impl InProcessBus {
                         if subs.iter().any(|s| key_matches(s, topic)) {
                             let t0 = timed.then(Instant::now);
                             out.extend(node.handle(m)?);
+                            out.extend(std::iter::from_fn(|| node.next_output()));
                             if let Some(t0) = t0 {
                                 times.push((k, t0.elapsed()));
                             }

@@ -21,7 +21,7 @@
 //! the histories.
 
 use faer::{Mat, MatRef};
-use glissade_bus::convert::{field_of, view, FieldPool};
+use glissade_bus::convert::{view, FieldPool};
 use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonCoordinator, AndersonStep, GramPartials, MAX_CONDITION};
 use glissade_mechanics::condensed::BoundaryLayout;
@@ -175,6 +175,9 @@ pub struct InterfaceNode {
     reported: bool,
     decider: Option<Decider>,
     finished: bool,
+    /// After a stop: the positions (in `owned`) of the interfaces whose solution is still to be
+    /// published, one message at a time ([`Node::next_output`]).
+    solutions_left: std::ops::Range<usize>,
     /// Buffers of the fields this node sent, back from the bus ([`Node::recycle`]).
     pool: FieldPool,
 }
@@ -314,6 +317,7 @@ impl InterfaceNode {
             reported: false,
             decider,
             finished: false,
+            solutions_left: 0..0,
             pool: FieldPool::default(),
         }
     }
@@ -565,35 +569,11 @@ impl InterfaceNode {
         if stop {
             self.finished = true;
             // The solutions are the run's largest messages (s and ŝ of every owned interface, all
-            // time points: 141 MB at N = 1000 on the stratified scene), written into new buffers
-            // whose pages are faulted in as they are written: on both cores, interface by
-            // interface, while the subdomains wait for the decision.
-            let solutions: Vec<InterfaceSolution> = self
-                .locals
-                .par_iter()
-                .zip(self.fields.par_iter())
-                .zip(self.owned.par_iter())
-                .map(|((local, s), &interface)| {
-                    let h = &local.hat;
-                    InterfaceSolution {
-                        interface: interface as u32,
-                        w_a: field_of(s.w_a.as_ref()),
-                        w_b: field_of(s.w_b.as_ref()),
-                        f_a: field_of(s.f_a.as_ref()),
-                        f_b: field_of(s.f_b.as_ref()),
-                        w_a_hat: field_of(h.w_a.as_ref()),
-                        w_b_hat: field_of(h.w_b.as_ref()),
-                        f_a_hat: field_of(h.f_a.as_ref()),
-                        f_b_hat: field_of(h.f_b.as_ref()),
-                        status: local.status.iter().map(|s| *s as u8).collect(),
-                    }
-                })
-                .collect();
-            out.extend(
-                solutions
-                    .into_iter()
-                    .map(|sol| self.msg(Stage::Final, n, Payload::InterfaceSolution(sol))),
-            );
+            // time points: 141 MB at N = 1000 on the stratified scene): they follow the decision
+            // one at a time ([`Node::next_output`]), each written into the buffers of the one
+            // before once the bus has it, instead of all into new memory at once (whose pages
+            // are faulted in as they are written).
+            self.solutions_left = 0..self.owned.len();
         } else {
             let nt = self.model.time.n_points();
             for &s in &self.participants {
@@ -932,6 +912,25 @@ impl Node for InterfaceNode {
         Ok(Vec::new())
     }
 
+    fn next_output(&mut self) -> Option<Message> {
+        let p = self.solutions_left.next()?;
+        let (local, s, pool) = (&self.locals[p], &self.fields[p], &mut self.pool);
+        let h = &local.hat;
+        let solution = InterfaceSolution {
+            interface: self.owned[p] as u32,
+            w_a: pool.field_of(s.w_a.as_ref()),
+            w_b: pool.field_of(s.w_b.as_ref()),
+            f_a: pool.field_of(s.f_a.as_ref()),
+            f_b: pool.field_of(s.f_b.as_ref()),
+            w_a_hat: pool.field_of(h.w_a.as_ref()),
+            w_b_hat: pool.field_of(h.w_b.as_ref()),
+            f_a_hat: pool.field_of(h.f_a.as_ref()),
+            f_b_hat: pool.field_of(h.f_b.as_ref()),
+            status: local.status.iter().map(|s| *s as u8).collect(),
+        };
+        Some(self.msg(Stage::Final, self.iteration, Payload::InterfaceSolution(solution)))
+    }
+
     fn is_finished(&self) -> bool {
         self.finished
     }
@@ -944,6 +943,7 @@ impl Node for InterfaceNode {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glissade_bus::convert::field_of;
     use glissade_mechanics::local::IndicatorSums;
     use glissade_mechanics::model::SolverParams;
     use glissade_mechanics::scene::load_str;
@@ -1142,6 +1142,62 @@ mod tests {
             joined.extend((0..q1.rows()).map(|r| q1.get(r, c)));
         }
         assert_eq!(joined, q.data, "the pieces are the one-node q̂, bit for bit");
+    }
+
+    #[test]
+    fn final_solutions_follow_the_decision_one_at_a_time_in_the_same_buffers() {
+        // One iteration allowed: the first decision is a stop.
+        let (model, ctx) = in_a_row(3);
+        let mut capped = (*model).clone();
+        capped.solver.max_iterations = 1;
+        let model = Arc::new(capped);
+        let k0 = vec![1000.0; model.interfaces.len()];
+        let mut node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+        let mut out = Vec::new();
+        for m in states(&model, &ctx, &k0) {
+            out.extend(node.handle(&m).unwrap());
+        }
+        let [decision] = &out[..] else {
+            panic!("the stop's reply is its decision alone: {out:?}")
+        };
+        assert!(matches!(&decision.payload, Payload::Decision(d) if d.verdict.is_stop()));
+        assert!(node.is_finished());
+        // Solution p: of interface p, at the final stage, s and ŝ as the node holds them, bit
+        // for bit; returns its fields' buffers.
+        let check = |node: &InterfaceNode, m: &Message, p: usize| -> Vec<*const f64> {
+            let Payload::InterfaceSolution(sol) = &m.payload else {
+                panic!("an interface solution: {m:?}")
+            };
+            assert_eq!((sol.interface, m.envelope.stage), (p as u32, Stage::Final));
+            let (s, h) = (&node.fields[p], &node.locals[p].hat);
+            let expected =
+                [&s.w_a, &s.w_b, &s.f_a, &s.f_b, &h.w_a, &h.w_b, &h.f_a, &h.f_b].map(|m| field_of(m.as_ref()));
+            let got = [
+                &sol.w_a,
+                &sol.w_b,
+                &sol.f_a,
+                &sol.f_b,
+                &sol.w_a_hat,
+                &sol.w_b_hat,
+                &sol.f_a_hat,
+                &sol.f_b_hat,
+            ];
+            assert!(got.iter().zip(&expected).all(|(g, e)| *g == e), "interface {p}");
+            let mut buffers: Vec<_> = got.iter().map(|f| f.data.as_ptr()).collect();
+            buffers.sort();
+            buffers
+        };
+        let first = node.next_output().expect("interface 0's solution");
+        let buffers = check(&node, &first, 0);
+        node.recycle(first);
+        // Once given back, its buffers hold the next solution.
+        let second = node.next_output().expect("interface 1's solution");
+        assert_eq!(
+            check(&node, &second, 1),
+            buffers,
+            "interface 1's fields reuse interface 0's buffers"
+        );
+        assert!(node.next_output().is_none(), "two interfaces, two solutions");
     }
 
     #[test]

@@ -579,6 +579,11 @@ pub fn run_nodes(
                             publish_new(session, &out, published)?;
                             node.recycle(out);
                         }
+                        // The rest one at a time, each once the one before is out.
+                        while let Some(out) = node.next_output() {
+                            publish_new(session, &out, published)?;
+                            node.recycle(out);
+                        }
                     }
                     // The node refused this message and is unchanged: it is not the run's (a
                     // damaged or stray copy); the genuine one may still come.
@@ -631,6 +636,9 @@ pub fn run_nodes(
             for m in node.start()? {
                 publish_new(session, &m, &published)?;
             }
+            while let Some(m) = node.next_output() {
+                publish_new(session, &m, &published)?;
+            }
         }
         for (key, bytes) in inputs {
             handle(
@@ -669,6 +677,9 @@ pub fn run_nodes(
         }
         for node in &mut nodes {
             for m in node.start()? {
+                publish(session, &m)?;
+            }
+            while let Some(m) = node.next_output() {
                 publish(session, &m)?;
             }
         }
