@@ -189,6 +189,8 @@ struct NodeProcess {
     /// Its `glissade node` arguments (a replacement gets them too, with `--resume`).
     args: Vec<String>,
     last_lines: Arc<Mutex<Vec<String>>>,
+    /// The threads that read its stdout and stderr into `last_lines`.
+    readers: Vec<std::thread::JoinHandle<()>>,
     /// Exit status once it exited.
     status: Option<ExitStatus>,
     /// Its liveliness token was seen (a token of the same name that disappears before is its
@@ -242,7 +244,11 @@ fn local_endpoint(listen: &str) -> String {
 }
 
 /// Forwards a child's output lines to stderr with a `[prefix]`, keeping its last 10 lines in `last`.
-pub(crate) fn forward(prefix: String, stream: impl std::io::Read + Send + 'static, last: Arc<Mutex<Vec<String>>>) {
+pub(crate) fn forward(
+    prefix: String,
+    stream: impl std::io::Read + Send + 'static,
+    last: Arc<Mutex<Vec<String>>>,
+) -> std::thread::JoinHandle<()> {
     std::thread::spawn(move || {
         for line in BufReader::new(stream).lines().map_while(Result::ok) {
             eprintln!("[{prefix}] {line}");
@@ -254,7 +260,21 @@ pub(crate) fn forward(prefix: String, stream: impl std::io::Read + Send + 'stati
                 }
             }
         }
-    });
+    })
+}
+
+/// Longest wait, once a child process has exited, for the threads that read its output to reach
+/// its end ([`settle`]).
+const OUTPUT_SETTLE: Duration = Duration::from_secs(2);
+
+/// Waits (up to [`OUTPUT_SETTLE`]) for the threads of [`forward`] that read an exited child's
+/// output to have read it all, so that its last lines, its own error among them, are there to
+/// quote: the process's exit can be seen before its last writes are read.
+pub(crate) fn settle(readers: &[std::thread::JoinHandle<()>]) {
+    let deadline = Instant::now() + OUTPUT_SETTLE;
+    while readers.iter().any(|r| !r.is_finished()) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(2));
+    }
 }
 
 /// The `glissade node` arguments of node `name` (after the executable); `tls`: its `--tls-*`
@@ -365,17 +385,19 @@ fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<Nod
         .spawn()
         .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
     let last = Arc::new(Mutex::new(Vec::new()));
+    let mut readers = Vec::new();
     if let Some(out) = child.stdout.take() {
-        forward(name.to_string(), out, last.clone());
+        readers.push(forward(name.to_string(), out, last.clone()));
     }
     if let Some(err) = child.stderr.take() {
-        forward(name.to_string(), err, last.clone());
+        readers.push(forward(name.to_string(), err, last.clone()));
     }
     Ok(NodeProcess {
         name,
         child,
         args: args.to_vec(),
         last_lines: last,
+        readers,
         status: None,
         token_seen: false,
         token_lost: None,
@@ -707,6 +729,7 @@ pub fn run_distributed_observed(
             if let Some(status) = p.child.try_wait()? {
                 p.status = Some(status);
                 if !status.success() {
+                    settle(&p.readers);
                     child_failure = Some(format!(
                         "node {} failed ({status}); its last lines:\n    {}",
                         p.name,

@@ -171,6 +171,8 @@ pub struct RecorderProcess {
     _watch: zenoh::pubsub::Subscriber<()>,
     path: PathBuf,
     last_lines: Arc<Mutex<Vec<String>>>,
+    /// The threads that read its stdout and stderr into `last_lines`.
+    readers: Vec<std::thread::JoinHandle<()>>,
 }
 
 impl Drop for RecorderProcess {
@@ -231,11 +233,20 @@ pub fn spawn_recorder_process(
         .spawn()
         .with_context(|| format!("cannot start the recorder process ({})", exe.display()))?;
     let last_lines = Arc::new(Mutex::new(Vec::new()));
+    let mut readers = Vec::new();
     if let Some(out) = child.stdout.take() {
-        crate::distributed::forward("recorder:0".into(), out, last_lines.clone());
+        readers.push(crate::distributed::forward(
+            "recorder:0".into(),
+            out,
+            last_lines.clone(),
+        ));
     }
     if let Some(err) = child.stderr.take() {
-        crate::distributed::forward("recorder:0".into(), err, last_lines.clone());
+        readers.push(crate::distributed::forward(
+            "recorder:0".into(),
+            err,
+            last_lines.clone(),
+        ));
     }
     Ok(RecorderProcess {
         child,
@@ -243,6 +254,7 @@ pub fn spawn_recorder_process(
         _watch: watch,
         path: path.to_path_buf(),
         last_lines,
+        readers,
     })
 }
 
@@ -263,6 +275,7 @@ impl RecorderProcess {
     fn failure(&mut self) -> Option<String> {
         match self.child.try_wait() {
             Ok(Some(status)) if !status.success() => {
+                crate::distributed::settle(&self.readers);
                 let lines = self.last_lines.lock().map(|l| l.join("\n    ")).unwrap_or_default();
                 Some(format!(
                     "the recorder process failed ({status}); its last lines:\n    {lines}"
