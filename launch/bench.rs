@@ -428,10 +428,26 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// Gives the memory this process has freed back to the kernel. glibc keeps freed memory in its
+/// arenas for reuse; after an in-process run at N = 1000 that is gigabytes, which the node
+/// processes of the next run then cannot have: they take pages the kernel has not used yet, and
+/// on a virtual machine the first touch of such a page is far slower than of one used before
+/// (measured: the node processes of a shared-memory run after an in-process run in the same
+/// bench spent ~3.6 s of CPU clearing pages, against ~0.4 s when run on their own). Each run of
+/// the comparison thus starts from the free memory a run of its own would find.
+fn give_back_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only walks glibc's own free lists; no other state is involved.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 /// Runs `scene` `rounds` times in-process, as processes over TCP and as processes through shared
 /// memory (node processes started from `exe`, the launcher's router on a loopback port, no
 /// recording), one after the other in each round. Every run must be the same run: the same
-/// iterations and bit-identical decisions, or this is an error. `run_id` names each run.
+/// iterations and bit-identical decisions, or this is an error. `run_id` names each run. The
+/// memory each run frees is given back to the kernel before the next ([`give_back_freed_memory`]).
 pub fn compare_processes(
     scene: &LoadedScene,
     exe: &Path,
@@ -472,9 +488,11 @@ pub fn compare_processes(
             run_id: id,
             interior: false,
         };
+        give_back_freed_memory();
         let in_process = same_run("in-process", run_in_process(scene, &opts(run_id()?), |_| {})?)?;
         let mut times = [(0.0, 0.0); 2];
         for (t, shm) in times.iter_mut().zip([false, true]) {
+            give_back_freed_memory();
             let mut sc = scene.clone();
             sc.network.shared_memory = shm;
             let (r, _) = run_distributed(&sc, &opts(run_id()?), exe, &Network::default(), |_| {})?;
