@@ -156,12 +156,17 @@ fn launch_endless(name: &str) -> (Launcher, String, Scratch) {
 
 /// As [`launch_endless`], with `deployment` lines added to the scene's deployment section.
 fn launch_endless_with(name: &str, deployment: &str) -> (Launcher, String, Scratch) {
+    launch_endless_scene(name, deployment, "")
+}
+
+/// As [`launch_endless_with`], with `sections` appended to the scene.
+fn launch_endless_scene(name: &str, deployment: &str, sections: &str) -> (Launcher, String, Scratch) {
     let dir = scratch(name);
     let scene = endless_scene(&dir);
-    if !deployment.is_empty() {
+    if !deployment.is_empty() || !sections.is_empty() {
         let text = std::fs::read_to_string(&scene).expect("read the scene");
         assert!(text.contains("\n[deployment]\n"), "the scene has a deployment section");
-        let text = text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{deployment}\n"), 1);
+        let text = text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{deployment}\n"), 1) + sections;
         std::fs::write(&scene, text).expect("write the scene");
     }
     let run_id = format!("{name}-{}", std::process::id());
@@ -192,7 +197,14 @@ fn kill_one_of(role: &str, index: Option<&str>, deployment: &str) {
     let several = if deployment.is_empty() { "" } else { "-of-several" };
     let name = format!("kill-{role}-{}{several}", index.unwrap_or("0"));
     // Without restarts (tests/it/recovery.rs has the supervised runs).
-    let (mut launcher, run_id, _dir) = launch_endless_with(&name, &format!("restarts = 0\n{deployment}"));
+    let (launcher, run_id, _dir) = launch_endless_with(&name, &format!("restarts = 0\n{deployment}"));
+    kill_and_expect_stop(launcher, &run_id, role, index);
+}
+
+/// Kills node `role` (`--index` `index`, if given) of the running `launcher` with SIGKILL and
+/// checks that the run stops within [`STOP_BOUND`], naming the node, and leaves no process.
+fn kill_and_expect_stop(mut launcher: Launcher, run_id: &str, role: &str, index: Option<&str>) {
+    let run_id = run_id.to_string();
     let mut words = vec!["node", role];
     if let Some(i) = index {
         words.extend(["--index", i]);
@@ -222,6 +234,27 @@ fn kill_one_of(role: &str, index: Option<&str>, deployment: &str) {
         "the error names the killed node and its exit status: {error}"
     );
     assert_no_process_left(&run_id);
+}
+
+/// With shared memory a node process that dies is not restarted (README, "Architecture": a
+/// killed process's last messages can reach some nodes and not others): with restarts allowed
+/// (the default) and the run recorded completely, the launcher says so up front, and a killed
+/// node stops the run instead of being restarted.
+#[test]
+fn with_shared_memory_a_killed_node_stops_the_run_instead_of_restarting() {
+    let name = "kill-subdomain-1-shared-memory";
+    let (launcher, run_id, dir) = launch_endless_scene(name, "", "\n[network]\nshared_memory = true\n");
+    let scene = std::fs::read_to_string(dir.join("endless.toml")).expect("read the scene");
+    assert!(
+        !scene.contains("restarts") && !scene.contains("[recording]"),
+        "restarts and recording at their defaults (3, complete): shared memory must be the only reason"
+    );
+    let said = launcher.output();
+    assert!(
+        said.contains("node restarts off (network.shared_memory = true"),
+        "the launcher says why restarts are off:\n{said}"
+    );
+    kill_and_expect_stop(launcher, &run_id, "subdomain", Some("1"));
 }
 
 #[test]
