@@ -327,6 +327,10 @@ const INTERRUPTED: u8 = 130;
 fn main() -> ExitCode {
     keep_freed_memory();
     let cli = Cli::parse();
+    if let Err(e) = log_if_asked() {
+        eprintln!("error: {e:#}");
+        return ExitCode::from(2);
+    }
     match dispatch(cli) {
         Ok(code) => code,
         Err(e) => {
@@ -334,6 +338,27 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// With `RUST_LOG` set (tracing's filter syntax, e.g. `zenoh=warn` or
+/// `zenoh_transport=debug`), prints the log lines of this process and its libraries (Zenoh) to
+/// stderr. Node processes inherit the variable, and the launcher forwards their lines. Without
+/// it nothing is installed and nothing is logged.
+fn log_if_asked() -> anyhow::Result<()> {
+    let Some(filter) = std::env::var_os("RUST_LOG") else {
+        return Ok(());
+    };
+    let filter = filter
+        .into_string()
+        .map_err(|v| anyhow::anyhow!("RUST_LOG = {v:?} is not UTF-8"))?;
+    let filter = tracing_subscriber::EnvFilter::try_new(&filter)
+        .map_err(|e| anyhow::anyhow!("RUST_LOG = {filter:?} is not a tracing filter: {e}"))?;
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(false)
+        .try_init()
+        .map_err(|e| anyhow::anyhow!("cannot install the log for RUST_LOG: {e}"))
 }
 
 /// Makes the allocator keep the memory a process frees for its next allocations instead of

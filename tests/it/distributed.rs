@@ -501,3 +501,46 @@ fn messages_of_another_run_are_ignored() {
     assert_identical(&local, &a);
     assert_identical(&local, &b);
 }
+
+/// `RUST_LOG` shows the log of every process of a run: the node processes inherit it and the
+/// launcher forwards their lines under the node's name (Zenoh logs its session id at `info` when
+/// a session opens). Without it, no log line at all.
+#[test]
+fn rust_log_shows_every_process_log_lines() {
+    let dir = std::env::temp_dir().join(format!("glissade-rust-log-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let scene = dir.join("two-blocks.toml");
+    std::fs::write(&scene, scene_text("two-blocks")).expect("scene file");
+    let run = |log: Option<&str>| {
+        let mut cmd = std::process::Command::new(exe());
+        cmd.args(["run", "--quiet", "--out"]).arg(dir.join("out")).arg(&scene);
+        match log {
+            Some(l) => cmd.env("RUST_LOG", l),
+            None => cmd.env_remove("RUST_LOG"),
+        };
+        let output = cmd.output().expect("spawn glissade");
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let with = run(Some("zenoh=info"));
+    let without = run(None);
+    let _ = std::fs::remove_dir_all(&dir);
+    // The launcher's own lines carry no name: they start with the log's time stamp.
+    let launcher = |l: &str| l.starts_with(|c: char| c.is_ascii_digit());
+    let zid = |l: &str| l.contains("INFO zenoh::net::runtime: Using ZID");
+    assert!(
+        with.lines().any(|l| launcher(l) && zid(l)),
+        "no Zenoh log line from the launcher:\n{with}"
+    );
+    for who in ["[subdomain:0] ", "[interface:0] ", "[coarse:0] "] {
+        assert!(
+            with.lines().any(|l| l.starts_with(who) && zid(l)),
+            "no Zenoh log line from `{who}`:\n{with}"
+        );
+    }
+    assert!(
+        !without.contains("INFO zenoh"),
+        "a log line without RUST_LOG:\n{without}"
+    );
+}
