@@ -150,6 +150,18 @@ impl Launcher {
     }
 }
 
+/// A test that fails before its launcher exits must not leave the run going (an endless scene
+/// runs until stopped): the launcher is killed and reaped, and its nodes follow it (their
+/// parent-death signal).
+impl Drop for Launcher {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
 fn launch_endless(name: &str) -> (Launcher, String, Scratch) {
     launch_endless_with(name, "")
 }
