@@ -3,6 +3,7 @@
 
 use faer::{Mat, MatMut, MatRef};
 use glissade_messages::{BufferPool, Field, Message};
+use rayon::prelude::*;
 
 /// Column `j` of a matrix as a slice, when its rows are contiguous.
 fn col(m: MatRef<'_, f64>, j: usize) -> Option<&[f64]> {
@@ -84,6 +85,34 @@ impl FieldPool {
         }
     }
 
+    /// [`Self::field_with`] for several fields at once: field `i` is `rows[i]` × `cols`, in a
+    /// pooled buffer, filled by `fill(i, field)` (which sees a matrix of zeros). The buffers are
+    /// taken here in order; the zeroing and the filling (and with them the first touch of new
+    /// memory) run in parallel, one field per task.
+    pub fn fields_with(
+        &mut self,
+        rows: &[usize],
+        cols: usize,
+        fill: impl Fn(usize, MatMut<'_, f64>) + Sync,
+    ) -> Vec<Field> {
+        let mut data: Vec<Vec<f64>> = rows.iter().map(|&r| self.buffers.take_empty(r * cols)).collect();
+        data.par_iter_mut()
+            .zip(rows.par_iter())
+            .enumerate()
+            .for_each(|(i, (d, &r))| {
+                d.resize(r * cols, 0.0);
+                fill(i, MatMut::from_column_major_slice_mut(d, r, cols));
+            });
+        data.into_iter()
+            .zip(rows)
+            .map(|(data, &r)| Field {
+                rows: r as u32,
+                cols: cols as u32,
+                data,
+            })
+            .collect()
+    }
+
     /// Keeps the field buffers of a delivered message, up to [`Self::CAPACITY`].
     pub fn recycle(&mut self, msg: Message) {
         self.buffers.recycle(msg.payload);
@@ -103,6 +132,47 @@ impl FieldPool {
 mod tests {
     use super::*;
     use glissade_messages::{Envelope, NodeId, Payload, Role, Stage, SCHEMA_VERSION};
+
+    /// Several fields filled in parallel are the fields `field_with` makes one by one, in the
+    /// order of `rows`, and reuse the pool's buffers.
+    #[test]
+    fn fields_with_matches_field_with() {
+        let fill = |i: usize, mut m: MatMut<'_, f64>| {
+            for c in 0..m.ncols() {
+                for r in 0..m.nrows() {
+                    m[(r, c)] = (i * 1000 + r * 10 + c) as f64 + 0.25;
+                }
+            }
+        };
+        let rows = [3, 0, 7, 5];
+        let mut one_by_one = FieldPool::default();
+        let expected: Vec<Field> = rows
+            .iter()
+            .enumerate()
+            .map(|(i, &r)| one_by_one.field_with(r, 4, |m| fill(i, m)))
+            .collect();
+        let mut pool = FieldPool::default();
+        let got = pool.fields_with(&rows, 4, fill);
+        assert_eq!(got, expected);
+        // Given back, the buffers hold the next fields (no new memory for fields that fit).
+        let addresses: Vec<*const f64> = got
+            .iter()
+            .filter(|f| !f.data.is_empty())
+            .map(|f| f.data.as_ptr())
+            .collect();
+        for f in got {
+            pool.buffers.put(f.data);
+        }
+        let again = pool.fields_with(&[3, 7, 5], 4, |_, _| {});
+        for f in &again {
+            assert!(
+                addresses.contains(&f.data.as_ptr()),
+                "a new buffer for a field of {} rows",
+                f.rows
+            );
+            assert!(f.data.iter().all(|&v| v == 0.0), "a reused buffer is zeroed");
+        }
+    }
 
     fn message(payload: Payload) -> Message {
         Message {

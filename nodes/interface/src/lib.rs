@@ -576,22 +576,33 @@ impl InterfaceNode {
             self.solutions_left = 0..self.owned.len();
         } else {
             let nt = self.model.time.n_points();
-            for &s in &self.participants {
-                let layout = self.layouts[s as usize].as_ref().expect("participant");
-                let mine: Vec<_> = layout
-                    .slots
-                    .iter()
-                    .filter_map(|sl| self.position[sl.interface].map(|p| (p, sl)))
-                    .collect();
-                let rows = mine.iter().map(|(_, sl)| 2 * sl.n_pairs).sum();
-                // Written in place into the message's field (a buffer of an earlier one).
-                let q_hat = self.pool.field_with(rows, nt, |mut q| {
-                    let mut offset = 0;
-                    for (p, sl) in &mine {
-                        self.locals[*p].q_hat_into(sl.side == Side::A, q.as_mut(), offset);
-                        offset += 2 * sl.n_pairs;
-                    }
-                });
+            let (layouts, position, locals) = (&self.layouts, &self.position, &self.locals);
+            let mine: Vec<Vec<_>> = self
+                .participants
+                .iter()
+                .map(|&s| {
+                    let layout = layouts[s as usize].as_ref().expect("participant");
+                    layout
+                        .slots
+                        .iter()
+                        .filter_map(|sl| position[sl.interface].map(|p| (p, sl)))
+                        .collect()
+                })
+                .collect();
+            let rows: Vec<usize> = mine
+                .iter()
+                .map(|m| m.iter().map(|(_, sl)| 2 * sl.n_pairs).sum())
+                .collect();
+            // Written in place into the messages' fields (buffers of earlier ones), one
+            // subdomain per task: the subdomains wait for these.
+            let q_hats = self.pool.fields_with(&rows, nt, |i, mut q| {
+                let mut offset = 0;
+                for (p, sl) in &mine[i] {
+                    locals[*p].q_hat_into(sl.side == Side::A, q.as_mut(), offset);
+                    offset += 2 * sl.n_pairs;
+                }
+            });
+            for ((&s, mine), q_hat) in self.participants.iter().zip(&mine).zip(q_hats) {
                 out.push(self.msg(
                     Stage::Local,
                     n + 1,
