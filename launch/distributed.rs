@@ -601,10 +601,10 @@ pub fn run_distributed_observed(
     // Shared memory: a message lies in its sender's pool, and Zenoh (1.10.2) drops, with no more
     // than a debug log ("Error receiving SHM buffer: Buffer is invalidated"), a message whose
     // shared buffer a receiver no longer takes as valid, which happens to the last messages of a
-    // process killed mid-run. The recorder may hold such a message and a
-    // node not: the resumed node then takes it for already delivered and never sends it again,
-    // and the node that missed it waits (seen with shared memory forced on in the restart test,
-    // on a loaded machine: 2 of 100 runs went wrong, a stall and a recorder missing 7 messages).
+    // process killed mid-run. The recorder may hold such a message and a node not: the resumed
+    // node then takes it for already delivered and never sends it again, and the node that
+    // missed it waits (seen with shared memory forced on in the restart test, on a loaded
+    // machine: 2 of 100 runs went wrong, a stall and a recorder missing 7 messages).
     let restarts = scene.deployment.restarts;
     let no_resume = match &net.recording {
         None => Some("the run is not recorded".to_string()),

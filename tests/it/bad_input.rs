@@ -345,9 +345,7 @@ fn bad_inputs_exit_2_with_a_clear_error_and_write_nothing() {
 /// one is bad input like any other: exit 2, the variable and its value named, nothing written.
 #[test]
 fn a_bad_rust_log_exits_2_and_writes_nothing() {
-    let dir = std::env::temp_dir().join(format!("glissade-bad-rust-log-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let dir = crate::node_failures::scratch("bad-rust-log");
     let scene = dir.join("two-blocks.toml");
     std::fs::write(&scene, GOOD).expect("scene file");
     let out = dir.join("out");
@@ -360,7 +358,6 @@ fn a_bad_rust_log_exits_2_and_writes_nothing() {
         .expect("spawn glissade");
     let stderr = String::from_utf8_lossy(&output.stderr);
     let written = files_in(&out);
-    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(
         stderr.contains("error: RUST_LOG = \"zenoh=[\" is not a tracing filter"),

@@ -507,9 +507,7 @@ fn messages_of_another_run_are_ignored() {
 /// a session opens). Without it, no log line at all.
 #[test]
 fn rust_log_shows_every_process_log_lines() {
-    let dir = std::env::temp_dir().join(format!("glissade-rust-log-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let dir = crate::node_failures::scratch("rust-log");
     let scene = dir.join("two-blocks.toml");
     std::fs::write(&scene, scene_text("two-blocks")).expect("scene file");
     let run = |log: Option<&str>| {
@@ -525,7 +523,6 @@ fn rust_log_shows_every_process_log_lines() {
     };
     let with = run(Some("zenoh=info"));
     let without = run(None);
-    let _ = std::fs::remove_dir_all(&dir);
     // The launcher's own lines carry no name: they start with the log's time stamp.
     let launcher = |l: &str| l.starts_with(|c: char| c.is_ascii_digit());
     let zid = |l: &str| l.contains("INFO zenoh::net::runtime: Using ZID");

@@ -163,16 +163,12 @@ impl Drop for Launcher {
 }
 
 fn launch_endless(name: &str) -> (Launcher, String, Scratch) {
-    launch_endless_with(name, "")
+    launch_endless_with(name, "", "")
 }
 
-/// As [`launch_endless`], with `deployment` lines added to the scene's deployment section.
-fn launch_endless_with(name: &str, deployment: &str) -> (Launcher, String, Scratch) {
-    launch_endless_scene(name, deployment, "")
-}
-
-/// As [`launch_endless_with`], with `sections` appended to the scene.
-fn launch_endless_scene(name: &str, deployment: &str, sections: &str) -> (Launcher, String, Scratch) {
+/// As [`launch_endless`], with `deployment` lines added to the scene's deployment section and
+/// `sections` appended to the scene.
+fn launch_endless_with(name: &str, deployment: &str, sections: &str) -> (Launcher, String, Scratch) {
     let dir = scratch(name);
     let scene = endless_scene(&dir);
     if !deployment.is_empty() || !sections.is_empty() {
@@ -209,19 +205,18 @@ fn kill_one_of(role: &str, index: Option<&str>, deployment: &str) {
     let several = if deployment.is_empty() { "" } else { "-of-several" };
     let name = format!("kill-{role}-{}{several}", index.unwrap_or("0"));
     // Without restarts (tests/it/recovery.rs has the supervised runs).
-    let (launcher, run_id, _dir) = launch_endless_with(&name, &format!("restarts = 0\n{deployment}"));
+    let (launcher, run_id, _dir) = launch_endless_with(&name, &format!("restarts = 0\n{deployment}"), "");
     kill_and_expect_stop(launcher, &run_id, role, index);
 }
 
 /// Kills node `role` (`--index` `index`, if given) of the running `launcher` with SIGKILL and
 /// checks that the run stops within [`STOP_BOUND`], naming the node, and leaves no process.
 fn kill_and_expect_stop(mut launcher: Launcher, run_id: &str, role: &str, index: Option<&str>) {
-    let run_id = run_id.to_string();
     let mut words = vec!["node", role];
     if let Some(i) = index {
         words.extend(["--index", i]);
     }
-    let pids = processes_with(&run_id, &words);
+    let pids = processes_with(run_id, &words);
     assert_eq!(pids.len(), 1, "one process of node {role}: {pids:?}");
     assert!(
         launcher.child.try_wait().unwrap().is_none(),
@@ -245,7 +240,7 @@ fn kill_and_expect_stop(mut launcher: Launcher, run_id: &str, role: &str, index:
         error.contains(&format!("node {node} failed")) && error.contains("SIGKILL"),
         "the error names the killed node and its exit status: {error}"
     );
-    assert_no_process_left(&run_id);
+    assert_no_process_left(run_id);
 }
 
 /// With shared memory a node process that dies is not restarted (README, "Architecture": a
@@ -255,7 +250,7 @@ fn kill_and_expect_stop(mut launcher: Launcher, run_id: &str, role: &str, index:
 #[test]
 fn with_shared_memory_a_killed_node_stops_the_run_instead_of_restarting() {
     let name = "kill-subdomain-1-shared-memory";
-    let (launcher, run_id, dir) = launch_endless_scene(name, "", "\n[network]\nshared_memory = true\n");
+    let (launcher, run_id, dir) = launch_endless_with(name, "", "\n[network]\nshared_memory = true\n");
     let scene = std::fs::read_to_string(dir.join("endless.toml")).expect("read the scene");
     assert!(
         !scene.contains("restarts") && !scene.contains("[recording]"),
