@@ -31,6 +31,7 @@ use glissade_bus::{Node, NodeError};
 use glissade_messages::{
     decode, decode_from_reader, encode, BufferPool, DecodeBuffers, DecodeError, Expected, Message,
 };
+use rayon::prelude::*;
 use std::collections::{BTreeSet, HashSet, VecDeque};
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
@@ -539,68 +540,104 @@ pub fn run_nodes(
     // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
     let mut seen: HashSet<u64> = HashSet::new();
     let mut published: HashSet<u64> = HashSet::new();
-    let mut handle = |received: Box<Received>,
+    // A batch of messages, as they arrived: each node handles the ones it subscribes to in
+    // arrival order, and the process's nodes do so in parallel (a process hosting several
+    // subdomains uses every core, as the in-process bus does); a node publishes its replies as
+    // it makes them.
+    let mut handle = |batch: Vec<Box<Received>>,
                       nodes: &mut Vec<Box<dyn Node>>,
                       published: &HashSet<u64>,
                       log: &mut dyn FnMut(&str)|
      -> Result<(), TransportError> {
-        let Received { key, hash, message } = *received;
-        let msg = match message {
-            Ok(m) => m,
-            Err(e) => {
-                log(&format!("ignored a message on {key}: {e}"));
-                return Ok(());
-            }
-        };
         // A handled or ignored message's buffers hold the next ones.
         let recycle = |msg: Message| buffers.lock().unwrap_or_else(|e| e.into_inner()).recycle(msg.payload);
-        if msg.topic() != key {
-            log(&format!(
-                "ignored a message on {key}: its envelope and payload belong on {}",
-                msg.topic()
-            ));
-            recycle(msg);
-            return Ok(());
+        let mut batch_hashes = HashSet::new();
+        let mut msgs: Vec<(String, u64, Message)> = Vec::with_capacity(batch.len());
+        for received in batch {
+            let Received { key, hash, message } = *received;
+            let msg = match message {
+                Ok(m) => m,
+                Err(e) => {
+                    log(&format!("ignored a message on {key}: {e}"));
+                    continue;
+                }
+            };
+            if msg.topic() != key {
+                log(&format!(
+                    "ignored a message on {key}: its envelope and payload belong on {}",
+                    msg.topic()
+                ));
+                recycle(msg);
+                continue;
+            }
+            if seen.contains(&hash) || !batch_hashes.insert(hash) {
+                log(&format!(
+                    "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
+                    msg.envelope.iteration, msg.envelope.stage
+                ));
+                recycle(msg);
+                continue;
+            }
+            msgs.push((key, hash, msg));
         }
-        if seen.contains(&hash) {
-            log(&format!(
-                "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
-                msg.envelope.iteration, msg.envelope.stage
-            ));
-            recycle(msg);
-            return Ok(());
-        }
-        let mut taken = true;
-        for (node, subs) in nodes.iter_mut().zip(&subscriptions) {
-            if subs.iter().any(|s| glissade_messages::key_matches(s, &key)) {
-                match node.handle(&msg) {
-                    Ok(outs) => {
-                        for out in outs {
-                            publish_new(session, &out, published)?;
-                            node.recycle(out);
-                        }
-                        // The rest one at a time, each once the one before is out.
-                        while let Some(out) = node.next_output() {
-                            publish_new(session, &out, published)?;
-                            node.recycle(out);
-                        }
+        let msgs_ref = &msgs;
+        // Per node: the messages it refused (index, reason), or the error that ends the run.
+        let outcomes: Vec<Result<Vec<(usize, String)>, TransportError>> = nodes
+            .par_iter_mut()
+            .zip(subscriptions.par_iter())
+            .map(|(node, subs)| {
+                let mut refused = Vec::new();
+                for (k, (key, _, msg)) in msgs_ref.iter().enumerate() {
+                    if !subs.iter().any(|s| glissade_messages::key_matches(s, key)) {
+                        continue;
                     }
-                    // The node refused this message and is unchanged: it is not the run's (a
-                    // damaged or stray copy); the genuine one may still come.
-                    Err(e) if e.is_rejection() => {
-                        log(&format!("ignored a message on {key}: {e}"));
-                        taken = false;
+                    match node.handle(msg) {
+                        Ok(outs) => {
+                            for out in outs {
+                                publish_new(session, &out, published)?;
+                                node.recycle(out);
+                            }
+                            // The rest one at a time, each once the one before is out.
+                            while let Some(out) = node.next_output() {
+                                publish_new(session, &out, published)?;
+                                node.recycle(out);
+                            }
+                        }
+                        // The node refused this message and is unchanged: it is not the run's (a
+                        // damaged or stray copy); the genuine one may still come.
+                        Err(e) if e.is_rejection() => refused.push((k, format!("ignored a message on {key}: {e}"))),
+                        Err(e) => return Err(e.into()),
                     }
-                    Err(e) => return Err(e.into()),
+                }
+                Ok(refused)
+            })
+            .collect();
+        let mut taken = vec![true; msgs.len()];
+        let mut first_error = None;
+        for outcome in outcomes {
+            match outcome {
+                Ok(refused) => {
+                    for (k, why) in refused {
+                        log(&why);
+                        taken[k] = false;
+                    }
+                }
+                Err(e) => {
+                    first_error.get_or_insert(e);
                 }
             }
         }
+        if let Some(e) = first_error {
+            return Err(e);
+        }
         // Only a message the nodes took counts as handled: a refused copy does not hide the
         // genuine one.
-        if taken {
-            seen.insert(hash);
+        for ((_, hash, msg), taken) in msgs.into_iter().zip(taken) {
+            if taken {
+                seen.insert(hash);
+            }
+            recycle(msg);
         }
-        recycle(msg);
         Ok(())
     };
     if run.resume {
@@ -642,7 +679,7 @@ pub fn run_nodes(
         }
         for (key, bytes) in inputs {
             handle(
-                Box::new(Received::from_bytes(key, &bytes, expected)),
+                vec![Box::new(Received::from_bytes(key, &bytes, expected))],
                 &mut nodes,
                 &published,
                 &mut log,
@@ -683,9 +720,7 @@ pub fn run_nodes(
                 publish(session, &m)?;
             }
         }
-        while let Some(received) = early.pop_front() {
-            handle(received, &mut nodes, &published, &mut log)?;
-        }
+        handle(early.drain(..).collect(), &mut nodes, &published, &mut log)?;
     }
     let mut last_message = Instant::now();
     // The peers that left (first first), and when this process gives up on them.
@@ -693,6 +728,8 @@ pub fn run_nodes(
     let mut give_up: Option<Instant> = None;
     // The launcher may hold every result before a node here has heard the final decision.
     let mut done = false;
+    // An event taken from the channel behind a batch of messages, handled next.
+    let mut pending: Option<Event> = None;
     while !nodes.iter().all(|n| n.is_finished()) {
         let now = Instant::now();
         if give_up.is_some_and(|t| now >= t) {
@@ -712,10 +749,27 @@ pub fn run_nodes(
         if let Some(t) = give_up {
             wait = wait.min(t.saturating_duration_since(now));
         }
-        match rx.recv_timeout(wait) {
+        let event = match pending.take() {
+            Some(event) => Ok(event),
+            None => rx.recv_timeout(wait),
+        };
+        match event {
             Ok(Event::Data(received)) => {
                 last_message = Instant::now();
-                handle(received, &mut nodes, &published, &mut log)?;
+                // With the messages already waiting behind it, up to the next event of another
+                // kind (handled next, in its turn).
+                let mut batch = vec![received];
+                loop {
+                    match rx.try_recv() {
+                        Ok(Event::Data(r)) => batch.push(r),
+                        Ok(other) => {
+                            pending = Some(other);
+                            break;
+                        }
+                        Err(_) => break,
+                    }
+                }
+                handle(batch, &mut nodes, &published, &mut log)?;
             }
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
             Ok(Event::Alive(key, false)) if run.supervised && key != own_token && key != launcher_token => {
@@ -736,7 +790,11 @@ pub fn run_nodes(
     // the last one can lose it. Leave once the launcher says it holds the run's results.
     let deadline = Instant::now() + run.done_timeout;
     while !done {
-        match rx.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+        let event = match pending.take() {
+            Some(event) => Ok(event),
+            None => rx.recv_timeout(deadline.saturating_duration_since(Instant::now())),
+        };
+        match event {
             Ok(Event::Done) => done = true,
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
             Ok(Event::Alive(key, false)) if key == launcher_token => {
@@ -1246,6 +1304,136 @@ mod tests {
                 .any(|l| l.contains("did not acknowledge the run's results")),
             "{lines:?}"
         );
+    }
+
+    /// A node that, handling its message, waits (up to 10 s) for the other nodes of its process
+    /// to be handling theirs at the same time, and says whether they were.
+    struct Meeting {
+        id: NodeId,
+        topic: String,
+        inside: Arc<std::sync::atomic::AtomicUsize>,
+        met: Arc<Mutex<Vec<bool>>>,
+        done: bool,
+    }
+
+    impl Node for Meeting {
+        fn id(&self) -> NodeId {
+            self.id
+        }
+        fn subscriptions(&self) -> Vec<String> {
+            vec![self.topic.clone()]
+        }
+        fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+            Ok(Vec::new())
+        }
+        fn handle(&mut self, _: &Message) -> Result<Vec<Message>, NodeError> {
+            use std::sync::atomic::Ordering;
+            self.inside.fetch_add(1, Ordering::SeqCst);
+            let deadline = Instant::now() + Duration::from_secs(10);
+            while self.inside.load(Ordering::SeqCst) < 2 && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            self.met.lock().unwrap().push(self.inside.load(Ordering::SeqCst) == 2);
+            self.done = true;
+            Ok(Vec::new())
+        }
+        fn is_finished(&self) -> bool {
+            self.done
+        }
+    }
+
+    /// The nodes of one process handle the messages waiting for them in parallel: two nodes,
+    /// each waiting inside its `handle` for the other, both see the other there (handled one
+    /// after the other, the first would wait its 10 s alone). The messages arrive before the
+    /// launcher's start, so they wait together.
+    #[test]
+    fn a_process_handles_its_nodes_messages_in_parallel() {
+        let port = free_loopback_port().unwrap();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let launcher = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+        let run_id = "parallel";
+        let expected = Expected {
+            run_id: run_id.into(),
+            scene_fingerprint: 1,
+        };
+        let message = |index: u32| Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: run_id.into(),
+                scene_fingerprint: 1,
+                iteration: 1,
+                stage: Stage::Final,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index,
+                },
+            },
+            payload: Payload::Displacement {
+                subdomain: index,
+                u: Field::zeros(2, 3),
+            },
+        };
+        let (alive_tx, alive_rx) = mpsc::channel::<(String, bool)>();
+        let _alive = watch_tokens(&launcher, run_id, alive_tx, |k, up| (k, up)).unwrap();
+        let _launcher_token = launcher_token(&launcher, run_id).unwrap();
+        let inside = Arc::new(std::sync::atomic::AtomicUsize::new(0));
+        let met = Arc::new(Mutex::new(Vec::new()));
+        let nodes: Vec<Box<dyn Node>> = (0..2)
+            .map(|i| {
+                Box::new(Meeting {
+                    id: NodeId {
+                        role: Role::Interface,
+                        index: i,
+                    },
+                    topic: message(i).topic(),
+                    inside: inside.clone(),
+                    met: met.clone(),
+                    done: false,
+                }) as Box<dyn Node>
+            })
+            .collect();
+        let node = std::thread::spawn(move || {
+            let session = open(config("client", &[], &[endpoint], false).unwrap()).unwrap();
+            let run = NodeRun {
+                run_id: run_id.into(),
+                expected,
+                token_role: "interface".into(),
+                token_index: 0,
+                start_timeout: Duration::from_secs(20),
+                idle_timeout: Duration::from_secs(20),
+                departure_grace: Duration::from_secs(2),
+                supervised: false,
+                resume: false,
+                done_timeout: Duration::from_millis(200),
+            };
+            // Two threads, whatever the machine's core count.
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+            let out = pool.install(|| run_nodes(&session, &run, nodes, |_| {}));
+            let _ = session.close().wait();
+            out
+        });
+        let node_token = alive_key(run_id, "interface", 0);
+        loop {
+            let (k, up) = alive_rx
+                .recv_timeout(Duration::from_secs(20))
+                .expect("the node's token");
+            if k == node_token && up {
+                break;
+            }
+        }
+        for i in 0..2 {
+            publish(&launcher, &message(i)).unwrap();
+        }
+        std::thread::sleep(Duration::from_millis(500));
+        let started = Instant::now();
+        publish_start(&launcher, run_id).unwrap();
+        node.join().unwrap().unwrap();
+        assert_eq!(
+            *met.lock().unwrap(),
+            vec![true, true],
+            "the nodes did not handle their messages together"
+        );
+        assert!(started.elapsed() < Duration::from_secs(8), "{:?}", started.elapsed());
     }
 
     /// The recorder's log survives its encoding, and a truncated one is refused with the offset.
