@@ -1208,18 +1208,51 @@ mod tests {
         }
     }
 
+    /// A launcher-side router session on a free loopback port, with its endpoint.
+    fn test_launcher() -> (Session, String) {
+        let port = free_loopback_port().unwrap();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let launcher = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+        (launcher, endpoint)
+    }
+
+    /// What a test node process of run `run_id` (scene fingerprint 1) is told, with its token's
+    /// role and its wait for the launcher's `done`.
+    fn test_run(run_id: &str, token_role: &str, done_timeout: Duration) -> NodeRun {
+        NodeRun {
+            run_id: run_id.into(),
+            expected: Expected {
+                run_id: run_id.into(),
+                scene_fingerprint: 1,
+            },
+            token_role: token_role.into(),
+            token_index: 0,
+            start_timeout: Duration::from_secs(20),
+            idle_timeout: Duration::from_secs(20),
+            departure_grace: Duration::from_secs(2),
+            supervised: false,
+            resume: false,
+            done_timeout,
+        }
+    }
+
+    /// Waits (up to 20 s) for liveliness token `key` to appear among `changes`.
+    fn wait_token(changes: &mpsc::Receiver<(String, bool)>, key: &str) {
+        loop {
+            let (k, up) = changes.recv_timeout(Duration::from_secs(20)).expect("the node's token");
+            if k == key && up {
+                break;
+            }
+        }
+    }
+
     /// A process whose nodes are finished leaves only once the launcher says `done` (its last
     /// put may still be queued), and without it only after its bounded wait, saying so.
     #[test]
     fn finished_process_waits_for_the_launchers_done() {
-        let port = free_loopback_port().unwrap();
-        let endpoint = format!("tcp/127.0.0.1:{port}");
-        let launcher = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+        let (launcher, endpoint) = test_launcher();
         let run_id = "done";
-        let expected = Expected {
-            run_id: run_id.into(),
-            scene_fingerprint: 1,
-        };
+        let expected = test_run(run_id, "subdomain", Duration::ZERO).expected;
         let msg = Message {
             envelope: Envelope {
                 schema_version: SCHEMA_VERSION,
@@ -1242,21 +1275,10 @@ mod tests {
         let _alive = watch_tokens(&launcher, run_id, alive_tx, |k, up| (k, up)).unwrap();
         let _launcher_token = launcher_token(&launcher, run_id).unwrap();
         let spawn = |done_timeout: Duration| {
-            let (endpoint, expected, msg) = (endpoint.clone(), expected.clone(), msg.clone());
+            let (endpoint, msg) = (endpoint.clone(), msg.clone());
             std::thread::spawn(move || {
                 let session = open(config("client", &[], &[endpoint], false).unwrap()).unwrap();
-                let run = NodeRun {
-                    run_id: "done".into(),
-                    expected,
-                    token_role: "subdomain".into(),
-                    token_index: 0,
-                    start_timeout: Duration::from_secs(20),
-                    idle_timeout: Duration::from_secs(20),
-                    departure_grace: Duration::from_secs(2),
-                    supervised: false,
-                    resume: false,
-                    done_timeout,
-                };
+                let run = test_run(run_id, "subdomain", done_timeout);
                 let mut lines = Vec::new();
                 let out = run_nodes(&session, &run, vec![Box::new(OneShot { msg, done: false })], |l| {
                     lines.push(l.to_string())
@@ -1266,19 +1288,11 @@ mod tests {
             })
         };
         let node_token = alive_key(run_id, "subdomain", 0);
-        let wait_token = || loop {
-            let (k, up) = alive_rx
-                .recv_timeout(Duration::from_secs(20))
-                .expect("the node's token");
-            if k == node_token && up {
-                break;
-            }
-        };
 
         // Acknowledged: the node is still there a second after its message arrived, and leaves
         // at once after `done`.
         let node = spawn(Duration::from_secs(60));
-        wait_token();
+        wait_token(&alive_rx, &node_token);
         publish_start(&launcher, run_id).unwrap();
         let bytes = rx.recv_timeout(Duration::from_secs(20)).expect("the node's output");
         assert_eq!(decode(&bytes, &expected).unwrap(), msg);
@@ -1293,7 +1307,7 @@ mod tests {
 
         // Not acknowledged: the node leaves after its bounded wait and says why.
         let node = spawn(Duration::from_millis(500));
-        wait_token();
+        wait_token(&alive_rx, &node_token);
         publish_start(&launcher, run_id).unwrap();
         rx.recv_timeout(Duration::from_secs(20)).expect("the node's output");
         let (out, lines) = node.join().unwrap();
@@ -1348,14 +1362,8 @@ mod tests {
     /// launcher's start, so they wait together.
     #[test]
     fn a_process_handles_its_nodes_messages_in_parallel() {
-        let port = free_loopback_port().unwrap();
-        let endpoint = format!("tcp/127.0.0.1:{port}");
-        let launcher = open(config("router", std::slice::from_ref(&endpoint), &[], false).unwrap()).unwrap();
+        let (launcher, endpoint) = test_launcher();
         let run_id = "parallel";
-        let expected = Expected {
-            run_id: run_id.into(),
-            scene_fingerprint: 1,
-        };
         let message = |index: u32| Message {
             envelope: Envelope {
                 schema_version: SCHEMA_VERSION,
@@ -1394,33 +1402,14 @@ mod tests {
             .collect();
         let node = std::thread::spawn(move || {
             let session = open(config("client", &[], &[endpoint], false).unwrap()).unwrap();
-            let run = NodeRun {
-                run_id: run_id.into(),
-                expected,
-                token_role: "interface".into(),
-                token_index: 0,
-                start_timeout: Duration::from_secs(20),
-                idle_timeout: Duration::from_secs(20),
-                departure_grace: Duration::from_secs(2),
-                supervised: false,
-                resume: false,
-                done_timeout: Duration::from_millis(200),
-            };
+            let run = test_run(run_id, "interface", Duration::from_millis(200));
             // Two threads, whatever the machine's core count.
             let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
             let out = pool.install(|| run_nodes(&session, &run, nodes, |_| {}));
             let _ = session.close().wait();
             out
         });
-        let node_token = alive_key(run_id, "interface", 0);
-        loop {
-            let (k, up) = alive_rx
-                .recv_timeout(Duration::from_secs(20))
-                .expect("the node's token");
-            if k == node_token && up {
-                break;
-            }
-        }
+        wait_token(&alive_rx, &alive_key(run_id, "interface", 0));
         for i in 0..2 {
             publish(&launcher, &message(i)).unwrap();
         }
