@@ -296,8 +296,7 @@ fn bad_inputs_exit_2_with_a_clear_error_and_write_nothing() {
         CASES.len() >= 20,
         "the issue asks for a table of at least 20 bad inputs"
     );
-    let root = std::env::temp_dir().join(format!("glissade-bad-input-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&root);
+    let root = crate::common::scratch("bad-input");
     let mut failures = Vec::new();
     for (i, case) in CASES.iter().enumerate() {
         let dir = root.join(format!("case-{i}"));
@@ -337,7 +336,6 @@ fn bad_inputs_exit_2_with_a_clear_error_and_write_nothing() {
             ));
         }
     }
-    let _ = std::fs::remove_dir_all(&root);
     assert!(failures.is_empty(), "{}", failures.join("\n---\n"));
 }
 
@@ -345,7 +343,7 @@ fn bad_inputs_exit_2_with_a_clear_error_and_write_nothing() {
 /// one is bad input like any other: exit 2, the variable and its value named, nothing written.
 #[test]
 fn a_bad_rust_log_exits_2_and_writes_nothing() {
-    let dir = crate::node_failures::scratch("bad-rust-log");
+    let dir = crate::common::scratch("bad-rust-log");
     let scene = dir.join("two-blocks.toml");
     std::fs::write(&scene, GOOD).expect("scene file");
     let out = dir.join("out");

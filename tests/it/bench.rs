@@ -151,9 +151,8 @@ fn bench_compares_processes_with_the_same_run_in_process() {
 /// level (that the kernels give the same bits at every level is the numerics crate's test).
 #[test]
 fn bench_kernels_level_changes_the_code_not_the_run() {
-    let dir = std::env::temp_dir().join(format!("glissade-bench-kernels-{}", std::process::id()));
+    let dir = crate::common::scratch("bench-kernels");
     let scene = dir.join("small-three-layer.toml");
-    std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(&scene, scene_text("small-three-layer")).expect("scene file");
     let detected = glissade_mechanics::simd::detected().name();
     let mut decisions = Vec::new();
@@ -180,7 +179,6 @@ fn bench_kernels_level_changes_the_code_not_the_run() {
         decisions.push(json["iterations"].clone());
     }
     assert_eq!(decisions[0], decisions[1]);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `glissade bench --max-iterations m --processes 1`: the node processes run the iteration cap of
@@ -188,9 +186,7 @@ fn bench_kernels_level_changes_the_code_not_the_run() {
 /// carries the override), so every run stops after m iterations and repeats the in-process run.
 #[test]
 fn bench_processes_run_the_command_line_iteration_cap() {
-    let dir = std::env::temp_dir().join(format!("glissade-bench-cap-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("temp dir");
+    let dir = crate::common::scratch("bench-cap");
     let scene_file = dir.join("small-three-layer.toml");
     std::fs::write(&scene_file, scene_text("small-three-layer")).expect("scene file");
     // Far below the scene's own run (which the cap must cut short for the test to mean anything).
@@ -222,5 +218,4 @@ fn bench_processes_run_the_command_line_iteration_cap() {
             .expect("bench json parses");
     assert_eq!(json["iterations"], cap, "{json}");
     assert_eq!(json["processes"]["iterations"], cap, "{json}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -507,7 +507,7 @@ fn messages_of_another_run_are_ignored() {
 /// a session opens). Without it, no log line at all.
 #[test]
 fn rust_log_shows_every_process_log_lines() {
-    let dir = crate::node_failures::scratch("rust-log");
+    let dir = crate::common::scratch("rust-log");
     let scene = dir.join("two-blocks.toml");
     std::fs::write(&scene, scene_text("two-blocks")).expect("scene file");
     let run = |log: Option<&str>| {

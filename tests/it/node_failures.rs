@@ -1,7 +1,7 @@
 //! A multi-process run without restarts stops within 10 s, naming the node, when any one node is
 //! killed, and stops every node when the launcher gets Ctrl-C; no node process of the run remains.
 
-use crate::common::scene_text;
+use crate::common::{scene_text, scratch, Scratch};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -27,29 +27,6 @@ fn endless_scene(dir: &Path) -> PathBuf {
     let path = dir.join("endless.toml");
     std::fs::write(&path, text).expect("write the scene");
     path
-}
-
-/// A scratch folder, removed when dropped.
-pub struct Scratch(PathBuf);
-
-impl std::ops::Deref for Scratch {
-    type Target = Path;
-
-    fn deref(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-pub fn scratch(name: &str) -> Scratch {
-    let dir = std::env::temp_dir().join(format!("glissade-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("scratch folder");
-    Scratch(dir)
 }
 
 /// Pids of the processes whose command line contains `needle` and every one of `words`.

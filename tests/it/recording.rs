@@ -3,7 +3,7 @@
 //! multi-process recorder records the same messages as the in-process one; a recorder killed with
 //! SIGKILL leaves every chunk it wrote readable.
 
-use crate::common::{scene, scene_text};
+use crate::common::{scene, scene_text, scratch, Scratch};
 use glissade::recording::run_in_process_recorded;
 use glissade::runner::{run_in_process_observed, RunOptions};
 use glissade_recorder::Recording;
@@ -13,12 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// A fresh empty folder under the system's temporary folder.
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("glissade-recording-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh empty folder under the system's temporary folder, removed when dropped.
+fn temp_dir(tag: &str) -> Scratch {
+    scratch(&format!("recording-{tag}"))
 }
 
 /// (topic, wire bytes) of every message of an in-process run, in publication order.
@@ -176,7 +173,6 @@ fn in_process_recording_reads_back_with_both_readers() {
             counts.len()
         );
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Recording off: no file; topic restriction: only the selected channels; an unwritable folder:
@@ -218,7 +214,6 @@ fn recording_off_restricted_and_unwritable() {
     let e = run_in_process_recorded(&only, &opts, Some(&bad), |_| solved = true).unwrap_err();
     assert!(format!("{e:#}").contains(&bad.display().to_string()), "{e:#}");
     assert!(!solved, "the error comes before any iteration");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Runs `glissade run` as processes with recording into `dir`; returns the child.
@@ -266,12 +261,11 @@ fn multi_process_recording_matches_in_process() {
     let (r, msgs) = read_back(&dir.join("small-three-layer-rec-3.mcap"));
     assert!(r.is_finished(), "{err}");
     assert_eq!(by_topic(msgs), by_topic(bus_messages(&text, "rec-3")));
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A folder `tag` holding `long.toml`: the small three-layer scene run to 400 iterations, long
 /// enough for a signal to land mid-run. Returns (folder, scene path, scene text).
-fn long_run_scene(tag: &str) -> (PathBuf, PathBuf, String) {
+fn long_run_scene(tag: &str) -> (Scratch, PathBuf, String) {
     let dir = temp_dir(tag);
     let text = scene_text("small-three-layer").replace(
         "tolerance = 1e-4",
@@ -353,7 +347,6 @@ fn recording_survives_sigkill_of_the_recorder() {
     for (topic, list) in by_topic(msgs) {
         assert_eq!(list[..], full[&topic][..list.len()], "{topic}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// SIGTERM to the launcher mid-run: every node stops, the launcher exits 130, and the recording is
@@ -395,7 +388,6 @@ fn sigterm_leaves_a_finalised_recording_both_readers_open() {
         let our_counts: BTreeMap<String, u64> = ours.iter().map(|(t, l)| (t.clone(), l.len() as u64)).collect();
         assert_eq!(counts, our_counts, "summary statistics of the Python reader");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A full disk (the recording file on `/dev/full`, where every write fails with ENOSPC): both an
@@ -438,5 +430,4 @@ fn a_full_disk_fails_the_run_before_solving() {
             .collect();
         assert!(written.is_empty(), "outputs written: {written:?}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }

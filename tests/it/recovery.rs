@@ -3,8 +3,9 @@
 //! undisturbed one; a node that keeps dying stops the run after `deployment.restarts` restarts.
 
 use crate::common::{scene, scene_text};
+use crate::common::{scratch, Scratch};
 use crate::distributed::assert_identical;
-use crate::node_failures::{processes_with, scratch, Scratch};
+use crate::node_failures::processes_with;
 use glissade::distributed::{run_distributed, Network};
 use glissade::runner::{run_in_process, RunOptions};
 use std::path::Path;

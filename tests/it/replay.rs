@@ -4,7 +4,7 @@
 //! refuses to re-execute the nodes that need the thinned fields; `glissade replay` writes an .rrd
 //! the pinned Rerun CLI accepts, and `glissade run --rerun <file.rrd>` streams a live run's view.
 
-use crate::common::{scene, scene_text};
+use crate::common::{scene, scene_text, scratch, Scratch};
 use glissade::recording::run_in_process_recorded;
 use glissade::reexecute::{parse_node, recorded_nodes, reexecute};
 use glissade::runner::RunOptions;
@@ -13,11 +13,8 @@ use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("glissade-replay-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn temp_dir(tag: &str) -> Scratch {
+    scratch(&format!("replay-{tag}"))
 }
 
 /// Runs `glissade` with `args`, asserts that it succeeded, and returns its standard output.
@@ -64,7 +61,6 @@ fn every_node_of_a_recorded_run_reexecutes_bit_identically() {
         assert_eq!(r.outputs, r.recorded_outputs, "node {id}");
         assert!(r.inputs > 0 && r.outputs > 0, "node {id}: {r:?}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// With a time-coarse start the subdomains' first inputs are the launcher's local directions:
@@ -87,7 +83,6 @@ fn a_time_coarse_start_recording_reexecutes_bit_identically() {
         assert_eq!(r.mismatch, None, "node {id}");
         assert_eq!(r.outputs, r.recorded_outputs, "node {id}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -161,7 +156,6 @@ fn a_tampered_recording_names_the_first_differing_message_and_field() {
             && stdout.contains(&format!("w[row {row}, column {col}]")),
         "{stdout}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `rerun rrd verify` on `rrd`, or None (reason printed) when the Rerun CLI is absent.
@@ -226,7 +220,6 @@ fn a_thinned_recording_replays_but_refuses_to_reexecute_nodes_that_need_every_fi
         "expected {iterations} iterations and {meshes} meshes: {stdout}"
     );
     rerun_verify(&rrd);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `glissade run --rerun` on a multi-process run: the launcher feeds the view every message it
@@ -261,7 +254,6 @@ fn multi_process_live_view_writes_an_rrd_the_rerun_cli_accepts() {
     assert!(nums[1] >= 6 * iterations, "{line}");
     assert!(std::fs::metadata(&live).unwrap().len() > 10_000);
     rerun_verify(&live);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -302,7 +294,6 @@ fn replay_and_live_run_write_rrd_files_the_rerun_cli_accepts() {
         assert!(std::fs::metadata(rrd).unwrap().len() > 10_000, "{}", rrd.display());
         rerun_verify(rrd);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `replay --reference` logs each iteration's error against the monolithic Newton reference, and
@@ -338,7 +329,6 @@ fn replay_logs_the_error_against_the_reference_as_the_report_measures_it() {
         assert_eq!(e_f.to_bits(), p.traction_error.to_bits(), "iteration {}", p.iteration);
         assert_eq!(e_w.to_bits(), p.jump_error.to_bits(), "iteration {}", p.iteration);
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A PGD run's basis sizes come back from its recorded mode-form states (the time functions'
@@ -379,5 +369,4 @@ fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
         "{stdout}"
     );
     rerun_verify(&dir.join("pgd.rrd"));
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -5,9 +5,7 @@ use std::collections::BTreeSet;
 use std::process::Command;
 
 fn generated_ids(runs: usize) -> Vec<String> {
-    let dir = std::env::temp_dir().join(format!("glissade-run-id-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = crate::common::scratch("run-id");
     let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/launch/scenes/two-blocks.toml");
     for _ in 0..runs {
         let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
@@ -31,7 +29,6 @@ fn generated_ids(runs: usize) -> Vec<String> {
         })
         .collect();
     ids.sort();
-    std::fs::remove_dir_all(&dir).unwrap();
     ids
 }
 

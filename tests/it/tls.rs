@@ -3,7 +3,7 @@
 //! both signed by it; `stranger`, CN `glissade-node`, signed by another CA). Loopback only,
 //! multicast scouting off, every wait bounded, every process reaped.
 
-use crate::node_failures::scratch;
+use crate::common::scratch;
 use glissade::distributed::run_multi_process;
 use glissade::runner::RunOptions;
 use glissade_zenoh as transport;

@@ -3,7 +3,8 @@
 //! subdomain node 1 to be started by hand in the other. Creating namespaces needs root; without
 //! it the test prints why it skipped.
 
-use crate::node_failures::{scratch, Launcher};
+use crate::common::scratch;
+use crate::node_failures::Launcher;
 use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
