@@ -379,7 +379,9 @@ pub fn render(r: &BenchReport) -> String {
 /// processes over loopback TCP (with TLS if the scene asks for it), and as processes through
 /// shared memory; and the set-up before that first iteration (`*_setup_s`: operators, a
 /// time-coarse start's coarse solve, for processes also starting them and their bus), so that
-/// set-up + iterations is the time a user waits for the result.
+/// set-up + iterations is the time a user waits for the result. `*_iteration_ms`: the median
+/// time of one iteration from the third on (decision to decision; none for a run of fewer than
+/// three), what an iteration costs once the first ones have faulted in their memory.
 #[derive(Debug, Clone, Serialize)]
 pub struct ProcessRound {
     pub in_process_s: f64,
@@ -388,6 +390,9 @@ pub struct ProcessRound {
     pub in_process_setup_s: f64,
     pub tcp_setup_s: f64,
     pub shared_memory_setup_s: f64,
+    pub in_process_iteration_ms: Option<f64>,
+    pub tcp_iteration_ms: Option<f64>,
+    pub shared_memory_iteration_ms: Option<f64>,
 }
 
 impl ProcessRound {
@@ -416,6 +421,17 @@ pub struct ProcessComparison {
     /// The same with the set-up: set-up + iterations against in-process set-up + iterations.
     pub tcp_total_over_in_process: f64,
     pub shared_memory_total_over_in_process: f64,
+    /// Medians of each round's ratio of the median iteration from the third on (none for a run
+    /// of fewer than three iterations).
+    pub tcp_iteration_over_in_process: Option<f64>,
+    pub shared_memory_iteration_over_in_process: Option<f64>,
+}
+
+/// The median time (ms) of an iteration from the third on, decision to decision, from the times
+/// (s since the loop's start) at which each iteration's decision was made.
+fn steady_iteration_ms(decided_s: &[f64]) -> Option<f64> {
+    let times: Vec<f64> = decided_s.windows(2).skip(1).map(|w| 1e3 * (w[1] - w[0])).collect();
+    (!times.is_empty()).then(|| median(times))
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -463,7 +479,7 @@ pub fn compare_processes(
     // The first run's decisions, as text (every value written out exactly, so the comparison is
     // bit for bit, NaN and the sign of zero included): every other run must repeat them.
     let mut reference: Option<Vec<String>> = None;
-    let mut same_run = |what: &str, r: RunResult| -> anyhow::Result<(f64, f64)> {
+    let mut same_run = |what: &str, r: RunResult| -> anyhow::Result<(f64, f64, Option<f64>)> {
         let decisions: Vec<String> = r.iterations.iter().map(|i| format!("{:?}", i.decision)).collect();
         match &reference {
             None => reference = Some(decisions),
@@ -480,7 +496,8 @@ pub fn compare_processes(
                 }
             }
         }
-        Ok((r.setup_s, r.solve_s))
+        let decided: Vec<f64> = r.iterations.iter().map(|i| i.elapsed_s).collect();
+        Ok((r.setup_s, r.solve_s, steady_iteration_ms(&decided)))
     };
     let mut out = Vec::with_capacity(rounds);
     for _ in 0..rounds {
@@ -490,7 +507,7 @@ pub fn compare_processes(
         };
         give_back_freed_memory();
         let in_process = same_run("in-process", run_in_process(scene, &opts(run_id()?), |_| {})?)?;
-        let mut times = [(0.0, 0.0); 2];
+        let mut times = [(0.0, 0.0, None); 2];
         for (t, shm) in times.iter_mut().zip([false, true]) {
             give_back_freed_memory();
             let mut sc = scene.clone();
@@ -505,10 +522,17 @@ pub fn compare_processes(
             in_process_setup_s: in_process.0,
             tcp_setup_s: times[0].0,
             shared_memory_setup_s: times[1].0,
+            in_process_iteration_ms: in_process.2,
+            tcp_iteration_ms: times[0].2,
+            shared_memory_iteration_ms: times[1].2,
         });
     }
     let ratio = |f: fn(&ProcessRound) -> f64| median(out.iter().map(|r| f(r) / r.in_process_s).collect());
     let total_ratio = |k: usize| median(out.iter().map(|r| r.totals()[k] / r.totals()[0]).collect());
+    let iteration_ratio = |f: fn(&ProcessRound) -> Option<f64>| {
+        let ratios: Option<Vec<f64>> = out.iter().map(|r| Some(f(r)? / r.in_process_iteration_ms?)).collect();
+        ratios.map(median)
+    };
     Ok(ProcessComparison {
         scene: scene.model.name.clone(),
         iterations: reference.map_or(0, |d| d.len()),
@@ -517,6 +541,8 @@ pub fn compare_processes(
         shared_memory_over_in_process: ratio(|r| r.shared_memory_s),
         tcp_total_over_in_process: total_ratio(1),
         shared_memory_total_over_in_process: total_ratio(2),
+        tcp_iteration_over_in_process: iteration_ratio(|r| r.tcp_iteration_ms),
+        shared_memory_iteration_over_in_process: iteration_ratio(|r| r.shared_memory_iteration_ms),
         rounds: out,
     })
 }
@@ -584,5 +610,55 @@ pub fn render_processes(c: &ProcessComparison) -> String {
         "median ratio to in-process, set-up + iterations: {link} {:.2}×, shared memory {:.2}×",
         c.tcp_total_over_in_process, c.shared_memory_total_over_in_process
     );
+    if let (Some(tcp), Some(shm)) = (
+        c.tcp_iteration_over_in_process,
+        c.shared_memory_iteration_over_in_process,
+    ) {
+        let _ = writeln!(
+            s,
+            "\nthe same runs, median iteration from the 3rd on (ms, decision to decision: without the first \
+             iterations' faulting in of new memory and the end of the run):\n"
+        );
+        let _ = writeln!(
+            s,
+            "| round | in-process | processes, {link} | processes, shared memory |"
+        );
+        let _ = writeln!(s, "|---:|---:|---:|---:|");
+        for (i, r) in c.rounds.iter().enumerate() {
+            if let (Some(a), Some(b), Some(m)) = (
+                r.in_process_iteration_ms,
+                r.tcp_iteration_ms,
+                r.shared_memory_iteration_ms,
+            ) {
+                let _ = writeln!(
+                    s,
+                    "| {} | {a:.1} | {b:.1} ({:.2}×) | {m:.1} ({:.2}×) |",
+                    i + 1,
+                    b / a,
+                    m / a
+                );
+            }
+        }
+        let _ = writeln!(
+            s,
+            "median ratio to in-process, iteration from the 3rd on: {link} {tcp:.2}×, shared memory {shm:.2}×"
+        );
+    }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::steady_iteration_ms;
+
+    /// Iterations decided at 0.5, 0.8, 0.9, 1.0, 1.3 and 1.35 s: from the third on they took
+    /// 100, 100, 300 and 50 ms, median 100 ms; the first two (500 and 300 ms) do not count.
+    #[test]
+    fn steady_iteration_is_the_median_from_the_third_on() {
+        let ms = steady_iteration_ms(&[0.5, 0.8, 0.9, 1.0, 1.3, 1.35]).unwrap();
+        assert!((ms - 100.0).abs() < 1e-9, "{ms}");
+        assert!((steady_iteration_ms(&[0.5, 0.8, 1.0]).unwrap() - 200.0).abs() < 1e-9);
+        assert_eq!(steady_iteration_ms(&[0.5, 0.8]), None);
+        assert_eq!(steady_iteration_ms(&[]), None);
+    }
 }

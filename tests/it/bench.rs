@@ -218,4 +218,21 @@ fn bench_processes_run_the_command_line_iteration_cap() {
             .expect("bench json parses");
     assert_eq!(json["iterations"], cap, "{json}");
     assert_eq!(json["processes"]["iterations"], cap, "{json}");
+    // The steady iteration of every run: a positive time, and its ratio reported.
+    let round = &json["processes"]["rounds"][0];
+    for run in ["in_process", "tcp", "shared_memory"] {
+        let ms = round[format!("{run}_iteration_ms")].as_f64().unwrap_or(f64::NAN);
+        assert!(ms > 0.0, "{run}: {json}");
+    }
+    assert!(
+        json["processes"]["shared_memory_iteration_over_in_process"]
+            .as_f64()
+            .is_some(),
+        "{json}"
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        stdout.contains("median ratio to in-process, iteration from the 3rd on"),
+        "{stdout}"
+    );
 }
