@@ -451,6 +451,21 @@ impl Received {
     }
 }
 
+/// Messages in arrival order, cut into batches in which none repeats another (by hash): a repeat
+/// starts the next batch, so that it is dropped only if its first copy was taken.
+fn batches(received: impl IntoIterator<Item = Box<Received>>) -> Vec<Vec<Received>> {
+    let mut out: Vec<Vec<Received>> = Vec::new();
+    let mut hashes = HashSet::new();
+    for r in received {
+        if out.is_empty() || !hashes.insert(r.hash) {
+            hashes = HashSet::from([r.hash]);
+            out.push(Vec::new());
+        }
+        out.last_mut().expect("a batch").push(*r);
+    }
+    out
+}
+
 /// Declares a liveliness subscriber on every token of `run_id` (with the tokens already alive)
 /// that forwards its changes to `tx` through `wrap`.
 fn watch_tokens<T: Send + 'static>(
@@ -540,21 +555,21 @@ pub fn run_nodes(
     // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
     let mut seen: HashSet<u64> = HashSet::new();
     let mut published: HashSet<u64> = HashSet::new();
-    // A batch of messages, as they arrived: each node handles the ones it subscribes to in
-    // arrival order, and the process's nodes do so in parallel (a process hosting several
-    // subdomains uses every core, as the in-process bus does); a node publishes its replies as
-    // it makes them.
-    let mut handle = |batch: Vec<Box<Received>>,
+    // A batch of messages, as they arrived, none a repeat of another ([`batches`]): each node
+    // handles the ones it subscribes to in arrival order, and the process's nodes do so in
+    // parallel (a process hosting several subdomains uses every core, as the in-process bus
+    // does); a node publishes its replies as it makes them. A node's error stops every node
+    // before its next message, and the error of the earliest message is the one reported.
+    let mut handle = |batch: Vec<Received>,
                       nodes: &mut Vec<Box<dyn Node>>,
                       published: &HashSet<u64>,
                       log: &mut dyn FnMut(&str)|
      -> Result<(), TransportError> {
         // A handled or ignored message's buffers hold the next ones.
         let recycle = |msg: Message| buffers.lock().unwrap_or_else(|e| e.into_inner()).recycle(msg.payload);
-        let mut batch_hashes = HashSet::new();
         let mut msgs: Vec<(String, u64, Message)> = Vec::with_capacity(batch.len());
         for received in batch {
-            let Received { key, hash, message } = *received;
+            let Received { key, hash, message } = received;
             let msg = match message {
                 Ok(m) => m,
                 Err(e) => {
@@ -570,7 +585,7 @@ pub fn run_nodes(
                 recycle(msg);
                 continue;
             }
-            if seen.contains(&hash) || !batch_hashes.insert(hash) {
+            if seen.contains(&hash) {
                 log(&format!(
                     "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
                     msg.envelope.iteration, msg.envelope.stage
@@ -581,8 +596,11 @@ pub fn run_nodes(
             msgs.push((key, hash, msg));
         }
         let msgs_ref = &msgs;
-        // Per node: the messages it refused (index, reason), or the error that ends the run.
-        let outcomes: Vec<Result<Vec<(usize, String)>, TransportError>> = nodes
+        let failed = std::sync::atomic::AtomicBool::new(false);
+        // Per node: the messages it refused (index, reason), or the error that ends the run with
+        // the index of the message that caused it.
+        type Outcome = Result<Vec<(usize, String)>, (usize, TransportError)>;
+        let outcomes: Vec<Outcome> = nodes
             .par_iter_mut()
             .zip(subscriptions.par_iter())
             .map(|(node, subs)| {
@@ -591,43 +609,57 @@ pub fn run_nodes(
                     if !subs.iter().any(|s| glissade_messages::key_matches(s, key)) {
                         continue;
                     }
-                    match node.handle(msg) {
-                        Ok(outs) => {
-                            for out in outs {
-                                publish_new(session, &out, published)?;
-                                node.recycle(out);
-                            }
-                            // The rest one at a time, each once the one before is out.
-                            while let Some(out) = node.next_output() {
-                                publish_new(session, &out, published)?;
-                                node.recycle(out);
-                            }
+                    if failed.load(std::sync::atomic::Ordering::Relaxed) {
+                        break;
+                    }
+                    let mut handled = || -> Result<(), TransportError> {
+                        for out in node.handle(msg)? {
+                            publish_new(session, &out, published)?;
+                            node.recycle(out);
                         }
+                        // The rest one at a time, each once the one before is out.
+                        while let Some(out) = node.next_output() {
+                            publish_new(session, &out, published)?;
+                            node.recycle(out);
+                        }
+                        Ok(())
+                    };
+                    match handled() {
+                        Ok(()) => {}
                         // The node refused this message and is unchanged: it is not the run's (a
                         // damaged or stray copy); the genuine one may still come.
-                        Err(e) if e.is_rejection() => refused.push((k, format!("ignored a message on {key}: {e}"))),
-                        Err(e) => return Err(e.into()),
+                        Err(TransportError::Node(e)) if e.is_rejection() => {
+                            refused.push((k, format!("ignored a message on {key}: {e}")))
+                        }
+                        Err(e) => {
+                            failed.store(true, std::sync::atomic::Ordering::Relaxed);
+                            return Err((k, e));
+                        }
                     }
                 }
                 Ok(refused)
             })
             .collect();
         let mut taken = vec![true; msgs.len()];
-        let mut first_error = None;
+        let mut refusals = Vec::new();
+        let mut first_error: Option<(usize, TransportError)> = None;
         for outcome in outcomes {
             match outcome {
-                Ok(refused) => {
-                    for (k, why) in refused {
-                        log(&why);
-                        taken[k] = false;
+                Ok(refused) => refusals.extend(refused),
+                Err((k, e)) => {
+                    if first_error.as_ref().is_none_or(|(first, _)| k < *first) {
+                        first_error = Some((k, e));
                     }
-                }
-                Err(e) => {
-                    first_error.get_or_insert(e);
                 }
             }
         }
-        if let Some(e) = first_error {
+        // Logged in arrival order (a stable sort keeps node order within a message).
+        refusals.sort_by_key(|(k, _)| *k);
+        for (k, why) in refusals {
+            log(&why);
+            taken[k] = false;
+        }
+        if let Some((_, e)) = first_error {
             return Err(e);
         }
         // Only a message the nodes took counts as handled: a refused copy does not hide the
@@ -679,7 +711,7 @@ pub fn run_nodes(
         }
         for (key, bytes) in inputs {
             handle(
-                vec![Box::new(Received::from_bytes(key, &bytes, expected))],
+                vec![Received::from_bytes(key, &bytes, expected)],
                 &mut nodes,
                 &published,
                 &mut log,
@@ -720,7 +752,9 @@ pub fn run_nodes(
                 publish(session, &m)?;
             }
         }
-        handle(early.drain(..).collect(), &mut nodes, &published, &mut log)?;
+        for batch in batches(early.drain(..)) {
+            handle(batch, &mut nodes, &published, &mut log)?;
+        }
     }
     let mut last_message = Instant::now();
     // The peers that left (first first), and when this process gives up on them.
@@ -728,7 +762,8 @@ pub fn run_nodes(
     let mut give_up: Option<Instant> = None;
     // The launcher may hold every result before a node here has heard the final decision.
     let mut done = false;
-    // An event taken from the channel behind a batch of messages, handled next.
+    // An event taken from the channel behind a batch of messages (another kind of event, or a
+    // repeat of a message of the batch), handled next.
     let mut pending: Option<Event> = None;
     while !nodes.iter().all(|n| n.is_finished()) {
         let now = Instant::now();
@@ -757,11 +792,13 @@ pub fn run_nodes(
             Ok(Event::Data(received)) => {
                 last_message = Instant::now();
                 // With the messages already waiting behind it, up to the next event of another
-                // kind (handled next, in its turn).
-                let mut batch = vec![received];
+                // kind or the next repeat of a message in the batch (handled next, in its turn:
+                // a repeat is dropped only once the first copy was taken).
+                let mut hashes = HashSet::from([received.hash]);
+                let mut batch = vec![*received];
                 loop {
                     match rx.try_recv() {
-                        Ok(Event::Data(r)) => batch.push(r),
+                        Ok(Event::Data(r)) if hashes.insert(r.hash) => batch.push(*r),
                         Ok(other) => {
                             pending = Some(other);
                             break;
@@ -1356,14 +1393,46 @@ mod tests {
         }
     }
 
-    /// The nodes of one process handle the messages waiting for them in parallel: two nodes,
-    /// each waiting inside its `handle` for the other, both see the other there (handled one
-    /// after the other, the first would wait its 10 s alone). The messages arrive before the
-    /// launcher's start, so they wait together.
-    #[test]
-    fn a_process_handles_its_nodes_messages_in_parallel() {
+    /// A node that, handling its message, waits (up to 10 s) until `open` is set.
+    struct Gate {
+        topic: String,
+        open: Arc<std::sync::atomic::AtomicBool>,
+        done: bool,
+    }
+
+    impl Node for Gate {
+        fn id(&self) -> NodeId {
+            NodeId {
+                role: Role::Coarse,
+                index: 0,
+            }
+        }
+        fn subscriptions(&self) -> Vec<String> {
+            vec![self.topic.clone()]
+        }
+        fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+            Ok(Vec::new())
+        }
+        fn handle(&mut self, _: &Message) -> Result<Vec<Message>, NodeError> {
+            let deadline = Instant::now() + Duration::from_secs(10);
+            while !self.open.load(std::sync::atomic::Ordering::SeqCst) && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            self.done = true;
+            Ok(Vec::new())
+        }
+        fn is_finished(&self) -> bool {
+            self.done
+        }
+    }
+
+    /// Two nodes of one process, each waiting inside its `handle` for the other, both see the
+    /// other there: the process handled their messages in parallel (handled one after the
+    /// other, the first would wait its 10 s alone). The two messages wait on the process's
+    /// channel together: sent before the launcher's start, or, after it, while a third node
+    /// (the gate) holds the process's loop until they are there.
+    fn nodes_meet(run_id: &str, after_start: bool) {
         let (launcher, endpoint) = test_launcher();
-        let run_id = "parallel";
         let message = |index: u32| Message {
             envelope: Envelope {
                 schema_version: SCHEMA_VERSION,
@@ -1386,7 +1455,8 @@ mod tests {
         let _launcher_token = launcher_token(&launcher, run_id).unwrap();
         let inside = Arc::new(std::sync::atomic::AtomicUsize::new(0));
         let met = Arc::new(Mutex::new(Vec::new()));
-        let nodes: Vec<Box<dyn Node>> = (0..2)
+        let gate = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let mut nodes: Vec<Box<dyn Node>> = (0..2)
             .map(|i| {
                 Box::new(Meeting {
                     id: NodeId {
@@ -1400,9 +1470,17 @@ mod tests {
                 }) as Box<dyn Node>
             })
             .collect();
+        if after_start {
+            nodes.push(Box::new(Gate {
+                topic: message(2).topic(),
+                open: gate.clone(),
+                done: false,
+            }));
+        }
+        let run_id_owned = run_id.to_string();
         let node = std::thread::spawn(move || {
             let session = open(config("client", &[], &[endpoint], false).unwrap()).unwrap();
-            let run = test_run(run_id, "interface", Duration::from_millis(200));
+            let run = test_run(&run_id_owned, "interface", Duration::from_millis(200));
             // Two threads, whatever the machine's core count.
             let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
             let out = pool.install(|| run_nodes(&session, &run, nodes, |_| {}));
@@ -1410,19 +1488,55 @@ mod tests {
             out
         });
         wait_token(&alive_rx, &alive_key(run_id, "interface", 0));
+        let started = Instant::now();
+        if after_start {
+            publish_start(&launcher, run_id).unwrap();
+            publish(&launcher, &message(2)).unwrap();
+            std::thread::sleep(Duration::from_millis(300));
+        }
         for i in 0..2 {
             publish(&launcher, &message(i)).unwrap();
         }
         std::thread::sleep(Duration::from_millis(500));
-        let started = Instant::now();
-        publish_start(&launcher, run_id).unwrap();
+        if after_start {
+            gate.store(true, std::sync::atomic::Ordering::SeqCst);
+        } else {
+            publish_start(&launcher, run_id).unwrap();
+        }
         node.join().unwrap().unwrap();
         assert_eq!(
             *met.lock().unwrap(),
             vec![true, true],
             "the nodes did not handle their messages together"
         );
-        assert!(started.elapsed() < Duration::from_secs(8), "{:?}", started.elapsed());
+        assert!(started.elapsed() < Duration::from_secs(9), "{:?}", started.elapsed());
+    }
+
+    /// Messages are cut into batches at a repeat: the repeat starts the next batch (its first
+    /// copy's fate is known by then).
+    #[test]
+    fn a_repeat_starts_the_next_batch() {
+        let expected = test_run("batches", "interface", Duration::ZERO).expected;
+        let received = |bytes: &[u8]| Box::new(Received::from_bytes("k".into(), bytes, &expected));
+        let (a, b, c) = (received(&[1]), received(&[2]), received(&[3]));
+        let hashes = |batch: &Vec<Received>| batch.iter().map(|r| r.hash).collect::<Vec<_>>();
+        let (ha, hb, hc) = (a.hash, b.hash, c.hash);
+        let cut = batches([a, b, received(&[1]), c, received(&[2])]);
+        assert_eq!(
+            cut.iter().map(hashes).collect::<Vec<_>>(),
+            vec![vec![ha, hb], vec![ha, hc, hb]]
+        );
+        assert!(batches(Vec::new()).is_empty());
+    }
+
+    #[test]
+    fn a_process_handles_its_nodes_early_messages_in_parallel() {
+        nodes_meet("parallel-early", false);
+    }
+
+    #[test]
+    fn a_process_handles_its_nodes_waiting_messages_in_parallel() {
+        nodes_meet("parallel-waiting", true);
     }
 
     /// The recorder's log survives its encoding, and a truncated one is refused with the offset.
