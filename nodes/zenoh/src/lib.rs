@@ -762,8 +762,7 @@ pub fn run_nodes(
     let mut give_up: Option<Instant> = None;
     // The launcher may hold every result before a node here has heard the final decision.
     let mut done = false;
-    // An event taken from the channel behind a batch of messages (another kind of event, or a
-    // repeat of a message of the batch), handled next.
+    // An event of another kind taken from the channel behind a batch of messages, handled next.
     let mut pending: Option<Event> = None;
     while !nodes.iter().all(|n| n.is_finished()) {
         let now = Instant::now();
@@ -792,13 +791,11 @@ pub fn run_nodes(
             Ok(Event::Data(received)) => {
                 last_message = Instant::now();
                 // With the messages already waiting behind it, up to the next event of another
-                // kind or the next repeat of a message in the batch (handled next, in its turn:
-                // a repeat is dropped only once the first copy was taken).
-                let mut hashes = HashSet::from([received.hash]);
-                let mut batch = vec![*received];
+                // kind (handled next, in its turn), in batches cut at repeats.
+                let mut waiting = vec![received];
                 loop {
                     match rx.try_recv() {
-                        Ok(Event::Data(r)) if hashes.insert(r.hash) => batch.push(*r),
+                        Ok(Event::Data(r)) => waiting.push(r),
                         Ok(other) => {
                             pending = Some(other);
                             break;
@@ -806,7 +803,9 @@ pub fn run_nodes(
                         Err(_) => break,
                     }
                 }
-                handle(batch, &mut nodes, &published, &mut log)?;
+                for batch in batches(waiting) {
+                    handle(batch, &mut nodes, &published, &mut log)?;
+                }
             }
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
             Ok(Event::Alive(key, false)) if run.supervised && key != own_token && key != launcher_token => {
