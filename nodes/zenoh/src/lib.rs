@@ -1272,6 +1272,33 @@ mod tests {
         }
     }
 
+    /// Subdomain `index`'s final displacement `u` at `iteration` in run `run_id` (scene
+    /// fingerprint 1).
+    fn displacement(run_id: &str, index: u32, iteration: u32, u: Field) -> Message {
+        Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: run_id.into(),
+                scene_fingerprint: 1,
+                iteration,
+                stage: Stage::Final,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index,
+                },
+            },
+            payload: Payload::Displacement { subdomain: index, u },
+        }
+    }
+
+    /// Waits until `ready` holds, or 10 s have passed.
+    fn wait_until(ready: impl Fn() -> bool) {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !ready() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
     /// Waits (up to 20 s) for liveliness token `key` to appear among `changes`.
     fn wait_token(changes: &mpsc::Receiver<(String, bool)>, key: &str) {
         loop {
@@ -1289,23 +1316,7 @@ mod tests {
         let (launcher, endpoint) = test_launcher();
         let run_id = "done";
         let expected = test_run(run_id, "subdomain", Duration::ZERO).expected;
-        let msg = Message {
-            envelope: Envelope {
-                schema_version: SCHEMA_VERSION,
-                run_id: run_id.into(),
-                scene_fingerprint: 1,
-                iteration: 3,
-                stage: Stage::Final,
-                sender: NodeId {
-                    role: Role::Subdomain,
-                    index: 0,
-                },
-            },
-            payload: Payload::Displacement {
-                subdomain: 0,
-                u: Field::from_fn(400, 1001, |r, c| (r + 2 * c) as f64),
-            },
-        };
+        let msg = displacement(run_id, 0, 3, Field::from_fn(400, 1001, |r, c| (r + 2 * c) as f64));
         let (_sub, rx) = received(&launcher, &msg.topic());
         let (alive_tx, alive_rx) = mpsc::channel::<(String, bool)>();
         let _alive = watch_tokens(&launcher, run_id, alive_tx, |k, up| (k, up)).unwrap();
@@ -1379,10 +1390,7 @@ mod tests {
         fn handle(&mut self, _: &Message) -> Result<Vec<Message>, NodeError> {
             use std::sync::atomic::Ordering;
             self.inside.fetch_add(1, Ordering::SeqCst);
-            let deadline = Instant::now() + Duration::from_secs(10);
-            while self.inside.load(Ordering::SeqCst) < 2 && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(1));
-            }
+            wait_until(|| self.inside.load(Ordering::SeqCst) >= 2);
             self.met.lock().unwrap().push(self.inside.load(Ordering::SeqCst) == 2);
             self.done = true;
             Ok(Vec::new())
@@ -1413,10 +1421,7 @@ mod tests {
             Ok(Vec::new())
         }
         fn handle(&mut self, _: &Message) -> Result<Vec<Message>, NodeError> {
-            let deadline = Instant::now() + Duration::from_secs(10);
-            while !self.open.load(std::sync::atomic::Ordering::SeqCst) && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(1));
-            }
+            wait_until(|| self.open.load(std::sync::atomic::Ordering::SeqCst));
             self.done = true;
             Ok(Vec::new())
         }
@@ -1432,23 +1437,7 @@ mod tests {
     /// (the gate) holds the process's loop until they are there.
     fn nodes_meet(run_id: &str, after_start: bool) {
         let (launcher, endpoint) = test_launcher();
-        let message = |index: u32| Message {
-            envelope: Envelope {
-                schema_version: SCHEMA_VERSION,
-                run_id: run_id.into(),
-                scene_fingerprint: 1,
-                iteration: 1,
-                stage: Stage::Final,
-                sender: NodeId {
-                    role: Role::Subdomain,
-                    index,
-                },
-            },
-            payload: Payload::Displacement {
-                subdomain: index,
-                u: Field::zeros(2, 3),
-            },
-        };
+        let message = |index: u32| displacement(run_id, index, 1, Field::zeros(2, 3));
         let (alive_tx, alive_rx) = mpsc::channel::<(String, bool)>();
         let _alive = watch_tokens(&launcher, run_id, alive_tx, |k, up| (k, up)).unwrap();
         let _launcher_token = launcher_token(&launcher, run_id).unwrap();
