@@ -557,11 +557,10 @@ pub fn render_processes(c: &ProcessComparison) -> String {
         c.iterations
     );
     let link = if c.tls { "TCP with TLS" } else { "TCP" };
-    let _ = writeln!(
-        s,
-        "| round | in-process | processes, {link} | processes, shared memory |"
-    );
-    let _ = writeln!(s, "|---:|---:|---:|---:|");
+    // The head of each of the three tables.
+    let head =
+        format!("| round | in-process | processes, {link} | processes, shared memory |\n|---:|---:|---:|---:|\n");
+    s.push_str(&head);
     for (i, r) in c.rounds.iter().enumerate() {
         let _ = writeln!(
             s,
@@ -584,11 +583,7 @@ pub fn render_processes(c: &ProcessComparison) -> String {
         "\nthe same runs, set-up + iterations (s; the set-up: operators, a time-coarse start's coarse solve, and for \
          processes starting them and their bus):\n"
     );
-    let _ = writeln!(
-        s,
-        "| round | in-process | processes, {link} | processes, shared memory |"
-    );
-    let _ = writeln!(s, "|---:|---:|---:|---:|");
+    s.push_str(&head);
     for (i, r) in c.rounds.iter().enumerate() {
         let [t0, t1, t2] = r.totals();
         let _ = writeln!(
@@ -619,11 +614,7 @@ pub fn render_processes(c: &ProcessComparison) -> String {
             "\nthe same runs, median iteration from the 3rd on (ms, decision to decision: without the first \
              iterations' faulting in of new memory and the end of the run):\n"
         );
-        let _ = writeln!(
-            s,
-            "| round | in-process | processes, {link} | processes, shared memory |"
-        );
-        let _ = writeln!(s, "|---:|---:|---:|---:|");
+        s.push_str(&head);
         for (i, r) in c.rounds.iter().enumerate() {
             if let (Some(a), Some(b), Some(m)) = (
                 r.in_process_iteration_ms,
