@@ -20,7 +20,6 @@ use glissade_messages::{
     decode, encode, Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
 };
 use glissade_zenoh as transport;
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -865,11 +864,12 @@ pub fn run_distributed_observed(
             Ok(a) => {
                 last_message = Instant::now();
                 let Some(bytes) = count(&mut traffic, &a) else { continue };
+                let (hash, m) = transport::hash_and_decode(&a.key, bytes, &expected);
                 // A restarted node re-sends outputs its predecessor may have sent already.
-                if !heard.insert(transport::message_hash(&a.key, &bytes)) {
+                if !heard.insert(hash) {
                     continue;
                 }
-                let Ok(m) = decode(&bytes, &expected) else { continue };
+                let Ok(m) = m else { continue };
                 if let Some(o) = observe.as_mut() {
                     o(&m);
                 }
@@ -933,10 +933,11 @@ pub fn run_distributed_observed(
         };
         let Some(a) = next else { continue };
         let Some(bytes) = count(&mut traffic, &a) else { continue };
-        if !heard.insert(transport::message_hash(&a.key, &bytes)) {
+        let (hash, m) = transport::hash_and_decode(&a.key, bytes, &expected);
+        if !heard.insert(hash) {
             continue;
         }
-        if let Ok(m) = decode(&bytes, &expected) {
+        if let Ok(m) = m {
             if let Some(o) = observe.as_mut() {
                 o(&m);
             }
@@ -1088,14 +1089,14 @@ fn kind_of(key: &str) -> &str {
 
 /// Adds a message to the traffic if it belongs to the run (its envelope says so); returns its
 /// bytes if the launcher keeps them.
-fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<Cow<'a, [u8]>> {
+fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a zenoh::bytes::ZBytes> {
     if !a.ours {
         return None;
     }
     let t = traffic.by_kind.entry(kind_of(&a.key).to_string()).or_default();
     t.messages += 1;
     t.bytes += a.size as u64;
-    a.bytes.as_ref().map(|z| z.to_bytes())
+    a.bytes.as_ref()
 }
 
 /// Runs one node process: connects to `connect`, fetches the scene of run `run_id` over the bus,

@@ -9,6 +9,9 @@
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
 
+mod values;
+pub use values::{BlockLender, ValueBlock, Values};
+
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
 /// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
 /// `BoundaryModes`, a PGD subdomain's state in mode form.
@@ -89,7 +92,7 @@ pub struct Envelope {
 pub struct Field {
     pub rows: u32,
     pub cols: u32,
-    pub data: Vec<f64>,
+    pub data: Values,
 }
 
 impl Field {
@@ -97,7 +100,7 @@ impl Field {
         Self {
             rows: rows as u32,
             cols: cols as u32,
-            data: vec![0.0; rows * cols],
+            data: vec![0.0; rows * cols].into(),
         }
     }
 
@@ -112,7 +115,7 @@ impl Field {
         Self {
             rows: rows as u32,
             cols: cols as u32,
-            data,
+            data: data.into(),
         }
     }
 
@@ -302,7 +305,11 @@ impl bincode::Decode<DecodeBuffers> for Field {
                 *v = f64::decode(d)?;
             }
         }
-        Ok(Field { rows, cols, data })
+        Ok(Field {
+            rows,
+            cols,
+            data: data.into(),
+        })
     }
 }
 
@@ -478,6 +485,62 @@ pub enum Payload {
     },
 }
 
+/// The fields of a payload (`$p`), in wire order, each passed to `$visit` as `&` or `&mut`.
+macro_rules! for_each_field {
+    ($p:expr, $visit:ident, $($r:tt)+) => {{
+        let mut $visit = $visit;
+        match $p {
+            Payload::Scene { .. }
+            | Payload::AndersonStep { .. }
+            | Payload::Decision(_)
+            | Payload::IndicatorPartials { .. } => {}
+            Payload::HomogenizedOperator { l_e, .. } => $visit(l_e),
+            Payload::MacroForces { forces, .. } => $visit(forces),
+            Payload::MacroDisplacements { w_tilde, .. } => $visit(w_tilde),
+            Payload::BoundaryState { w, f, .. } => {
+                $visit(w);
+                $visit(f);
+            }
+            Payload::BoundaryModes {
+                particular,
+                z,
+                g,
+                lambda,
+                ..
+            } => {
+                if let Some(p) = particular {
+                    $visit($($r)+ p.w);
+                    $visit($($r)+ p.f);
+                    $visit($($r)+ p.time);
+                }
+                $visit(z);
+                $visit(g);
+                $visit(lambda);
+            }
+            Payload::LocalDirections { q_hat, .. } => $visit(q_hat),
+            Payload::AndersonGram { gram, projection, .. } => {
+                $visit(gram);
+                $visit(projection);
+            }
+            Payload::InterfaceSolution(s) => {
+                for f in [
+                    $($r)+ s.w_a,
+                    $($r)+ s.w_b,
+                    $($r)+ s.f_a,
+                    $($r)+ s.f_b,
+                    $($r)+ s.w_a_hat,
+                    $($r)+ s.w_b_hat,
+                    $($r)+ s.f_a_hat,
+                    $($r)+ s.f_b_hat,
+                ] {
+                    $visit(f);
+                }
+            }
+            Payload::Displacement { u, .. } => $visit(u),
+        }
+    }};
+}
+
 impl Payload {
     /// The field chunk of the key expression.
     pub fn field_key(&self) -> &'static str {
@@ -500,36 +563,23 @@ impl Payload {
 
     /// Hands the value buffer of every field of the payload to `keep`, e.g. back to its sender's
     /// pool once the message is delivered (other contents are dropped).
-    pub fn into_buffers(self, mut keep: impl FnMut(Vec<f64>)) {
-        let mut field = |f: Field| keep(f.data);
-        match self {
-            Payload::Scene { .. }
-            | Payload::AndersonStep { .. }
-            | Payload::Decision(_)
-            | Payload::IndicatorPartials { .. } => {}
-            Payload::HomogenizedOperator { l_e, .. } => field(l_e),
-            Payload::MacroForces { forces, .. } => field(forces),
-            Payload::MacroDisplacements { w_tilde, .. } => field(w_tilde),
-            Payload::BoundaryState { w, f, .. } => [w, f].into_iter().for_each(field),
-            Payload::BoundaryModes {
-                particular,
-                z,
-                g,
-                lambda,
-                ..
-            } => {
-                if let Some(p) = particular {
-                    [p.w, p.f, p.time].into_iter().for_each(&mut field);
-                }
-                [z, g, lambda].into_iter().for_each(field);
+    pub fn into_buffers(mut self, mut keep: impl FnMut(Vec<f64>)) {
+        // A lent block goes back to its lender when dropped, not to a pool.
+        self.fields_mut(|f| {
+            if let Some(v) = std::mem::take(&mut f.data).into_vec() {
+                keep(v)
             }
-            Payload::LocalDirections { q_hat, .. } => field(q_hat),
-            Payload::AndersonGram { gram, projection, .. } => [gram, projection].into_iter().for_each(field),
-            Payload::InterfaceSolution(s) => [s.w_a, s.w_b, s.f_a, s.f_b, s.w_a_hat, s.w_b_hat, s.f_a_hat, s.f_b_hat]
-                .into_iter()
-                .for_each(field),
-            Payload::Displacement { u, .. } => field(u),
-        }
+        });
+    }
+
+    /// Calls `visit` on every field of the payload, in wire order.
+    pub fn fields(&self, visit: impl FnMut(&Field)) {
+        for_each_field!(self, visit, &);
+    }
+
+    /// Calls `visit` on every field of the payload, in wire order, to change it.
+    pub fn fields_mut(&mut self, visit: impl FnMut(&mut Field)) {
+        for_each_field!(self, visit, &mut);
     }
 
     /// Subdomain a payload is addressed to, for payloads with one recipient subdomain.
@@ -768,6 +818,64 @@ pub fn encode_into(msg: &Message, out: &mut [u8]) -> Option<usize> {
     Some(n + m)
 }
 
+/// A part of a message's encoding ([`encode_pieces`]).
+#[derive(Debug, PartialEq)]
+pub enum Piece {
+    /// Encoded bytes.
+    Bytes(Vec<u8>),
+    /// The values of the field whose lent block ([`Values::lent`]) starts at this address, in
+    /// their wire form: the block's memory itself.
+    Block(usize),
+}
+
+/// [`encode`]'s bytes in pieces, with the values of every lent field block named by its address
+/// instead of copied, so that a transport can send the blocks themselves: concatenated (each
+/// block as its values' bytes), the pieces are [`encode`]'s bytes. On a big-endian machine,
+/// where values are encoded one by one, there is no block piece.
+pub fn encode_pieces(msg: &Message) -> Vec<Piece> {
+    let mut blocks = Vec::new();
+    msg.payload.fields(|f| {
+        if f.data.is_lent() && !f.data.is_empty() {
+            let bytes: &[u8] = bytemuck::cast_slice(&f.data);
+            blocks.push((bytes.as_ptr() as usize, bytes.len()));
+        }
+    });
+    let mut w = PieceWriter {
+        blocks,
+        pieces: Vec::new(),
+        current: Vec::with_capacity(256),
+    };
+    bincode::encode_into_writer(&msg.envelope, &mut w, config()).expect("encoding into a Vec cannot fail");
+    bincode::encode_into_writer(&msg.payload, &mut w, config()).expect("encoding into a Vec cannot fail");
+    if !w.current.is_empty() {
+        w.pieces.push(Piece::Bytes(w.current));
+    }
+    w.pieces
+}
+
+/// Collects [`encode_pieces`]: a write of exactly a lent block's bytes (a field's values, which
+/// [`Field`]'s encoding writes in one piece) becomes a block piece.
+struct PieceWriter {
+    blocks: Vec<(usize, usize)>,
+    pieces: Vec<Piece>,
+    current: Vec<u8>,
+}
+
+impl bincode::enc::write::Writer for PieceWriter {
+    fn write(&mut self, bytes: &[u8]) -> Result<(), bincode::error::EncodeError> {
+        let at = (bytes.as_ptr() as usize, bytes.len());
+        if !bytes.is_empty() && self.blocks.contains(&at) {
+            if !self.current.is_empty() {
+                self.pieces.push(Piece::Bytes(std::mem::take(&mut self.current)));
+            }
+            self.pieces.push(Piece::Block(at.0));
+        } else {
+            self.current.extend_from_slice(bytes);
+        }
+        Ok(())
+    }
+}
+
 /// A decoding error of `part` ("envelope" or "payload").
 fn malformed(part: &'static str) -> impl Fn(bincode::error::DecodeError) -> DecodeError {
     move |e| DecodeError::Malformed {
@@ -898,6 +1006,42 @@ mod tests {
         }
     }
 
+    /// The values of lent fields are named in place by [`encode_pieces`], not copied, and the
+    /// pieces put together are [`encode`]'s bytes; without lent fields there is one piece.
+    #[test]
+    fn pieces_put_together_are_the_encoding() {
+        let plain = msg();
+        assert_eq!(encode_pieces(&plain), vec![Piece::Bytes(encode(&plain))]);
+        let mut lent = msg();
+        let Payload::BoundaryState { w, f, .. } = &mut lent.payload else {
+            unreachable!()
+        };
+        for field in [w, f] {
+            field.data = Values::lent(Box::new(values::TestBlock(field.data.to_vec())));
+        }
+        let Payload::BoundaryState { w, f, .. } = &lent.payload else {
+            unreachable!()
+        };
+        let at = |f: &Field| f.data.as_ptr() as usize;
+        let pieces = encode_pieces(&lent);
+        assert!(
+            matches!(&pieces[..], [Piece::Bytes(_), Piece::Block(a), Piece::Bytes(_), Piece::Block(b)] if *a == at(w) && *b == at(f)),
+            "{pieces:?}"
+        );
+        let mut joined = Vec::new();
+        for p in &pieces {
+            match p {
+                Piece::Bytes(b) => joined.extend_from_slice(b),
+                Piece::Block(a) => {
+                    let field = if *a == at(w) { w } else { f };
+                    joined.extend_from_slice(bytemuck::cast_slice(&field.data));
+                }
+            }
+        }
+        assert_eq!(joined, encode(&plain));
+        assert_eq!(encode(&lent), encode(&plain), "a lent field encodes as an owned one");
+    }
+
     #[test]
     fn round_trip_and_topic() {
         let m = msg();
@@ -972,7 +1116,7 @@ mod tests {
         assert!(matches!(e, DecodeError::SchemaVersion { .. }), "{e}");
         let mut bad = m.clone();
         if let Payload::BoundaryState { w, .. } = &mut bad.payload {
-            w.data.pop();
+            w.data.vec_mut().pop();
         }
         let e = decode(&encode(&bad), &expected()).unwrap_err();
         assert!(
@@ -1002,7 +1146,7 @@ mod tests {
         let mut dirty = first.payload;
         if let Payload::BoundaryState { w, .. } = &mut dirty {
             w.data.iter_mut().for_each(|v| *v = f64::NAN);
-            w.data.push(f64::NAN);
+            w.data.vec_mut().push(f64::NAN);
         }
         let at: Vec<*const f64> = match &dirty {
             Payload::BoundaryState { w, f, .. } => vec![w.data.as_ptr(), f.data.as_ptr()],

@@ -27,7 +27,11 @@ fn expected() -> Expected {
 
 fn field() -> impl Strategy<Value = Field> {
     (0u32..5, 0u32..4).prop_flat_map(|(r, c)| {
-        proptest::collection::vec(any::<f64>(), (r * c) as usize).prop_map(move |data| Field { rows: r, cols: c, data })
+        proptest::collection::vec(any::<f64>(), (r * c) as usize).prop_map(move |data| Field {
+            rows: r,
+            cols: c,
+            data: data.into(),
+        })
     })
 }
 
@@ -58,7 +62,11 @@ fn boundary_modes() -> impl Strategy<Value = Payload> {
                 values(n_c * nt),
             )
                 .prop_map(move |(z, g, lambda, pw, pf, time)| {
-                    let f = |rows: u32, cols: u32, data: Vec<f64>| Field { rows, cols, data };
+                    let f = |rows: u32, cols: u32, data: Vec<f64>| Field {
+                        rows,
+                        cols,
+                        data: data.into(),
+                    };
                     Payload::BoundaryModes {
                         subdomain,
                         particular: with_particular.then(|| glissade_messages::ParticularModes {
@@ -89,12 +97,12 @@ fn anderson_payload() -> impl Strategy<Value = Payload> {
                     gram: Field {
                         rows: k as u32,
                         cols: k as u32,
-                        data: gram,
+                        data: gram.into(),
                     },
                     projection: Field {
                         rows: k as u32,
                         cols: 1,
-                        data: projection,
+                        data: projection.into(),
                     },
                     residual2,
                 })

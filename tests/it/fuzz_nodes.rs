@@ -124,20 +124,20 @@ fn misshapen(f: &Field, rng: &mut Rng) -> Field {
     match rng.below(5) {
         0 => {
             g.rows += 1;
-            g.data = vec![0.5; g.rows() * g.cols()];
+            g.data = vec![0.5; g.rows() * g.cols()].into();
         }
         1 => {
             g.cols += 1 + rng.below(3) as u32;
-            g.data = vec![0.5; g.rows() * g.cols()];
+            g.data = vec![0.5; g.rows() * g.cols()].into();
         }
         2 if g.rows > 0 => {
             g.rows -= 1;
-            g.data = vec![0.5; g.rows() * g.cols()];
+            g.data = vec![0.5; g.rows() * g.cols()].into();
         }
         3 if !g.data.is_empty() => {
-            g.data.pop();
+            g.data.vec_mut().pop();
         }
-        _ => g.data.push(1.0),
+        _ => g.data.vec_mut().push(1.0),
     }
     g
 }

@@ -2,8 +2,9 @@
 //! buffers of the fields it sends.
 
 use faer::{Mat, MatMut, MatRef};
-use glissade_messages::{BufferPool, Field, Message};
+use glissade_messages::{BlockLender, BufferPool, Field, Message, Values};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Column `j` of a matrix as a slice, when its rows are contiguous.
 fn col(m: MatRef<'_, f64>, j: usize) -> Option<&[f64]> {
@@ -21,6 +22,18 @@ fn extend_columns(data: &mut Vec<f64>, m: MatRef<'_, f64>) {
     }
 }
 
+/// Writes the columns of `m` over `data` (column-major, as many values).
+fn write_columns(data: &mut [f64], m: MatRef<'_, f64>) {
+    let rows = m.nrows();
+    for j in 0..m.ncols() {
+        let out = &mut data[j * rows..(j + 1) * rows];
+        match col(m, j) {
+            Some(c) => out.copy_from_slice(c),
+            None => out.iter_mut().enumerate().for_each(|(r, v)| *v = m[(r, j)]),
+        }
+    }
+}
+
 /// Wire field of a matrix (column-major copy).
 pub fn field_of(m: MatRef<'_, f64>) -> Field {
     let mut data = Vec::new();
@@ -28,7 +41,7 @@ pub fn field_of(m: MatRef<'_, f64>) -> Field {
     Field {
         rows: m.nrows() as u32,
         cols: m.ncols() as u32,
-        data,
+        data: data.into(),
     }
 }
 
@@ -52,19 +65,57 @@ pub fn copy_into(f: &Field, m: &mut Mat<f64>) {
 /// node's multi-megabyte fields reuse memory instead of being allocated (and their pages faulted
 /// in) again. The buffers are a [`BufferPool`] (bounded; a field takes the smallest buffer that
 /// fits and is at most twice its size).
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct FieldPool {
     buffers: BufferPool,
+    /// Lends the memory of fields of [`FieldPool::LEND_MIN`] values or more, when set: a
+    /// transport that then sends them without copying their values ([`FieldPool::lend_from`]).
+    lender: Option<Arc<dyn BlockLender>>,
+}
+
+impl std::fmt::Debug for FieldPool {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FieldPool")
+            .field("buffers", &self.buffers)
+            .field("lender", &self.lender.is_some())
+            .finish()
+    }
 }
 
 impl FieldPool {
     /// Most buffers kept (an interface node sends one field per subdomain it serves).
     pub const CAPACITY: usize = BufferPool::CAPACITY;
 
-    /// [`field_of`] into a pooled buffer.
+    /// Smallest field (in values, 64 KiB) whose memory is asked of the lender: the boundary
+    /// fields (MBs) and the macro data (tens of kB) are, small fields are not.
+    pub const LEND_MIN: usize = 8 << 10;
+
+    /// From now on, fields of [`Self::LEND_MIN`] values or more are written into blocks `lender`
+    /// lends (into pooled vectors when it has none to give).
+    pub fn lend_from(&mut self, lender: Arc<dyn BlockLender>) {
+        self.lender = Some(lender);
+    }
+
+    /// Memory for `len` values: a lent block (whatever it holds), or a pooled vector (empty).
+    fn take(&mut self, len: usize) -> Values {
+        let lent = match &self.lender {
+            Some(lender) if len >= Self::LEND_MIN => lender.lend(len),
+            _ => None,
+        };
+        match lent {
+            Some(block) => Values::lent(block),
+            None => self.buffers.take_empty(len).into(),
+        }
+    }
+
+    /// [`field_of`] into a pooled buffer (or a lent block).
     pub fn field_of(&mut self, m: MatRef<'_, f64>) -> Field {
-        let mut data = self.buffers.take_empty(m.nrows() * m.ncols());
-        extend_columns(&mut data, m);
+        let mut data = self.take(m.nrows() * m.ncols());
+        if data.is_lent() {
+            write_columns(&mut data, m);
+        } else {
+            extend_columns(data.vec_mut(), m);
+        }
         Field {
             rows: m.nrows() as u32,
             cols: m.ncols() as u32,
@@ -72,11 +123,12 @@ impl FieldPool {
         }
     }
 
-    /// A `rows` × `cols` field in a pooled buffer, filled by `fill` (which sees it as a matrix of
-    /// zeros): the field is written in place, with no matrix of its own to copy from.
+    /// A `rows` × `cols` field in a pooled buffer (or a lent block), filled by `fill` (which
+    /// sees it as a matrix of zeros): the field is written in place, with no matrix of its own to
+    /// copy from.
     pub fn field_with(&mut self, rows: usize, cols: usize, fill: impl FnOnce(MatMut<'_, f64>)) -> Field {
-        let mut data = self.buffers.take_empty(rows * cols);
-        data.resize(rows * cols, 0.0);
+        let mut data = self.take(rows * cols);
+        zero(&mut data, rows * cols);
         fill(MatMut::from_column_major_slice_mut(&mut data, rows, cols));
         Field {
             rows: rows as u32,
@@ -86,21 +138,21 @@ impl FieldPool {
     }
 
     /// [`Self::field_with`] for several fields at once: field `i` is `rows[i]` × `cols`, in a
-    /// pooled buffer, filled by `fill(i, field)` (which sees a matrix of zeros). The buffers are
-    /// taken here in order; the zeroing and the filling (and with them the first touch of new
-    /// memory) run in parallel, one field per task.
+    /// pooled buffer (or a lent block), filled by `fill(i, field)` (which sees a matrix of
+    /// zeros). The buffers are taken here in order; the zeroing and the filling (and with them
+    /// the first touch of new memory) run in parallel, one field per task.
     pub fn fields_with(
         &mut self,
         rows: &[usize],
         cols: usize,
         fill: impl Fn(usize, MatMut<'_, f64>) + Sync,
     ) -> Vec<Field> {
-        let mut data: Vec<Vec<f64>> = rows.iter().map(|&r| self.buffers.take_empty(r * cols)).collect();
+        let mut data: Vec<Values> = rows.iter().map(|&r| self.take(r * cols)).collect();
         data.par_iter_mut()
             .zip(rows.par_iter())
             .enumerate()
             .for_each(|(i, (d, &r))| {
-                d.resize(r * cols, 0.0);
+                zero(d, r * cols);
                 fill(i, MatMut::from_column_major_slice_mut(d, r, cols));
             });
         data.into_iter()
@@ -125,6 +177,16 @@ impl FieldPool {
 
     pub fn is_empty(&self) -> bool {
         self.buffers.is_empty()
+    }
+}
+
+/// `len` zeros in `data` (taken by [`FieldPool::take`]: a lent block of `len` values, or an
+/// empty vector).
+fn zero(data: &mut Values, len: usize) {
+    if data.is_lent() {
+        data.fill(0.0);
+    } else {
+        data.vec_mut().resize(len, 0.0);
     }
 }
 
@@ -161,7 +223,7 @@ mod tests {
             .map(|f| f.data.as_ptr())
             .collect();
         for f in got {
-            pool.buffers.put(f.data);
+            pool.buffers.put(f.data.into_vec().expect("owned"));
         }
         let again = pool.fields_with(&[3, 7, 5], 4, |_, _| {});
         for f in &again {
@@ -172,6 +234,69 @@ mod tests {
             );
             assert!(f.data.iter().all(|&v| v == 0.0), "a reused buffer is zeroed");
         }
+    }
+
+    /// Lends blocks in vectors of their own, as long as it has some left.
+    struct Lender(std::sync::Mutex<usize>);
+
+    struct Block(Vec<f64>);
+
+    impl glissade_messages::ValueBlock for Block {
+        fn values(&self) -> &[f64] {
+            &self.0
+        }
+        fn values_mut(&mut self) -> &mut [f64] {
+            &mut self.0
+        }
+        fn into_any(self: Box<Self>) -> Box<dyn std::any::Any> {
+            self
+        }
+    }
+
+    impl BlockLender for Lender {
+        fn lend(&self, len: usize) -> Option<Box<dyn glissade_messages::ValueBlock>> {
+            let mut left = self.0.lock().unwrap();
+            // Whatever the memory held: the pool must overwrite or zero all of it.
+            (*left > 0).then(|| {
+                *left -= 1;
+                Box::new(Block(vec![f64::NAN; len])) as Box<dyn glissade_messages::ValueBlock>
+            })
+        }
+    }
+
+    /// With a lender, fields of `LEND_MIN` values or more are written into its blocks (whatever
+    /// they held) and are the fields made without one; smaller fields, and fields the lender has
+    /// no block for, take vectors; a lent block does not go back to the pool.
+    #[test]
+    fn lent_fields_are_the_fields_made_without_a_lender() {
+        let rows = FieldPool::LEND_MIN / 10 + 1;
+        let big = Mat::from_fn(rows, 10, |r, c| (r * 10 + c) as f64 * 0.5);
+        let fill = |i: usize, mut m: MatMut<'_, f64>| m[(i, 1)] = 2.0 + i as f64;
+        let make = |pool: &mut FieldPool| {
+            let mut made = vec![pool.field_of(big.as_ref()), pool.field_of(big.transpose())];
+            made.push(pool.field_with(rows, 10, |m| fill(7, m)));
+            made.extend(pool.fields_with(&[rows, 3, rows], 10, fill));
+            made
+        };
+        let expected = make(&mut FieldPool::default());
+        let mut pool = FieldPool::default();
+        pool.lend_from(Arc::new(Lender(std::sync::Mutex::new(4))));
+        let got = make(&mut pool);
+        assert_eq!(got, expected);
+        let lent: Vec<bool> = got.iter().map(|f| f.data.is_lent()).collect();
+        // The fifth large field finds the lender out of blocks; the 3-row one is too small.
+        assert_eq!(lent, [true, true, true, true, false, false]);
+        let mut got = got.into_iter();
+        pool.recycle(message(Payload::BoundaryState {
+            subdomain: 0,
+            w: got.next().unwrap(),
+            f: got.nth(3).unwrap(),
+        }));
+        assert_eq!(
+            pool.len(),
+            1,
+            "the vector goes back to the pool, the lent block does not"
+        );
     }
 
     fn message(payload: Payload) -> Message {

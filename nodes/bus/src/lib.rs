@@ -105,6 +105,12 @@ pub trait Node: Send {
     fn recycle(&mut self, msg: Message) {
         drop(msg);
     }
+    /// From now on the node writes its large outgoing fields into blocks `lender` lends
+    /// ([`convert::FieldPool::lend_from`]), for a transport that sends them without copying their
+    /// values. By default a node's fields stay in memory of its own.
+    fn lend_fields(&mut self, lender: std::sync::Arc<dyn glissade_messages::BlockLender>) {
+        drop(lender);
+    }
 }
 
 /// Errors of a bus run.

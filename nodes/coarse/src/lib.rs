@@ -278,4 +278,8 @@ impl Node for CoarseNode {
     fn recycle(&mut self, msg: Message) {
         self.pool.recycle(msg);
     }
+
+    fn lend_fields(&mut self, lender: std::sync::Arc<dyn glissade_messages::BlockLender>) {
+        self.pool.lend_from(lender);
+    }
 }

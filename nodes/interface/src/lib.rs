@@ -778,8 +778,8 @@ impl InterfaceNode {
         }
         let partials = GramPartials {
             k,
-            gram: gram.data.clone(),
-            projection: projection.data.clone(),
+            gram: gram.data.to_vec(),
+            projection: projection.data.to_vec(),
             residual2,
         };
         d.grams.insert(s, partials);
@@ -948,6 +948,10 @@ impl Node for InterfaceNode {
 
     fn recycle(&mut self, msg: Message) {
         self.pool.recycle(msg);
+    }
+
+    fn lend_fields(&mut self, lender: std::sync::Arc<dyn glissade_messages::BlockLender>) {
+        self.pool.lend_from(lender);
     }
 }
 
@@ -1293,7 +1297,7 @@ mod tests {
             let col = |data: Vec<f64>, rows: usize| Field {
                 rows: rows as u32,
                 cols: (data.len() / rows) as u32,
-                data,
+                data: data.into(),
             };
             by_modes.push(message(
                 &ctx,

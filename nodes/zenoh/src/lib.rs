@@ -29,7 +29,8 @@
 
 use glissade_bus::{Node, NodeError};
 use glissade_messages::{
-    decode, decode_from_reader, encode, BufferPool, DecodeBuffers, DecodeError, Expected, Message,
+    decode, decode_from_reader, encode, BlockLender, BufferPool, DecodeBuffers, DecodeError, Expected, Message, Piece,
+    ValueBlock,
 };
 use rayon::prelude::*;
 use std::collections::{BTreeSet, HashSet, VecDeque};
@@ -343,6 +344,117 @@ fn encode_shared(session: &Session, msg: &Message) -> Option<zenoh::bytes::ZByte
     Some(buffer.into())
 }
 
+/// Publishes a message a node made, taking the shared-memory blocks its fields were written
+/// into ([`ShmLender`]) out of it: they are sent as they are, without copying their values, and
+/// the message keeps its other fields (for the node to reuse, [`Node::recycle`]). A message
+/// without lent fields is published as [`publish`] does.
+pub fn publish_lent(session: &Session, msg: &mut Message) -> Result<(), TransportError> {
+    let mut lent = false;
+    msg.payload.fields(|f| lent |= f.data.is_lent());
+    if !lent {
+        return publish(session, msg);
+    }
+    let key = msg.topic();
+    let pieces = glissade_messages::encode_pieces(msg);
+    let mut blocks = Vec::new();
+    msg.payload.fields_mut(|f| blocks.extend(f.data.take_block()));
+    let mut out = zenoh::bytes::ZBytes::writer();
+    for piece in pieces {
+        match piece {
+            Piece::Bytes(b) => std::io::Write::write_all(&mut out, &b).expect("writing into memory cannot fail"),
+            Piece::Block(at) => {
+                let k = blocks
+                    .iter()
+                    .position(|b| b.values().as_ptr() as usize == at)
+                    .ok_or_else(|| TransportError::Protocol(format!("{key}: a field block vanished while encoding")))?;
+                // Blocks come from this transport's lender only.
+                let shm = blocks.swap_remove(k).into_any().downcast::<ShmBlock>().map_err(|_| {
+                    TransportError::Protocol(format!("{key}: a field block not lent by this transport"))
+                })?;
+                out.append(shm.0.into());
+            }
+        }
+    }
+    put_bytes(session, &key, out.finish())
+}
+
+/// A block of the session's shared-memory pool holding a field's values ([`ShmLender`]).
+struct ShmBlock(zenoh::shm::ZShmMut);
+
+impl ValueBlock for ShmBlock {
+    fn values(&self) -> &[f64] {
+        bytemuck::cast_slice(&self.0)
+    }
+
+    fn values_mut(&mut self) -> &mut [f64] {
+        bytemuck::cast_slice_mut(&mut self.0)
+    }
+
+    fn into_any(self: Box<Self>) -> Box<dyn std::any::Any> {
+        self
+    }
+}
+
+/// Lends a process's nodes blocks of shared memory to write their large fields into, so that
+/// they are sent without a copy ([`publish_lent`]). A block comes from the session's pool if it
+/// has room, else from pools of the lender's own, added one at a time as the nodes' fields need
+/// room (an interface node writes every subdomain's local directions before the first is read,
+/// 34 MB at N = 1000, more than the session's pool holds), up to [`ShmLender::POOLS`] of them.
+/// The blocks receivers have released are collected first, so that new blocks reuse memory
+/// already written rather than pages never touched yet (a first touch is slow on some virtual
+/// machines). When no pool has room, a field takes memory of its own and is copied into the
+/// session's pool when sent, as without lending.
+pub struct ShmLender {
+    session: Session,
+    pools: Mutex<Vec<ShmPool>>,
+}
+
+type ShmPool = zenoh::shm::ShmProvider<zenoh::shm::PosixShmProviderBackend>;
+
+impl ShmLender {
+    /// Size of each pool of the lender's own.
+    pub const POOL_BYTES: usize = 32 << 20;
+    /// Most pools of its own.
+    pub const POOLS: usize = 8;
+
+    /// A lender for the nodes of `session`'s process, or None when shared memory is off in it.
+    pub fn new(session: &Session) -> Option<Self> {
+        (!matches!(session.get_shm_provider(), zenoh::shm::ShmProviderState::Disabled)).then(|| Self {
+            session: session.clone(),
+            pools: Mutex::new(Vec::new()),
+        })
+    }
+}
+
+impl BlockLender for ShmLender {
+    fn lend(&self, len: usize) -> Option<Box<dyn ValueBlock>> {
+        use zenoh::shm::ShmProviderBuilder;
+        let bytes = len.checked_mul(8)?;
+        let take = |p: &ShmPool| {
+            p.garbage_collect();
+            p.alloc(bytes).wait().ok()
+        };
+        let session_pool = self.session.get_shm_provider().into_option();
+        let mut buffer = session_pool.as_deref().and_then(take);
+        if buffer.is_none() {
+            let mut pools = self.pools.lock().unwrap_or_else(|e| e.into_inner());
+            buffer = pools.iter().find_map(take);
+            if buffer.is_none() && pools.len() < Self::POOLS {
+                let pool = ShmProviderBuilder::default_backend(Self::POOL_BYTES.max(bytes))
+                    .wait()
+                    .ok()?;
+                buffer = pool.alloc(bytes).wait().ok();
+                pools.push(pool);
+            }
+        }
+        let buffer = buffer?;
+        // The pools' layouts are byte-aligned, but their allocator hands out 8-byte aligned
+        // blocks: checked here, since a field's values are read in place as f64.
+        (buffer.len() == bytes && (buffer.as_ptr() as usize).is_multiple_of(8))
+            .then(|| Box::new(ShmBlock(buffer)) as Box<dyn ValueBlock>)
+    }
+}
+
 fn put_bytes(session: &Session, key: &str, bytes: impl Into<zenoh::bytes::ZBytes>) -> Result<(), TransportError> {
     session
         .put(key, bytes)
@@ -451,6 +563,18 @@ impl Received {
     }
 }
 
+/// The hash of a message that arrived as `payload` on `key` ([`message_hash`] of its bytes) and
+/// the message, decoded into new buffers where its bytes lie, whether they came in one piece or
+/// in several (fragments, or the blocks of a message sent with [`publish_lent`]).
+pub fn hash_and_decode(
+    key: &str,
+    payload: &zenoh::bytes::ZBytes,
+    expected: &Expected,
+) -> (u64, Result<Message, DecodeError>) {
+    let r = Received::from_payload(key.to_string(), payload, expected, DecodeBuffers::default());
+    (r.hash, r.message)
+}
+
 /// Messages in arrival order, cut into batches in which none repeats another (by hash): a repeat
 /// starts the next batch, so that it is dropped only if its first copy was taken.
 fn batches(received: impl IntoIterator<Item = Box<Received>>) -> Vec<Vec<Received>> {
@@ -553,6 +677,11 @@ pub fn run_nodes(
 
     // Messages already handled (a replacement process re-sends outputs its predecessor may have
     // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
+    // With shared memory, the nodes write their large fields straight into the pool's blocks.
+    if let Some(lender) = ShmLender::new(session) {
+        let lender: Arc<dyn BlockLender> = Arc::new(lender);
+        nodes.iter_mut().for_each(|n| n.lend_fields(lender.clone()));
+    }
     let mut seen: HashSet<u64> = HashSet::new();
     let mut published: HashSet<u64> = HashSet::new();
     // A batch of messages, as they arrived, none a repeat of another ([`batches`]): each node
@@ -613,13 +742,13 @@ pub fn run_nodes(
                         break;
                     }
                     let mut handled = || -> Result<(), TransportError> {
-                        for out in node.handle(msg)? {
-                            publish_new(session, &out, published)?;
+                        for mut out in node.handle(msg)? {
+                            publish_new(session, &mut out, published)?;
                             node.recycle(out);
                         }
                         // The rest one at a time, each once the one before is out.
-                        while let Some(out) = node.next_output() {
-                            publish_new(session, &out, published)?;
+                        while let Some(mut out) = node.next_output() {
+                            publish_new(session, &mut out, published)?;
                             node.recycle(out);
                         }
                         Ok(())
@@ -702,11 +831,11 @@ pub fn run_nodes(
             published.len()
         ));
         for node in &mut nodes {
-            for m in node.start()? {
-                publish_new(session, &m, &published)?;
+            for mut m in node.start()? {
+                publish_new(session, &mut m, &published)?;
             }
-            while let Some(m) = node.next_output() {
-                publish_new(session, &m, &published)?;
+            while let Some(mut m) = node.next_output() {
+                publish_new(session, &mut m, &published)?;
             }
         }
         for (key, bytes) in inputs {
@@ -745,11 +874,11 @@ pub fn run_nodes(
             }
         }
         for node in &mut nodes {
-            for m in node.start()? {
-                publish(session, &m)?;
+            for mut m in node.start()? {
+                publish_lent(session, &mut m)?;
             }
-            while let Some(m) = node.next_output() {
-                publish(session, &m)?;
+            while let Some(mut m) = node.next_output() {
+                publish_lent(session, &mut m)?;
             }
         }
         for batch in batches(early.drain(..)) {
@@ -975,9 +1104,10 @@ fn hash_parts(key: &str, len: usize, head: &[u8], tail: &[u8]) -> u64 {
 
 /// Publishes `msg` unless it is among the outputs already on the bus (`published`, the hashes
 /// of a resumed process's outputs that the recorder holds).
-fn publish_new(session: &Session, msg: &Message, published: &HashSet<u64>) -> Result<(), TransportError> {
+/// Lent field blocks are sent without a copy ([`publish_lent`]).
+fn publish_new(session: &Session, msg: &mut Message, published: &HashSet<u64>) -> Result<(), TransportError> {
     if published.is_empty() {
-        return publish(session, msg);
+        return publish_lent(session, msg);
     }
     let (topic, bytes) = (msg.topic(), encode(msg));
     if published.contains(&message_hash(&topic, &bytes)) {
@@ -1121,12 +1251,8 @@ mod tests {
         drop(router);
     }
 
-    /// With shared memory on, a large message is encoded straight into the session's pool (its
-    /// bytes are a shared-memory buffer holding exactly `encode`'s bytes), and arrives through
-    /// the router as such and intact; a small message, or a session without shared memory, takes
-    /// the encoded-buffer path.
-    #[test]
-    fn large_messages_are_encoded_into_shared_memory() {
+    /// A router and three clients on loopback: two with shared memory on, one without.
+    fn shm_sessions() -> [Session; 4] {
         let port = free_loopback_port().unwrap();
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let shm_config = |mode: &str, listen: &[String], connect: &[String]| {
@@ -1138,6 +1264,16 @@ mod tests {
         let a = open(shm_config("client", &[], std::slice::from_ref(&endpoint))).unwrap();
         let b = open(shm_config("client", &[], std::slice::from_ref(&endpoint))).unwrap();
         let plain = open(config("client", &[], std::slice::from_ref(&endpoint), false).unwrap()).unwrap();
+        [router, a, b, plain]
+    }
+
+    /// With shared memory on, a large message is encoded straight into the session's pool (its
+    /// bytes are a shared-memory buffer holding exactly `encode`'s bytes), and arrives through
+    /// the router as such and intact; a small message, or a session without shared memory, takes
+    /// the encoded-buffer path.
+    #[test]
+    fn large_messages_are_encoded_into_shared_memory() {
+        let [router, a, b, plain] = shm_sessions();
         let msg = boundary_state("shm", 1, 300, 1001);
         // The pool is set up on first use, in the background.
         let deadline = Instant::now() + Duration::from_secs(20);
@@ -1172,6 +1308,72 @@ mod tests {
             scene_fingerprint: 1,
         };
         assert_eq!(decode(&bytes, &expected).unwrap(), msg);
+        drop((plain, router));
+    }
+
+    /// Fields a node wrote into blocks the shared-memory lender lent are sent as those blocks:
+    /// they reach another process's session as slices of exactly their size (over the link a
+    /// multi-MB message arrives in fragments of at most 64 KiB), the bytes are those of the
+    /// message's encoding, and the sender's message no longer holds them. Blocks come from pools
+    /// of the lender's own once the session's pool is full; a session without shared memory has
+    /// no lender.
+    #[test]
+    fn lent_fields_are_sent_as_their_shared_memory_blocks() {
+        let [router, a, b, plain] = shm_sessions();
+        assert!(ShmLender::new(&plain).is_none());
+        let lender: Arc<dyn BlockLender> = Arc::new(ShmLender::new(&a).expect("shared memory is on"));
+        // As in a run, the session's own pool is ready (set up on first use, in the background).
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while encode_shared(&a, &boundary_state("shm", 1, 300, 30)).is_none() {
+            assert!(Instant::now() < deadline, "no shared-memory pool within 20 s");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        // Blocks for more than the session's 16 MiB pool at once: 3 × 12 MiB.
+        let big: Vec<_> = (0..3).map(|_| lender.lend(3 << 19).expect("a block")).collect();
+        assert!(big.iter().all(|b| b.values().len() == 3 << 19));
+        drop(big);
+
+        let (rows, cols) = (300, 1001);
+        let expected = boundary_state("shm", 1, rows, cols);
+        let mut pool = glissade_bus::convert::FieldPool::default();
+        pool.lend_from(lender.clone());
+        let Payload::BoundaryState { w, f, .. } = &expected.payload else {
+            unreachable!()
+        };
+        let (w, f) = (glissade_bus::convert::view(w), glissade_bus::convert::view(f));
+        let mut msg = Message {
+            envelope: expected.envelope.clone(),
+            payload: Payload::BoundaryState {
+                subdomain: 0,
+                w: pool.field_of(w),
+                f: pool.field_of(f),
+            },
+        };
+        msg.payload.fields(|f| assert!(f.data.is_lent()));
+        assert_eq!(msg, expected);
+
+        let (tx, rx) = mpsc::channel();
+        let _sub = b
+            .declare_subscriber(expected.topic())
+            .callback(move |s| {
+                let sizes: Vec<usize> = s.payload().slices().map(|x| x.len()).collect();
+                let _ = tx.send((sizes, s.payload().to_bytes().into_owned()));
+            })
+            .wait()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(500));
+        publish_lent(&a, &mut msg).unwrap();
+        msg.payload
+            .fields(|f| assert!(f.data.is_empty() && !f.data.is_lent(), "the blocks were sent"));
+        let (sizes, bytes) = rx.recv_timeout(Duration::from_secs(20)).expect("the message arrived");
+        let block = rows * cols * 8;
+        assert_eq!(sizes.iter().filter(|&&n| n == block).count(), 2, "slices {sizes:?}");
+        assert_eq!(bytes, encode(&expected));
+        let exp = Expected {
+            run_id: "shm".into(),
+            scene_fingerprint: 1,
+        };
+        assert_eq!(decode(&bytes, &exp).unwrap(), expected);
         drop((plain, router));
     }
 
