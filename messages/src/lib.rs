@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex};
 
 mod values;
-pub use values::{BlockLender, ValueBlock, Values};
+pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
 /// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
@@ -229,20 +229,47 @@ impl BufferPool {
 
 /// Where the decoder takes the buffers of the fields it decodes (bincode's decoding context):
 /// a shared [`BufferPool`], or none (new buffers).
-#[derive(Debug, Clone, Default)]
+#[derive(Clone, Default)]
 pub struct DecodeBuffers {
     pool: Option<Arc<Mutex<BufferPool>>>,
     /// Bytes of the payload being decoded: no field may claim more values than they hold (set by
     /// the decoder before it reads the payload).
     payload_bytes: usize,
+    /// Blocks of the payload that a field's values may be read from in place ([`Self::holding`]).
+    held: Option<Arc<dyn HoldSource>>,
+}
+
+impl std::fmt::Debug for DecodeBuffers {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DecodeBuffers")
+            .field("pool", &self.pool)
+            .field("payload_bytes", &self.payload_bytes)
+            .field("held", &self.held.is_some())
+            .finish()
+    }
+}
+
+/// Blocks of a received payload that fields may keep and read in place instead of copying them
+/// ([`DecodeBuffers::holding`]), e.g. the shared-memory blocks a sender wrote fields into.
+pub trait HoldSource: Send + Sync {
+    /// The block whose bytes start at address `at` and are exactly `len` long, 8-byte aligned,
+    /// if the payload has one.
+    fn hold(&self, at: usize, len: usize) -> Option<Box<dyn HeldBlock>>;
 }
 
 impl DecodeBuffers {
     pub fn pooled(pool: Arc<Mutex<BufferPool>>) -> Self {
         Self {
             pool: Some(pool),
-            payload_bytes: 0,
+            ..Self::default()
         }
+    }
+
+    /// With `source`, a field whose values are exactly one of its blocks is read in place
+    /// (held, [`Values::held`]) when the decoder reads from memory ([`decode_from_slices`]).
+    pub fn holding(mut self, source: Arc<dyn HoldSource>) -> Self {
+        self.held = Some(source);
+        self
     }
 
     /// Refuses a field of `len` values that the payload is too short to hold (a damaged length),
@@ -297,6 +324,20 @@ impl bincode::Decode<DecodeBuffers> for Field {
         // anything is allocated.
         d.context().check(len)?;
         d.claim_container_read::<f64>(len)?;
+        if cfg!(target_endian = "little") && len > 0 {
+            if let Some(source) = d.context().held.clone() {
+                let bytes = len * 8;
+                let at = d.reader().peek_read(bytes).map(|b| b.as_ptr() as usize);
+                if let Some(block) = at.and_then(|at| source.hold(at, bytes)) {
+                    d.reader().consume(bytes);
+                    return Ok(Field {
+                        rows,
+                        cols,
+                        data: Values::held(block),
+                    });
+                }
+            }
+        }
         let mut data = d.context().take(len);
         if cfg!(target_endian = "little") {
             d.reader().read(bytemuck::cast_slice_mut(&mut data))?;
@@ -885,7 +926,7 @@ fn malformed(part: &'static str) -> impl Fn(bincode::error::DecodeError) -> Deco
 }
 
 /// Reads the envelope at the start of `r`, checking the schema version and the run.
-fn read_envelope<R: std::io::Read>(r: &mut Bounded<R>, run_id: &str) -> Result<Envelope, DecodeError> {
+fn read_envelope<R: Source>(r: &mut Bounded<R>, run_id: &str) -> Result<Envelope, DecodeError> {
     let envelope: Envelope = bincode::decode_from_reader(r, config()).map_err(malformed("envelope"))?;
     if envelope.schema_version != SCHEMA_VERSION {
         return Err(DecodeError::SchemaVersion {
@@ -907,7 +948,7 @@ fn read_envelope<R: std::io::Read>(r: &mut Bounded<R>, run_id: &str) -> Result<E
 pub fn peek_envelope(bytes: &[u8], run_id: &str) -> Result<Envelope, DecodeError> {
     read_envelope(
         &mut Bounded {
-            inner: bytes,
+            inner: IoSource(bytes),
             left: bytes.len(),
         },
         run_id,
@@ -926,12 +967,40 @@ pub fn decode_from_reader(
     reader: impl std::io::Read,
     len: usize,
     expected: &Expected,
+    buffers: DecodeBuffers,
+) -> Result<Message, DecodeError> {
+    decode_bounded(
+        Bounded {
+            inner: IoSource(reader),
+            left: len,
+        },
+        expected,
+        buffers,
+    )
+}
+
+/// [`decode_from_reader`] of a payload that lies in memory in `slices` (`len` bytes in all, e.g.
+/// the fragments or pieces a transport received), read where they lie: a field whose values are
+/// a block of `buffers`' hold source ([`DecodeBuffers::holding`]) keeps it instead of copying it.
+pub fn decode_from_slices<'a>(
+    slices: impl IntoIterator<Item = &'a [u8]>,
+    len: usize,
+    expected: &Expected,
+    buffers: DecodeBuffers,
+) -> Result<Message, DecodeError> {
+    let inner = Slices {
+        slices: slices.into_iter().collect(),
+        k: 0,
+        at: 0,
+    };
+    decode_bounded(Bounded { inner, left: len }, expected, buffers)
+}
+
+fn decode_bounded<R: Source>(
+    mut r: Bounded<R>,
+    expected: &Expected,
     mut buffers: DecodeBuffers,
 ) -> Result<Message, DecodeError> {
-    let mut r = Bounded {
-        inner: reader,
-        left: len,
-    };
     let envelope = read_envelope(&mut r, &expected.run_id)?;
     if envelope.scene_fingerprint != expected.scene_fingerprint {
         return Err(DecodeError::OtherScene {
@@ -956,7 +1025,74 @@ struct Bounded<R> {
     left: usize,
 }
 
-impl<R: std::io::Read> bincode::de::read::Reader for Bounded<R> {
+/// What [`Bounded`] reads from: bytes in order, and where they lie in memory, a look at the next
+/// ones without copying them.
+trait Source: std::io::Read {
+    /// The next `n` bytes, if they lie together in memory.
+    fn peek(&self, n: usize) -> Option<&[u8]>;
+    /// Moves past `n` bytes [`Source::peek`] showed.
+    fn skip(&mut self, n: usize);
+}
+
+/// A [`Source`] over any reader: no look ahead.
+struct IoSource<R>(R);
+
+impl<R: std::io::Read> std::io::Read for IoSource<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        self.0.read(buf)
+    }
+}
+
+impl<R: std::io::Read> Source for IoSource<R> {
+    fn peek(&self, _: usize) -> Option<&[u8]> {
+        None
+    }
+
+    fn skip(&mut self, _: usize) {
+        unreachable!("nothing was peeked")
+    }
+}
+
+/// A [`Source`] over a payload's slices in memory, one after the other (e.g. the fragments a
+/// transport received, or the pieces of a message sent with its fields' blocks).
+struct Slices<'a> {
+    slices: Vec<&'a [u8]>,
+    /// The current slice and the position in it.
+    k: usize,
+    at: usize,
+}
+
+impl std::io::Read for Slices<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let mut n = 0;
+        while n < buf.len() && self.k < self.slices.len() {
+            let rest = &self.slices[self.k][self.at..];
+            let m = rest.len().min(buf.len() - n);
+            buf[n..n + m].copy_from_slice(&rest[..m]);
+            n += m;
+            self.at += m;
+            if self.at == self.slices[self.k].len() {
+                (self.k, self.at) = (self.k + 1, 0);
+            }
+        }
+        Ok(n)
+    }
+}
+
+impl Source for Slices<'_> {
+    fn peek(&self, n: usize) -> Option<&[u8]> {
+        self.slices.get(self.k).and_then(|s| s[self.at..].get(..n))
+    }
+
+    fn skip(&mut self, n: usize) {
+        self.at += n;
+        if self.at == self.slices[self.k].len() {
+            (self.k, self.at) = (self.k + 1, 0);
+        }
+    }
+}
+
+impl<R: Source> bincode::de::read::Reader for Bounded<R> {
     fn read(&mut self, bytes: &mut [u8]) -> Result<(), bincode::error::DecodeError> {
         if bytes.len() > self.left {
             return Err(bincode::error::DecodeError::UnexpectedEnd {
@@ -971,6 +1107,18 @@ impl<R: std::io::Read> bincode::de::read::Reader for Bounded<R> {
             })?;
         self.left -= bytes.len();
         Ok(())
+    }
+
+    fn peek_read(&mut self, n: usize) -> Option<&[u8]> {
+        if n > self.left {
+            return None;
+        }
+        self.inner.peek(n)
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.inner.skip(n);
+        self.left -= n;
     }
 }
 
@@ -1017,7 +1165,7 @@ mod tests {
             unreachable!()
         };
         for field in [w, f] {
-            field.data = Values::lent(Box::new(values::TestBlock(field.data.to_vec())));
+            field.data = Values::lent(Box::new(field.data.to_vec()));
         }
         let Payload::BoundaryState { w, f, .. } = &lent.payload else {
             unreachable!()
@@ -1040,6 +1188,61 @@ mod tests {
         }
         assert_eq!(joined, encode(&plain));
         assert_eq!(encode(&lent), encode(&plain), "a lent field encodes as an owned one");
+    }
+
+    /// A hold source over one block of values.
+    struct OneBlock(Arc<Vec<f64>>);
+
+    impl HoldSource for OneBlock {
+        fn hold(&self, at: usize, len: usize) -> Option<Box<dyn HeldBlock>> {
+            (at == self.0.as_ptr() as usize && len == 8 * self.0.len())
+                .then(|| Box::new(self.0.clone()) as Box<dyn HeldBlock>)
+        }
+    }
+
+    /// Decoding a payload from its slices reads a field whose values are exactly a block of the
+    /// hold source in place and copies the others; the message and the refusals are those of
+    /// [`decode`].
+    #[test]
+    fn a_field_that_is_a_held_block_is_read_in_place() {
+        let m = msg();
+        let Payload::BoundaryState { w, .. } = &m.payload else {
+            unreachable!()
+        };
+        let block = Arc::new(w.data.to_vec());
+        let bytes = encode(&m);
+        let w_bytes: &[u8] = bytemuck::cast_slice(&block[..]);
+        let at = bytes
+            .windows(w_bytes.len())
+            .position(|x| x == w_bytes)
+            .expect("w's values");
+        let end = at + w_bytes.len();
+        let slices = [&bytes[..at], w_bytes, &bytes[end..]];
+        let holding = || DecodeBuffers::default().holding(Arc::new(OneBlock(block.clone())));
+        let got = decode_from_slices(slices, bytes.len(), &expected(), holding()).unwrap();
+        assert_eq!(got, m);
+        let Payload::BoundaryState { w, f, .. } = &got.payload else {
+            unreachable!()
+        };
+        assert!(w.data.is_held() && w.data.as_ptr() == block.as_ptr(), "w read in place");
+        assert!(!f.data.is_held(), "f is no block of the source");
+        // Without a hold source, or from other slices, the values are copied.
+        let copied = decode_from_slices(slices, bytes.len(), &expected(), DecodeBuffers::default()).unwrap();
+        copied.payload.fields(|f| assert!(!f.data.is_held()));
+        let other = bytes[at..end].to_vec();
+        let apart = decode_from_slices(
+            [&bytes[..at], &other, &bytes[end..]],
+            bytes.len(),
+            &expected(),
+            holding(),
+        );
+        apart.unwrap().payload.fields(|f| assert!(!f.data.is_held()));
+        // Cut short after the block: refused as decode refuses it.
+        let short = [&bytes[..at], w_bytes, &bytes[end..bytes.len() - 1]];
+        assert_eq!(
+            decode_from_slices(short, bytes.len() - 1, &expected(), holding()).unwrap_err(),
+            decode(&bytes[..bytes.len() - 1], &expected()).unwrap_err()
+        );
     }
 
     #[test]

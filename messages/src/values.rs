@@ -16,6 +16,12 @@ pub trait ValueBlock: Send + Sync {
     fn into_any(self: Box<Self>) -> Box<dyn Any>;
 }
 
+/// Memory a field's values were received in and are read from where they lie (e.g. a block of
+/// the sender's shared-memory pool), held as long as the field is.
+pub trait HeldBlock: Send + Sync {
+    fn values(&self) -> &[f64];
+}
+
 /// Lends [`ValueBlock`]s: a node's fields are written straight into them.
 pub trait BlockLender: Send + Sync {
     /// A block of exactly `len` values, or None (no room; the field then takes a vector).
@@ -30,6 +36,8 @@ pub struct Values(Repr);
 enum Repr {
     Owned(Vec<f64>),
     Lent(Box<dyn ValueBlock>),
+    /// Read only: a write first copies the values into a vector ([`Values::vec_mut`]).
+    Held(Box<dyn HeldBlock>),
 }
 
 impl Default for Repr {
@@ -44,28 +52,37 @@ impl Values {
         Self(Repr::Lent(block))
     }
 
+    /// Values read where they were received.
+    pub fn held(block: Box<dyn HeldBlock>) -> Self {
+        Self(Repr::Held(block))
+    }
+
     pub fn is_lent(&self) -> bool {
         matches!(self.0, Repr::Lent(_))
     }
 
-    /// The vector holding the values, to resize them or hand them to a pool: a lent block's
-    /// values are first copied into one.
+    pub fn is_held(&self) -> bool {
+        matches!(self.0, Repr::Held(_))
+    }
+
+    /// The vector holding the values, to resize them or hand them to a pool: a lent or held
+    /// block's values are first copied into one.
     pub fn vec_mut(&mut self) -> &mut Vec<f64> {
-        if let Repr::Lent(b) = &self.0 {
-            self.0 = Repr::Owned(b.values().to_vec());
+        if !matches!(self.0, Repr::Owned(_)) {
+            self.0 = Repr::Owned(self.to_vec());
         }
         match &mut self.0 {
             Repr::Owned(v) => v,
-            Repr::Lent(_) => unreachable!("copied into a vector above"),
+            _ => unreachable!("copied into a vector above"),
         }
     }
 
-    /// The vector holding the values, or None for a lent block (which goes back to its lender
-    /// when dropped, not to a pool).
+    /// The vector holding the values, or None for a lent or held block (which goes back to
+    /// its lender, or is released to its sender, when dropped, not to a pool).
     pub fn into_vec(self) -> Option<Vec<f64>> {
         match self.0 {
             Repr::Owned(v) => Some(v),
-            Repr::Lent(_) => None,
+            Repr::Lent(_) | Repr::Held(_) => None,
         }
     }
 
@@ -107,15 +124,21 @@ impl Deref for Values {
         match &self.0 {
             Repr::Owned(v) => v,
             Repr::Lent(b) => b.values(),
+            Repr::Held(b) => b.values(),
         }
     }
 }
 
 impl DerefMut for Values {
+    /// Held values are first copied into a vector of their own.
     fn deref_mut(&mut self) -> &mut [f64] {
+        if let Repr::Held(_) = self.0 {
+            return self.vec_mut();
+        }
         match &mut self.0 {
             Repr::Owned(v) => v,
             Repr::Lent(b) => b.values_mut(),
+            Repr::Held(_) => unreachable!("copied above"),
         }
     }
 }
@@ -163,19 +186,22 @@ impl<'de> Deserialize<'de> for Values {
     }
 }
 
-/// A lent block in a vector of its own, for tests.
-#[cfg(test)]
-pub(crate) struct TestBlock(pub Vec<f64>);
-
-#[cfg(test)]
-impl ValueBlock for TestBlock {
+/// A block in a vector of its own (e.g. a lender in a test, or one without shared memory).
+impl ValueBlock for Vec<f64> {
     fn values(&self) -> &[f64] {
-        &self.0
+        self
     }
     fn values_mut(&mut self) -> &mut [f64] {
-        &mut self.0
+        self
     }
     fn into_any(self: Box<Self>) -> Box<dyn Any> {
+        self
+    }
+}
+
+/// Values held in a shared vector.
+impl HeldBlock for std::sync::Arc<Vec<f64>> {
+    fn values(&self) -> &[f64] {
         self
     }
 }
@@ -186,7 +212,7 @@ mod tests {
 
     #[test]
     fn lent_values_read_write_compare_and_copy_like_owned_ones() {
-        let mut lent = Values::lent(Box::new(TestBlock(vec![7.0; 3])));
+        let mut lent = Values::lent(Box::new(vec![7.0; 3]));
         lent.copy_from_slice(&[1.0, 2.0, 3.0]);
         let owned = Values::from(vec![1.0, 2.0, 3.0]);
         assert!(lent.is_lent() && !owned.is_lent());
@@ -198,15 +224,29 @@ mod tests {
         // A lent block is not a pool's: into_vec refuses it; take_block hands it back.
         let mut taken = lent.clone();
         assert!(taken.take_block().is_none() && taken.len() == 3);
-        let mut lent2 = Values::lent(Box::new(TestBlock(vec![4.0])));
+        let mut lent2 = Values::lent(Box::new(vec![4.0]));
         let block = lent2.take_block().expect("a lent block");
         assert_eq!(block.values(), &[4.0]);
         assert!(lent2.is_empty() && !lent2.is_lent());
-        assert!(Values::lent(Box::new(TestBlock(vec![1.0]))).into_vec().is_none());
+        assert!(Values::lent(Box::new(vec![1.0])).into_vec().is_none());
         // vec_mut copies a lent block into a vector first.
-        let mut grown = Values::lent(Box::new(TestBlock(vec![5.0])));
+        let mut grown = Values::lent(Box::new(vec![5.0]));
         grown.vec_mut().push(6.0);
         assert!(!grown.is_lent());
         assert_eq!(grown, vec![5.0, 6.0]);
+    }
+
+    /// Held values read like owned ones; a write copies them into a vector of their own first.
+    #[test]
+    fn held_values_are_read_in_place_and_copied_on_write() {
+        let mut held = Values::held(Box::new(std::sync::Arc::new(vec![1.0, 2.0])));
+        assert!(held.is_held() && held == vec![1.0, 2.0]);
+        let at = held.as_ptr();
+        held[1] = 3.0;
+        assert!(!held.is_held() && held.as_ptr() != at);
+        assert_eq!(held, vec![1.0, 3.0]);
+        assert!(Values::held(Box::new(std::sync::Arc::new(vec![1.0])))
+            .into_vec()
+            .is_none());
     }
 }

@@ -9,8 +9,9 @@
 //! serde's form through bincode, the wire form of the recordings.
 
 use glissade_messages::{
-    decode, decode_from_reader, encode, BufferPool, Decision, DecodeBuffers, Envelope, Expected, Field,
-    InterfaceIndicators, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict, SCHEMA_VERSION,
+    decode, decode_from_reader, decode_from_slices, encode, encode_pieces, BufferPool, Decision, DecodeBuffers,
+    Envelope, Expected, Field, HeldBlock, HoldSource, InterfaceIndicators, InterfaceSolution, Message, NodeId, Payload,
+    Piece, Role, Stage, Values, Verdict, SCHEMA_VERSION,
 };
 use proptest::prelude::*;
 use std::sync::{Arc, Mutex};
@@ -303,8 +304,79 @@ thread_local! {
     static POOL: Arc<Mutex<BufferPool>> = Arc::new(Mutex::new(BufferPool::default()));
 }
 
+/// Where the values of `m`'s non-empty fields lie in its encoding (start, end), as a sender that
+/// wrote them into blocks of their own sends them ([`encode_pieces`]).
+fn value_blocks(m: &Message) -> Vec<(usize, usize)> {
+    let mut lent = m.clone();
+    lent.payload
+        .fields_mut(|f| f.data = Values::lent(Box::new(f.data.to_vec())));
+    let mut sizes = std::collections::HashMap::new();
+    lent.payload.fields(|f| {
+        sizes.insert(f.data.as_ptr() as usize, 8 * f.data.len());
+    });
+    let (mut at, mut blocks) = (0, Vec::new());
+    for piece in encode_pieces(&lent) {
+        match piece {
+            Piece::Bytes(b) => at += b.len(),
+            Piece::Block(addr) => {
+                blocks.push((at, at + sizes[&addr]));
+                at += sizes[&addr];
+            }
+        }
+    }
+    blocks
+}
+
+/// Holds the blocks it was given (values in vectors of their own).
+struct Blocks(Vec<Arc<Vec<f64>>>);
+
+impl HoldSource for Blocks {
+    fn hold(&self, at: usize, len: usize) -> Option<Box<dyn HeldBlock>> {
+        let b = self
+            .0
+            .iter()
+            .find(|b| b.as_ptr() as usize == at && 8 * b.len() == len)?;
+        Some(Box::new(b.clone()))
+    }
+}
+
+/// `bytes` decoded from slices cut at `blocks` (start, end), those slices being blocks a field
+/// may hold (when they are a whole number of values).
+fn decode_held(bytes: &[u8], blocks: &[(usize, usize)]) -> Result<Message, glissade_messages::DecodeError> {
+    let n = bytes.len();
+    let (mut held, mut cuts, mut last) = (Vec::new(), Vec::new(), 0);
+    for &(a, b) in blocks {
+        let (a, b) = (a.clamp(last, n), b.clamp(last, n));
+        cuts.push((last, a, false));
+        let whole = (b - a) % 8 == 0;
+        if whole {
+            held.push(Arc::new(
+                bytes[a..b]
+                    .chunks_exact(8)
+                    .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+                    .collect::<Vec<f64>>(),
+            ));
+        }
+        cuts.push((a, b, whole));
+        last = b;
+    }
+    cuts.push((last, n, false));
+    let mut blocks_held = held.iter();
+    let slices: Vec<&[u8]> = cuts
+        .iter()
+        .map(|&(a, b, whole)| match whole {
+            true => bytemuck::cast_slice(&blocks_held.next().unwrap()[..]),
+            false => &bytes[a..b],
+        })
+        .collect();
+    let holding = DecodeBuffers::default().holding(Arc::new(Blocks(held.clone())));
+    decode_from_slices(slices, n, &expected(), holding)
+}
+
 /// Decoding `bytes` does not panic, and an accepted message is exactly what the bytes encode.
-fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
+/// `blocks` (start, end): where the undamaged message's field values lay; read from slices cut
+/// there, with those slices as blocks a field may hold, it takes and refuses what `decode` does.
+fn check(bytes: &[u8], blocks: &[(usize, usize)]) -> Result<(), TestCaseError> {
     // Decoding into buffers of earlier cases' messages (with their old values), as a node
     // process does, takes and refuses what decoding into new buffers does, with the same error.
     let sliced = decode(bytes, &expected());
@@ -316,6 +388,11 @@ fn check(bytes: &[u8]) -> Result<(), TestCaseError> {
         }
         (Err(a), Err(b)) => prop_assert_eq!(a, &b),
         (a, b) => prop_assert!(false, "new buffers: {:?}; pooled buffers: {:?}", a, b),
+    }
+    match (&sliced, decode_held(bytes, blocks)) {
+        (Ok(a), Ok(b)) => prop_assert_eq!(encode(a), encode(&b)),
+        (Err(a), Err(b)) => prop_assert_eq!(a, &b),
+        (a, b) => prop_assert!(false, "one buffer: {:?}; slices with held blocks: {:?}", a, b),
     }
     if let Ok(m) = sliced {
         prop_assert_eq!(&m.envelope.run_id, RUN);
@@ -346,7 +423,14 @@ proptest! {
         // The undamaged message round-trips (NaN payloads compare by bytes, not by value).
         let back = decode(&bytes, &expected()).expect("a valid message decodes");
         prop_assert_eq!(encode(&back), bytes.clone());
-        check(&apply(bytes, &encode(&other), &d))?;
+        // Read from its blocks, every non-empty field is held, not copied.
+        let blocks = value_blocks(&m);
+        let held = decode_held(&bytes, &blocks).expect("a valid message decodes from its blocks");
+        let mut copied = 0;
+        held.payload.fields(|f| copied += usize::from(!f.data.is_empty() && !f.data.is_held()));
+        prop_assert_eq!(copied, 0);
+        prop_assert_eq!(encode(&held), bytes.clone());
+        check(&apply(bytes, &encode(&other), &d), &blocks)?;
     }
 }
 
@@ -374,6 +458,6 @@ proptest! {
             bytes.extend_from_slice(&env[..env.len() - 12]);
         }
         bytes.extend_from_slice(&tail);
-        check(&bytes)?;
+        check(&bytes, &[])?;
     }
 }

@@ -239,27 +239,13 @@ mod tests {
     /// Lends blocks in vectors of their own, as long as it has some left.
     struct Lender(std::sync::Mutex<usize>);
 
-    struct Block(Vec<f64>);
-
-    impl glissade_messages::ValueBlock for Block {
-        fn values(&self) -> &[f64] {
-            &self.0
-        }
-        fn values_mut(&mut self) -> &mut [f64] {
-            &mut self.0
-        }
-        fn into_any(self: Box<Self>) -> Box<dyn std::any::Any> {
-            self
-        }
-    }
-
     impl BlockLender for Lender {
         fn lend(&self, len: usize) -> Option<Box<dyn glissade_messages::ValueBlock>> {
             let mut left = self.0.lock().unwrap();
             // Whatever the memory held: the pool must overwrite or zero all of it.
             (*left > 0).then(|| {
                 *left -= 1;
-                Box::new(Block(vec![f64::NAN; len])) as Box<dyn glissade_messages::ValueBlock>
+                Box::new(vec![f64::NAN; len]) as Box<dyn glissade_messages::ValueBlock>
             })
         }
     }

@@ -29,7 +29,7 @@
 
 use glissade_bus::{Node, NodeError};
 use glissade_messages::{
-    decode, decode_from_reader, encode, BlockLender, BufferPool, DecodeBuffers, DecodeError, Expected, Message, Piece,
+    decode, decode_from_slices, encode, BlockLender, BufferPool, DecodeBuffers, DecodeError, Expected, Message, Piece,
     ValueBlock,
 };
 use rayon::prelude::*;
@@ -557,7 +557,7 @@ impl Received {
         tail.reverse();
         Self {
             hash: hash_parts(&key, len, &head, &tail),
-            message: decode_from_reader(payload.reader(), len, expected, buffers),
+            message: decode_from_slices(slices, len, expected, buffers),
             key,
         }
     }
@@ -573,6 +573,58 @@ pub fn hash_and_decode(
 ) -> (u64, Result<Message, DecodeError>) {
     let r = Received::from_payload(key.to_string(), payload, expected, DecodeBuffers::default());
     (r.hash, r.message)
+}
+
+/// The blocks of a received payload that its fields may be read from in place: its slices of
+/// [`PayloadBlocks::MIN`] bytes or more, 8-byte aligned. Over a link a large message arrives in
+/// fragments smaller than that; such slices are the shared-memory blocks a sender wrote its
+/// fields into ([`publish_lent`]). A field that keeps one holds the sender's block until the
+/// field is dropped (once its node has handled the message).
+struct PayloadBlocks {
+    payload: zenoh::bytes::ZBytes,
+    /// Address, length and index of each block among the payload's slices.
+    blocks: Vec<(usize, usize, usize)>,
+}
+
+impl PayloadBlocks {
+    /// Larger than any batch of a link (64 KiB at most).
+    const MIN: usize = 1 << 16;
+
+    fn of(payload: &zenoh::bytes::ZBytes) -> Option<Self> {
+        let blocks: Vec<_> = payload
+            .slices()
+            .enumerate()
+            .filter(|(_, s)| s.len() >= Self::MIN && (s.as_ptr() as usize).is_multiple_of(8))
+            .map(|(k, s)| (s.as_ptr() as usize, s.len(), k))
+            .collect();
+        (!blocks.is_empty()).then(|| Self {
+            payload: payload.clone(),
+            blocks,
+        })
+    }
+}
+
+impl glissade_messages::HoldSource for PayloadBlocks {
+    fn hold(&self, at: usize, len: usize) -> Option<Box<dyn glissade_messages::HeldBlock>> {
+        let &(_, _, k) = self.blocks.iter().find(|&&(a, n, _)| a == at && n == len)?;
+        Some(Box::new(HeldSlice {
+            payload: self.payload.clone(),
+            k,
+        }))
+    }
+}
+
+/// A field's values read in place: slice `k` of a received payload (kept alive by it).
+struct HeldSlice {
+    payload: zenoh::bytes::ZBytes,
+    k: usize,
+}
+
+impl glissade_messages::HeldBlock for HeldSlice {
+    fn values(&self) -> &[f64] {
+        // Checked aligned and of a whole number of values when the block was taken.
+        bytemuck::cast_slice(self.payload.slices().nth(self.k).expect("the payload's slice"))
+    }
 }
 
 /// Messages in arrival order, cut into batches in which none repeats another (by hash): a repeat
@@ -642,11 +694,13 @@ pub fn run_nodes(
             .declare_subscriber(key.as_str())
             .callback(move |sample| {
                 let key = sample.key_expr().as_str().to_string();
+                let payload = sample.payload();
+                let buffers = match PayloadBlocks::of(payload) {
+                    Some(blocks) => pooled.clone().holding(Arc::new(blocks)),
+                    None => pooled.clone(),
+                };
                 let _ = tx.send(Event::Data(Box::new(Received::from_payload(
-                    key,
-                    sample.payload(),
-                    &expected,
-                    pooled.clone(),
+                    key, payload, &expected, buffers,
                 ))));
             })
             .wait()
@@ -1314,7 +1368,8 @@ mod tests {
     /// Fields a node wrote into blocks the shared-memory lender lent are sent as those blocks:
     /// they reach another process's session as slices of exactly their size (over the link a
     /// multi-MB message arrives in fragments of at most 64 KiB), the bytes are those of the
-    /// message's encoding, and the sender's message no longer holds them. Blocks come from pools
+    /// message's encoding, the receiver's decoding reads the fields in place (held), and the
+    /// sender's message no longer holds them. Blocks come from pools
     /// of the lender's own once the session's pool is full; a session without shared memory has
     /// no lender.
     #[test]
@@ -1356,8 +1411,17 @@ mod tests {
         let _sub = b
             .declare_subscriber(expected.topic())
             .callback(move |s| {
-                let sizes: Vec<usize> = s.payload().slices().map(|x| x.len()).collect();
-                let _ = tx.send((sizes, s.payload().to_bytes().into_owned()));
+                let payload = s.payload();
+                let sizes: Vec<usize> = payload.slices().map(|x| x.len()).collect();
+                // As a node process decodes it: its fields read in place.
+                let exp = Expected {
+                    run_id: "shm".into(),
+                    scene_fingerprint: 1,
+                };
+                let blocks = PayloadBlocks::of(payload).expect("blocks in the payload");
+                let buffers = DecodeBuffers::default().holding(Arc::new(blocks));
+                let held = Received::from_payload(s.key_expr().to_string(), payload, &exp, buffers).message;
+                let _ = tx.send((sizes, payload.to_bytes().into_owned(), held));
             })
             .wait()
             .unwrap();
@@ -1365,7 +1429,7 @@ mod tests {
         publish_lent(&a, &mut msg).unwrap();
         msg.payload
             .fields(|f| assert!(f.data.is_empty() && !f.data.is_lent(), "the blocks were sent"));
-        let (sizes, bytes) = rx.recv_timeout(Duration::from_secs(20)).expect("the message arrived");
+        let (sizes, bytes, held) = rx.recv_timeout(Duration::from_secs(20)).expect("the message arrived");
         let block = rows * cols * 8;
         assert_eq!(sizes.iter().filter(|&&n| n == block).count(), 2, "slices {sizes:?}");
         assert_eq!(bytes, encode(&expected));
@@ -1374,6 +1438,10 @@ mod tests {
             scene_fingerprint: 1,
         };
         assert_eq!(decode(&bytes, &exp).unwrap(), expected);
+        let held = held.unwrap();
+        held.payload
+            .fields(|f| assert!(f.data.is_held(), "a field copied out of its block"));
+        assert_eq!(held, expected);
         drop((plain, router));
     }
 
