@@ -407,6 +407,9 @@ impl ValueBlock for ShmBlock {
 pub struct ShmLender {
     session: Session,
     pools: Mutex<Vec<ShmPool>>,
+    /// Blocks lent, and requests refused.
+    lent: std::sync::atomic::AtomicUsize,
+    refused: std::sync::atomic::AtomicUsize,
 }
 
 type ShmPool = zenoh::shm::ShmProvider<zenoh::shm::PosixShmProviderBackend>;
@@ -422,7 +425,26 @@ impl ShmLender {
         (!matches!(session.get_shm_provider(), zenoh::shm::ShmProviderState::Disabled)).then(|| Self {
             session: session.clone(),
             pools: Mutex::new(Vec::new()),
+            lent: Default::default(),
+            refused: Default::default(),
         })
+    }
+
+    /// Blocks lent so far, and requests refused (no room).
+    pub fn counts(&self) -> (usize, usize) {
+        use std::sync::atomic::Ordering::Relaxed;
+        (self.lent.load(Relaxed), self.refused.load(Relaxed))
+    }
+
+    /// Whether `/dev/shm` (where the pools' segments live) has room for twice a pool of `size`
+    /// bytes: a pool's pages are claimed as they are first written, and a write that finds the
+    /// file system full kills the process (SIGBUS), so a pool is added only with room to spare.
+    fn room_for_a_pool(size: usize) -> bool {
+        let path = c"/dev/shm";
+        let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+        // SAFETY: `path` is a NUL-terminated string and `st` a statvfs to fill.
+        let ok = unsafe { libc::statvfs(path.as_ptr(), &mut st) } == 0;
+        ok && (st.f_bavail as u128) * (st.f_frsize as u128) >= 2 * size as u128
     }
 }
 
@@ -439,19 +461,22 @@ impl BlockLender for ShmLender {
         if buffer.is_none() {
             let mut pools = self.pools.lock().unwrap_or_else(|e| e.into_inner());
             buffer = pools.iter().find_map(take);
-            if buffer.is_none() && pools.len() < Self::POOLS {
-                let pool = ShmProviderBuilder::default_backend(Self::POOL_BYTES.max(bytes))
-                    .wait()
-                    .ok()?;
-                buffer = pool.alloc(bytes).wait().ok();
-                pools.push(pool);
+            let size = Self::POOL_BYTES.max(bytes);
+            if buffer.is_none() && pools.len() < Self::POOLS && Self::room_for_a_pool(size) {
+                if let Ok(pool) = ShmProviderBuilder::default_backend(size).wait() {
+                    buffer = pool.alloc(bytes).wait().ok();
+                    pools.push(pool);
+                }
             }
         }
-        let buffer = buffer?;
         // The pools' layouts are byte-aligned, but their allocator hands out 8-byte aligned
         // blocks: checked here, since a field's values are read in place as f64.
-        (buffer.len() == bytes && (buffer.as_ptr() as usize).is_multiple_of(8))
-            .then(|| Box::new(ShmBlock(buffer)) as Box<dyn ValueBlock>)
+        let block = buffer
+            .filter(|b| b.len() == bytes && (b.as_ptr() as usize).is_multiple_of(8))
+            .map(|b| Box::new(ShmBlock(b)) as Box<dyn ValueBlock>);
+        let counter = if block.is_some() { &self.lent } else { &self.refused };
+        counter.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        block
     }
 }
 
@@ -732,8 +757,9 @@ pub fn run_nodes(
     // Messages already handled (a replacement process re-sends outputs its predecessor may have
     // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
     // With shared memory, the nodes write their large fields straight into the pool's blocks.
-    if let Some(lender) = ShmLender::new(session) {
-        let lender: Arc<dyn BlockLender> = Arc::new(lender);
+    let lender = ShmLender::new(session).map(Arc::new);
+    if let Some(lender) = &lender {
+        let lender: Arc<dyn BlockLender> = lender.clone();
         nodes.iter_mut().for_each(|n| n.lend_fields(lender.clone()));
     }
     let mut seen: HashSet<u64> = HashSet::new();
@@ -1029,6 +1055,13 @@ pub fn run_nodes(
                 break;
             }
         }
+    }
+    if let Some((lent, refused)) = lender.map(|l| l.counts()).filter(|&(_, refused)| refused > 0) {
+        log(&format!(
+            "shared memory: {refused} of {} large fields found no room in the pools and were copied \
+             into memory of their own (more room in /dev/shm would make them faster)",
+            lent + refused
+        ));
     }
     Ok(())
 }
@@ -1376,7 +1409,8 @@ mod tests {
     fn lent_fields_are_sent_as_their_shared_memory_blocks() {
         let [router, a, b, plain] = shm_sessions();
         assert!(ShmLender::new(&plain).is_none());
-        let lender: Arc<dyn BlockLender> = Arc::new(ShmLender::new(&a).expect("shared memory is on"));
+        let shm_lender = Arc::new(ShmLender::new(&a).expect("shared memory is on"));
+        let lender: Arc<dyn BlockLender> = shm_lender.clone();
         // As in a run, the session's own pool is ready (set up on first use, in the background).
         let deadline = Instant::now() + Duration::from_secs(20);
         while encode_shared(&a, &boundary_state("shm", 1, 300, 30)).is_none() {
@@ -1386,7 +1420,11 @@ mod tests {
         // Blocks for more than the session's 16 MiB pool at once: 3 × 12 MiB.
         let big: Vec<_> = (0..3).map(|_| lender.lend(3 << 19).expect("a block")).collect();
         assert!(big.iter().all(|b| b.values().len() == 3 << 19));
+        assert_eq!(shm_lender.counts(), (3, 0));
         drop(big);
+        // A pool is added only with room for two in /dev/shm.
+        assert!(ShmLender::room_for_a_pool(ShmLender::POOL_BYTES));
+        assert!(!ShmLender::room_for_a_pool(1 << 60));
 
         let (rows, cols) = (300, 1001);
         let expected = boundary_state("shm", 1, rows, cols);
