@@ -337,6 +337,50 @@ fn shared_memory_processes_match_in_process_bit_for_bit() {
     assert_eq!(local.displacements, remote.displacements);
 }
 
+/// With shared memory, `glissade run` as processes has its nodes write their large fields
+/// (at N = 30, most boundary fields are 64–81 kB; the macro data are far smaller) into
+/// shared-memory blocks and send those: every node process that sends such fields says so at
+/// the end, with none copied for lack of room.
+#[test]
+fn with_shared_memory_large_fields_are_sent_without_a_copy() {
+    let dir = crate::common::scratch("lent-fields");
+    let scene_file = dir.join("stratified.toml");
+    let text = scene_text("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";
+    std::fs::write(&scene_file, text).expect("scene file");
+    let output = std::process::Command::new(exe())
+        .args(["run", "--quiet", "--out"])
+        .arg(dir.join("out"))
+        .arg(&scene_file)
+        .output()
+        .expect("spawn glissade");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let written = |node: &str| -> Vec<(u64, u64)> {
+        stderr
+            .lines()
+            .filter_map(|l| l.strip_prefix(&format!("[{node}")))
+            .filter_map(|l| l.split_once("] shared memory: ").map(|(_, rest)| rest))
+            .map(|rest| {
+                let n: Vec<u64> = rest.split(' ').filter_map(|w| w.parse().ok()).collect();
+                (n[0], n[1])
+            })
+            .collect()
+    };
+    for node in ["interface", "subdomain"] {
+        let counts = written(node);
+        assert!(
+            !counts.is_empty(),
+            "no {node} process reported on shared memory:\n{stderr}"
+        );
+        for (lent, refused) in counts {
+            assert!(
+                lent > 0 && refused == 0,
+                "{node}: {lent} written in place, {refused} copied"
+            );
+        }
+    }
+}
+
 /// Two runs of the same scene share one Zenoh router (a stand-in for `zenohd`, the launchers
 /// connect to it as clients) while a third session publishes messages of another run on the
 /// first run's own keys: a stop decision, boundary states, local directions, and a decision of

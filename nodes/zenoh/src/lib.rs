@@ -1056,11 +1056,15 @@ pub fn run_nodes(
             }
         }
     }
-    if let Some((lent, refused)) = lender.map(|l| l.counts()).filter(|&(_, refused)| refused > 0) {
+    if let Some((lent, refused)) = lender.map(|l| l.counts()).filter(|&(lent, refused)| lent + refused > 0) {
         log(&format!(
-            "shared memory: {refused} of {} large fields found no room in the pools and were copied \
-             into memory of their own (more room in /dev/shm would make them faster)",
-            lent + refused
+            "shared memory: {lent} large field(s) written in place and sent without a copy, {refused} copied \
+             for lack of room{}",
+            if refused > 0 {
+                " (more room in /dev/shm would make them faster)"
+            } else {
+                ""
+            }
         ));
     }
     Ok(())
