@@ -378,7 +378,7 @@ pub fn publish_lent(session: &Session, msg: &mut Message) -> Result<(), Transpor
     put_bytes(session, &key, out.finish())
 }
 
-/// A block of the session's shared-memory pool holding a field's values ([`ShmLender`]).
+/// A block of a shared-memory pool holding a field's values ([`ShmLender`]).
 struct ShmBlock(zenoh::shm::ZShmMut);
 
 impl ValueBlock for ShmBlock {
@@ -754,14 +754,14 @@ pub fn run_nodes(
         .wait()
         .map_err(|e| zerr("liveliness token", e))?;
 
-    // Messages already handled (a replacement process re-sends outputs its predecessor may have
-    // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
-    // With shared memory, the nodes write their large fields straight into the pool's blocks.
+    // With shared memory, the nodes write their large fields straight into the pools' blocks.
     let lender = ShmLender::new(session).map(Arc::new);
     if let Some(lender) = &lender {
         let lender: Arc<dyn BlockLender> = lender.clone();
         nodes.iter_mut().for_each(|n| n.lend_fields(lender.clone()));
     }
+    // Messages already handled (a replacement process re-sends outputs its predecessor may have
+    // sent: a repeat is dropped), and, when resuming, this process's outputs already on the bus.
     let mut seen: HashSet<u64> = HashSet::new();
     let mut published: HashSet<u64> = HashSet::new();
     // A batch of messages, as they arrived, none a repeat of another ([`batches`]): each node
