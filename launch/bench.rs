@@ -511,7 +511,7 @@ pub fn compare_processes(
         for (t, shm) in times.iter_mut().zip([false, true]) {
             give_back_freed_memory();
             let mut sc = scene.clone();
-            sc.network.shared_memory = shm;
+            sc.network.shared_memory = Some(shm);
             let (r, _) = run_distributed(&sc, &opts(run_id()?), exe, &Network::default(), |_| {})?;
             *t = same_run(if shm { "through shared memory" } else { "over TCP" }, r)?;
         }

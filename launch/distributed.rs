@@ -243,6 +243,43 @@ fn local_endpoint(listen: &str) -> String {
     listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 }
 
+/// Least room in `/dev/shm` for the launcher to choose shared memory: the processes' 16 MiB
+/// pools and the lenders' pools of a run of the stratified scene at N = 1000, with room to spare.
+pub const SHARED_MEMORY_ROOM: u64 = 512 << 20;
+
+/// Whether a run whose scene leaves `network.shared_memory` unset passes its fields through
+/// shared memory: Ok(why) when node restarts are off for it anyway (they need fields that do not
+/// go through shared memory: see [`run_distributed`]), the bus is not encrypted (with TLS, fields
+/// stay on the encrypted link) and `/dev/shm` has [`SHARED_MEMORY_ROOM`] free (`room`, None if it
+/// cannot be read); Err(why not) otherwise.
+pub fn auto_shared_memory(scene: &LoadedScene, recorded: bool, room: Option<u64>) -> Result<String, String> {
+    let restarts_off = if scene.deployment.restarts == 0 {
+        Some("deployment.restarts = 0".to_string())
+    } else if !recorded {
+        Some("the run is not recorded".to_string())
+    } else {
+        scene.recording.incomplete()
+    };
+    let Some(restarts_off) = restarts_off else {
+        return Err("node restarts are on: they need fields that do not go through shared memory".into());
+    };
+    if scene.network.tls.is_some() {
+        return Err("network.tls: fields stay on the encrypted link".into());
+    }
+    match room {
+        Some(room) if room >= SHARED_MEMORY_ROOM => Ok(format!(
+            "network.shared_memory unset: node restarts are off ({restarts_off}) and /dev/shm has {} MiB free",
+            room >> 20
+        )),
+        Some(room) => Err(format!(
+            "/dev/shm has {} MiB free, less than {} MiB",
+            room >> 20,
+            SHARED_MEMORY_ROOM >> 20
+        )),
+        None => Err("no /dev/shm".into()),
+    }
+}
+
 /// Forwards a child's output lines to stderr with a `[prefix]`, keeping its last 10 lines in `last`.
 pub(crate) fn forward(
     prefix: String,
@@ -527,15 +564,26 @@ pub fn run_distributed_observed(
             );
         }
     }
+    let shared_memory = match scene.network.shared_memory {
+        Some(on) => on,
+        None => {
+            let auto = auto_shared_memory(scene, net.recording.is_some(), transport::shared_memory_room());
+            if let Ok(why) = &auto {
+                eprintln!("fields through shared memory ({why})");
+            }
+            auto.is_ok()
+        }
+    };
     let bus_config = |mode: &str, listen: &[String], connect: &[String]| {
         let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), access.as_ref())
             .context("the bus (the scene's [network] section, --listen, --connect)")?;
-        transport::set_shared_memory(&mut c, scene.network.shared_memory)?;
+        transport::set_shared_memory(&mut c, shared_memory)?;
         anyhow::Ok(c)
     };
-    // How every process joins the bus: TLS, and shared memory when the scene asks for it (only
-    // between processes on one machine; across machines Zenoh uses the link).
-    let shared_memory_arg = scene.network.shared_memory.then(|| "--shared-memory".to_string());
+    // How every process joins the bus: TLS, and shared memory when the scene asks for it or the
+    // launcher chose it (only between processes on one machine; across machines Zenoh uses the
+    // link).
+    let shared_memory_arg = shared_memory.then(|| "--shared-memory".to_string());
     let mut node_tls = match &scene.network.tls {
         Some(t) => tls_args(&t.root_ca, t.mutual.then_some((&*t.cert, &*t.key))),
         None => Vec::new(),
@@ -608,7 +656,7 @@ pub fn run_distributed_observed(
     let no_resume = match &net.recording {
         None => Some("the run is not recorded".to_string()),
         Some(_) => scene.recording.incomplete().or_else(|| {
-            scene.network.shared_memory.then(|| {
+            shared_memory.then(|| {
                 "network.shared_memory = true: a killed node's last messages may reach some nodes and not others"
                     .to_string()
             })

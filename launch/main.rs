@@ -182,7 +182,8 @@ struct NodeArgs {
     #[arg(long, value_name = "PEM", requires = "tls_cert")]
     tls_key: Option<PathBuf>,
     /// Exchange fields with processes on this machine through shared memory (the launcher passes
-    /// it when the scene says `network.shared_memory = true`).
+    /// it when the scene says `network.shared_memory = true`, or leaves it unset and node
+    /// restarts are off anyway).
     #[arg(long)]
     shared_memory: bool,
 }

@@ -324,7 +324,7 @@ fn stratified_over_three_subdomain_processes() {
 fn shared_memory_processes_match_in_process_bit_for_bit() {
     let text = scene_text("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";
     let sc = scene(&text);
-    assert!(sc.network.shared_memory);
+    assert_eq!(sc.network.shared_memory, Some(true));
     let opts = |run_id: &str| RunOptions {
         run_id: run_id.into(),
         interior: true,
@@ -335,6 +335,47 @@ fn shared_memory_processes_match_in_process_bit_for_bit() {
     assert_eq!(remote.displacements.len(), local.displacements.len());
     assert_identical(&local, &remote);
     assert_eq!(local.displacements, remote.displacements);
+}
+
+/// A scene that leaves `network.shared_memory` unset passes its fields through shared memory
+/// exactly when node restarts are off for the run anyway, the bus is not encrypted and
+/// `/dev/shm` has room.
+#[test]
+fn shared_memory_is_chosen_when_restarts_are_off_anyway() {
+    use glissade::distributed::{auto_shared_memory, SHARED_MEMORY_ROOM};
+    let room = Some(SHARED_MEMORY_ROOM);
+    // Full recording, restarts on by default: not chosen, unless the run is not recorded.
+    let full = scene(&scene_text("small-three-layer"));
+    assert_eq!(full.network.shared_memory, None);
+    assert!(full.deployment.restarts > 0 && full.recording.incomplete().is_none());
+    let why = auto_shared_memory(&full, true, room).unwrap_err();
+    assert!(why.contains("node restarts are on"), "{why}");
+    let why = auto_shared_memory(&full, false, room).unwrap();
+    assert!(why.contains("the run is not recorded"), "{why}");
+    let mut no_restarts = full.clone();
+    no_restarts.deployment.restarts = 0;
+    assert!(auto_shared_memory(&no_restarts, true, room)
+        .unwrap()
+        .contains("deployment.restarts = 0"));
+    // The stratified scene records full fields every 10th iteration only: chosen.
+    let thinned = scene(&scene_text("stratified"));
+    let why = auto_shared_memory(&thinned, true, room).unwrap();
+    assert!(why.contains("full_fields_every = 10"), "{why}");
+    // Not without room in /dev/shm, nor without /dev/shm.
+    let why = auto_shared_memory(&thinned, true, Some(SHARED_MEMORY_ROOM - 1)).unwrap_err();
+    assert!(why.contains("/dev/shm has"), "{why}");
+    assert!(auto_shared_memory(&thinned, true, None).is_err());
+    // Nor with TLS.
+    let mut tls = thinned.clone();
+    tls.network.tls = Some(glissade_mechanics::scene::TlsFiles {
+        root_ca: "ca.pem".into(),
+        cert: "node.pem".into(),
+        key: "node.key".into(),
+        mutual: true,
+    });
+    assert!(auto_shared_memory(&tls, true, room)
+        .unwrap_err()
+        .contains("network.tls"));
 }
 
 /// With shared memory, `glissade run` as processes has its nodes write their large fields

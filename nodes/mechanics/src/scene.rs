@@ -181,8 +181,9 @@ pub struct Network {
     /// every process the certificate authority vouches for (or any, without TLS).
     pub allow: Option<Vec<String>>,
     /// `network.shared_memory`: processes on one machine pass fields through shared memory
-    /// instead of loopback sockets (default false).
-    pub shared_memory: bool,
+    /// instead of loopback sockets; None (unset): the launcher decides (on when node restarts
+    /// are off anyway, see the launcher).
+    pub shared_memory: Option<bool>,
 }
 
 /// `network.tls`: PEM files, as written until [`Network::resolve_files`] makes them relative to
@@ -1283,7 +1284,7 @@ impl Ctx<'_> {
         Ok(Network {
             tls,
             allow: r.allow.clone(),
-            shared_memory: r.shared_memory.unwrap_or(false),
+            shared_memory: r.shared_memory,
         })
     }
 
@@ -3142,11 +3143,18 @@ uy = -0.01
                     mutual: true,
                 }),
                 allow: Some(vec!["node-a".into(), "node-b".into()]),
-                shared_memory: false,
+                shared_memory: None,
             }
         );
         assert!(!load(&net(tls)).unwrap().network.tls.unwrap().mutual);
-        assert!(load(&net("shared_memory = true")).unwrap().network.shared_memory);
+        assert_eq!(
+            load(&net("shared_memory = true")).unwrap().network.shared_memory,
+            Some(true)
+        );
+        assert_eq!(
+            load(&net("shared_memory = false")).unwrap().network.shared_memory,
+            Some(false)
+        );
         let e = load(&net("shared_memory = \"yes\"")).unwrap_err().to_string();
         assert!(e.contains("shared_memory"), "{e}");
         expect_err(&net("allow = [\"node-a\"]"), "network.allow", "it needs network.tls");
@@ -3198,7 +3206,7 @@ uy = -0.01
                 mutual: false,
             }),
             allow: None,
-            shared_memory: false,
+            shared_memory: None,
         };
         let mut ok = network("tls/node.pem");
         ok.resolve_files(&scene_file).unwrap();

@@ -440,12 +440,18 @@ impl ShmLender {
     /// bytes: a pool's pages are claimed as they are first written, and a write that finds the
     /// file system full kills the process (SIGBUS), so a pool is added only with room to spare.
     fn room_for_a_pool(size: usize) -> bool {
-        let path = c"/dev/shm";
-        let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
-        // SAFETY: `path` is a NUL-terminated string and `st` a statvfs to fill.
-        let ok = unsafe { libc::statvfs(path.as_ptr(), &mut st) } == 0;
-        ok && (st.f_bavail as u128) * (st.f_frsize as u128) >= 2 * size as u128
+        shared_memory_room().is_some_and(|room| room >= 2 * size as u64)
     }
+}
+
+/// Bytes free in `/dev/shm`, where Zenoh's and the lenders' shared-memory pools live; None if it
+/// cannot be read (no such file system).
+pub fn shared_memory_room() -> Option<u64> {
+    let path = c"/dev/shm";
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    // SAFETY: `path` is a NUL-terminated string and `st` a statvfs to fill.
+    let ok = unsafe { libc::statvfs(path.as_ptr(), &mut st) } == 0;
+    ok.then(|| (st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
 }
 
 impl BlockLender for ShmLender {
