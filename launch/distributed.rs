@@ -247,15 +247,28 @@ fn local_endpoint(listen: &str) -> String {
 /// pools and the lenders' pools of a run of the stratified scene at N = 1000, with room to spare.
 pub const SHARED_MEMORY_ROOM: u64 = 512 << 20;
 
+/// What [`auto_shared_memory`] looks at besides the scene.
+#[derive(Debug, Clone)]
+pub struct Host {
+    /// The run is recorded.
+    pub recorded: bool,
+    /// Some nodes run on other machines (started by hand).
+    pub remote_nodes: bool,
+    /// Bytes free in `/dev/shm`; None if it cannot be read.
+    pub room: Option<u64>,
+    /// Whether processes here may lock shared memory ([`transport::shared_memory_lockable`]).
+    pub lockable: Result<(), String>,
+}
+
 /// Whether a run whose scene leaves `network.shared_memory` unset passes its fields through
 /// shared memory: Ok(why) when node restarts are off for it anyway (they need fields that do not
-/// go through shared memory: see [`run_distributed`]), the bus is not encrypted (with TLS, fields
-/// stay on the encrypted link) and `/dev/shm` has [`SHARED_MEMORY_ROOM`] free (`room`, None if it
-/// cannot be read); Err(why not) otherwise.
-pub fn auto_shared_memory(scene: &LoadedScene, recorded: bool, room: Option<u64>) -> Result<String, String> {
+/// go through shared memory: see [`run_distributed`]), every node runs on this machine, the bus
+/// is not encrypted (with TLS, fields stay on the encrypted link), processes may lock shared
+/// memory and `/dev/shm` has [`SHARED_MEMORY_ROOM`] free; Err(why not) otherwise.
+pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, String> {
     let restarts_off = if scene.deployment.restarts == 0 {
         Some("deployment.restarts = 0".to_string())
-    } else if !recorded {
+    } else if !host.recorded {
         Some("the run is not recorded".to_string())
     } else {
         scene.recording.incomplete()
@@ -263,10 +276,14 @@ pub fn auto_shared_memory(scene: &LoadedScene, recorded: bool, room: Option<u64>
     let Some(restarts_off) = restarts_off else {
         return Err("node restarts are on: they need fields that do not go through shared memory".into());
     };
+    if host.remote_nodes {
+        return Err("nodes on other machines".into());
+    }
     if scene.network.tls.is_some() {
         return Err("network.tls: fields stay on the encrypted link".into());
     }
-    match room {
+    host.lockable.clone()?;
+    match host.room {
         Some(room) if room >= SHARED_MEMORY_ROOM => Ok(format!(
             "network.shared_memory unset: node restarts are off ({restarts_off}) and /dev/shm has {} MiB free",
             room >> 20
@@ -567,7 +584,13 @@ pub fn run_distributed_observed(
     let shared_memory = match scene.network.shared_memory {
         Some(on) => on,
         None => {
-            let auto = auto_shared_memory(scene, net.recording.is_some(), transport::shared_memory_room());
+            let host = Host {
+                recorded: net.recording.is_some(),
+                remote_nodes: !net.remote.is_empty(),
+                room: transport::shared_memory_room(),
+                lockable: transport::shared_memory_lockable(),
+            };
+            let auto = auto_shared_memory(scene, &host);
             if let Ok(why) = &auto {
                 eprintln!("fields through shared memory ({why})");
             }
@@ -912,12 +935,13 @@ pub fn run_distributed_observed(
             Ok(a) => {
                 last_message = Instant::now();
                 let Some(bytes) = count(&mut traffic, &a) else { continue };
-                let (hash, m) = transport::hash_and_decode(&a.key, bytes, &expected);
                 // A restarted node re-sends outputs its predecessor may have sent already.
-                if !heard.insert(hash) {
+                if !heard.insert(transport::payload_hash(&a.key, bytes)) {
                     continue;
                 }
-                let Ok(m) = m else { continue };
+                let Ok(m) = transport::decode_payload(bytes, &expected, Default::default()) else {
+                    continue;
+                };
                 if let Some(o) = observe.as_mut() {
                     o(&m);
                 }
@@ -981,11 +1005,10 @@ pub fn run_distributed_observed(
         };
         let Some(a) = next else { continue };
         let Some(bytes) = count(&mut traffic, &a) else { continue };
-        let (hash, m) = transport::hash_and_decode(&a.key, bytes, &expected);
-        if !heard.insert(hash) {
+        if !heard.insert(transport::payload_hash(&a.key, bytes)) {
             continue;
         }
-        if let Ok(m) = m {
+        if let Ok(m) = transport::decode_payload(bytes, &expected, Default::default()) {
             if let Some(o) = observe.as_mut() {
                 o(&m);
             }

@@ -338,33 +338,65 @@ fn shared_memory_processes_match_in_process_bit_for_bit() {
 }
 
 /// A scene that leaves `network.shared_memory` unset passes its fields through shared memory
-/// exactly when node restarts are off for the run anyway, the bus is not encrypted and
-/// `/dev/shm` has room.
+/// exactly when node restarts are off for the run anyway, every node is local, the bus is not
+/// encrypted, processes may lock shared memory and `/dev/shm` has room.
 #[test]
 fn shared_memory_is_chosen_when_restarts_are_off_anyway() {
-    use glissade::distributed::{auto_shared_memory, SHARED_MEMORY_ROOM};
-    let room = Some(SHARED_MEMORY_ROOM);
+    use glissade::distributed::{auto_shared_memory, Host, SHARED_MEMORY_ROOM};
+    let host = |recorded: bool| Host {
+        recorded,
+        remote_nodes: false,
+        room: Some(SHARED_MEMORY_ROOM),
+        lockable: Ok(()),
+    };
     // Full recording, restarts on by default: not chosen, unless the run is not recorded.
     let full = scene(&scene_text("small-three-layer"));
     assert_eq!(full.network.shared_memory, None);
     assert!(full.deployment.restarts > 0 && full.recording.incomplete().is_none());
-    let why = auto_shared_memory(&full, true, room).unwrap_err();
+    let why = auto_shared_memory(&full, &host(true)).unwrap_err();
     assert!(why.contains("node restarts are on"), "{why}");
-    let why = auto_shared_memory(&full, false, room).unwrap();
+    let why = auto_shared_memory(&full, &host(false)).unwrap();
     assert!(why.contains("the run is not recorded"), "{why}");
     let mut no_restarts = full.clone();
     no_restarts.deployment.restarts = 0;
-    assert!(auto_shared_memory(&no_restarts, true, room)
+    assert!(auto_shared_memory(&no_restarts, &host(true))
         .unwrap()
         .contains("deployment.restarts = 0"));
     // The stratified scene records full fields every 10th iteration only: chosen.
     let thinned = scene(&scene_text("stratified"));
-    let why = auto_shared_memory(&thinned, true, room).unwrap();
+    let why = auto_shared_memory(&thinned, &host(true)).unwrap();
     assert!(why.contains("full_fields_every = 10"), "{why}");
-    // Not without room in /dev/shm, nor without /dev/shm.
-    let why = auto_shared_memory(&thinned, true, Some(SHARED_MEMORY_ROOM - 1)).unwrap_err();
-    assert!(why.contains("/dev/shm has"), "{why}");
-    assert!(auto_shared_memory(&thinned, true, None).is_err());
+    // Not without room in /dev/shm, nor without /dev/shm, nor when memory cannot be locked, nor
+    // with nodes on other machines.
+    let short = Host {
+        room: Some(SHARED_MEMORY_ROOM - 1),
+        ..host(true)
+    };
+    assert!(auto_shared_memory(&thinned, &short)
+        .unwrap_err()
+        .contains("/dev/shm has"));
+    assert!(auto_shared_memory(
+        &thinned,
+        &Host {
+            room: None,
+            ..host(true)
+        }
+    )
+    .is_err());
+    let locked = Host {
+        lockable: Err("RLIMIT_MEMLOCK is 8192 KiB".into()),
+        ..host(true)
+    };
+    assert!(auto_shared_memory(&thinned, &locked)
+        .unwrap_err()
+        .contains("RLIMIT_MEMLOCK"));
+    let remote = Host {
+        remote_nodes: true,
+        ..host(true)
+    };
+    assert!(auto_shared_memory(&thinned, &remote)
+        .unwrap_err()
+        .contains("other machines"));
     // Nor with TLS.
     let mut tls = thinned.clone();
     tls.network.tls = Some(glissade_mechanics::scene::TlsFiles {
@@ -373,7 +405,7 @@ fn shared_memory_is_chosen_when_restarts_are_off_anyway() {
         key: "node.key".into(),
         mutual: true,
     });
-    assert!(auto_shared_memory(&tls, true, room)
+    assert!(auto_shared_memory(&tls, &host(true))
         .unwrap_err()
         .contains("network.tls"));
 }
@@ -384,6 +416,11 @@ fn shared_memory_is_chosen_when_restarts_are_off_anyway() {
 /// the end, with none copied for lack of room.
 #[test]
 fn with_shared_memory_large_fields_are_sent_without_a_copy() {
+    // Lending needs processes that may lock shared memory; elsewhere nodes copy, as they should.
+    if let Err(why) = transport::shared_memory_lockable() {
+        eprintln!("skipped: {why}");
+        return;
+    }
     let dir = crate::common::scratch("lent-fields");
     let scene_file = dir.join("stratified.toml");
     let text = scene_text("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";

@@ -108,6 +108,19 @@ impl FieldPool {
         }
     }
 
+    /// [`field_of`] into a pooled buffer, never a lent block: for a message its receiver keeps
+    /// (e.g. the final solutions, which the launcher holds until the end of the run), whose lent
+    /// blocks would stay taken while the next messages need new ones.
+    pub fn field_of_unlent(&mut self, m: MatRef<'_, f64>) -> Field {
+        let mut data = self.buffers.take_empty(m.nrows() * m.ncols());
+        extend_columns(&mut data, m);
+        Field {
+            rows: m.nrows() as u32,
+            cols: m.ncols() as u32,
+            data: data.into(),
+        }
+    }
+
     /// [`field_of`] into a pooled buffer (or a lent block).
     pub fn field_of(&mut self, m: MatRef<'_, f64>) -> Field {
         let mut data = self.take(m.nrows() * m.ncols());
@@ -269,6 +282,7 @@ mod tests {
         pool.lend_from(Arc::new(Lender(std::sync::Mutex::new(4))));
         let got = make(&mut pool);
         assert_eq!(got, expected);
+        assert!(!pool.field_of_unlent(big.as_ref()).data.is_lent());
         let lent: Vec<bool> = got.iter().map(|f| f.data.is_lent()).collect();
         // The fifth large field finds the lender out of blocks; the 3-row one is too small.
         assert_eq!(lent, [true, true, true, true, false, false]);

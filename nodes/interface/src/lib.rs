@@ -925,18 +925,20 @@ impl Node for InterfaceNode {
 
     fn next_output(&mut self) -> Option<Message> {
         let p = self.solutions_left.next()?;
+        // The launcher keeps the solutions: written into the buffers of the one before, not
+        // into shared-memory blocks the launcher would hold while the next ones need new ones.
         let (local, s, pool) = (&self.locals[p], &self.fields[p], &mut self.pool);
         let h = &local.hat;
         let solution = InterfaceSolution {
             interface: self.owned[p] as u32,
-            w_a: pool.field_of(s.w_a.as_ref()),
-            w_b: pool.field_of(s.w_b.as_ref()),
-            f_a: pool.field_of(s.f_a.as_ref()),
-            f_b: pool.field_of(s.f_b.as_ref()),
-            w_a_hat: pool.field_of(h.w_a.as_ref()),
-            w_b_hat: pool.field_of(h.w_b.as_ref()),
-            f_a_hat: pool.field_of(h.f_a.as_ref()),
-            f_b_hat: pool.field_of(h.f_b.as_ref()),
+            w_a: pool.field_of_unlent(s.w_a.as_ref()),
+            w_b: pool.field_of_unlent(s.w_b.as_ref()),
+            f_a: pool.field_of_unlent(s.f_a.as_ref()),
+            f_b: pool.field_of_unlent(s.f_b.as_ref()),
+            w_a_hat: pool.field_of_unlent(h.w_a.as_ref()),
+            w_b_hat: pool.field_of_unlent(h.w_b.as_ref()),
+            f_a_hat: pool.field_of_unlent(h.f_a.as_ref()),
+            f_b_hat: pool.field_of_unlent(h.f_b.as_ref()),
             status: local.status.iter().map(|s| *s as u8).collect(),
         };
         Some(self.msg(Stage::Final, self.iteration, Payload::InterfaceSolution(solution)))

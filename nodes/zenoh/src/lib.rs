@@ -396,16 +396,16 @@ impl ValueBlock for ShmBlock {
 }
 
 /// Lends a process's nodes blocks of shared memory to write their large fields into, so that
-/// they are sent without a copy ([`publish_lent`]). A block comes from the session's pool if it
-/// has room, else from pools of the lender's own, added one at a time as the nodes' fields need
-/// room (an interface node writes every subdomain's local directions before the first is read,
-/// 34 MB at N = 1000, more than the session's pool holds), up to [`ShmLender::POOLS`] of them.
-/// The blocks receivers have released are collected first, so that new blocks reuse memory
-/// already written rather than pages never touched yet (a first touch is slow on some virtual
-/// machines). When no pool has room, a field takes memory of its own and is copied into the
-/// session's pool when sent, as without lending.
+/// they are sent without a copy ([`publish_lent`]). The blocks come from pools of the lender's
+/// own, added one at a time as the nodes' fields need room (an interface node writes every
+/// subdomain's local directions before the first is read, 34 MB at N = 1000), up to
+/// [`ShmLender::POOLS`] of them. Not from the session's pool: Zenoh's transport copies other
+/// messages into that one with a collection that may free a block a receiver still reads (one
+/// whose watchdog a starved process missed), and receivers now read blocks in place
+/// ([`PayloadBlocks`]). The blocks receivers have released are collected before each lend, so
+/// that new blocks reuse memory already written. When no pool has room, a field takes memory of
+/// its own and is copied into the session's pool when sent, as without lending.
 pub struct ShmLender {
-    session: Session,
     pools: Mutex<Vec<ShmPool>>,
     /// Blocks lent, and requests refused.
     lent: std::sync::atomic::AtomicUsize,
@@ -415,15 +415,17 @@ pub struct ShmLender {
 type ShmPool = zenoh::shm::ShmProvider<zenoh::shm::PosixShmProviderBackend>;
 
 impl ShmLender {
-    /// Size of each pool of the lender's own.
-    pub const POOL_BYTES: usize = 32 << 20;
-    /// Most pools of its own.
-    pub const POOLS: usize = 8;
+    /// Size of each pool (Zenoh locks a pool's whole segment in memory when it is created, and
+    /// every receiver when it maps it: small pools keep that to what the fields need).
+    pub const POOL_BYTES: usize = 8 << 20;
+    /// Most pools.
+    pub const POOLS: usize = 32;
 
-    /// A lender for the nodes of `session`'s process, or None when shared memory is off in it.
+    /// A lender for the nodes of `session`'s process, or None when shared memory is off in it or
+    /// this process may not lock the pools' memory ([`shared_memory_lockable`]).
     pub fn new(session: &Session) -> Option<Self> {
-        (!matches!(session.get_shm_provider(), zenoh::shm::ShmProviderState::Disabled)).then(|| Self {
-            session: session.clone(),
+        let on = !matches!(session.get_shm_provider(), zenoh::shm::ShmProviderState::Disabled);
+        (on && shared_memory_lockable().is_ok()).then(|| Self {
             pools: Mutex::new(Vec::new()),
             lent: Default::default(),
             refused: Default::default(),
@@ -437,8 +439,7 @@ impl ShmLender {
     }
 
     /// Whether `/dev/shm` (where the pools' segments live) has room for twice a pool of `size`
-    /// bytes: a pool's pages are claimed as they are first written, and a write that finds the
-    /// file system full kills the process (SIGBUS), so a pool is added only with room to spare.
+    /// bytes, so that a new pool never takes the last of it.
     fn room_for_a_pool(size: usize) -> bool {
         shared_memory_room().is_some_and(|room| room >= 2 * size as u64)
     }
@@ -454,6 +455,38 @@ pub fn shared_memory_room() -> Option<u64> {
     ok.then(|| (st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
 }
 
+/// Ok when this process may lock any amount of memory: Zenoh locks (`mlock`) every
+/// shared-memory segment a process creates or maps, and a receiver that cannot map a sender's
+/// segment drops its message (Zenoh 1.10.2 logs it at debug level only), which stalls a run.
+/// That needs an unlimited `RLIMIT_MEMLOCK` or the `CAP_IPC_LOCK` capability; Err says which
+/// limit is in the way.
+pub fn shared_memory_lockable() -> Result<(), String> {
+    let mut lim = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: `lim` is an rlimit to fill.
+    if unsafe { libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut lim) } == 0 && lim.rlim_cur == libc::RLIM_INFINITY {
+        return Ok(());
+    }
+    // CAP_IPC_LOCK is capability 14 of the effective set.
+    let cap_ipc_lock = std::fs::read_to_string("/proc/self/status").ok().is_some_and(|status| {
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("CapEff:"))
+            .and_then(|hex| u64::from_str_radix(hex.trim(), 16).ok())
+            .is_some_and(|caps| caps & (1 << 14) != 0)
+    });
+    if cap_ipc_lock {
+        return Ok(());
+    }
+    Err(format!(
+        "RLIMIT_MEMLOCK is {} KiB and the process lacks CAP_IPC_LOCK: Zenoh locks every shared-memory \
+         segment it maps, and a receiver that cannot map one drops the message",
+        lim.rlim_cur / 1024
+    ))
+}
+
 impl BlockLender for ShmLender {
     fn lend(&self, len: usize) -> Option<Box<dyn ValueBlock>> {
         use zenoh::shm::ShmProviderBuilder;
@@ -462,19 +495,21 @@ impl BlockLender for ShmLender {
             p.garbage_collect();
             p.alloc(bytes).wait().ok()
         };
-        let session_pool = self.session.get_shm_provider().into_option();
-        let mut buffer = session_pool.as_deref().and_then(take);
-        if buffer.is_none() {
-            let mut pools = self.pools.lock().unwrap_or_else(|e| e.into_inner());
-            buffer = pools.iter().find_map(take);
-            let size = Self::POOL_BYTES.max(bytes);
-            if buffer.is_none() && pools.len() < Self::POOLS && Self::room_for_a_pool(size) {
-                if let Ok(pool) = ShmProviderBuilder::default_backend(size).wait() {
-                    buffer = pool.alloc(bytes).wait().ok();
+        let mut pools = self.pools.lock().unwrap_or_else(|e| e.into_inner());
+        let mut buffer = pools.iter().find_map(take);
+        // A pool for a field larger than the usual pools has room for the allocator's own
+        // bookkeeping too (a pool of exactly the field's size could not hold it).
+        let size = Self::POOL_BYTES.max(bytes.div_ceil(1 << 20) * (1 << 20) + (1 << 20));
+        if buffer.is_none() && pools.len() < Self::POOLS && Self::room_for_a_pool(size) {
+            if let Ok(pool) = ShmProviderBuilder::default_backend(size).wait() {
+                // A pool that cannot give even the block it was made for is not kept.
+                buffer = pool.alloc(bytes).wait().ok();
+                if buffer.is_some() {
                     pools.push(pool);
                 }
             }
         }
+        drop(pools);
         // The pools' layouts are byte-aligned, but their allocator hands out 8-byte aligned
         // blocks: checked here, since a field's values are read in place as f64.
         let block = buffer
@@ -574,36 +609,37 @@ impl Received {
     /// Decodes a sample's payload where it lies, fragments and all (a large message over TCP
     /// arrives in many), instead of first copying it into one buffer.
     fn from_payload(key: String, payload: &zenoh::bytes::ZBytes, expected: &Expected, buffers: DecodeBuffers) -> Self {
-        let len = payload.len();
-        // The ends the hash reads, gathered across fragments.
-        let slices: Vec<&[u8]> = payload.slices().collect();
-        let head: Vec<u8> = slices.iter().flat_map(|s| s.iter()).take(HASHED_END).copied().collect();
-        let mut tail: Vec<u8> = slices
-            .iter()
-            .rev()
-            .flat_map(|s| s.iter().rev())
-            .take(HASHED_END)
-            .copied()
-            .collect();
-        tail.reverse();
         Self {
-            hash: hash_parts(&key, len, &head, &tail),
-            message: decode_from_slices(slices, len, expected, buffers),
+            hash: payload_hash(&key, payload),
+            message: decode_payload(payload, expected, buffers),
             key,
         }
     }
 }
 
-/// The hash of a message that arrived as `payload` on `key` ([`message_hash`] of its bytes) and
-/// the message, decoded into new buffers where its bytes lie, whether they came in one piece or
-/// in several (fragments, or the blocks of a message sent with [`publish_lent`]).
-pub fn hash_and_decode(
-    key: &str,
+/// [`message_hash`] of a payload that arrived on `key`, read across its slices (fragments, or the
+/// blocks of a message sent with [`publish_lent`]) without joining them.
+pub fn payload_hash(key: &str, payload: &zenoh::bytes::ZBytes) -> u64 {
+    let slices: Vec<&[u8]> = payload.slices().collect();
+    let head: Vec<u8> = slices.iter().flat_map(|s| s.iter()).take(HASHED_END).copied().collect();
+    let mut tail: Vec<u8> = slices
+        .iter()
+        .rev()
+        .flat_map(|s| s.iter().rev())
+        .take(HASHED_END)
+        .copied()
+        .collect();
+    tail.reverse();
+    hash_parts(key, payload.len(), &head, &tail)
+}
+
+/// A payload decoded where its slices lie, into `buffers`.
+pub fn decode_payload(
     payload: &zenoh::bytes::ZBytes,
     expected: &Expected,
-) -> (u64, Result<Message, DecodeError>) {
-    let r = Received::from_payload(key.to_string(), payload, expected, DecodeBuffers::default());
-    (r.hash, r.message)
+    buffers: DecodeBuffers,
+) -> Result<Message, DecodeError> {
+    decode_from_slices(payload.slices(), payload.len(), expected, buffers)
 }
 
 /// The blocks of a received payload that its fields may be read from in place: its slices of
@@ -1417,6 +1453,10 @@ mod tests {
     /// no lender.
     #[test]
     fn lent_fields_are_sent_as_their_shared_memory_blocks() {
+        if let Err(why) = shared_memory_lockable() {
+            eprintln!("skipped: {why}");
+            return;
+        }
         let [router, a, b, plain] = shm_sessions();
         assert!(ShmLender::new(&plain).is_none());
         let shm_lender = Arc::new(ShmLender::new(&a).expect("shared memory is on"));
