@@ -247,6 +247,16 @@ fn local_endpoint(listen: &str) -> String {
 /// pools and the lenders' pools of a run of the stratified scene at N = 1000, with room to spare.
 pub const SHARED_MEMORY_ROOM: u64 = 512 << 20;
 
+/// Why a dead node process could not resume from the recording of a run (`recorded` or not) of
+/// `scene`, whatever the transport: no recording, or an incomplete one.
+fn unresumable(scene: &LoadedScene, recorded: bool) -> Option<String> {
+    if recorded {
+        scene.recording.incomplete()
+    } else {
+        Some("the run is not recorded".to_string())
+    }
+}
+
 /// What [`auto_shared_memory`] looks at besides the scene.
 #[derive(Debug, Clone)]
 pub struct Host {
@@ -268,10 +278,8 @@ pub struct Host {
 pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, String> {
     let restarts_off = if scene.deployment.restarts == 0 {
         Some("deployment.restarts = 0".to_string())
-    } else if !host.recorded {
-        Some("the run is not recorded".to_string())
     } else {
-        scene.recording.incomplete()
+        unresumable(scene, host.recorded)
     };
     let Some(restarts_off) = restarts_off else {
         return Err("node restarts are on: they need fields that do not go through shared memory".into());
@@ -676,15 +684,12 @@ pub fn run_distributed_observed(
     // missed it waits (seen with shared memory forced on in the restart test, on a loaded
     // machine: 2 of 100 runs went wrong, a stall and a recorder missing 7 messages).
     let restarts = scene.deployment.restarts;
-    let no_resume = match &net.recording {
-        None => Some("the run is not recorded".to_string()),
-        Some(_) => scene.recording.incomplete().or_else(|| {
-            shared_memory.then(|| {
-                "network.shared_memory = true: a killed node's last messages may reach some nodes and not others"
-                    .to_string()
-            })
-        }),
-    };
+    let no_resume = unresumable(scene, net.recording.is_some()).or_else(|| {
+        shared_memory.then(|| {
+            "network.shared_memory = true: a killed node's last messages may reach some nodes and not others"
+                .to_string()
+        })
+    });
     let supervised = restarts > 0 && no_resume.is_none();
     if let (true, Some(why)) = (restarts > 0, &no_resume) {
         eprintln!("node restarts off ({why}): a node process that dies stops the run");

@@ -1070,12 +1070,19 @@ impl std::io::Read for Slices<'_> {
             let m = rest.len().min(buf.len() - n);
             buf[n..n + m].copy_from_slice(&rest[..m]);
             n += m;
-            self.at += m;
-            if self.at == self.slices[self.k].len() {
-                (self.k, self.at) = (self.k + 1, 0);
-            }
+            self.advance(m);
         }
         Ok(n)
+    }
+}
+
+impl Slices<'_> {
+    /// Moves `n` bytes on within the current slice, to the next slice at its end.
+    fn advance(&mut self, n: usize) {
+        self.at += n;
+        if self.at == self.slices[self.k].len() {
+            (self.k, self.at) = (self.k + 1, 0);
+        }
     }
 }
 
@@ -1085,10 +1092,7 @@ impl Source for Slices<'_> {
     }
 
     fn skip(&mut self, n: usize) {
-        self.at += n;
-        if self.at == self.slices[self.k].len() {
-            (self.k, self.at) = (self.k + 1, 0);
-        }
+        self.advance(n);
     }
 }
 

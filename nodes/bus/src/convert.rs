@@ -96,10 +96,11 @@ impl FieldPool {
         self.lender = Some(lender);
     }
 
-    /// Memory for `len` values: a lent block (whatever it holds), or a pooled vector (empty).
-    fn take(&mut self, len: usize) -> Values {
+    /// Memory for `len` values: a lent block (whatever it holds) when `lend`, or a pooled vector
+    /// (empty).
+    fn take(&mut self, len: usize, lend: bool) -> Values {
         let lent = match &self.lender {
-            Some(lender) if len >= Self::LEND_MIN => lender.lend(len),
+            Some(lender) if lend && len >= Self::LEND_MIN => lender.lend(len),
             _ => None,
         };
         match lent {
@@ -108,22 +109,9 @@ impl FieldPool {
         }
     }
 
-    /// [`field_of`] into a pooled buffer, never a lent block: for a message its receiver keeps
-    /// (e.g. the final solutions, which the launcher holds until the end of the run), whose lent
-    /// blocks would stay taken while the next messages need new ones.
-    pub fn field_of_unlent(&mut self, m: MatRef<'_, f64>) -> Field {
-        let mut data = self.buffers.take_empty(m.nrows() * m.ncols());
-        extend_columns(&mut data, m);
-        Field {
-            rows: m.nrows() as u32,
-            cols: m.ncols() as u32,
-            data: data.into(),
-        }
-    }
-
-    /// [`field_of`] into a pooled buffer (or a lent block).
-    pub fn field_of(&mut self, m: MatRef<'_, f64>) -> Field {
-        let mut data = self.take(m.nrows() * m.ncols());
+    /// [`field_of`] into memory [`Self::take`] gives.
+    fn copy_of(&mut self, m: MatRef<'_, f64>, lend: bool) -> Field {
+        let mut data = self.take(m.nrows() * m.ncols(), lend);
         if data.is_lent() {
             write_columns(&mut data, m);
         } else {
@@ -136,11 +124,23 @@ impl FieldPool {
         }
     }
 
+    /// [`field_of`] into a pooled buffer, never a lent block: for a message its receiver keeps
+    /// (e.g. the final solutions, which the launcher holds until the end of the run), whose lent
+    /// blocks would stay taken while the next messages need new ones.
+    pub fn field_of_unlent(&mut self, m: MatRef<'_, f64>) -> Field {
+        self.copy_of(m, false)
+    }
+
+    /// [`field_of`] into a pooled buffer (or a lent block).
+    pub fn field_of(&mut self, m: MatRef<'_, f64>) -> Field {
+        self.copy_of(m, true)
+    }
+
     /// A `rows` × `cols` field in a pooled buffer (or a lent block), filled by `fill` (which
     /// sees it as a matrix of zeros): the field is written in place, with no matrix of its own to
     /// copy from.
     pub fn field_with(&mut self, rows: usize, cols: usize, fill: impl FnOnce(MatMut<'_, f64>)) -> Field {
-        let mut data = self.take(rows * cols);
+        let mut data = self.take(rows * cols, true);
         zero(&mut data, rows * cols);
         fill(MatMut::from_column_major_slice_mut(&mut data, rows, cols));
         Field {
@@ -160,7 +160,7 @@ impl FieldPool {
         cols: usize,
         fill: impl Fn(usize, MatMut<'_, f64>) + Sync,
     ) -> Vec<Field> {
-        let mut data: Vec<Values> = rows.iter().map(|&r| self.take(r * cols)).collect();
+        let mut data: Vec<Values> = rows.iter().map(|&r| self.take(r * cols, true)).collect();
         data.par_iter_mut()
             .zip(rows.par_iter())
             .enumerate()

@@ -669,6 +669,14 @@ impl PayloadBlocks {
             blocks,
         })
     }
+
+    /// `buffers` that read `payload`'s blocks in place, if it has any.
+    fn holding(buffers: DecodeBuffers, payload: &zenoh::bytes::ZBytes) -> DecodeBuffers {
+        match Self::of(payload) {
+            Some(blocks) => buffers.holding(Arc::new(blocks)),
+            None => buffers,
+        }
+    }
 }
 
 impl glissade_messages::HoldSource for PayloadBlocks {
@@ -762,10 +770,7 @@ pub fn run_nodes(
             .callback(move |sample| {
                 let key = sample.key_expr().as_str().to_string();
                 let payload = sample.payload();
-                let buffers = match PayloadBlocks::of(payload) {
-                    Some(blocks) => pooled.clone().holding(Arc::new(blocks)),
-                    None => pooled.clone(),
-                };
+                let buffers = PayloadBlocks::holding(pooled.clone(), payload);
                 let _ = tx.send(Event::Data(Box::new(Received::from_payload(
                     key, payload, &expected, buffers,
                 ))));
@@ -864,16 +869,8 @@ pub fn run_nodes(
                         break;
                     }
                     let mut handled = || -> Result<(), TransportError> {
-                        for mut out in node.handle(msg)? {
-                            publish_new(session, &mut out, published)?;
-                            node.recycle(out);
-                        }
-                        // The rest one at a time, each once the one before is out.
-                        while let Some(mut out) = node.next_output() {
-                            publish_new(session, &mut out, published)?;
-                            node.recycle(out);
-                        }
-                        Ok(())
+                        let outs = node.handle(msg)?;
+                        publish_outputs(session, node.as_mut(), outs, published)
                     };
                     match handled() {
                         Ok(()) => {}
@@ -953,12 +950,8 @@ pub fn run_nodes(
             published.len()
         ));
         for node in &mut nodes {
-            for mut m in node.start()? {
-                publish_new(session, &mut m, &published)?;
-            }
-            while let Some(mut m) = node.next_output() {
-                publish_new(session, &mut m, &published)?;
-            }
+            let outs = node.start()?;
+            publish_outputs(session, node.as_mut(), outs, &published)?;
         }
         for (key, bytes) in inputs {
             handle(
@@ -996,12 +989,8 @@ pub fn run_nodes(
             }
         }
         for node in &mut nodes {
-            for mut m in node.start()? {
-                publish_lent(session, &mut m)?;
-            }
-            while let Some(mut m) = node.next_output() {
-                publish_lent(session, &mut m)?;
-            }
+            let outs = node.start()?;
+            publish_outputs(session, node.as_mut(), outs, &published)?;
         }
         for batch in batches(early.drain(..)) {
             handle(batch, &mut nodes, &published, &mut log)?;
@@ -1233,6 +1222,25 @@ fn hash_parts(key: &str, len: usize, head: &[u8], tail: &[u8]) -> u64 {
     head.hash(&mut h);
     tail.hash(&mut h);
     h.finish()
+}
+
+/// Publishes `outs`, a node's outputs, then its further outputs one at a time, each once the one
+/// before is out ([`Node::next_output`]), giving each back to the node ([`Node::recycle`]).
+fn publish_outputs(
+    session: &Session,
+    node: &mut dyn Node,
+    outs: Vec<Message>,
+    published: &HashSet<u64>,
+) -> Result<(), TransportError> {
+    for mut out in outs {
+        publish_new(session, &mut out, published)?;
+        node.recycle(out);
+    }
+    while let Some(mut out) = node.next_output() {
+        publish_new(session, &mut out, published)?;
+        node.recycle(out);
+    }
+    Ok(())
 }
 
 /// Publishes `msg` unless it is among the outputs already on the bus (`published`, the hashes
@@ -1506,8 +1514,8 @@ mod tests {
                     run_id: "shm".into(),
                     scene_fingerprint: 1,
                 };
-                let blocks = PayloadBlocks::of(payload).expect("blocks in the payload");
-                let buffers = DecodeBuffers::default().holding(Arc::new(blocks));
+                assert!(PayloadBlocks::of(payload).is_some(), "blocks in the payload");
+                let buffers = PayloadBlocks::holding(DecodeBuffers::default(), payload);
                 let held = Received::from_payload(s.key_expr().to_string(), payload, &exp, buffers).message;
                 let _ = tx.send((sizes, payload.to_bytes().into_owned(), held));
             })
