@@ -1092,7 +1092,7 @@ pub fn run_nodes(
             "shared memory: {lent} large field(s) written in place and sent without a copy, {refused} copied \
              for lack of room{}",
             if refused > 0 {
-                " (more room in /dev/shm would make them faster)"
+                " (every pool full, or no room in /dev/shm for another)"
             } else {
                 ""
             }
@@ -1456,9 +1456,8 @@ mod tests {
     /// they reach another process's session as slices of exactly their size (over the link a
     /// multi-MB message arrives in fragments of at most 64 KiB), the bytes are those of the
     /// message's encoding, the receiver's decoding reads the fields in place (held), and the
-    /// sender's message no longer holds them. Blocks come from pools
-    /// of the lender's own once the session's pool is full; a session without shared memory has
-    /// no lender.
+    /// sender's message no longer holds them. A field larger than the lender's pools gets a pool
+    /// of its own; a session without shared memory has no lender.
     #[test]
     fn lent_fields_are_sent_as_their_shared_memory_blocks() {
         if let Err(why) = shared_memory_lockable() {
@@ -1475,7 +1474,7 @@ mod tests {
             assert!(Instant::now() < deadline, "no shared-memory pool within 20 s");
             std::thread::sleep(Duration::from_millis(50));
         }
-        // Blocks for more than the session's 16 MiB pool at once: 3 × 12 MiB.
+        // Blocks larger than a pool, three at once: 3 × 12 MiB.
         let big: Vec<_> = (0..3).map(|_| lender.lend(3 << 19).expect("a block")).collect();
         assert!(big.iter().all(|b| b.values().len() == 3 << 19));
         assert_eq!(shm_lender.counts(), (3, 0));
