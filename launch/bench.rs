@@ -17,13 +17,15 @@
 //!   compute and memory-traffic bounds the iteration time is compared to.
 
 use crate::distributed::{run_distributed, Network};
-use crate::runner::{run_in_process, run_in_process_timed, Plan, RunOptions, RunResult};
+use crate::runner::{run_in_process, run_in_process_timed, RunOptions, RunResult};
 use faer::{Accum, Mat, Par};
 use glissade_bus::HandleTime;
+use glissade_deploy::Plan;
 use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::scene::{LinearStage, LoadedScene};
+use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::simd::matmul;
 use glissade_messages::{Payload, Role};
+use glissade_scene::LoadedScene;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;

@@ -12,20 +12,20 @@
 //! what is left. Every node also watches the others' tokens and the launcher's, so a run stops
 //! even if the launcher itself is killed (local children also die with it: parent-death signal).
 
-use crate::runner::{build_interface_node, build_nodes, IterationRecord, Plan, RunOptions, RunResult, Selection};
+use crate::children::{settle, spawn_node, Children, NodeName, NodeRole};
+use crate::runner::{IterationRecord, RunOptions, RunResult};
 use anyhow::{bail, Context};
 use glissade_bus::RunContext;
-use glissade_mechanics::scene::{fingerprint, load_str, LoadedScene};
+use glissade_deploy::{build_interface_node, build_nodes, Plan, Selection};
 use glissade_messages::{
     decode, encode, Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
 };
+use glissade_scene::{fingerprint, load_str, LoadedScene};
 use glissade_zenoh as transport;
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
@@ -76,56 +76,6 @@ pub fn install_interrupt_handler() -> anyhow::Result<()> {
 /// Whether SIGINT or SIGTERM was received since [`install_interrupt_handler`].
 pub fn interrupted() -> bool {
     INTERRUPTED.load(Ordering::SeqCst)
-}
-
-/// Role of a node process started by hand or by the launcher.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum NodeRole {
-    Subdomain,
-    Interface,
-    Coarse,
-}
-
-impl NodeRole {
-    pub fn key(self) -> &'static str {
-        match self {
-            NodeRole::Subdomain => "subdomain",
-            NodeRole::Interface => "interface",
-            NodeRole::Coarse => "coarse",
-        }
-    }
-}
-
-/// A node process of a run: its role and index (`subdomain:1`, `interface:0`, `coarse:0`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub struct NodeName {
-    pub role: NodeRole,
-    pub index: u32,
-}
-
-impl std::fmt::Display for NodeName {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}:{}", self.role.key(), self.index)
-    }
-}
-
-impl std::str::FromStr for NodeName {
-    type Err = String;
-
-    /// `role[:index]` with role `subdomain`, `interface` or `coarse`; the index defaults to 0.
-    fn from_str(s: &str) -> Result<Self, String> {
-        let (role, index) = s.split_once(':').unwrap_or((s, "0"));
-        let role = match role {
-            "subdomain" => NodeRole::Subdomain,
-            "interface" => NodeRole::Interface,
-            "coarse" => NodeRole::Coarse,
-            _ => return Err(format!("`{s}`: the role must be subdomain, interface or coarse")),
-        };
-        let index = index
-            .parse()
-            .map_err(|_| format!("`{s}`: the index after `:` must be a non-negative integer"))?;
-        Ok(Self { role, index })
-    }
 }
 
 /// Where the run's bus is and which nodes the launcher leaves to be started elsewhere.
@@ -180,57 +130,6 @@ pub struct Supervision {
     /// Pass fields to processes on this machine through shared memory (`glissade node
     /// --shared-memory`, the scene's `network.shared_memory`).
     pub shared_memory: bool,
-}
-
-/// One spawned node process.
-struct NodeProcess {
-    name: NodeName,
-    child: Child,
-    /// Its `glissade node` arguments (a replacement gets them too, with `--resume`).
-    args: Vec<String>,
-    last_lines: Arc<Mutex<Vec<String>>>,
-    /// The threads that read its stdout and stderr into `last_lines`.
-    readers: Vec<std::thread::JoinHandle<()>>,
-    /// Exit status once it exited.
-    status: Option<ExitStatus>,
-    /// Its liveliness token was seen (a token of the same name that disappears before is its
-    /// predecessor's).
-    token_seen: bool,
-    /// When its liveliness token disappeared while it was still running.
-    token_lost: Option<Instant>,
-}
-
-impl NodeProcess {
-    fn last_lines(&self) -> String {
-        match self.last_lines.lock() {
-            Ok(l) if !l.is_empty() => l.join("\n    "),
-            _ => "(none)".to_string(),
-        }
-    }
-}
-
-/// Kills every child still running when dropped (on any error path).
-struct Children(Vec<NodeProcess>);
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        for p in &mut self.0 {
-            if let Ok(None) = p.child.try_wait() {
-                let _ = p.child.kill();
-                let _ = p.child.wait();
-            }
-        }
-    }
-}
-
-impl Children {
-    /// Waits up to `timeout` for every child to exit (after `stop`); the rest are killed on drop.
-    fn wait_all(&mut self, timeout: Duration) {
-        let deadline = Instant::now() + timeout;
-        while Instant::now() < deadline && self.0.iter_mut().any(|p| matches!(p.child.try_wait(), Ok(None))) {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
 }
 
 /// A free TCP port on the loopback interface.
@@ -302,40 +201,6 @@ pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, St
             SHARED_MEMORY_ROOM >> 20
         )),
         None => Err("no /dev/shm".into()),
-    }
-}
-
-/// Forwards a child's output lines to stderr with a `[prefix]`, keeping its last 10 lines in `last`.
-pub(crate) fn forward(
-    prefix: String,
-    stream: impl std::io::Read + Send + 'static,
-    last: Arc<Mutex<Vec<String>>>,
-) -> std::thread::JoinHandle<()> {
-    std::thread::spawn(move || {
-        for line in BufReader::new(stream).lines().map_while(Result::ok) {
-            eprintln!("[{prefix}] {line}");
-            if let Ok(mut l) = last.lock() {
-                l.push(line);
-                let n = l.len();
-                if n > 10 {
-                    l.drain(..n - 10);
-                }
-            }
-        }
-    })
-}
-
-/// Longest wait, once a child process has exited, for the threads that read its output to reach
-/// its end ([`settle`]).
-const OUTPUT_SETTLE: Duration = Duration::from_secs(2);
-
-/// Waits (up to [`OUTPUT_SETTLE`]) for the threads of [`forward`] that read an exited child's
-/// output to have read it all, so that its last lines, its own error among them, are there to
-/// quote: the process's exit can be seen before its last writes are read.
-pub(crate) fn settle(readers: &[std::thread::JoinHandle<()>]) {
-    let deadline = Instant::now() + OUTPUT_SETTLE;
-    while readers.iter().any(|r| !r.is_finished()) && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(2));
     }
 }
 
@@ -420,50 +285,6 @@ pub fn node_tls(
         identity,
         mutual: false,
     }))
-}
-
-fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<NodeProcess> {
-    let mut cmd = Command::new(exe);
-    cmd.args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    {
-        use std::os::unix::process::CommandExt;
-        // Its own process group: a Ctrl-C in the terminal reaches the launcher only, which then
-        // stops every node through the bus.
-        cmd.process_group(0);
-        #[cfg(target_os = "linux")]
-        // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
-        unsafe {
-            cmd.pre_exec(|| {
-                // Die with the launcher: no orphans even if it is killed.
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-                Ok(())
-            });
-        }
-    }
-    let mut child = cmd
-        .spawn()
-        .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
-    let last = Arc::new(Mutex::new(Vec::new()));
-    let mut readers = Vec::new();
-    if let Some(out) = child.stdout.take() {
-        readers.push(forward(name.to_string(), out, last.clone()));
-    }
-    if let Some(err) = child.stderr.take() {
-        readers.push(forward(name.to_string(), err, last.clone()));
-    }
-    Ok(NodeProcess {
-        name,
-        child,
-        args: args.to_vec(),
-        last_lines: last,
-        readers,
-        status: None,
-        token_seen: false,
-        token_lost: None,
-    })
 }
 
 /// The node processes a run needs: one per subdomain group, one per interface group, the coarse

@@ -2,16 +2,16 @@
 //! a bus, and writes run outputs. The `glissade` binary only parses arguments and calls this.
 
 pub mod bench;
+pub mod children;
 pub mod distributed;
 pub mod output;
 pub mod recording;
-pub mod reexecute;
 pub mod report;
 pub mod runner;
 pub mod stability;
 
 use anyhow::Context;
-use glissade_mechanics::scene::{load_str, LoadedScene};
+use glissade_scene::{load_str, LoadedScene};
 use std::path::Path;
 
 /// Reads and validates a scene file; its TLS files (`network.tls`) become relative to its folder

@@ -3,18 +3,18 @@
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use glissade::children::{NodeName, NodeRole};
 use glissade::distributed::{
-    install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Network, NodeName, NodeRole,
-    Supervision,
+    install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Network, Supervision,
 };
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
 use glissade::report::{build_report, linear_stage_table, plot_svg};
 use glissade::runner::{IterationRecord, RunOptions};
-use glissade_mechanics::monolithic::solve_glued;
-use glissade_mechanics::reference::{solve_reference, verify, ReferenceOptions};
-use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::Verdict;
+use glissade_reference::glued::solve_glued;
+use glissade_reference::{solve_reference, verify, ReferenceOptions};
+use glissade_scene::LoadedScene;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -666,7 +666,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         );
     }
     if !args.node.is_empty() {
-        use glissade::reexecute::{parse_node, recorded_nodes, reexecute};
+        use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
         let mut nodes = Vec::new();
         for n in &args.node {
             if n == "all" {
@@ -704,7 +704,7 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         glissade_replay::Sink::Save(p)
     };
     // PGD runs: the basis sizes are the mode-form states' time-function counts.
-    let basis_sizes = match glissade::reexecute::recorded_basis_sizes(&recording)? {
+    let basis_sizes = match glissade_replay::reexecute::recorded_basis_sizes(&recording)? {
         Some(b) => {
             println!(
                 "PGD basis sizes: {} linear stages, from the recorded mode-form states",
@@ -801,7 +801,7 @@ fn load_with_overrides(
     out: &std::path::Path,
     tolerance: Option<f64>,
     max_iterations: Option<usize>,
-) -> anyhow::Result<glissade_mechanics::scene::LoadedScene> {
+) -> anyhow::Result<glissade_scene::LoadedScene> {
     let sc = load_scene(scene)?;
     if let Some(tolerance) = tolerance {
         if !(tolerance > 0.0 && tolerance.is_finite()) {

@@ -1,12 +1,14 @@
 //! Run outputs: the JSON summary and the interface fields, written under an output folder.
 
-use crate::runner::{Plan, RunResult};
+use crate::runner::RunResult;
 use anyhow::Context;
+use glissade_deploy::Plan;
+use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{InterfaceKind, Model};
-use glissade_mechanics::reference::ReferenceSolution;
-use glissade_mechanics::scene::{LinearStage, LoadedScene};
 use glissade_messages::InterfaceSolution;
+use glissade_reference::ReferenceSolution;
+use glissade_scene::LoadedScene;
 use glissade_subdomain::LinearStageRecord;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};

@@ -16,12 +16,12 @@
 
 use crate::runner::{run_in_process_logged, IterationRecord, RunOptions, RunResult};
 use anyhow::{bail, Context};
-use glissade_mechanics::scene::{fingerprint, load_str, LoadedScene};
 use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
 use glissade_recorder::{log_time_now, recording_file_name, Recorder, RecorderOptions, RecordingStats, RunInfo};
+use glissade_scene::{fingerprint, load_str, LoadedScene};
 use glissade_subdomain::LinearStageRecord;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -217,37 +217,9 @@ pub fn spawn_recorder_process(
         .args(tls)
         .arg("--file")
         .arg(path);
-    // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
-    unsafe {
-        use std::os::unix::process::CommandExt;
-        cmd.pre_exec(|| {
-            // The recorder finalises its file if the launcher dies.
-            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
-            Ok(())
-        });
-    }
-    let mut child = cmd
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
+    // The recorder finalises its file if the launcher dies (SIGTERM, not SIGKILL).
+    let (child, last_lines, readers) = crate::children::spawn_child(cmd, "recorder:0", libc::SIGTERM)
         .with_context(|| format!("cannot start the recorder process ({})", exe.display()))?;
-    let last_lines = Arc::new(Mutex::new(Vec::new()));
-    let mut readers = Vec::new();
-    if let Some(out) = child.stdout.take() {
-        readers.push(crate::distributed::forward(
-            "recorder:0".into(),
-            out,
-            last_lines.clone(),
-        ));
-    }
-    if let Some(err) = child.stderr.take() {
-        readers.push(crate::distributed::forward(
-            "recorder:0".into(),
-            err,
-            last_lines.clone(),
-        ));
-    }
     Ok(RecorderProcess {
         child,
         ready,
@@ -275,7 +247,7 @@ impl RecorderProcess {
     fn failure(&mut self) -> Option<String> {
         match self.child.try_wait() {
             Ok(Some(status)) if !status.success() => {
-                crate::distributed::settle(&self.readers);
+                crate::children::settle(&self.readers);
                 let lines = self.last_lines.lock().map(|l| l.join("\n    ")).unwrap_or_default();
                 Some(format!(
                     "the recorder process failed ({status}); its last lines:\n    {lines}"

@@ -7,12 +7,14 @@
 
 use crate::runner::{run_in_process_logged_until, AndersonTally, RunOptions, RunResult};
 use glissade_bus::convert::view;
+use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::ReferenceErrors;
 use glissade_mechanics::model::{Acceleration, TimeStart, DEFAULT_TIME_START_TOLERANCE};
-use glissade_mechanics::reference::{solve_reference, ReferenceOptions, ReferenceSolution};
-use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion};
+use glissade_mechanics::pgd::PgdCriterion;
 use glissade_messages::{encode, Stage, Verdict};
+use glissade_reference::{solve_reference, ReferenceOptions, ReferenceSolution};
 use glissade_replay::BoundaryStates;
+use glissade_scene::LoadedScene;
 use serde::Serialize;
 use std::cell::Cell;
 use std::time::Instant;
@@ -156,7 +158,7 @@ impl std::str::FromStr for Variant {
                 "plain" => v.acceleration = Some(Acceleration::None),
                 "anderson" => {
                     v.acceleration = Some(Acceleration::Anderson {
-                        window: glissade_mechanics::scene::DEFAULT_ANDERSON_WINDOW,
+                        window: glissade_scene::DEFAULT_ANDERSON_WINDOW,
                     })
                 }
                 p if start && (p == "zero" || p.starts_with("start")) => {

@@ -23,9 +23,9 @@
 use crate::runner::{run_in_process_observed, AndersonTally, RunOptions};
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
 use glissade_mechanics::model::Model;
-use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
-use glissade_mechanics::scene::{load_str, LoadedScene};
 use glissade_messages::Verdict;
+use glissade_reference::{solve_reference, ReferenceOptions};
+use glissade_scene::{load_str, LoadedScene};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::panic::{catch_unwind, AssertUnwindSafe};

@@ -13,9 +13,9 @@
 use crate::common::{rel_max, scene};
 use glissade::runner::{run_in_process, RunOptions, RunResult};
 use glissade_mechanics::model::{Interface, Side};
-use glissade_mechanics::monolithic::solve_glued;
-use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::{InterfaceSolution, Verdict};
+use glissade_reference::glued::solve_glued;
+use glissade_scene::LoadedScene;
 use std::f64::consts::PI;
 use std::time::Instant;
 
@@ -144,8 +144,7 @@ fn solve_contact(text: &str, solver: Solver) -> (LoadedScene, Interface, Interfa
         Solver::Reference => {
             let sc = scene(text);
             let clock = Instant::now();
-            let reference =
-                glissade_mechanics::reference::solve_reference(&sc.model, &Default::default()).expect("reference");
+            let reference = glissade_reference::solve_reference(&sc.model, &Default::default()).expect("reference");
             let secs = clock.elapsed().as_secs_f64();
             let k = sc
                 .model

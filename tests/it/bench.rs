@@ -8,7 +8,7 @@ use glissade::bench::{
 };
 use glissade::runner::RunResult;
 use glissade_mechanics::model::Acceleration;
-use glissade_mechanics::scene::LoadedScene;
+use glissade_scene::LoadedScene;
 use std::path::Path;
 
 /// The small three-layer scene and its plain in-process run.

@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests.
 
 use glissade::runner::{run_in_process, RunOptions, RunResult};
-use glissade_mechanics::scene::{load_str, LoadedScene};
+use glissade_scene::{load_str, LoadedScene};
 use std::path::{Path, PathBuf};
 
 /// The text of scene `launch/scenes/<name>.toml`.

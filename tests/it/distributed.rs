@@ -50,7 +50,7 @@ fn with_deployment(text: &str, lines: &str) -> String {
 }
 
 /// An in-process run of `sc` and how many `indicator_partials` messages crossed its bus.
-fn in_process_with_partials(sc: &glissade_mechanics::scene::LoadedScene) -> (RunResult, usize) {
+fn in_process_with_partials(sc: &glissade_scene::LoadedScene) -> (RunResult, usize) {
     let mut partials = 0;
     let result = glissade::runner::run_in_process_observed(
         sc,
@@ -232,7 +232,7 @@ fn pgd_mode_form_processes_match_in_process_bit_for_bit() {
             "[solver.pgd]\ncriterion = \"increment-svd\"\nmax_new_modes = 2\n\n[deployment]\n",
         );
     let sc = scene(&text);
-    assert_eq!(sc.linear_stage, glissade_mechanics::scene::LinearStage::Pgd);
+    assert_eq!(sc.linear_stage, glissade_mechanics::linear::LinearStage::Pgd);
     let (mut held, mut rotations) = (BTreeMap::new(), 0);
     let local = glissade::runner::run_in_process_observed(
         &sc,
@@ -399,7 +399,7 @@ fn shared_memory_is_chosen_when_restarts_are_off_anyway() {
         .contains("other machines"));
     // Nor with TLS.
     let mut tls = thinned.clone();
-    tls.network.tls = Some(glissade_mechanics::scene::TlsFiles {
+    tls.network.tls = Some(glissade_scene::TlsFiles {
         root_ca: "ca.pem".into(),
         cert: "node.pem".into(),
         key: "node.key".into(),

@@ -16,10 +16,10 @@
 //! message leaves the node as it was.
 
 use crate::common::scene_text;
-use glissade::runner::{build_nodes, Plan, Selection};
 use glissade_bus::{Node, NodeError, RunContext};
-use glissade_mechanics::scene::{load_str, LoadedScene};
+use glissade_deploy::{build_nodes, Plan, Selection};
 use glissade_messages::{decode, encode, key_matches, Expected, Field, Message, NodeId, Payload, Role, Stage};
+use glissade_scene::{load_str, LoadedScene};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 

@@ -2,8 +2,8 @@
 
 use crate::common::{rel_max, run, scene};
 use glissade_mechanics::model::Side;
-use glissade_mechanics::monolithic::solve_glued;
 use glissade_messages::Verdict;
+use glissade_reference::glued::solve_glued;
 
 fn bar(split: [usize; 2], coarse: bool) -> String {
     format!(

@@ -5,8 +5,8 @@ use crate::common::{scene, scene_text};
 use glissade::runner::{run_in_process, RunOptions};
 use glissade_bus::convert::mat_of;
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
-use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
 use glissade_messages::Verdict;
+use glissade_reference::{solve_reference, ReferenceOptions};
 
 /// (traction error, jump error) of LATIN's s at η ≤ `tolerance` against the reference.
 fn latin_vs_reference(name: &str, tolerance: f64, k0_factor: f64) -> (f64, f64) {

@@ -4,10 +4,12 @@
 use crate::common::{rel_max, run, scene};
 use glissade::report::{build_reports, comparison_table, plot_svg, Variant};
 use glissade::runner::RunResult;
+use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::error_against_reference;
 use glissade_mechanics::model::Acceleration;
-use glissade_mechanics::scene::{LinearStage, LoadedScene, PgdCriterion, PgdParams};
+use glissade_mechanics::pgd::{PgdCriterion, PgdParams};
 use glissade_messages::Verdict;
+use glissade_scene::LoadedScene;
 
 fn scene_file(name: &str) -> LoadedScene {
     let path = format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
@@ -281,7 +283,8 @@ fn reports_stop_at_an_accuracy() {
 #[test]
 fn reports_count_linear_stage_flops() {
     use glissade::output::linear_stage_totals;
-    use glissade::runner::{run_in_process_logged, Plan, RunOptions};
+    use glissade::runner::{run_in_process_logged, RunOptions};
+    use glissade_deploy::Plan;
     use glissade_mechanics::linear::SubdomainSolver;
 
     let mut sc = scene_file("two-blocks");

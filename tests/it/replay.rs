@@ -6,10 +6,10 @@
 
 use crate::common::{scene, scene_text, scratch, Scratch};
 use glissade::recording::run_in_process_recorded;
-use glissade::reexecute::{parse_node, recorded_nodes, reexecute};
 use glissade::runner::RunOptions;
 use glissade_messages::{encode, Payload, Role, Stage};
 use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
+use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -353,14 +353,14 @@ fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
         expected.iter().any(|e| e.2 > 1),
         "the run built PGD bases: {expected:?}"
     );
-    let sizes = glissade::reexecute::recorded_basis_sizes(&Recording::open(&path).unwrap())
+    let sizes = glissade_replay::reexecute::recorded_basis_sizes(&Recording::open(&path).unwrap())
         .unwrap()
         .expect("a PGD run");
     assert_eq!(sizes, expected);
     // Another linear stage: nothing to show.
     let plain = record(&scene_text("small-three-layer"), &dir, "rx-plain");
     assert_eq!(
-        glissade::reexecute::recorded_basis_sizes(&Recording::open(&plain).unwrap()).unwrap(),
+        glissade_replay::reexecute::recorded_basis_sizes(&Recording::open(&plain).unwrap()).unwrap(),
         None
     );
     let stdout = glissade_ok(&[&"replay", &"--save", &dir.join("pgd.rrd"), &path]);

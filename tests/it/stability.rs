@@ -167,7 +167,7 @@ fn full_matrix_scenes_load() {
     let full = cases(false);
     for c in &full {
         for scene in [&c.scene, &c.accelerated] {
-            let loaded = glissade_mechanics::scene::load_str(scene, "case.toml");
+            let loaded = glissade_scene::load_str(scene, "case.toml");
             match &c.expect {
                 glissade::stability::Expect::Rejected { reason } => {
                     let e = loaded.expect_err(c.name);
@@ -177,8 +177,8 @@ fn full_matrix_scenes_load() {
             }
         }
         // The accelerated scene is the case's scene with Anderson acceleration and nothing else.
-        let plain = glissade_mechanics::scene::load_str(&c.scene, "case.toml");
-        let accelerated = glissade_mechanics::scene::load_str(&c.accelerated, "case.toml");
+        let plain = glissade_scene::load_str(&c.scene, "case.toml");
+        let accelerated = glissade_scene::load_str(&c.accelerated, "case.toml");
         if let (Ok(p), Ok(a)) = (plain, accelerated) {
             assert_eq!(p.model.solver.acceleration, Acceleration::None, "{}", c.name);
             assert!(

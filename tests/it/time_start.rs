@@ -8,8 +8,8 @@ use glissade::distributed::run_multi_process;
 use glissade::runner::{run_in_process_observed, RunOptions, RunResult};
 use glissade_mechanics::local::error_against_reference;
 use glissade_mechanics::model::TimeStart;
-use glissade_mechanics::scene::LoadedScene;
 use glissade_messages::{Payload, Role, Verdict};
+use glissade_scene::LoadedScene;
 use std::path::Path;
 use std::time::Duration;
 

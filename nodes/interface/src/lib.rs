@@ -963,8 +963,8 @@ mod tests {
     use glissade_bus::convert::field_of;
     use glissade_mechanics::local::IndicatorSums;
     use glissade_mechanics::model::SolverParams;
-    use glissade_mechanics::scene::load_str;
     use glissade_messages::{Envelope, Field, SCHEMA_VERSION};
+    use glissade_scene::load_str;
 
     fn sums(eta: f64, norm: f64) -> IndicatorSums {
         // η² = num / (½ den)

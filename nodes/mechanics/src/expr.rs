@@ -9,13 +9,13 @@
 use std::fmt;
 
 /// A parsed formula. Variables are referenced by their index in the list given to [`Expr::parse`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Expr {
     source: String,
     root: Node,
 }
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 enum Node {
     Num(f64),
     Var(usize),
@@ -25,7 +25,7 @@ enum Node {
     Call2(Fun2, Box<Node>, Box<Node>),
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 enum Op {
     Add,
     Sub,
@@ -34,7 +34,7 @@ enum Op {
     Pow,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 enum Fun1 {
     Sin,
     Cos,
@@ -45,7 +45,7 @@ enum Fun1 {
     Abs,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 enum Fun2 {
     Min,
     Max,

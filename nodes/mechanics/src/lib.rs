@@ -1,6 +1,7 @@
 //! Pure numerics of glissade: QUA8 elasticity, condensed subdomain operators, the LATIN laws and
-//! indicators, and monolithic reference solves. No I/O, no transport, no async: every item is
-//! testable in-process in milliseconds.
+//! indicators, PGD and Anderson acceleration. No I/O, no file format, no transport, no async:
+//! every item is testable in-process in milliseconds. Models come from the `glissade-scene`
+//! crate; the monolithic reference solvers live in `glissade-reference`.
 //!
 //! Units: mm, N, MPa, s. Plane strain unless a scene says plane stress; unit thickness.
 
@@ -16,10 +17,7 @@ pub mod local;
 pub mod mesh;
 pub mod model;
 pub mod modes;
-pub mod monolithic;
 pub mod pgd;
-pub mod reference;
-pub mod scene;
 pub mod simd;
 
 /// Passes over full boundary fields (n_b × (N+1)) that one plain iteration makes per subdomain,
@@ -48,3 +46,26 @@ pub mod simd;
 /// field stayed in cache from one call to the next (within a call, a column read again right
 /// after it is written, as by the indicator sums, is not counted again).
 pub const FIELD_PASSES: usize = 10 + 1 + 2 + 10 + 4 + 4 + 3;
+
+#[cfg(test)]
+pub(crate) mod fixtures {
+    //! Models for the unit tests, built by the scene crate from scene files and kept as JSON in
+    //! `tests/fixtures/` (this crate reads no scene format). The scene crate's test
+    //! `model_fixtures_are_what_the_scenes_build` fails when a fixture differs from what its scene
+    //! builds today (`GLISSADE_BLESS=1` rewrites them).
+    use crate::model::Model;
+
+    fn parse(json: &str) -> Model {
+        serde_json::from_str(json).expect("a model fixture of tests/fixtures/")
+    }
+
+    /// launch/scenes/small-three-layer.toml.
+    pub(crate) fn small_three_layer() -> Model {
+        parse(include_str!("../tests/fixtures/small-three-layer.model.json"))
+    }
+
+    /// tests/fixtures/two-blocks-contact.toml.
+    pub(crate) fn two_blocks_contact() -> Model {
+        parse(include_str!("../tests/fixtures/two-blocks-contact.model.json"))
+    }
+}

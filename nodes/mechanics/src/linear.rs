@@ -13,6 +13,48 @@ use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use std::sync::Arc;
 
+/// The linear stage of the subdomains (DESIGN §3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinearStage {
+    /// One dense product with the condensed A_E per micro problem.
+    Condensed,
+    /// No A_E: each micro problem is one multi-right-hand-side solve with the sparse factors of
+    /// K_E + Bᵀk⁻MB for all time points (the paper's baseline).
+    Sparse,
+    /// PGD on a reduced basis per subdomain ([`crate::pgd`]).
+    Pgd,
+    /// Chosen per subdomain from its size ([`LinearStage::resolve`]).
+    Auto,
+}
+
+impl LinearStage {
+    pub const ALL: [LinearStage; 4] = [Self::Condensed, Self::Sparse, Self::Pgd, Self::Auto];
+
+    /// The stage's name, as `solver.linear_stage` spells it.
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::Condensed => "condensed",
+            Self::Sparse => "sparse",
+            Self::Pgd => "pgd",
+            Self::Auto => "auto",
+        }
+    }
+
+    /// The stage a subdomain with n_b boundary entries uses: `Auto` resolves to `Condensed`, the
+    /// fastest to a contact-traction error of 1e-3 on every measured case (README "PGD linear
+    /// stage", with Anderson, N = 100 and N = 1000): stratified (n_b ≤ 328) condensed 2.18 s and
+    /// 14.38 s, PGD 6.73 s and 55.93 s, sparse 29.77 s and 331.96 s; layered (n_b ≈ 960)
+    /// condensed 3.61 s and 62.35 s, PGD 18.93 s and 214.58 s, sparse 30.24 s and 938.30 s. The
+    /// PGD basis grows to a large fraction of n_b on both (188 of 328, 677 of about 960), so no
+    /// boundary size measured favours it; it comes close only to 1e-2 at N = 100.
+    pub fn resolve(self, _n_boundary: usize) -> LinearStage {
+        match self {
+            LinearStage::Auto => LinearStage::Condensed,
+            other => other,
+        }
+    }
+}
+
 /// Default search direction per interface: k₀ = k0_factor · E/L_Γ, with E the geometric mean of
 /// the two sides' [`Material::interface_modulus`] √(2G·M) (≈ Young's modulus for ν ≤ 0.3, the
 /// neighbour's when both sides share a material) and L_Γ the interface length. MPa/mm.
@@ -603,19 +645,13 @@ pub fn relax_into(mu: f64, w1: MatRef<'_, f64>, f1: MatRef<'_, f64>, mut w: MatM
 #[cfg(test)]
 pub(crate) mod flop_tests {
     use super::*;
-    use crate::scene::load_str;
-
-    const SCENE: &str = include_str!(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../launch/scenes/small-three-layer.toml"
-    ));
     /// core.2: loaded on its free end, clamped nowhere, a perfect and two contact interfaces (so
     /// three macro slots).
     const SUB: usize = 3;
 
     /// The small-three-layer model and the solver of its subdomain core.2 (also the PGD tests').
     pub(crate) fn model_and_solver(dense: bool) -> (Model, SubdomainSolver) {
-        let model = load_str(SCENE, "small-three-layer.toml").unwrap().model;
+        let model = crate::fixtures::small_three_layer();
         let k0 = default_k0(&model);
         let bases = macro_bases(&model);
         let solver = SubdomainSolver::with_dense(&model, SUB, &k0, &bases, dense).unwrap();

@@ -625,47 +625,12 @@ impl InterfaceLocal {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::load_str;
 
     /// The contact indicator reads only s, ŝ, M and the time weights: evaluating it on the same
     /// pair (s, ŝ) with k₀ and 100 k₀ gives the same value, while η changes.
     #[test]
     fn contact_indicator_does_not_depend_on_k() {
-        let text = r#"
-[time]
-T = 1.0
-N = 3
-[materials.m]
-E = 1000.0
-nu = 0.3
-[[block]]
-name = "lo"
-material = "m"
-x = [0.0, 4.0]
-y = [0.0, 1.0]
-nx = 4
-ny = 1
-[[block]]
-name = "hi"
-material = "m"
-x = [0.0, 4.0]
-y = [1.0, 2.0]
-nx = 4
-ny = 1
-[[interface]]
-between = ["lo", "hi"]
-kind = "contact"
-friction = 0.3
-[[boundary]]
-y = 0.0
-ux = 0.0
-uy = 0.0
-[[boundary]]
-y = 2.0
-ux = "0.01*t"
-uy = "-0.01*t"
-"#;
-        let model = load_str(text, "k.toml").unwrap().model;
+        let model = crate::fixtures::two_blocks_contact();
         let itf = &model.interfaces[0];
         let nt = model.time.n_points();
         let mut s = InterfaceFields::zeros(itf.n_pairs(), nt);

@@ -5,7 +5,7 @@
 //! mid-side nodes 4 (bottom), 5 (right), 6 (top), 7 (left).
 
 /// A QUA8 mesh. Dof `2·node` is x, `2·node + 1` is y.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Mesh {
     pub coords: Vec<[f64; 2]>,
     pub elements: Vec<[usize; 8]>,

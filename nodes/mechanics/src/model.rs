@@ -1,19 +1,19 @@
 //! The kernel's description of a problem: meshes, materials, loads, interfaces and the time
-//! grid, already validated. Built from a scene file by [`crate::scene`]; everything downstream
+//! grid, already validated. Built from a scene file by the `glissade-scene` crate; everything downstream
 //! (condensed operators, LATIN laws, monolithic solves) reads only this.
 
 use crate::expr::Expr;
 use crate::mesh::Mesh;
 
 /// Plane strain or plane stress (unit thickness).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Plane {
     Strain,
     Stress,
 }
 
 /// Isotropic linear elastic material. `e` in MPa.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Material {
     pub e: f64,
     pub nu: f64,
@@ -37,7 +37,7 @@ impl Material {
 }
 
 /// Time grid t_i = i·T/N, i = 0..N (t_0 is solved too).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TimeGrid {
     pub t_end: f64,
     pub n_steps: usize,
@@ -64,7 +64,7 @@ impl TimeGrid {
 }
 
 /// A scalar function of time φ(t).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum TimeFunction {
     Constant(f64),
     /// A formula in `t` (see [`crate::expr`]).
@@ -105,7 +105,7 @@ pub fn interpolate(xs: &[f64], vs: &[f64], x: f64) -> f64 {
 /// A load case of one subdomain: a spatial pattern times a time function. The pattern is a
 /// nodal force vector (consistent edge loads, N) and/or prescribed values at constrained dofs
 /// (mm); both are full-length dof vectors of the subdomain.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LoadCase {
     pub force: Vec<f64>,
     pub displacement: Vec<f64>,
@@ -113,7 +113,7 @@ pub struct LoadCase {
 }
 
 /// One elastic part of the decomposition.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Subdomain {
     pub name: String,
     pub mesh: Mesh,
@@ -130,7 +130,7 @@ impl Subdomain {
 }
 
 /// What an interface between two subdomains does.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum InterfaceKind {
     /// Displacement continuity and action–reaction.
     Perfect,
@@ -141,7 +141,7 @@ pub enum InterfaceKind {
 
 /// A conforming interface Γ between subdomains `a` and `b`: node pairs coincide. The normal
 /// `normal` points out of `a` towards `b`; `tangent` = (−n_y, n_x).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Interface {
     pub kind: InterfaceKind,
     pub a: usize,
@@ -197,7 +197,7 @@ pub enum Side {
 }
 
 /// Solver parameters of a scene (DESIGN §3), already validated.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SolverParams {
     /// k₀ = k0_factor · E/L_Γ.
     pub k0_factor: f64,
@@ -234,7 +234,7 @@ pub struct SolverParams {
 /// same settings) until η ≤ `tolerance`, and the fine iteration starts from that solve's ŝ,
 /// interpolated linearly in time, instead of ŝ = 0. The start changes the path, not the limit:
 /// the fixed point of the fine iteration does not depend on where it starts.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TimeStart {
     /// c ≥ 2, dividing N.
     pub coarsening: usize,
@@ -285,7 +285,7 @@ pub const DEFAULT_ANDERSON_WINDOW: usize = 5;
 /// How the LATIN fixed point s ← G(s) is iterated ([`crate::anderson`]). The default is Anderson
 /// mixing over [`DEFAULT_ANDERSON_WINDOW`] iterates: it reaches the same limit in fewer iterations
 /// on every scene of this project and every converging case of the stability matrix.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Acceleration {
     /// Plain relaxation s ← μ G(s) + (1 − μ) s.
     None,
@@ -294,7 +294,7 @@ pub enum Acceleration {
 }
 
 /// A validated problem.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Model {
     pub name: String,
     pub plane: Plane,

@@ -38,9 +38,60 @@
 
 use crate::anderson::AndersonHistory;
 use crate::linear::SubdomainSolver;
-use crate::scene::PgdCriterion;
 use crate::simd::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
+
+/// How the PGD enrichment criterion ξ is measured (DESIGN §3, "Where PGD pays").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PgdCriterion {
+    /// ξ relative to the increment δ.
+    Increment,
+    /// ξ relative to the accumulated correction.
+    Accumulated,
+    /// Relative to the increment, plus SVD compression of the basis.
+    IncrementSvd,
+}
+
+/// PGD settings of the linear stage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PgdParams {
+    pub enabled: bool,
+    /// ξ₀ of micro problem 1.
+    pub xi1: f64,
+    /// ξ₀ of micro problem 2.
+    pub xi2: f64,
+    pub criterion: PgdCriterion,
+    /// The macro modes 𝔼 start the basis, frozen (micro 2 exact).
+    pub macro_modes: bool,
+    /// New modes per micro problem and iteration, at most.
+    pub max_new_modes: usize,
+}
+
+impl PgdParams {
+    /// The settings a subdomain's PGD linear stage runs with.
+    pub fn settings(&self) -> PgdSettings {
+        PgdSettings {
+            criterion: self.criterion,
+            xi1: self.xi1,
+            xi2: self.xi2,
+            macro_modes: self.macro_modes,
+            max_new_modes: self.max_new_modes,
+        }
+    }
+}
+
+impl Default for PgdParams {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            xi1: 0.1,
+            xi2: 0.01,
+            criterion: PgdCriterion::Increment,
+            macro_modes: false,
+            max_new_modes: 1,
+        }
+    }
+}
 
 /// Settings of a PGD linear stage.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -64,12 +64,13 @@ fn allocations_with(
     warm_up: usize,
     measured: usize,
 ) -> (u64, u64, bool) {
-    let path = format!("{}/../../launch/scenes/{scene}", env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(&path).expect("scene file");
+    // The model fixtures (tests/fixtures/, kept in step with their scenes by the scene crate).
+    let json = match scene {
+        "small-three-layer.toml" => include_str!("fixtures/small-three-layer.model.json"),
+        other => panic!("no model fixture for {other}"),
+    };
     let before_setup = calls();
-    let mut model = glissade_mechanics::scene::load_str(&text, &path)
-        .expect("valid scene")
-        .model;
+    let mut model: glissade_mechanics::model::Model = serde_json::from_str(json).expect("a model fixture");
     model.solver.search_direction_update = search_direction_update;
     let mut run = latin::Latin::with_dense(model, dense);
     for _ in 0..warm_up {

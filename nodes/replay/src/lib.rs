@@ -19,6 +19,7 @@
 //! state, then every message); [`View`] takes messages one at a time, as [`replay`] and a live run
 //! (`glissade run --rerun`) give them.
 
+pub mod reexecute;
 mod states;
 
 use glissade_bus::convert::view;
@@ -28,10 +29,10 @@ use glissade_mechanics::linear::default_k0;
 use glissade_mechanics::local::{InterfaceFields, ReferenceErrors};
 use glissade_mechanics::model::Side;
 use glissade_mechanics::model::{Model, Plane};
-use glissade_mechanics::reference::{solve_reference, ReferenceOptions};
-use glissade_mechanics::scene::load_str;
 use glissade_messages::{Field, InterfaceSolution, Message, Payload, Stage};
 use glissade_recorder::Recording;
+use glissade_reference::{solve_reference, ReferenceOptions};
+use glissade_scene::load_str;
 use nalgebra::SVector;
 pub use states::BoundaryStates;
 use std::collections::BTreeMap;

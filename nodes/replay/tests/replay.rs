@@ -4,13 +4,13 @@
 
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::linear::default_k0;
-use glissade_mechanics::scene::load_str;
 use glissade_messages::{
     encode, Decision, Envelope, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
     SCHEMA_VERSION,
 };
 use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
 use glissade_replay::{replay, ColorBy, ReplayOptions, Sink};
+use glissade_scene::load_str;
 use std::process::Command;
 
 #[test]

@@ -4,15 +4,43 @@
 //! it, topic by topic. A mismatch names the first differing recorded message (key, iteration,
 //! stage) and the first differing field in it.
 
-use crate::runner::{build_nodes, Plan, Selection};
-use anyhow::{bail, Context};
-use glissade_bus::{Node, RunContext};
-use glissade_mechanics::scene::load_str;
-use glissade_messages::{encode, key_matches, Message, NodeId, Role};
+use glissade_bus::{Node, NodeError, RunContext};
+use glissade_deploy::{build_nodes, BuildError, Plan, Selection};
+use glissade_messages::{encode, key_matches, DecodeError, Message, NodeId, Role};
 use glissade_recorder::Recording;
+use glissade_scene::{load_str, SceneError};
 use glissade_subdomain::{LinearStageLog, LinearStageRecord};
 use std::collections::BTreeMap;
 use std::sync::Arc;
+
+/// Why a node could not be re-executed (a difference from the recording is not an error: it is
+/// [`Reexecution::mismatch`]).
+#[derive(Debug, thiserror::Error)]
+pub enum ReexecuteError {
+    /// `--node` is not `<role>:<index>`.
+    #[error("--node `{text}`: {problem}")]
+    NodeArgument { text: String, problem: String },
+    /// The recording cannot serve a re-execution (unfinished, thinned, without a scene…).
+    #[error("{path}: {problem}")]
+    Recording { path: String, problem: String },
+    #[error("{path}: {what}: {source}")]
+    Decode {
+        path: String,
+        what: String,
+        source: DecodeError,
+    },
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    /// The node failed on its start or on a recorded input.
+    #[error("node {node} failed on {what}: {source}")]
+    Node {
+        node: NodeId,
+        what: String,
+        source: NodeError,
+    },
+}
 
 /// Full fields a recorder may thin out (`recording.full_fields_every`).
 const THINNED_FIELDS: [&str; 2] = ["boundary_state", "local_directions"];
@@ -75,29 +103,33 @@ pub struct Reexecution {
 }
 
 /// Parses `role:id` (`subdomain:3`, `interface:0`, `coarse:0`).
-pub fn parse_node(text: &str) -> anyhow::Result<NodeId> {
+pub fn parse_node(text: &str) -> Result<NodeId, ReexecuteError> {
+    let bad = |problem: String| ReexecuteError::NodeArgument {
+        text: text.to_string(),
+        problem,
+    };
     let (role, id) = text
         .split_once(':')
-        .with_context(|| format!("--node `{text}`: expected <role>:<id>, e.g. subdomain:0"))?;
+        .ok_or_else(|| bad("expected <role>:<id>, e.g. subdomain:0".into()))?;
     let role = match role {
         "subdomain" => Role::Subdomain,
         "interface" => Role::Interface,
         "coarse" => Role::Coarse,
-        other => bail!("--node `{text}`: unknown role `{other}` (subdomain, interface or coarse)"),
+        other => return Err(bad(format!("unknown role `{other}` (subdomain, interface or coarse)"))),
     };
     let index = id
         .parse::<u32>()
-        .with_context(|| format!("--node `{text}`: `{id}` is not a node index"))?;
+        .map_err(|_| bad(format!("`{id}` is not a node index")))?;
     Ok(NodeId { role, index })
 }
 
 /// The nodes whose outputs a recording holds (sender of at least one message), in order.
-pub fn recorded_nodes(recording: &Recording) -> anyhow::Result<Vec<NodeId>> {
+pub fn recorded_nodes(recording: &Recording) -> Result<Vec<NodeId>, ReexecuteError> {
     let mut nodes = std::collections::BTreeSet::new();
     for m in recording.messages() {
         let msg = recording
             .decode(&m)
-            .with_context(|| format!("{}: message on `{}`", recording.path().display(), m.topic))?;
+            .map_err(|source| decode_error(recording, m.topic, source))?;
         if matches!(
             msg.envelope.sender.role,
             Role::Subdomain | Role::Interface | Role::Coarse
@@ -109,33 +141,37 @@ pub fn recorded_nodes(recording: &Recording) -> anyhow::Result<Vec<NodeId>> {
 }
 
 /// Re-executes node `id` of `recording` and compares its outputs with the recorded ones.
-pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecution> {
+pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, ReexecuteError> {
     let path = recording.path().display().to_string();
+    let refuse = |problem: String| ReexecuteError::Recording {
+        path: path.clone(),
+        problem,
+    };
     if !recording.is_finished() {
-        bail!(
-            "{path}: the recording is not finished ({}): re-execution needs every input of the run",
+        return Err(refuse(format!(
+            "the recording is not finished ({}): re-execution needs every input of the run",
             recording.truncated().unwrap_or("no summary section")
-        );
+        )));
     }
     let text = recording
         .scene_text()
-        .with_context(|| format!("{path}: the recording holds no scene"))?;
+        .ok_or_else(|| refuse("the recording holds no scene".into()))?;
     let scene = load_str(text, &format!("{path} (scene.toml)"))?;
     if scene.fingerprint != recording.scene_fingerprint() {
-        bail!(
-            "{path}: the recorded scene's fingerprint {:016x} differs from the recording's {:016x}",
+        return Err(refuse(format!(
+            "the recorded scene's fingerprint {:016x} differs from the recording's {:016x}",
             scene.fingerprint,
             recording.scene_fingerprint()
-        );
+        )));
     }
     let meta = recording.metadata();
     if let Some(topics) = meta.get("topics").filter(|t| t.as_str() != "**") {
-        bail!("{path}: the recording keeps only the topics `{topics}`; re-execution needs every message of the run (recording.topics = [\"**\"])");
+        return Err(refuse(format!("the recording keeps only the topics `{topics}`; re-execution needs every message of the run (recording.topics = [\"**\"])")));
     }
     let thinning: u32 = match meta.get("full_fields_every") {
         Some(k) => k
             .parse::<u32>()
-            .with_context(|| format!("{path}: metadata full_fields_every = `{k}` is not a number"))?,
+            .map_err(|_| refuse(format!("metadata full_fields_every = `{k}` is not a number")))?,
         None => 1,
     };
     let model = Arc::new(scene.model.clone());
@@ -163,13 +199,13 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
             interface: false,
             coarse: true,
         },
-        _ => bail!("{path}: the run has no node {id}"),
+        _ => return Err(refuse(format!("the run has no node {id}"))),
     };
     // Every interface node is built when one is asked for: keep the one asked for.
     let mut node: Box<dyn Node> = build_nodes(&model, &ctx, interior, &plan, &selection)?
         .into_iter()
         .find(|n| n.id() == id)
-        .with_context(|| format!("{path}: the run has no node {id}"))?;
+        .ok_or_else(|| refuse(format!("the run has no node {id}")))?;
     let subs = node.subscriptions();
     if thinning > 1 {
         let needs: Vec<&str> = THINNED_FIELDS
@@ -181,10 +217,10 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
             })
             .collect();
         if !needs.is_empty() {
-            bail!(
-                "{path}: the recording keeps {} only every {thinning} iterations (recording.full_fields_every = {thinning}); node {id} needs every one of them: record with full_fields_every = 1",
+            return Err(refuse(format!(
+                "the recording keeps {} only every {thinning} iterations (recording.full_fields_every = {thinning}); node {id} needs every one of them: record with full_fields_every = 1",
                 needs.join(" and ")
-            );
+            )));
         }
     }
 
@@ -193,9 +229,11 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
     let mut recorded: BTreeMap<String, Vec<(usize, Vec<u8>, Message)>> = BTreeMap::new();
     let mut recorded_outputs = 0;
     for (i, m) in recording.messages().enumerate() {
-        let msg = recording
-            .decode(&m)
-            .with_context(|| format!("{path}: recorded message #{i} on `{}`", m.topic))?;
+        let msg = recording.decode(&m).map_err(|source| ReexecuteError::Decode {
+            path: path.clone(),
+            what: format!("recorded message #{i} on `{}`", m.topic),
+            source,
+        })?;
         if msg.envelope.sender == id {
             recorded_outputs += 1;
             recorded
@@ -217,16 +255,22 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> anyhow::Result<Reexecutio
             produced.entry(o.topic()).or_default().push(o);
         }
     };
-    keep(node.start().with_context(|| format!("node {id}: start"))?);
+    keep(node.start().map_err(|source| ReexecuteError::Node {
+        node: id,
+        what: "its start".into(),
+        source,
+    })?);
     keep(std::iter::from_fn(|| node.next_output()).collect());
     for (i, msg) in &inputs {
-        let out = node.handle(msg).with_context(|| {
-            format!(
-                "node {id} failed on recorded message #{i} `{}` (iteration {}, stage {:?})",
+        let out = node.handle(msg).map_err(|source| ReexecuteError::Node {
+            node: id,
+            what: format!(
+                "recorded message #{i} `{}` (iteration {}, stage {:?})",
                 msg.topic(),
                 msg.envelope.iteration,
                 msg.envelope.stage
-            )
+            ),
+            source,
         })?;
         keep(out);
         keep(std::iter::from_fn(|| node.next_output()).collect());
@@ -396,11 +440,14 @@ fn short(v: &serde_json::Value) -> String {
     }
 }
 
+/// (iteration, subdomain, basis size) of a PGD subdomain after its linear stage.
+pub type BasisSize = (u32, u32, usize);
+
 /// The PGD basis sizes of a recorded run, (iteration, subdomain, basis size after the linear
 /// stage): the row count of the time functions of each `boundary_modes` message, the state a PGD
 /// subdomain sends in mode form (never thinned by `full_fields_every`). None when no subdomain of
 /// the run uses the PGD stage.
-pub fn recorded_basis_sizes(recording: &Recording) -> anyhow::Result<Option<Vec<(u32, u32, usize)>>> {
+pub fn recorded_basis_sizes(recording: &Recording) -> Result<Option<Vec<BasisSize>>, ReexecuteError> {
     let mut sizes = Vec::new();
     for m in recording.messages() {
         if glissade_messages::topic_field(m.topic) != Some("boundary_modes") {
@@ -408,7 +455,7 @@ pub fn recorded_basis_sizes(recording: &Recording) -> anyhow::Result<Option<Vec<
         }
         let msg = recording
             .decode(&m)
-            .with_context(|| format!("{}: message on `{}`", recording.path().display(), m.topic))?;
+            .map_err(|source| decode_error(recording, m.topic, source))?;
         if let glissade_messages::Payload::BoundaryModes { subdomain, lambda, .. } = &msg.payload {
             sizes.push((msg.envelope.iteration, *subdomain, lambda.rows()));
         }
@@ -418,4 +465,13 @@ pub fn recorded_basis_sizes(recording: &Recording) -> anyhow::Result<Option<Vec<
     }
     sizes.sort_unstable();
     Ok(Some(sizes))
+}
+
+/// A recorded message on `topic` that does not decode.
+fn decode_error(recording: &Recording, topic: &str, source: DecodeError) -> ReexecuteError {
+    ReexecuteError::Decode {
+        path: recording.path().display().to_string(),
+        what: format!("message on `{topic}`"),
+        source,
+    }
 }

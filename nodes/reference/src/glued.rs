@@ -1,9 +1,9 @@
 //! Monolithic linear-elastic solve of a whole model with every interface glued (node pairs
 //! merged): the reference for perfect-interface scenes, and the elastic predictor of contact ones.
 
-use crate::assembly::{stiffness_triplets, AssemblyError, SparseSpd};
-use crate::model::Model;
 use faer::Mat;
+use glissade_mechanics::assembly::{stiffness_triplets, AssemblyError, SparseSpd};
+use glissade_mechanics::model::Model;
 
 /// Global numbering of a model's nodes with interface pairs merged.
 #[derive(Debug, Clone)]

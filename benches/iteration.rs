@@ -2,12 +2,12 @@
 //! thread from the crate's kernels (the calls the nodes make, without messages), timed per stage,
 //! with the machine's one-thread dense-product rate and read bandwidth measured in the same run.
 //!
-//! Run: `cargo bench -p glissade-mechanics --bench iteration -- [scene.toml] [points=N+1]
+//! Run: `cargo bench --bench iteration -- [scene.toml] [points=N+1]
 //! [iterations=K] [kernels=baseline|avx2|avx512]` (release build; the element-wise kernels at
 //! the CPU's widest vector extension unless `kernels=` lowers it). The first two iterations
 //! (μ = 1, first touch of every buffer) are left out of the figures.
 
-#[path = "../tests/support/latin.rs"]
+#[path = "../nodes/mechanics/tests/support/latin.rs"]
 mod latin;
 
 use faer::{Accum, Mat, Par};
@@ -52,7 +52,7 @@ fn read_bandwidth() -> f64 {
 }
 
 fn main() {
-    let mut scene = format!("{}/../../launch/scenes/stratified.toml", env!("CARGO_MANIFEST_DIR"));
+    let mut scene = format!("{}/launch/scenes/stratified.toml", env!("CARGO_MANIFEST_DIR"));
     let (mut points, mut iterations) = (None, 30usize);
     for arg in std::env::args().skip(1).filter(|a| !a.starts_with("--")) {
         if let Some(v) = arg.strip_prefix("points=") {
@@ -73,7 +73,7 @@ fn main() {
     }
     assert!(iterations >= 3, "iterations=K needs K ≥ 3 (two warm-up iterations)");
     let text = std::fs::read_to_string(&scene).unwrap_or_else(|e| panic!("cannot read {scene}: {e}"));
-    let mut model = glissade_mechanics::scene::load_str(&text, &scene)
+    let mut model = glissade_scene::load_str(&text, &scene)
         .unwrap_or_else(|e| panic!("{e}"))
         .model;
     if let Some(p) = points {

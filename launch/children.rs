@@ -1,0 +1,199 @@
+//! The launcher's child processes: spawning a node or recorder process with its output
+//! forwarded under a `[role:index]` prefix, its last lines kept for error messages, killed with
+//! the launcher (parent-death signal) and, for node processes, killed when the run's set of
+//! children is dropped on any error path.
+
+use anyhow::Context;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// Role of a node process started by hand or by the launcher.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum NodeRole {
+    Subdomain,
+    Interface,
+    Coarse,
+}
+
+impl NodeRole {
+    pub fn key(self) -> &'static str {
+        match self {
+            NodeRole::Subdomain => "subdomain",
+            NodeRole::Interface => "interface",
+            NodeRole::Coarse => "coarse",
+        }
+    }
+}
+
+/// A node process of a run: its role and index (`subdomain:1`, `interface:0`, `coarse:0`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub struct NodeName {
+    pub role: NodeRole,
+    pub index: u32,
+}
+
+impl std::fmt::Display for NodeName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.role.key(), self.index)
+    }
+}
+
+impl std::str::FromStr for NodeName {
+    type Err = String;
+
+    /// `role[:index]` with role `subdomain`, `interface` or `coarse`; the index defaults to 0.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (role, index) = s.split_once(':').unwrap_or((s, "0"));
+        let role = match role {
+            "subdomain" => NodeRole::Subdomain,
+            "interface" => NodeRole::Interface,
+            "coarse" => NodeRole::Coarse,
+            _ => return Err(format!("`{s}`: the role must be subdomain, interface or coarse")),
+        };
+        let index = index
+            .parse()
+            .map_err(|_| format!("`{s}`: the index after `:` must be a non-negative integer"))?;
+        Ok(Self { role, index })
+    }
+}
+
+/// One spawned node process.
+pub(crate) struct NodeProcess {
+    pub(crate) name: NodeName,
+    pub(crate) child: Child,
+    /// Its `glissade node` arguments (a replacement gets them too, with `--resume`).
+    pub(crate) args: Vec<String>,
+    pub(crate) last_lines: Arc<Mutex<Vec<String>>>,
+    /// The threads that read its stdout and stderr into `last_lines`.
+    pub(crate) readers: Vec<std::thread::JoinHandle<()>>,
+    /// Exit status once it exited.
+    pub(crate) status: Option<ExitStatus>,
+    /// Its liveliness token was seen (a token of the same name that disappears before is its
+    /// predecessor's).
+    pub(crate) token_seen: bool,
+    /// When its liveliness token disappeared while it was still running.
+    pub(crate) token_lost: Option<Instant>,
+}
+
+impl NodeProcess {
+    pub(crate) fn last_lines(&self) -> String {
+        match self.last_lines.lock() {
+            Ok(l) if !l.is_empty() => l.join("\n    "),
+            _ => "(none)".to_string(),
+        }
+    }
+}
+
+/// Kills every child still running when dropped (on any error path).
+pub(crate) struct Children(pub(crate) Vec<NodeProcess>);
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for p in &mut self.0 {
+            if let Ok(None) = p.child.try_wait() {
+                let _ = p.child.kill();
+                let _ = p.child.wait();
+            }
+        }
+    }
+}
+
+impl Children {
+    /// Waits up to `timeout` for every child to exit (after `stop`); the rest are killed on drop.
+    pub(crate) fn wait_all(&mut self, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline && self.0.iter_mut().any(|p| matches!(p.child.try_wait(), Ok(None))) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// Forwards a child's output lines to stderr with a `[prefix]`, keeping its last 10 lines in `last`.
+pub(crate) fn forward(
+    prefix: String,
+    stream: impl std::io::Read + Send + 'static,
+    last: Arc<Mutex<Vec<String>>>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        for line in BufReader::new(stream).lines().map_while(Result::ok) {
+            eprintln!("[{prefix}] {line}");
+            if let Ok(mut l) = last.lock() {
+                l.push(line);
+                let n = l.len();
+                if n > 10 {
+                    l.drain(..n - 10);
+                }
+            }
+        }
+    })
+}
+
+/// Longest wait, once a child process has exited, for the threads that read its output to reach
+/// its end ([`settle`]).
+pub(crate) const OUTPUT_SETTLE: Duration = Duration::from_secs(2);
+
+/// Waits (up to [`OUTPUT_SETTLE`]) for the threads of [`forward`] that read an exited child's
+/// output to have read it all, so that its last lines, its own error among them, are there to
+/// quote: the process's exit can be seen before its last writes are read.
+pub(crate) fn settle(readers: &[std::thread::JoinHandle<()>]) {
+    let deadline = Instant::now() + OUTPUT_SETTLE;
+    while readers.iter().any(|r| !r.is_finished()) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// Starts node process `name` with `args`: its own process group, killed with the launcher.
+pub(crate) fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<NodeProcess> {
+    let mut cmd = Command::new(exe);
+    cmd.args(args);
+    {
+        use std::os::unix::process::CommandExt;
+        // Its own process group: a Ctrl-C in the terminal reaches the launcher only, which then
+        // stops every node through the bus.
+        cmd.process_group(0);
+    }
+    let (child, last_lines, readers) = spawn_child(cmd, &name.to_string(), libc::SIGKILL)
+        .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
+    Ok(NodeProcess {
+        name,
+        child,
+        args: args.to_vec(),
+        last_lines,
+        readers,
+        status: None,
+        token_seen: false,
+        token_lost: None,
+    })
+}
+
+/// Spawns `cmd` with its standard output and error forwarded under `[prefix]` ([`forward`]) and
+/// `death_signal` sent to it when the launcher dies (Linux's parent-death signal: no orphans even
+/// if the launcher is killed). Returns the child, its last lines and the threads reading them.
+pub(crate) fn spawn_child(mut cmd: Command, prefix: &str, death_signal: libc::c_int) -> std::io::Result<Spawned> {
+    cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    #[cfg(target_os = "linux")]
+    // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+    unsafe {
+        use std::os::unix::process::CommandExt;
+        cmd.pre_exec(move || {
+            libc::prctl(libc::PR_SET_PDEATHSIG, death_signal);
+            Ok(())
+        });
+    }
+    let mut child = cmd.spawn()?;
+    let last = Arc::new(Mutex::new(Vec::new()));
+    let mut readers = Vec::new();
+    if let Some(out) = child.stdout.take() {
+        readers.push(forward(prefix.to_string(), out, last.clone()));
+    }
+    if let Some(err) = child.stderr.take() {
+        readers.push(forward(prefix.to_string(), err, last.clone()));
+    }
+    Ok((child, last, readers))
+}
+
+/// A spawned child: the process, its last output lines, the threads that read its output.
+pub(crate) type Spawned = (Child, Arc<Mutex<Vec<String>>>, Vec<std::thread::JoinHandle<()>>);

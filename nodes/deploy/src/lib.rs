@@ -1,0 +1,242 @@
+//! What a run deploys and how its nodes are built: the [`Plan`] of a scene (k₀ and macro bases
+//! per interface, the subdomains that take part, whether a coarse node is needed, the linear
+//! stage, the interface nodes' groups), the [`Selection`] of nodes one process hosts, and the
+//! builders of those nodes (subdomain operators in parallel). The launcher, the node processes,
+//! re-execution and the tests all build nodes through here.
+
+use glissade_bus::{Node, RunContext};
+use glissade_coarse::CoarseNode;
+use glissade_interface::InterfaceNode;
+use glissade_mechanics::assembly::AssemblyError;
+use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::linear::{default_k0, macro_bases, LinearStage, SubdomainSolver};
+use glissade_mechanics::model::Model;
+use glissade_mechanics::pgd::PgdParams;
+use glissade_scene::LoadedScene;
+use glissade_subdomain::{LinearStageLog, SubdomainNode, SubdomainOptions};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Why nodes could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    #[error("subdomain `{name}`: {source}")]
+    Operator { name: String, source: AssemblyError },
+    #[error("node selection: {0}")]
+    Selection(String),
+}
+
+/// What a scene's run needs: k₀ and macro bases per interface, the subdomains that take part
+/// (those with an interface), and whether a coarse node is needed.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    pub k0: Vec<f64>,
+    pub bases: Vec<Vec<Vec<f64>>>,
+    pub participants: Vec<u32>,
+    pub coarse: bool,
+    /// The scene's linear stage (resolved per subdomain when `Auto`) and PGD settings.
+    pub linear_stage: LinearStage,
+    pub pgd: PgdParams,
+    /// Where subdomain nodes log their linear stages, when asked.
+    pub log: Option<LinearStageLog>,
+    /// The interfaces each interface node owns (the scene's deployment; one node owning every
+    /// interface by default).
+    pub interface_groups: Vec<Vec<usize>>,
+}
+
+impl Plan {
+    pub fn new(model: &Model) -> Self {
+        let k0 = default_k0(model);
+        let bases = macro_bases(model);
+        let participants = (0..model.subdomains.len())
+            .filter(|&s| model.interfaces.iter().any(|i| i.a == s || i.b == s))
+            .map(|s| s as u32)
+            .collect();
+        Self {
+            k0,
+            bases,
+            participants,
+            coarse: model.solver.coarse && !model.interfaces.is_empty(),
+            linear_stage: LinearStage::Condensed,
+            pgd: PgdParams::default(),
+            log: None,
+            interface_groups: vec![(0..model.interfaces.len()).collect()],
+        }
+    }
+
+    /// The plan with the scene's linear-stage settings.
+    pub fn with_scene(mut self, scene: &LoadedScene) -> Self {
+        self.linear_stage = scene.linear_stage;
+        self.pgd = scene.pgd.clone();
+        self.interface_groups = scene.deployment.interface_groups(&scene.model);
+        self
+    }
+
+    /// The linear stage subdomain `s` uses (`Auto` resolved from its boundary size).
+    pub fn stage_of(&self, model: &Model, s: usize) -> LinearStage {
+        match self.linear_stage {
+            LinearStage::Auto => self.linear_stage.resolve(BoundaryLayout::new(model, s, &self.k0).len()),
+            other => other,
+        }
+    }
+
+    /// The participants split into `n` contiguous groups (one per subdomain node process).
+    pub fn groups(&self, n: usize) -> Vec<Vec<u32>> {
+        let n = n.clamp(1, self.participants.len().max(1));
+        let per = self.participants.len().div_ceil(n);
+        self.participants.chunks(per.max(1)).map(<[u32]>::to_vec).collect()
+    }
+
+    /// Nodes used (role × count) and what is left out and why.
+    pub fn describe(&self, model: &Model, subdomain_processes: usize) -> (Vec<String>, Vec<String>) {
+        let mut names = vec![
+            format!(
+                "subdomain × {} (in {} process(es))",
+                self.participants.len(),
+                subdomain_processes
+            ),
+            format!("interface × {}", self.interface_groups.len()),
+        ];
+        let mut left_out = Vec::new();
+        if self.coarse {
+            names.push("coarse × 1".into());
+        } else {
+            left_out.push("coarse node: the scene switches the coarse problem off".into());
+        }
+        if model.subdomains.len() > self.participants.len() {
+            left_out.push(format!(
+                "{} subdomain(s) without interface: not part of the iteration",
+                model.subdomains.len() - self.participants.len()
+            ));
+        }
+        (names, left_out)
+    }
+}
+
+/// Which nodes one process hosts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Selection {
+    pub subdomains: Vec<u32>,
+    /// Every interface node of the plan (see [`build_interface_node`] for one of several).
+    pub interface: bool,
+    pub coarse: bool,
+}
+
+/// Interface node `index` of the plan's deployment.
+pub fn build_interface_node(
+    model: &Arc<Model>,
+    ctx: &RunContext,
+    plan: &Plan,
+    index: usize,
+) -> Result<Box<dyn Node>, BuildError> {
+    if index >= plan.interface_groups.len() {
+        return Err(BuildError::Selection(format!(
+            "interface node {index}: the deployment has {} interface node(s), indices 0 to {}",
+            plan.interface_groups.len(),
+            plan.interface_groups.len() - 1
+        )));
+    }
+    Ok(Box::new(InterfaceNode::owning(
+        ctx.clone(),
+        model.clone(),
+        &plan.k0,
+        &plan.interface_groups,
+        index,
+    )))
+}
+
+impl Selection {
+    pub fn everything(plan: &Plan) -> Self {
+        Self {
+            subdomains: plan.participants.clone(),
+            interface: true,
+            coarse: plan.coarse,
+        }
+    }
+}
+
+/// Builds the nodes of `selection` (subdomain operators in parallel).
+pub fn build_nodes(
+    model: &Arc<Model>,
+    ctx: &RunContext,
+    interior: bool,
+    plan: &Plan,
+    selection: &Selection,
+) -> Result<Vec<Box<dyn Node>>, BuildError> {
+    let solvers = build_solvers(model, plan, &selection.subdomains)?;
+    build_nodes_with(model, ctx, interior, plan, selection, solvers)
+}
+
+/// The linear-stage operators of `subdomains`, built in parallel.
+pub fn build_solvers(model: &Model, plan: &Plan, subdomains: &[u32]) -> Result<Vec<SubdomainSolver>, BuildError> {
+    for s in subdomains {
+        if !plan.participants.contains(s) {
+            return Err(BuildError::Selection(format!(
+                "subdomain {s} has no interface or does not exist"
+            )));
+        }
+    }
+    subdomains
+        .par_iter()
+        .map(|&s| {
+            // A_E only for the condensed stage; the sparse and PGD stages use the sparse factors.
+            let dense = plan.stage_of(model, s as usize) == LinearStage::Condensed;
+            SubdomainSolver::with_dense(model, s as usize, &plan.k0, &plan.bases, dense).map_err(|source| {
+                BuildError::Operator {
+                    name: model.subdomains[s as usize].name.clone(),
+                    source,
+                }
+            })
+        })
+        .collect()
+}
+
+/// As [`build_nodes`], with the operators of `selection`'s subdomains already built (in its
+/// order).
+pub fn build_nodes_with(
+    model: &Arc<Model>,
+    ctx: &RunContext,
+    interior: bool,
+    plan: &Plan,
+    selection: &Selection,
+    solvers: Vec<SubdomainSolver>,
+) -> Result<Vec<Box<dyn Node>>, BuildError> {
+    debug_assert!(solvers
+        .iter()
+        .map(|s| s.subdomain as u32)
+        .eq(selection.subdomains.iter().copied()));
+    let options = SubdomainOptions {
+        coarse: plan.coarse,
+        relaxation: model.solver.relaxation,
+        send_displacement: interior,
+        acceleration: model.solver.acceleration,
+    };
+    let mut nodes: Vec<Box<dyn Node>> = Vec::new();
+    for solver in solvers {
+        let stage = plan.stage_of(model, solver.subdomain);
+        let mut node = SubdomainNode::new(ctx.clone(), model.clone(), solver, options)
+            .with_interface_owners(&plan.interface_groups);
+        if stage == LinearStage::Pgd {
+            node = node.with_pgd(plan.pgd.settings());
+        }
+        if let Some(log) = &plan.log {
+            node = node.with_log(log.clone());
+        }
+        nodes.push(Box::new(node));
+    }
+    if selection.interface {
+        for index in 0..plan.interface_groups.len() {
+            nodes.push(build_interface_node(model, ctx, plan, index)?);
+        }
+    }
+    if selection.coarse {
+        let n_modes = plan.bases.iter().map(Vec::len).collect();
+        nodes.push(Box::new(CoarseNode::new(
+            ctx.clone(),
+            n_modes,
+            plan.participants.clone(),
+            model.time.n_points(),
+        )));
+    }
+    Ok(nodes)
+}

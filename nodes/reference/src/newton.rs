@@ -1,0 +1,493 @@
+//! Semi-smooth Newton on the Alart–Curnier augmented Lagrangian, one time step at a time.
+
+use crate::numbering::*;
+use crate::sparse::*;
+use crate::verify::*;
+use crate::{dot, LinearSolver, ReferenceError, ReferenceOptions, NONE};
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::Lu;
+use faer::sparse::SparseColMat;
+use faer::Mat;
+use glissade_mechanics::assembly::stiffness_triplets;
+use glissade_mechanics::laws::Status;
+use glissade_mechanics::model::{InterfaceKind, Model};
+use std::collections::BTreeMap;
+
+/// Variable Jacobian entries of one pair's two rows (u entries at (A x, A y, B x, B y)).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct PairJacobian {
+    pub(crate) du_n: [f64; 4],
+    pub(crate) dln_n: f64,
+    pub(crate) du_t: [f64; 4],
+    pub(crate) dln_t: f64,
+    pub(crate) dlt_t: f64,
+}
+
+/// State of one time step: merged displacement and λ per merged pair in (n, t) components.
+#[derive(Clone)]
+pub(crate) struct StepState {
+    /// Unknowns: u_free then (λ_n, λ_t) per merged pair.
+    pub(crate) x: Vec<f64>,
+}
+
+/// Lower bound of the force scale F_s: 1e-4 · max|K_ii| · U_s. Without it a stress-free
+/// solution (a rigid motion: K u is round-off, f = 0, no contact force) has F_s at round-off level
+/// and the relative equilibrium check compares round-off with round-off (it failed at 0.5 on a
+/// rigid translation). Round-off in K u is about 1e-15 · max|K_ii| · U_s, so the relative residual
+/// stays near 1e-11 there, while for a loaded problem |K u| ~ max|K_ii| · U_s · h/L is far above
+/// the floor (h/L ≥ 1e-3 for any mesh of this project) and the checks are unchanged.
+pub(crate) fn force_floor(k_diag: f64, us: f64) -> f64 {
+    1e-4 * k_diag * us
+}
+
+pub(crate) struct Problem<'m> {
+    pub(crate) model: &'m Model,
+    pub(crate) num: Numbering,
+    pub(crate) n_dofs: usize,
+    pub(crate) free: Vec<usize>,
+    pub(crate) n_free: usize,
+    pub(crate) k: Csr,
+    /// max |K_ii|: with U_s it bounds the force scale from below ([`force_floor`]).
+    pub(crate) k_diag: f64,
+    pub(crate) pairs: Vec<MergedPair>,
+    /// Per interface and pair: (merged pair, orientation sign) for contact interfaces.
+    pub(crate) copies: Vec<Vec<(usize, f64)>>,
+    /// Per merged constrained dof: the (subdomain, dof) giving its prescribed value.
+    pub(crate) prescribed_source: Vec<(usize, usize)>,
+    pub(crate) sub_k: Vec<Csr>,
+    pub(crate) groups: Vec<PerfectGroup>,
+    pub(crate) solver: StepSolver,
+}
+
+impl<'m> Problem<'m> {
+    pub(crate) fn new(model: &'m Model, linear_solver: LinearSolver) -> Result<Self, ReferenceError> {
+        let num = Numbering::new(model);
+        let n_dofs = 2 * num.n_merged;
+        let mut constrained = vec![false; n_dofs];
+        let mut prescribed_source = vec![(NONE, NONE); n_dofs];
+        let mut k_all = Vec::new();
+        let mut sub_k = Vec::with_capacity(model.subdomains.len());
+        for (s, sub) in model.subdomains.iter().enumerate() {
+            for (d, &c) in sub.constrained.iter().enumerate() {
+                let g = num.dof(s, d);
+                if c && !constrained[g] {
+                    constrained[g] = true;
+                    prescribed_source[g] = (s, d);
+                }
+            }
+            let t = stiffness_triplets(&sub.mesh, sub.material, model.plane)?;
+            k_all.extend(t.iter().map(|&(i, j, v)| (num.dof(s, i), num.dof(s, j), v)));
+            sub_k.push(Csr::from_triplets(sub.n_dofs(), t));
+        }
+        let mut free = vec![NONE; n_dofs];
+        let mut n_free = 0;
+        for d in 0..n_dofs {
+            if !constrained[d] {
+                free[d] = n_free;
+                n_free += 1;
+            }
+        }
+        let k = Csr::from_triplets(n_dofs, k_all);
+
+        // Merged contact pairs.
+        let mut pairs: Vec<MergedPair> = Vec::new();
+        let mut index: BTreeMap<(usize, usize), usize> = BTreeMap::new();
+        let mut copies = vec![Vec::new(); model.interfaces.len()];
+        for (ki, itf) in model.interfaces.iter().enumerate() {
+            let InterfaceKind::Contact { friction, gap } = &itf.kind else {
+                continue;
+            };
+            let h = 1.5 * itf.weights.iter().copied().fold(0.0, f64::max);
+            let e_mean = 0.5 * (model.subdomains[itf.a].material.e + model.subdomains[itf.b].material.e);
+            for (p, &(na, nb)) in itf.pairs.iter().enumerate() {
+                let (ga, gb) = (num.node(itf.a, na), num.node(itf.b, nb));
+                if ga == gb {
+                    return Err(ReferenceError::ContactPairGlued { interface: ki, pair: p });
+                }
+                let w = itf.weights[p];
+                let found = index
+                    .get(&(ga, gb))
+                    .map(|&m| (m, 1.0))
+                    .or_else(|| index.get(&(gb, ga)).map(|&m| (m, -1.0)));
+                match found {
+                    Some((m, sign)) => {
+                        let mp = &mut pairs[m];
+                        let bad = |what| ReferenceError::InconsistentCopies {
+                            interface: ki,
+                            pair: p,
+                            what,
+                        };
+                        if (mp.normal[0] - sign * itf.normal[0]).abs() + (mp.normal[1] - sign * itf.normal[1]).abs()
+                            > 1e-12
+                        {
+                            return Err(bad("the normal"));
+                        }
+                        if mp.friction != *friction {
+                            return Err(bad("the friction coefficient"));
+                        }
+                        if (mp.gap - gap[p]).abs() > 1e-12 * (1.0 + mp.gap.abs()) {
+                            return Err(bad("the initial gap"));
+                        }
+                        mp.weight += w;
+                        mp.r_base += e_mean * w / h;
+                        copies[ki].push((m, sign));
+                    }
+                    None => {
+                        index.insert((ga, gb), pairs.len());
+                        copies[ki].push((pairs.len(), 1.0));
+                        let fr = |node: usize, c: usize| free[2 * node + c];
+                        let fdofs = [fr(ga, 0), fr(ga, 1), fr(gb, 0), fr(gb, 1)];
+                        if fdofs.iter().all(|&d| d == NONE) {
+                            return Err(ReferenceError::ConstrainedPair { interface: ki, pair: p });
+                        }
+                        pairs.push(MergedPair {
+                            node_a: ga,
+                            node_b: gb,
+                            normal: itf.normal,
+                            tangent: itf.tangent,
+                            friction: *friction,
+                            gap: gap[p],
+                            weight: w,
+                            r_base: e_mean * w / h,
+                            free: fdofs,
+                        });
+                    }
+                }
+            }
+        }
+
+        let solver = match linear_solver {
+            LinearSolver::Condensed => match condensed_solver(&k, &free, n_free, &pairs)? {
+                Some(c) => StepSolver::Condensed(c),
+                None => StepSolver::SparseLu(lu_pattern(&k, &free, n_free, &pairs)?),
+            },
+            LinearSolver::SparseLu => StepSolver::SparseLu(lu_pattern(&k, &free, n_free, &pairs)?),
+        };
+        let groups = perfect_groups(model, &num);
+        Ok(Self {
+            model,
+            num,
+            n_dofs,
+            free,
+            n_free,
+            k_diag: k.max_abs_diagonal(),
+            k,
+            pairs,
+            copies,
+            prescribed_source,
+            sub_k,
+            groups,
+            solver,
+        })
+    }
+
+    pub(crate) fn n_unknowns(&self) -> usize {
+        self.n_free + 2 * self.pairs.len()
+    }
+
+    /// Merged load vector f(t) and prescribed values at time `t` (zero at free dofs).
+    pub(crate) fn loads(&self, t: f64) -> (Vec<f64>, Vec<f64>) {
+        let mut f = vec![0.0; self.n_dofs];
+        let mut sub_u: Vec<Vec<f64>> = Vec::with_capacity(self.model.subdomains.len());
+        for (s, sub) in self.model.subdomains.iter().enumerate() {
+            let mut ud = vec![0.0; sub.n_dofs()];
+            for case in &sub.loads {
+                let phi = case.time.eval(t);
+                for (d, &v) in case.force.iter().enumerate() {
+                    if v != 0.0 {
+                        f[self.num.dof(s, d)] += v * phi;
+                    }
+                }
+                for (d, &v) in case.displacement.iter().enumerate() {
+                    if sub.constrained[d] {
+                        ud[d] += v * phi;
+                    }
+                }
+            }
+            sub_u.push(ud);
+        }
+        let prescribed = (0..self.n_dofs)
+            .map(|g| {
+                let (s, d) = self.prescribed_source[g];
+                if s == NONE {
+                    0.0
+                } else {
+                    sub_u[s][d]
+                }
+            })
+            .collect();
+        (f, prescribed)
+    }
+
+    /// Full merged displacement from the unknowns and the prescribed values.
+    pub(crate) fn displacement(&self, x: &[f64], prescribed: &[f64]) -> Vec<f64> {
+        (0..self.n_dofs)
+            .map(|g| {
+                if self.free[g] == NONE {
+                    prescribed[g]
+                } else {
+                    x[self.free[g]]
+                }
+            })
+            .collect()
+    }
+
+    pub(crate) fn jump(&self, m: usize, u: &[f64]) -> [f64; 2] {
+        let (a, b) = (self.pairs[m].node_a, self.pairs[m].node_b);
+        [u[2 * b] - u[2 * a], u[2 * b + 1] - u[2 * a + 1]]
+    }
+
+    /// Equilibrium residual on free dofs, K u over all dofs (for the scale) and the largest
+    /// relative violation of the step's convergence checks.
+    pub(crate) fn residual(&self, x: &[f64], u: &[f64], f: &[f64], slip_prev: &[f64]) -> (Vec<f64>, f64) {
+        let mut ku = vec![0.0; self.n_dofs];
+        self.k.matvec_into(u, &mut ku);
+        let mut r_dof: Vec<f64> = ku.iter().zip(f).map(|(a, b)| a - b).collect();
+        let mut fs = ku.iter().chain(f).fold(0.0f64, |a, v| a.max(v.abs()));
+        for (m, mp) in self.pairs.iter().enumerate() {
+            let (ln, lt) = (x[self.n_free + 2 * m], x[self.n_free + 2 * m + 1]);
+            let lam = [
+                ln * mp.normal[0] + lt * mp.tangent[0],
+                ln * mp.normal[1] + lt * mp.tangent[1],
+            ];
+            fs = fs.max(lam[0].abs()).max(lam[1].abs());
+            for c in 0..2 {
+                r_dof[2 * mp.node_a + c] -= lam[c];
+                r_dof[2 * mp.node_b + c] += lam[c];
+            }
+        }
+        let us = u.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let fs = fs.max(force_floor(self.k_diag, us));
+        let mut r = vec![0.0; self.n_unknowns()];
+        let mut worst = 0.0f64;
+        for (g, &fg) in self.free.iter().enumerate() {
+            if fg != NONE {
+                r[fg] = r_dof[g];
+                let v = r_dof[g].abs();
+                if v != 0.0 {
+                    worst = worst.max(v / fs);
+                }
+            }
+        }
+        for (m, mp) in self.pairs.iter().enumerate() {
+            let jump = self.jump(m, u);
+            let (ln, lt) = (x[self.n_free + 2 * m], x[self.n_free + 2 * m + 1]);
+            let gap = dot(jump, mp.normal) + mp.gap;
+            let dslip = dot(jump, mp.tangent) - slip_prev[m];
+            let v = law_violations(ln, lt, gap, dslip, mp.friction, fs, us);
+            worst = v.into_iter().fold(worst, f64::max);
+        }
+        (r, worst)
+    }
+
+    /// Alart–Curnier residual rows of every pair, written into `r` (rows n_free..), their
+    /// Jacobian entries and the statuses.
+    pub(crate) fn contact_rows(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        slip_prev: &[f64],
+        r_factor: f64,
+        r: &mut [f64],
+    ) -> (Vec<PairJacobian>, Vec<Status>) {
+        let mut jac = Vec::with_capacity(self.pairs.len());
+        let mut status = Vec::with_capacity(self.pairs.len());
+        for (m, mp) in self.pairs.iter().enumerate() {
+            let rr = r_factor * mp.r_base;
+            let jump = self.jump(m, u);
+            let (ln, lt) = (x[self.n_free + 2 * m], x[self.n_free + 2 * m + 1]);
+            let gap = dot(jump, mp.normal) + mp.gap;
+            let dslip = dot(jump, mp.tangent) - slip_prev[m];
+            let nu = ln + rr * gap;
+            let tau = mp.friction * (-nu).max(0.0);
+            let mu = lt + rr * dslip;
+            // ∂(jump·v)/∂u at (A x, A y, B x, B y).
+            let grad = |v: [f64; 2]| [-v[0], -v[1], v[0], v[1]];
+            let (gn, gt) = (grad(mp.normal), grad(mp.tangent));
+            let mut pj = PairJacobian::default();
+            // Row λ_n: C_n = λ_n − min(0, ν).
+            let c_n = if nu > 0.0 {
+                pj.dln_n = 1.0;
+                ln
+            } else {
+                pj.du_n = gn.map(|g| -rr * g);
+                -rr * gap
+            };
+            // Row λ_t: C_t = λ_t − proj_[−τ, τ](λ_t + rΔs).
+            let (c_t, st) = if nu > 0.0 {
+                pj.dlt_t = 1.0;
+                (lt, Status::Separated)
+            } else if mu.abs() <= tau {
+                pj.du_t = gt.map(|g| -rr * g);
+                (-rr * dslip, Status::Stick)
+            } else {
+                let sf = mu.signum() * mp.friction;
+                pj.du_t = gn.map(|g| sf * rr * g);
+                pj.dln_t = sf;
+                pj.dlt_t = 1.0;
+                (lt + sf * nu, Status::Slip)
+            };
+            r[self.n_free + 2 * m] = c_n;
+            r[self.n_free + 2 * m + 1] = c_t;
+            jac.push(pj);
+            status.push(st);
+        }
+        (jac, status)
+    }
+
+    /// ψ = ‖[R_u; C]‖² at `x`.
+    pub(crate) fn merit(&self, x: &[f64], prescribed: &[f64], f: &[f64], slip_prev: &[f64], r_factor: f64) -> f64 {
+        let u = self.displacement(x, prescribed);
+        let (mut r, _) = self.residual(x, &u, f, slip_prev);
+        self.contact_rows(x, &u, slip_prev, r_factor, &mut r);
+        r.iter().map(|v| v * v).sum()
+    }
+
+    /// Solves J dx = −r for the Newton correction (in place in `r`). None if a factorisation
+    /// fails or the correction is not finite.
+    pub(crate) fn newton_step(&self, jac: &[PairJacobian], r: &mut [f64], work: &mut NewtonWork) -> Option<()> {
+        let n_free = self.n_free;
+        match &self.solver {
+            StepSolver::SparseLu(pat) => {
+                let values = &mut work.values;
+                for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
+                    let mut o = pat.offset[m];
+                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
+                        values[o] = pj.du_n[q];
+                        o += 1;
+                    }
+                    values[o] = pj.dln_n;
+                    o += 1;
+                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
+                        values[o] = pj.du_t[q];
+                        o += 1;
+                    }
+                    values[o] = pj.dln_t;
+                    values[o + 1] = pj.dlt_t;
+                }
+                let mat = SparseColMat::new_from_argsort(pat.symbolic.clone(), &pat.argsort, values).ok()?;
+                let lu = Lu::try_new_with_symbolic(pat.lu_symbolic.clone(), mat.as_ref()).ok()?;
+                let mut rhs = Mat::from_fn(r.len(), 1, |i, _| -r[i]);
+                lu.solve_in_place(rhs.as_mut());
+                glissade_mechanics::simd::clear_upper_state();
+                for (i, ri) in r.iter_mut().enumerate() {
+                    *ri = rhs[(i, 0)];
+                }
+            }
+            StepSolver::Condensed(cs) => {
+                let np2 = 2 * self.pairs.len();
+                // a = K_ff⁻¹(−R_u).
+                let mut a: Vec<f64> = r[..n_free].iter().map(|v| -v).collect();
+                cs.k_ff.solve_vec_in_place(&mut a);
+                // rhs = −C − C_u a.
+                let mut rhs = Mat::<f64>::zeros(np2, 1);
+                for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
+                    let (rn, rt) = (2 * m, 2 * m + 1);
+                    rhs[(rn, 0)] = -r[n_free + rn];
+                    rhs[(rt, 0)] = -r[n_free + rt];
+                    for (q, &fd) in mp.free.iter().enumerate().filter(|&(_, &fd)| fd != NONE) {
+                        rhs[(rn, 0)] -= pj.du_n[q] * a[fd];
+                        rhs[(rt, 0)] -= pj.du_t[q] * a[fd];
+                    }
+                }
+                // S = C_λ − C_u Z, built as Sᵀ (a row of S is a contiguous column of Sᵀ: the
+                // rows of Zᵀ are added to it in place) and solved transposed.
+                let s_t = &mut work.s_t;
+                s_t.fill(0.0);
+                for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
+                    let (rn, rt) = (2 * m, 2 * m + 1);
+                    s_t[(rn, rn)] += pj.dln_n;
+                    s_t[(rn, rt)] += pj.dln_t;
+                    s_t[(rt, rt)] += pj.dlt_t;
+                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
+                        let (fd, cn, ct) = (mp.free[q], pj.du_n[q], pj.du_t[q]);
+                        let z = cs.z_t.col(cs.position[fd]);
+                        for (row, c) in [(rn, cn), (rt, ct)] {
+                            if c != 0.0 {
+                                for (s, &zj) in s_t.col_mut(row).iter_mut().zip(z.iter()) {
+                                    *s -= c * zj;
+                                }
+                            }
+                        }
+                    }
+                }
+                let lu = faer::linalg::solvers::PartialPivLu::new(s_t.as_ref());
+                lu.solve_transpose_in_place(rhs.as_mut());
+                glissade_mechanics::simd::clear_upper_state();
+                // Δu = K_ff⁻¹(−R_u − Bᵀ Δλ).
+                let mut b: Vec<f64> = r[..n_free].iter().map(|v| -v).collect();
+                for (m, mp) in self.pairs.iter().enumerate() {
+                    let (dn, dt) = (rhs[(2 * m, 0)], rhs[(2 * m + 1, 0)]);
+                    for (q, &fd) in mp.free.iter().enumerate() {
+                        if fd != NONE {
+                            let (c, sign) = (q % 2, if q < 2 { -1.0 } else { 1.0 });
+                            b[fd] -= sign * (mp.normal[c] * dn + mp.tangent[c] * dt);
+                        }
+                    }
+                }
+                cs.k_ff.solve_vec_in_place(&mut b);
+                r[..n_free].copy_from_slice(&b);
+                for i in 0..np2 {
+                    r[n_free + i] = rhs[(i, 0)];
+                }
+            }
+        }
+        r.iter().all(|v| v.is_finite()).then_some(())
+    }
+
+    /// One attempt of a step: Newton from `start`. Ok((state, iterations, statuses)) or
+    /// Err((iterations, worst violation)).
+    pub(crate) fn newton(
+        &self,
+        start: &StepState,
+        f: &[f64],
+        prescribed: &[f64],
+        slip_prev: &[f64],
+        r_factor: f64,
+        opts: &ReferenceOptions,
+    ) -> Result<(StepState, usize, Vec<Status>), (usize, f64)> {
+        let mut x = start.x.clone();
+        let mut work = NewtonWork::new(&self.solver, self.pairs.len());
+        let mut worst = f64::INFINITY;
+        for it in 0..=opts.max_newton_iterations {
+            let u = self.displacement(&x, prescribed);
+            let (mut r, w) = self.residual(&x, &u, f, slip_prev);
+            worst = w;
+            let (jac, status) = self.contact_rows(&x, &u, slip_prev, r_factor, &mut r);
+            if !w.is_finite() {
+                return Err((it, w));
+            }
+            if w <= opts.tolerance {
+                return Ok((StepState { x }, it, status));
+            }
+            if it == opts.max_newton_iterations {
+                break;
+            }
+            let psi0: f64 = r.iter().map(|v| v * v).sum();
+            if self.newton_step(&jac, &mut r, &mut work).is_none() {
+                return Err((it + 1, worst));
+            }
+            // Backtracking on ψ = ‖[R_u; C]‖² (both in N): the semi-smooth Newton direction is a
+            // descent direction of ψ where Φ is differentiable; full steps are taken whenever
+            // they decrease ψ, so the local quadratic convergence is kept.
+            let mut alpha = 1.0;
+            let mut best = (f64::INFINITY, 1.0);
+            for _ in 0..=opts.line_search_halvings {
+                let trial: Vec<f64> = x.iter().zip(&r).map(|(xi, dx)| xi + alpha * dx).collect();
+                let psi = self.merit(&trial, prescribed, f, slip_prev, r_factor);
+                if psi < best.0 {
+                    best = (psi, alpha);
+                }
+                if psi <= (1.0 - 1e-4 * alpha) * psi0 {
+                    break;
+                }
+                alpha *= 0.5;
+            }
+            let alpha = best.1;
+            for (xi, dx) in x.iter_mut().zip(&r) {
+                *xi += alpha * dx;
+            }
+        }
+        Err((opts.max_newton_iterations, worst))
+    }
+}

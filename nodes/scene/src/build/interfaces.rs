@@ -1,0 +1,274 @@
+//! Interfaces found between subdomains, the `[[interface]]` rules, gaps and the final interfaces.
+
+use super::*;
+
+impl Ctx<'_> {
+    /// The interface between subdomains i < j, if their opposite sides share a segment of
+    /// positive length; an error if the meshes do not conform there.
+    pub(crate) fn find_interface(&self, subs: &[Sub], i: usize, j: usize) -> Result<Option<GeoInterface>, SceneError> {
+        let (si, sj) = (&subs[i], &subs[j]);
+        let tol = si.tol.max(sj.tol);
+        // (a, b, horizontal): a below / left of b.
+        let candidates = [
+            (i, j, true, (si.y[1] - sj.y[0]).abs() <= tol),
+            (j, i, true, (sj.y[1] - si.y[0]).abs() <= tol),
+            (i, j, false, (si.x[1] - sj.x[0]).abs() <= tol),
+            (j, i, false, (sj.x[1] - si.x[0]).abs() <= tol),
+        ];
+        for (a, b, horizontal, touching) in candidates {
+            if !touching {
+                continue;
+            }
+            let (sa, sb) = (&subs[a], &subs[b]);
+            // `axis`: coordinate along the interface.
+            let (axis, side_a, side_b, ra, rb, line) = if horizontal {
+                (
+                    0,
+                    BlockSide::Top,
+                    BlockSide::Bottom,
+                    sa.x,
+                    sb.x,
+                    format!("y = {}", fmt_num(sa.y[1])),
+                )
+            } else {
+                (
+                    1,
+                    BlockSide::Right,
+                    BlockSide::Left,
+                    sa.y,
+                    sb.y,
+                    format!("x = {}", fmt_num(sa.x[1])),
+                )
+            };
+            let lo = ra[0].max(rb[0]);
+            let hi = ra[1].min(rb[1]);
+            if hi - lo <= tol {
+                continue;
+            }
+            let axis_name = if axis == 0 { "x" } else { "y" };
+            let key = format!("block[{}]", sa.block.max(sb.block));
+            let within = |c: f64| c >= lo - tol && c <= hi + tol;
+            // (node, coordinate along, is a corner node) of each side within the overlap.
+            let collect = |s: &Sub, side: BlockSide| -> Vec<(usize, f64, bool)> {
+                s.mesh
+                    .side_nodes(side)
+                    .into_iter()
+                    .enumerate()
+                    .map(|(k, n)| (n, s.mesh.coords[n][axis], k % 2 == 0))
+                    .filter(|&(_, c, _)| within(c))
+                    .collect()
+            };
+            let mismatch = |c: f64, why: &str| {
+                self.err(
+                    key.clone(),
+                    format!(
+                        "subdomains `{}` and `{}` share the segment {axis_name} ∈ [{}, {}] of the line {line} but their \
+                         meshes do not conform: {why} at {axis_name} = {}",
+                        sa.name,
+                        sb.name,
+                        fmt_num(lo),
+                        fmt_num(hi),
+                        fmt_num(c)
+                    ),
+                )
+            };
+            let na = collect(sa, side_a);
+            let nb = collect(sb, side_b);
+            if na.is_empty() || nb.is_empty() {
+                return Err(mismatch(lo, "no node of one side lies on the shared segment"));
+            }
+            for (k, (&(_, ca, corner_a), &(_, cb, corner_b))) in na.iter().zip(&nb).enumerate() {
+                if (ca - cb).abs() > tol {
+                    return Err(mismatch(ca.min(cb), "nodes do not coincide"));
+                }
+                if corner_a != corner_b {
+                    return Err(mismatch(ca, "a corner node faces a mid-side node"));
+                }
+                if (k == 0 || k + 1 == na.len()) && !corner_a {
+                    return Err(mismatch(ca, "an element edge crosses the end of the shared segment"));
+                }
+            }
+            if na.len() != nb.len() {
+                let k = na.len().min(nb.len());
+                let c = if na.len() > k { na[k].1 } else { nb[k].1 };
+                return Err(mismatch(c, "a node has no partner"));
+            }
+            let mut pair_of = vec![usize::MAX; sa.mesh.n_nodes()];
+            for (p, &(n, _, _)) in na.iter().enumerate() {
+                pair_of[n] = p;
+            }
+            let mut weights = vec![0.0; na.len()];
+            let mut length = 0.0;
+            for e in &sa.mesh.sides[side_a as usize] {
+                if !(within(sa.mesh.coords[e[0]][axis]) && within(sa.mesh.coords[e[2]][axis])) {
+                    continue;
+                }
+                let x = [sa.mesh.coords[e[0]], sa.mesh.coords[e[1]], sa.mesh.coords[e[2]]];
+                for (k, m) in edge_lumped_mass(&x).into_iter().enumerate() {
+                    weights[pair_of[e[k]]] += m;
+                }
+                length += ((x[2][0] - x[0][0]).powi(2) + (x[2][1] - x[0][1]).powi(2)).sqrt();
+            }
+            return Ok(Some(GeoInterface {
+                a,
+                b,
+                horizontal,
+                pairs: na.iter().zip(&nb).map(|(&(n, _, _), &(m, _, _))| (n, m)).collect(),
+                coords: na.iter().map(|&(n, _, _)| sa.mesh.coords[n]).collect(),
+                weights,
+                length,
+            }));
+        }
+        Ok(None)
+    }
+
+    /// Kind of each geometric interface after applying the `[[interface]]` rules in order.
+    pub(crate) fn interface_rules(
+        &self,
+        raw: &RawScene,
+        names: &BTreeMap<String, NameRef>,
+        subs: &[Sub],
+        geo: &[GeoInterface],
+    ) -> Result<Vec<KindRule>, SceneError> {
+        let mut kinds = vec![KindRule::Perfect; geo.len()];
+        for (r, rule) in raw.interface.iter().enumerate() {
+            let key = format!("interface[{r}]");
+            let (s0, _) = self.resolve(names, subs, &rule.between[0], &format!("{key}.between"))?;
+            let (s1, _) = self.resolve(names, subs, &rule.between[1], &format!("{key}.between"))?;
+            let kind = match rule.kind {
+                RawKind::Perfect => {
+                    if rule.friction.is_some() {
+                        return Err(self.err(
+                            format!("{key}.friction"),
+                            "`friction` applies to contact interfaces only",
+                        ));
+                    }
+                    if rule.gap.is_some() {
+                        return Err(self.err(format!("{key}.gap"), "`gap` applies to contact interfaces only"));
+                    }
+                    KindRule::Perfect
+                }
+                RawKind::Contact => {
+                    let Some(f) = rule.friction else {
+                        return Err(self.err(
+                            format!("{key}.friction"),
+                            "a contact interface needs `friction` (0 for frictionless contact)",
+                        ));
+                    };
+                    self.check(f >= 0.0 && f.is_finite(), &format!("{key}.friction"), || {
+                        format!("friction coefficient {f} must be ≥ 0")
+                    })?;
+                    KindRule::Contact(r)
+                }
+            };
+            let mut matched = false;
+            for (g, itf) in geo.iter().enumerate() {
+                let hit = (s0.contains(&itf.a) && s1.contains(&itf.b)) || (s0.contains(&itf.b) && s1.contains(&itf.a));
+                if hit {
+                    kinds[g] = kind;
+                    matched = true;
+                }
+            }
+            if !matched {
+                return Err(self.err(
+                    format!("{key}.between"),
+                    format!("`{}` and `{}` share no edge", rule.between[0], rule.between[1]),
+                ));
+            }
+        }
+        Ok(kinds)
+    }
+
+    pub(crate) fn gap_specs(&self, raw: &RawScene) -> Result<Vec<Option<GapSpec>>, SceneError> {
+        raw.interface
+            .iter()
+            .enumerate()
+            .map(|(r, rule)| {
+                let key = format!("interface[{r}].gap");
+                let Some(v) = &rule.gap else { return Ok(None) };
+                let spec = match v {
+                    toml::Value::Integer(i) => GapSpec::Constant(*i as f64),
+                    toml::Value::Float(f) => GapSpec::Constant(*f),
+                    toml::Value::String(s) => {
+                        GapSpec::Formula(Expr::parse(s, &["x", "y"]).map_err(|e| self.err(&key, e.to_string()))?)
+                    }
+                    toml::Value::Table(t) => {
+                        let (axis, xs, gs) = self.table(t, &key, &["x", "y"], "g")?;
+                        GapSpec::Table { axis, xs, gs }
+                    }
+                    other => {
+                        return Err(self.err(
+                            key,
+                            format!(
+                                "expected a number, a formula in x, y (string) or a table {{ x = [..], g = [..] }}, \
+                                 found {}",
+                                other.type_str()
+                            ),
+                        ))
+                    }
+                };
+                Ok(Some(spec))
+            })
+            .collect()
+    }
+
+    /// Final interfaces: kinds and gaps, pairs clamped on both sides left out, empty interfaces
+    /// dropped, centroids.
+    pub(crate) fn finish_interfaces(
+        &self,
+        raw: &RawScene,
+        geo: Vec<GeoInterface>,
+        kinds: &[KindRule],
+        gaps: &[Option<GapSpec>],
+        loads: &[SubLoads],
+    ) -> Result<Vec<Interface>, SceneError> {
+        let clamped = |s: usize, n: usize| loads[s].constrained[2 * n] && loads[s].constrained[2 * n + 1];
+        let mut out = Vec::new();
+        for (g, kind) in geo.into_iter().zip(kinds) {
+            let keep: Vec<usize> = (0..g.pairs.len())
+                .filter(|&p| !(clamped(g.a, g.pairs[p].0) && clamped(g.b, g.pairs[p].1)))
+                .collect();
+            if keep.is_empty() {
+                continue;
+            }
+            let pairs: Vec<(usize, usize)> = keep.iter().map(|&p| g.pairs[p]).collect();
+            let coords: Vec<[f64; 2]> = keep.iter().map(|&p| g.coords[p]).collect();
+            let weights: Vec<f64> = keep.iter().map(|&p| g.weights[p]).collect();
+            let kind = match *kind {
+                KindRule::Perfect => InterfaceKind::Perfect,
+                KindRule::Contact(r) => {
+                    let friction = raw.interface[r].friction.unwrap_or(0.0);
+                    let mut gap = Vec::with_capacity(coords.len());
+                    for &c in &coords {
+                        let g0 = gaps[r].as_ref().map_or(0.0, |spec| spec.eval(c));
+                        self.check(g0.is_finite(), &format!("interface[{r}].gap"), || {
+                            format!("gap {g0} at (x, y) = ({}, {}) is not finite", c[0], c[1])
+                        })?;
+                        gap.push(g0);
+                    }
+                    InterfaceKind::Contact { friction, gap }
+                }
+            };
+            let total: f64 = weights.iter().sum();
+            let mut centroid = [0.0; 2];
+            for (w, c) in weights.iter().zip(&coords) {
+                centroid[0] += w * c[0] / total;
+                centroid[1] += w * c[1] / total;
+            }
+            let normal = if g.horizontal { [0.0, 1.0] } else { [1.0, 0.0] };
+            out.push(Interface {
+                kind,
+                a: g.a,
+                b: g.b,
+                pairs,
+                coords,
+                weights,
+                normal,
+                tangent: [-normal[1], normal[0]],
+                length: g.length,
+                centroid,
+            });
+        }
+        Ok(out)
+    }
+}

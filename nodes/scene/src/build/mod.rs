@@ -1,0 +1,390 @@
+//! Building a [`Model`](glissade_mechanics::model::Model) from the raw scene: materials, blocks meshed
+//! into subdomains, names, and (in the child modules) settings, interfaces, loads and the
+//! rigid-mode check.
+
+mod interfaces;
+mod loads;
+mod options;
+mod rigid;
+
+use crate::raw::*;
+use crate::{
+    Deployment, Network, Recording, SceneError, TlsFiles, DEFAULT_ANDERSON_WINDOW, MAX_ANDERSON_WINDOW,
+    MAX_MACRO_DEGREE,
+};
+use glissade_mechanics::element::{edge_load, edge_lumped_mass};
+use glissade_mechanics::expr::Expr;
+use glissade_mechanics::linear::LinearStage;
+use glissade_mechanics::mesh::{BlockSide, Mesh};
+use glissade_mechanics::model::{
+    interpolate, Acceleration, Interface, InterfaceKind, LoadCase, Material, Model, Plane, SolverParams, Subdomain,
+    TimeFunction, TimeGrid, TimeStart, DEFAULT_TIME_START_TOLERANCE,
+};
+use glissade_mechanics::pgd::{PgdCriterion, PgdParams};
+use std::collections::BTreeMap;
+
+pub(crate) struct Ctx<'a> {
+    pub(crate) file: &'a str,
+}
+
+pub(crate) struct Built {
+    pub(crate) model: Model,
+    pub(crate) deployment: Deployment,
+    pub(crate) recording: Recording,
+    pub(crate) pgd: PgdParams,
+    pub(crate) linear_stage: LinearStage,
+}
+
+/// A subdomain during construction.
+pub(crate) struct Sub {
+    pub(crate) name: String,
+    pub(crate) block: usize,
+    pub(crate) x: [f64; 2],
+    pub(crate) y: [f64; 2],
+    /// `outer[side]`: this side lies on its block's outer boundary.
+    pub(crate) outer: [bool; 4],
+    /// Geometric tolerance: 1e-9 × the larger dimension of its block.
+    pub(crate) tol: f64,
+    pub(crate) mesh: Mesh,
+    pub(crate) material: Material,
+}
+
+/// An interface found geometrically, before rules and pair removal.
+pub(crate) struct GeoInterface {
+    pub(crate) a: usize,
+    pub(crate) b: usize,
+    /// Normal (0, 1) (a below b) if true, else (1, 0) (a left of b).
+    pub(crate) horizontal: bool,
+    pub(crate) pairs: Vec<(usize, usize)>,
+    pub(crate) coords: Vec<[f64; 2]>,
+    pub(crate) weights: Vec<f64>,
+    pub(crate) length: f64,
+}
+
+/// Initial gap g0(x, y) of a contact rule.
+pub(crate) enum GapSpec {
+    Constant(f64),
+    Formula(Expr),
+    /// Table in x (`axis` 0) or y (`axis` 1).
+    Table {
+        axis: usize,
+        xs: Vec<f64>,
+        gs: Vec<f64>,
+    },
+}
+
+impl GapSpec {
+    fn eval(&self, p: [f64; 2]) -> f64 {
+        match self {
+            GapSpec::Constant(g) => *g,
+            GapSpec::Formula(e) => e.eval(&p),
+            GapSpec::Table { axis, xs, gs } => interpolate(xs, gs, p[*axis]),
+        }
+    }
+}
+
+/// What an interface rule makes of the interfaces it matches.
+#[derive(Clone, Copy)]
+pub(crate) enum KindRule {
+    Perfect,
+    /// Contact rule `r` (index into the scene's interface rules).
+    Contact(usize),
+}
+
+/// Loads of one subdomain during construction.
+pub(crate) struct SubLoads {
+    pub(crate) constrained: Vec<bool>,
+    pub(crate) loads: Vec<LoadCase>,
+    /// Load case currently prescribing each dof (usize::MAX: none).
+    pub(crate) owner: Vec<usize>,
+}
+
+/// A name in the scene: a block (all its subdomains) or one subdomain.
+#[derive(Clone, Copy)]
+pub(crate) enum NameRef {
+    Block(usize),
+    Sub(usize),
+}
+
+pub(crate) fn fmt_num(v: f64) -> String {
+    format!("{v}")
+}
+
+pub(crate) fn outward_normal(side: BlockSide) -> [f64; 2] {
+    match side {
+        BlockSide::Bottom => [0.0, -1.0],
+        BlockSide::Right => [1.0, 0.0],
+        BlockSide::Top => [0.0, 1.0],
+        BlockSide::Left => [-1.0, 0.0],
+    }
+}
+
+impl Ctx<'_> {
+    pub(crate) fn err(&self, key: impl Into<String>, problem: impl Into<String>) -> SceneError {
+        SceneError {
+            file: self.file.to_string(),
+            key: key.into(),
+            problem: problem.into(),
+        }
+    }
+
+    pub(crate) fn check(&self, ok: bool, key: &str, problem: impl FnOnce() -> String) -> Result<(), SceneError> {
+        if ok {
+            Ok(())
+        } else {
+            Err(self.err(key, problem()))
+        }
+    }
+
+    pub(crate) fn build(&self, raw: &RawScene) -> Result<Built, SceneError> {
+        let name = match &raw.name {
+            Some(n) => n.clone(),
+            None => std::path::Path::new(self.file)
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "scene".to_string()),
+        };
+        let plane = match raw.plane {
+            None | Some(RawPlane::Strain) => Plane::Strain,
+            Some(RawPlane::Stress) => Plane::Stress,
+        };
+        let time = self.time_grid(&raw.time)?;
+        let solver = self.solver(&raw.solver)?;
+        let pgd = self.pgd(raw.solver.pgd.as_ref())?;
+        let linear_stage = self.linear_stage(&raw.solver)?;
+        if let Some(ts) = solver.time_start {
+            self.check(time.n_steps % ts.coarsening == 0, "solver.time_coarsening", || {
+                format!(
+                    "{} does not divide time.N = {} (the coarse grid takes every {}-th time point)",
+                    ts.coarsening, time.n_steps, ts.coarsening
+                )
+            })?;
+            self.check(linear_stage != LinearStage::Pgd, "solver.time_coarsening", || {
+                "is not available with the PGD linear stage (its basis is built from ŝ = 0); \
+                 use linear_stage = \"condensed\" or \"sparse\""
+                    .to_string()
+            })?;
+        }
+        let recording = self.recording(&raw.recording)?;
+        let materials = self.materials(&raw.materials)?;
+        self.blocks(raw, &materials)?;
+        let subs = self.subdomains(raw, &materials);
+        let names = self.names(raw, &subs)?;
+        let mut deployment = self.deployment(&raw.deployment, subs.len())?;
+
+        let mut geo = Vec::new();
+        for i in 0..subs.len() {
+            for j in i + 1..subs.len() {
+                if let Some(g) = self.find_interface(&subs, i, j)? {
+                    geo.push(g);
+                }
+            }
+        }
+        let kinds = self.interface_rules(raw, &names, &subs, &geo)?;
+        let gaps = self.gap_specs(raw)?;
+        let sub_loads = self.boundaries(raw, &names, &subs, time)?;
+        let interfaces = self.finish_interfaces(raw, geo, &kinds, &gaps, &sub_loads)?;
+        self.check_rigid_modes(&subs, &interfaces, &sub_loads)?;
+        self.interface_groups(&raw.deployment, &mut deployment, &names, &subs, &interfaces)?;
+
+        let subdomains = subs
+            .into_iter()
+            .zip(sub_loads)
+            .map(|(s, l)| Subdomain {
+                name: s.name,
+                mesh: s.mesh,
+                material: s.material,
+                constrained: l.constrained,
+                loads: l.loads,
+            })
+            .collect();
+        let model = Model {
+            name,
+            plane,
+            time,
+            subdomains,
+            interfaces,
+            solver,
+        };
+        Ok(Built {
+            model,
+            deployment,
+            recording,
+            pgd,
+            linear_stage,
+        })
+    }
+
+    pub(crate) fn time_grid(&self, t: &RawTime) -> Result<TimeGrid, SceneError> {
+        self.check(t.t_end > 0.0 && t.t_end.is_finite(), "time.T", || {
+            format!("T = {} must be a finite duration > 0 (s)", t.t_end)
+        })?;
+        self.check(t.n_steps >= 1, "time.N", || {
+            "N = 0: need at least one time step (N ≥ 1)".to_string()
+        })?;
+        Ok(TimeGrid {
+            t_end: t.t_end,
+            n_steps: t.n_steps,
+        })
+    }
+
+    pub(crate) fn materials(
+        &self,
+        raw: &BTreeMap<String, RawMaterial>,
+    ) -> Result<BTreeMap<String, Material>, SceneError> {
+        let mut out = BTreeMap::new();
+        for (name, m) in raw {
+            self.check(m.e > 0.0 && m.e.is_finite(), &format!("materials.{name}.E"), || {
+                format!("E = {} must be > 0 (MPa)", m.e)
+            })?;
+            self.check(m.nu > -1.0 && m.nu < 0.5, &format!("materials.{name}.nu"), || {
+                format!("ν = {} is outside (−1, 0.5)", m.nu)
+            })?;
+            out.insert(name.clone(), Material { e: m.e, nu: m.nu });
+        }
+        Ok(out)
+    }
+
+    /// Per-block checks: names, material, extents, element counts, split, overlaps.
+    pub(crate) fn blocks(&self, raw: &RawScene, materials: &BTreeMap<String, Material>) -> Result<(), SceneError> {
+        self.check(!raw.block.is_empty(), "block", || {
+            "the scene has no [[block]]".to_string()
+        })?;
+        for (i, b) in raw.block.iter().enumerate() {
+            let key = |k: &str| format!("block[{i}].{k}");
+            self.check(!b.name.is_empty(), &key("name"), || "block name is empty".to_string())?;
+            if let Some(j) = raw.block[..i].iter().position(|o| o.name == b.name) {
+                return Err(self.err(
+                    key("name"),
+                    format!("duplicate block name `{}` (also block[{j}])", b.name),
+                ));
+            }
+            self.check(materials.contains_key(&b.material), &key("material"), || {
+                let known: Vec<&str> = materials.keys().map(String::as_str).collect();
+                format!("unknown material `{}` (defined: {})", b.material, known.join(", "))
+            })?;
+            for (axis, r) in [("x", b.x), ("y", b.y)] {
+                self.check(r[0] < r[1] && r[0].is_finite() && r[1].is_finite(), &key(axis), || {
+                    format!("{axis} = [{}, {}]: need {axis}0 < {axis}1", r[0], r[1])
+                })?;
+            }
+            self.check(b.nx >= 1, &key("nx"), || {
+                "nx = 0: need at least one element".to_string()
+            })?;
+            self.check(b.ny >= 1, &key("ny"), || {
+                "ny = 0: need at least one element".to_string()
+            })?;
+            let [sx, sy] = b.split.unwrap_or([1, 1]);
+            self.check(
+                sx >= 1 && sy >= 1 && b.nx % sx == 0 && b.ny % sy == 0,
+                &key("split"),
+                || format!("split = [{sx}, {sy}] must divide (nx, ny) = ({}, {})", b.nx, b.ny),
+            )?;
+        }
+        for (j, bj) in raw.block.iter().enumerate() {
+            for bi in &raw.block[..j] {
+                let tol = 1e-9 * block_dimension(bi).max(block_dimension(bj));
+                let ox = bi.x[1].min(bj.x[1]) - bi.x[0].max(bj.x[0]);
+                let oy = bi.y[1].min(bj.y[1]) - bi.y[0].max(bj.y[0]);
+                if ox > tol && oy > tol {
+                    return Err(self.err(
+                        format!("block[{j}]"),
+                        format!("block `{}` overlaps block `{}`", bj.name, bi.name),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    pub(crate) fn subdomains(&self, raw: &RawScene, materials: &BTreeMap<String, Material>) -> Vec<Sub> {
+        let mut subs = Vec::new();
+        for (bi, b) in raw.block.iter().enumerate() {
+            let [sx, sy] = b.split.unwrap_or([1, 1]);
+            let (ex, ey) = (b.nx / sx, b.ny / sy);
+            let cut = |r: [f64; 2], k: usize, n: usize| {
+                if k == n {
+                    r[1]
+                } else {
+                    r[0] + (r[1] - r[0]) * k as f64 / n as f64
+                }
+            };
+            for iy in 0..sy {
+                for ix in 0..sx {
+                    let x = [cut(b.x, ix, sx), cut(b.x, ix + 1, sx)];
+                    let y = [cut(b.y, iy, sy), cut(b.y, iy + 1, sy)];
+                    let name = if sx * sy == 1 {
+                        b.name.clone()
+                    } else {
+                        format!("{}.{}", b.name, iy * sx + ix + 1)
+                    };
+                    let mut outer = [false; 4];
+                    outer[BlockSide::Bottom as usize] = iy == 0;
+                    outer[BlockSide::Right as usize] = ix + 1 == sx;
+                    outer[BlockSide::Top as usize] = iy + 1 == sy;
+                    outer[BlockSide::Left as usize] = ix == 0;
+                    subs.push(Sub {
+                        name,
+                        block: bi,
+                        x,
+                        y,
+                        outer,
+                        tol: 1e-9 * block_dimension(b),
+                        mesh: Mesh::rectangle(x, y, ex, ey),
+                        material: materials[&b.material],
+                    });
+                }
+            }
+        }
+        subs
+    }
+
+    /// Name table: block names and generated subdomain names, all distinct.
+    pub(crate) fn names(&self, raw: &RawScene, subs: &[Sub]) -> Result<BTreeMap<String, NameRef>, SceneError> {
+        let mut names = BTreeMap::new();
+        for (i, b) in raw.block.iter().enumerate() {
+            names.insert(b.name.clone(), NameRef::Block(i));
+        }
+        for (s, sub) in subs.iter().enumerate() {
+            if sub.name == raw.block[sub.block].name {
+                continue;
+            }
+            if let Some(other) = names.get(&sub.name) {
+                let what = match *other {
+                    NameRef::Block(j) => format!("block[{j}]"),
+                    NameRef::Sub(o) => {
+                        format!("a subdomain of block `{}`", raw.block[subs[o].block].name)
+                    }
+                };
+                return Err(self.err(
+                    format!("block[{}].name", sub.block),
+                    format!(
+                        "subdomain name `{}` generated from block `{}` is also the name of {what}",
+                        sub.name, raw.block[sub.block].name
+                    ),
+                ));
+            }
+            names.insert(sub.name.clone(), NameRef::Sub(s));
+        }
+        Ok(names)
+    }
+
+    /// Subdomains a name stands for, and whether it names a block.
+    pub(crate) fn resolve(
+        &self,
+        names: &BTreeMap<String, NameRef>,
+        subs: &[Sub],
+        name: &str,
+        key: &str,
+    ) -> Result<(Vec<usize>, bool), SceneError> {
+        match names.get(name) {
+            Some(NameRef::Block(b)) => Ok(((0..subs.len()).filter(|&s| subs[s].block == *b).collect(), true)),
+            Some(NameRef::Sub(s)) => Ok((vec![*s], false)),
+            None => Err(self.err(key, format!("unknown block or subdomain `{name}`"))),
+        }
+    }
+}
+
+pub(crate) fn block_dimension(b: &RawBlock) -> f64 {
+    (b.x[1] - b.x[0]).abs().max((b.y[1] - b.y[0]).abs())
+}

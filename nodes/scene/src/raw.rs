@@ -1,0 +1,224 @@
+//! The scene as written: serde structs, unknown keys rejected everywhere.
+
+use glissade_mechanics::mesh::BlockSide;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawScene {
+    pub(crate) name: Option<String>,
+    pub(crate) plane: Option<RawPlane>,
+    pub(crate) time: RawTime,
+    #[serde(default)]
+    pub(crate) materials: BTreeMap<String, RawMaterial>,
+    #[serde(default)]
+    pub(crate) block: Vec<RawBlock>,
+    #[serde(default)]
+    pub(crate) interface: Vec<RawInterface>,
+    #[serde(default)]
+    pub(crate) boundary: Vec<RawBoundary>,
+    #[serde(default)]
+    pub(crate) solver: RawSolver,
+    #[serde(default)]
+    pub(crate) deployment: RawDeployment,
+    #[serde(default)]
+    pub(crate) recording: RawRecording,
+    #[serde(default)]
+    pub(crate) network: RawNetwork,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum RawPlane {
+    Strain,
+    Stress,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTime {
+    #[serde(rename = "T")]
+    pub(crate) t_end: f64,
+    #[serde(rename = "N")]
+    pub(crate) n_steps: usize,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMaterial {
+    #[serde(rename = "E")]
+    pub(crate) e: f64,
+    pub(crate) nu: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawBlock {
+    pub(crate) name: String,
+    pub(crate) material: String,
+    pub(crate) x: [f64; 2],
+    pub(crate) y: [f64; 2],
+    pub(crate) nx: usize,
+    pub(crate) ny: usize,
+    pub(crate) split: Option<[usize; 2]>,
+}
+
+#[derive(Deserialize, Clone, Copy, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum RawKind {
+    Perfect,
+    Contact,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawInterface {
+    pub(crate) between: [String; 2],
+    pub(crate) kind: RawKind,
+    pub(crate) friction: Option<f64>,
+    pub(crate) gap: Option<toml::Value>,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "lowercase")]
+pub(crate) enum RawSide {
+    Bottom,
+    Right,
+    Top,
+    Left,
+}
+
+impl RawSide {
+    pub(crate) fn block_side(self) -> BlockSide {
+        match self {
+            RawSide::Bottom => BlockSide::Bottom,
+            RawSide::Right => BlockSide::Right,
+            RawSide::Top => BlockSide::Top,
+            RawSide::Left => BlockSide::Left,
+        }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawBoundary {
+    pub(crate) blocks: Option<Vec<String>>,
+    pub(crate) side: Option<RawSide>,
+    pub(crate) x: Option<f64>,
+    pub(crate) y: Option<f64>,
+    pub(crate) ux: Option<toml::Value>,
+    pub(crate) uy: Option<toml::Value>,
+    pub(crate) tx: Option<toml::Value>,
+    pub(crate) ty: Option<toml::Value>,
+    pub(crate) p: Option<toml::Value>,
+}
+
+/// `solver.macro_degree`: a number or "auto".
+#[derive(Deserialize, Clone)]
+#[serde(untagged)]
+pub(crate) enum RawDegree {
+    Degree(i64),
+    Name(String),
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSolver {
+    pub(crate) k0_factor: Option<f64>,
+    pub(crate) relaxation: Option<f64>,
+    pub(crate) tolerance: Option<f64>,
+    pub(crate) contact_tolerance: Option<f64>,
+    pub(crate) max_iterations: Option<usize>,
+    pub(crate) stagnation_window: Option<usize>,
+    pub(crate) stagnation_ratio: Option<f64>,
+    pub(crate) coarse: Option<bool>,
+    pub(crate) search_direction_update: Option<bool>,
+    pub(crate) alpha: Option<f64>,
+    pub(crate) i0: Option<f64>,
+    pub(crate) macro_degree: Option<RawDegree>,
+    pub(crate) acceleration: Option<RawAcceleration>,
+    pub(crate) anderson_window: Option<usize>,
+    pub(crate) time_coarsening: Option<usize>,
+    pub(crate) time_coarsening_tolerance: Option<f64>,
+    pub(crate) linear_stage: Option<RawLinearStage>,
+    pub(crate) pgd: Option<RawPgd>,
+}
+
+#[derive(Deserialize, Clone, Copy, PartialEq)]
+#[serde(rename_all = "kebab-case")]
+pub(crate) enum RawLinearStage {
+    Condensed,
+    Sparse,
+    Pgd,
+    Auto,
+}
+
+#[derive(Deserialize, Clone, Copy, PartialEq)]
+#[serde(rename_all = "kebab-case")]
+pub(crate) enum RawAcceleration {
+    None,
+    Anderson,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "kebab-case")]
+pub(crate) enum RawCriterion {
+    Increment,
+    Accumulated,
+    IncrementSvd,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawPgd {
+    pub(crate) enabled: Option<bool>,
+    pub(crate) xi1: Option<f64>,
+    pub(crate) xi2: Option<f64>,
+    pub(crate) criterion: Option<RawCriterion>,
+    pub(crate) macro_modes: Option<bool>,
+    pub(crate) max_new_modes: Option<usize>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawDeployment {
+    pub(crate) subdomain_nodes: Option<usize>,
+    pub(crate) interface_nodes: Option<usize>,
+    pub(crate) interface_groups: Option<Vec<Vec<RawInterfaceRef>>>,
+    pub(crate) restarts: Option<usize>,
+}
+
+/// An interface in `deployment.interface_groups`: its index, or `"A|B"` (every interface between
+/// a subdomain of block or subdomain A and one of B).
+#[derive(Deserialize, Clone)]
+#[serde(untagged)]
+pub(crate) enum RawInterfaceRef {
+    Index(usize),
+    Between(String),
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawNetwork {
+    pub(crate) tls: Option<RawTls>,
+    pub(crate) allow: Option<Vec<String>>,
+    pub(crate) shared_memory: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTls {
+    pub(crate) root_ca: String,
+    pub(crate) cert: String,
+    pub(crate) key: String,
+    pub(crate) mutual: Option<bool>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawRecording {
+    pub(crate) enabled: Option<bool>,
+    pub(crate) topics: Option<Vec<String>>,
+    pub(crate) full_fields_every: Option<usize>,
+}
