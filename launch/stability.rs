@@ -16,9 +16,8 @@
 //! outcome ([`AccelerationEffect`]) and how many Anderson steps were mixed, safeguarded and
 //! restarted ([`AndersonTally`]).
 //!
-//! `glissade stability` runs the whole matrix (36 s in release, about 45 s with the test-profile
-//! binary, on 2 loaded cores; most of it steps-10000 and the thin layers); `--quick` leaves out the [`SLOW`]
-//! cases (about 15 s in the test profile) and is what `tests/it/stability.rs` runs.
+//! `glissade stability` runs the whole matrix (most of its time goes to steps-10000 and the thin
+//! layers); `--quick` leaves out the [`SLOW`] cases and is what `tests/it/stability.rs` runs.
 
 use crate::runner::{run_in_process_observed, AndersonTally, RunOptions};
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};

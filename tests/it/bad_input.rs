@@ -339,7 +339,7 @@ fn bad_inputs_exit_2_with_a_clear_error_and_write_nothing() {
     assert!(failures.is_empty(), "{}", failures.join("\n---\n"));
 }
 
-/// `RUST_LOG` turns on the log of every process (README, "Command line"); a filter that is not
+/// `RUST_LOG` turns on the log of every process (docs/operations.md, "Logs"); a filter that is not
 /// one is bad input like any other: exit 2, the variable and its value named, nothing written.
 #[test]
 fn a_bad_rust_log_exits_2_and_writes_nothing() {

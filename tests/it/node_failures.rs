@@ -220,7 +220,7 @@ fn kill_and_expect_stop(mut launcher: Launcher, run_id: &str, role: &str, index:
     assert_no_process_left(run_id);
 }
 
-/// With shared memory a node process that dies is not restarted (README, "Architecture": a
+/// With shared memory a node process that dies is not restarted (docs/architecture.md, "Node restarts": a
 /// killed process's last messages can reach some nodes and not others): with restarts allowed
 /// (the default) and the run recorded completely, the launcher says so up front, and a killed
 /// node stops the run instead of being restarted.

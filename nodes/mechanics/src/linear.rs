@@ -41,8 +41,8 @@ impl LinearStage {
     }
 
     /// The stage a subdomain with n_b boundary entries uses: `Auto` resolves to `Condensed`, the
-    /// fastest to a contact-traction error of 1e-3 on every measured case (README "PGD linear
-    /// stage", with Anderson, N = 100 and N = 1000): stratified (n_b ≤ 328) condensed 2.18 s and
+    /// fastest to a contact-traction error of 1e-3 on every measured case (docs/pgd.md, "Three linear
+    /// stages, time to accuracy", with Anderson, N = 100 and N = 1000): stratified (n_b ≤ 328) condensed 2.18 s and
     /// 14.38 s, PGD 6.73 s and 55.93 s, sparse 29.77 s and 331.96 s; layered (n_b ≈ 960)
     /// condensed 3.61 s and 62.35 s, PGD 18.93 s and 214.58 s, sparse 30.24 s and 938.30 s. The
     /// PGD basis grows to a large fraction of n_b on both (188 of 328, 677 of about 960), so no

@@ -182,7 +182,7 @@ macro_rules! multiversion {
 /// one chain of additions (a plain `iter().sum()` adds one value per add latency, about 9 GB/s at
 /// 3.5 GHz, below what one core reads). Used to measure the read bandwidth; not multiversioned,
 /// so that `--kernels` does not change the measurement (the baseline copy already reads as fast
-/// as the AVX-512 one: 26.7 against 25.1 GB/s on one thread of the EPYC in the README).
+/// as the AVX-512 one: 26.7 against 25.1 GB/s on one thread of the 2-core EPYC).
 pub fn sum(values: &[f64]) -> f64 {
     let mut acc = [0.0f64; 16];
     let chunks = values.chunks_exact(16);
