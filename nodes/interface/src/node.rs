@@ -1,0 +1,415 @@
+//! Building the node, the `Node` implementation (subscriptions and message handling), the
+//! boundary states it stores (in full or in mode form) and the final solutions it publishes.
+
+use crate::{Decider, InterfaceNode, ModeReceiver, StopRule};
+use faer::{Mat, MatRef};
+use glissade_bus::convert::{view, FieldPool};
+use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
+use glissade_mechanics::anderson::{AndersonCoordinator, MAX_CONDITION};
+use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::local::{InterfaceFields, InterfaceLocal};
+use glissade_mechanics::model::{Acceleration, Model};
+use glissade_mechanics::modes::ModeForm;
+use glissade_messages::{role_field_topic, InterfaceSolution, Message, NodeId, Payload, Role, Stage};
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+/// First (row, column, value) of a matrix that is NaN or infinite.
+fn first_non_finite(m: &Mat<f64>) -> Option<(usize, usize, f64)> {
+    (0..m.ncols()).find_map(|c| {
+        m.col_as_slice(c)
+            .iter()
+            .position(|v| !v.is_finite())
+            .map(|r| (r, c, m[(r, c)]))
+    })
+}
+
+impl InterfaceNode {
+    /// The only interface node of a run: it owns every interface of `model`, with
+    /// k⁻ = k₀ = `k0[i]`.
+    pub fn new(ctx: RunContext, model: Arc<Model>, k0: &[f64]) -> Self {
+        let all = vec![(0..model.interfaces.len()).collect()];
+        Self::owning(ctx, model, k0, &all, 0)
+    }
+
+    /// Interface node `index` of `groups.len()`, owning the interfaces `groups[index]` (the groups
+    /// partition the model's interfaces). Node 0 also decides: it sums every node's indicators in
+    /// interface order, applies the stop rule, sends the decision and hosts the Anderson step.
+    pub fn owning(ctx: RunContext, model: Arc<Model>, k0: &[f64], groups: &[Vec<usize>], index: usize) -> Self {
+        let nt = model.time.n_points();
+        let mut owned = groups[index].clone();
+        owned.sort_unstable();
+        let mut position = vec![None; model.interfaces.len()];
+        for (p, &i) in owned.iter().enumerate() {
+            position[i] = Some(p);
+        }
+        let layouts: Vec<Option<BoundaryLayout>> = (0..model.subdomains.len())
+            .map(|s| {
+                let l = BoundaryLayout::new(&model, s, k0);
+                (!l.is_empty()).then_some(l)
+            })
+            .collect();
+        let with_slot = |pred: &dyn Fn(usize) -> bool| -> Vec<u32> {
+            layouts
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| l.as_ref().is_some_and(|l| l.slots.iter().any(|sl| pred(sl.interface))))
+                .map(|(s, _)| s as u32)
+                .collect()
+        };
+        let participants = with_slot(&|i| position[i].is_some());
+        let decider = (index == 0).then(|| Decider {
+            rule: StopRule::new(&model.solver),
+            n_nodes: groups.len() as u32,
+            groups: groups
+                .iter()
+                .map(|g| {
+                    let mut g: Vec<u32> = g.iter().map(|&i| i as u32).collect();
+                    g.sort_unstable();
+                    g
+                })
+                .collect(),
+            shares: BTreeMap::new(),
+            diverged: None,
+            anderson: match model.solver.acceleration {
+                Acceleration::None => None,
+                Acceleration::Anderson { .. } => Some(AndersonCoordinator::new(MAX_CONDITION)),
+            },
+            window: match model.solver.acceleration {
+                Acceleration::None => 0,
+                Acceleration::Anderson { window } => window,
+            },
+            grams: BTreeMap::new(),
+            stepped: None,
+            anderson_participants: with_slot(&|_| true),
+            directions_changed: false,
+        });
+        let locals = owned
+            .iter()
+            .map(|&i| InterfaceLocal::new(i, &model.interfaces[i], k0[i], nt))
+            .collect();
+        let fields = owned
+            .iter()
+            .map(|&i| InterfaceFields::zeros(model.interfaces[i].n_pairs(), nt))
+            .collect();
+        let n_subdomains = model.subdomains.len();
+        Self {
+            id: NodeId {
+                role: Role::Interface,
+                index: index as u32,
+            },
+            ctx,
+            time_weights: model.time.trapezoid_weights(),
+            model,
+            layouts,
+            owned,
+            position,
+            participants,
+            locals,
+            fields,
+            received: BTreeSet::new(),
+            modes: std::iter::repeat_with(|| None).take(n_subdomains).collect(),
+            iteration: 0,
+            reported: false,
+            decider,
+            finished: false,
+            solutions_left: 0..0,
+            pool: FieldPool::default(),
+        }
+    }
+
+    /// The rejection of a message this node does not take.
+    pub(crate) fn not_taken(&self, msg: &Message) -> NodeError {
+        NodeError::rejected(
+            self.id,
+            format!(
+                "interface node {} does not take {} messages (from {}, iteration {})",
+                self.id.index,
+                msg.payload.field_key(),
+                msg.envelope.sender,
+                msg.envelope.iteration
+            ),
+        )
+    }
+
+    /// Subdomains whose boundary state this node needs (a side on an interface it owns).
+    pub fn participants(&self) -> &[u32] {
+        &self.participants
+    }
+
+    /// The interfaces this node owns.
+    pub fn owned(&self) -> &[usize] {
+        &self.owned
+    }
+
+    pub(crate) fn msg(&self, stage: Stage, iteration: u32, payload: Payload) -> Message {
+        Message {
+            envelope: self.ctx.envelope(self.id, iteration, stage),
+            payload,
+        }
+    }
+
+    /// Names a boundary entry: interface, pair and component.
+    fn locate(&self, s: usize, row: usize) -> String {
+        let layout = self.layouts[s].as_ref().expect("participant");
+        for slot in &layout.slots {
+            if row >= slot.offset && row < slot.offset + 2 * slot.n_pairs {
+                let e = row - slot.offset;
+                let itf = &self.model.interfaces[slot.interface];
+                let [x, y] = itf.coords[e / 2];
+                return format!(
+                    "interface {} ({} | {}), pair {} at ({x}, {y}), component {}",
+                    slot.interface,
+                    self.model.subdomains[itf.a].name,
+                    self.model.subdomains[itf.b].name,
+                    e / 2,
+                    if e.is_multiple_of(2) { "x" } else { "y" }
+                );
+            }
+        }
+        format!("boundary entry {row}")
+    }
+
+    /// Copies subdomain `s`'s rows of W and F into its interfaces' fields: the traces on one
+    /// thread and the forces on another (the other nodes wait for the local stage).
+    fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
+        let layout = self.layouts[s as usize].as_ref().expect("participant");
+        for slot in &layout.slots {
+            if let Some(p) = self.position[slot.interface] {
+                let (to_w, to_f) = self.fields[p].side_mut(slot.side);
+                let rows = to_w.nrows();
+                rayon::join(
+                    || to_w.copy_from(w.subrows(slot.offset, rows)),
+                    || to_f.copy_from(f.subrows(slot.offset, rows)),
+                );
+            }
+        }
+    }
+
+    /// Where a non-finite value of subdomain `s`'s W or F sits, for the divergence diagnosis.
+    fn non_finite_detail(&self, s: u32, name: &str, (r, c, v): (usize, usize, f64)) -> String {
+        format!(
+            "subdomain {} (`{}`) sent {name} = {v} at {}, time t_{c} = {} s, iteration {}",
+            s,
+            self.model.subdomains[s as usize].name,
+            self.locate(s as usize, r),
+            self.model.time.t(c),
+            self.iteration
+        )
+    }
+
+    /// A subdomain's state in mode form, checked in full before anything changes: the
+    /// particular part in its first message only, the basis update and λ of the sizes its
+    /// boundary and the held modes allow. Returns the subdomain's mode receiver, updated and
+    /// expanded, for the caller to put back.
+    fn take_modes(&mut self, s: u32, payload: &Payload) -> Result<ModeReceiver, NodeError> {
+        let Payload::BoundaryModes {
+            particular,
+            first_mode,
+            z,
+            g,
+            lambda,
+            ..
+        } = payload
+        else {
+            unreachable!("called on boundary modes")
+        };
+        let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
+        let nt = self.model.time.n_points();
+        let reject = |what: String| NodeError::rejected(self.id, format!("boundary modes of subdomain {s}: {what}"));
+        if z.rows() != n_b || lambda.cols() != nt {
+            return Err(reject(format!(
+                "modes of {} entries and time functions of {} time points, expected {n_b} and {nt}",
+                z.rows(),
+                lambda.cols()
+            )));
+        }
+        let mut receiver = match (particular, self.modes[s as usize].is_some()) {
+            (Some(pm), false) => {
+                if pm.w.rows() != n_b || pm.time.cols() != nt {
+                    return Err(reject(format!(
+                        "particular part of {} entries and {} time points, expected {n_b} and {nt}",
+                        pm.w.rows(),
+                        pm.time.cols()
+                    )));
+                }
+                let form = ModeForm::new(n_b, nt, pm.time.rows(), &pm.w.data, &pm.f.data, &pm.time.data)
+                    .map_err(|e| reject(e.to_string()))?;
+                ModeReceiver {
+                    form,
+                    w: Mat::zeros(n_b, nt),
+                    f: Mat::zeros(n_b, nt),
+                }
+            }
+            (Some(_), true) => return Err(reject("a second particular part".into())),
+            (None, false) => return Err(reject("mode form before its particular part".into())),
+            (None, true) => self.modes[s as usize].take().expect("held"),
+        };
+        if let Err(e) = receiver
+            .form
+            .check(*first_mode as usize, &z.data, &g.data, &lambda.data)
+        {
+            // Put a held form back unchanged.
+            if particular.is_none() {
+                self.modes[s as usize] = Some(receiver);
+            }
+            return Err(reject(e.to_string()));
+        }
+        receiver
+            .form
+            .update(*first_mode as usize, &z.data, &g.data, &lambda.data)
+            .expect("checked");
+        receiver.form.expand_into(receiver.w.as_mut(), receiver.f.as_mut());
+        Ok(receiver)
+    }
+}
+
+impl Node for InterfaceNode {
+    fn id(&self) -> NodeId {
+        self.id
+    }
+
+    fn subscriptions(&self) -> Vec<String> {
+        let run = &self.ctx.run_id;
+        let mut subs = vec![
+            role_field_topic(run, Role::Subdomain, "boundary_state", None),
+            role_field_topic(run, Role::Subdomain, "boundary_modes", None),
+        ];
+        match &self.decider {
+            Some(d) => {
+                if d.n_nodes > 1 {
+                    subs.push(role_field_topic(run, Role::Interface, "indicator_partials", None));
+                }
+                if d.anderson.is_some() {
+                    subs.push(role_field_topic(run, Role::Subdomain, "anderson_gram", None));
+                }
+            }
+            None => subs.push(role_field_topic(run, Role::Interface, "decision", None)),
+        }
+        subs
+    }
+
+    fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+        Ok(Vec::new())
+    }
+
+    fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError> {
+        if self.finished {
+            return Ok(Vec::new());
+        }
+        let (s, w, f) = match &msg.payload {
+            Payload::AndersonGram {
+                subdomain,
+                gram,
+                projection,
+                residual2,
+            } => return self.anderson_gram(msg, *subdomain, gram, projection, *residual2),
+            Payload::IndicatorPartials { interfaces, diverged } => {
+                return self.indicator_partials(msg, interfaces, diverged)
+            }
+            Payload::Decision(d) => return self.decision(msg, d),
+            Payload::BoundaryState { subdomain, w, f } => (*subdomain, Some(w), Some(f)),
+            Payload::BoundaryModes { subdomain, .. } => (*subdomain, None, None),
+            _ => return Err(self.not_taken(msg)),
+        };
+        if self.layouts.get(s as usize).is_none_or(Option::is_none) {
+            return Err(NodeError::rejected(
+                self.id,
+                format!("boundary state from subdomain {s}, which has no interface"),
+            ));
+        }
+        if !self.participants.contains(&s) {
+            // A side on interfaces other nodes own only.
+            return Ok(Vec::new());
+        }
+        expect_origin(self.id, msg, Role::Subdomain, Some(s))?;
+        if msg.envelope.iteration != self.iteration {
+            return Err(NodeError::rejected(
+                self.id,
+                format!(
+                    "boundary state of iteration {} from subdomain {s} while at iteration {}",
+                    msg.envelope.iteration, self.iteration
+                ),
+            ));
+        }
+        if self.received.contains(&s) {
+            return Err(NodeError::rejected(
+                self.id,
+                format!(
+                    "second boundary state of iteration {} from subdomain {s}",
+                    self.iteration
+                ),
+            ));
+        }
+        if self.reported {
+            // This iteration already diverged here: the decision is on its way.
+            return Ok(Vec::new());
+        }
+        if let (Some(w), Some(f)) = (w, f) {
+            let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
+            let nt = self.model.time.n_points();
+            expect_shape(self.id, "w", w, n_b, nt)?;
+            expect_shape(self.id, "f", f, n_b, nt)?;
+            self.received.insert(s);
+            // Both fields checked on two threads; W's non-finite value is named first.
+            let (bad_w, bad_f) = rayon::join(|| w.first_non_finite(), || f.first_non_finite());
+            for (name, bad) in [("W", bad_w), ("F", bad_f)] {
+                if let Some(at) = bad {
+                    let detail = self.non_finite_detail(s, name, at);
+                    return Ok(self.report(Vec::new(), Some(detail)));
+                }
+            }
+            self.store(s, view(w), view(f));
+        } else {
+            let receiver = self.take_modes(s, &msg.payload)?;
+            self.received.insert(s);
+            let bad = [("W", &receiver.w), ("F", &receiver.f)]
+                .into_iter()
+                .find_map(|(name, m)| first_non_finite(m).map(|at| (name, at)));
+            if let Some((name, at)) = bad {
+                let detail = self.non_finite_detail(s, name, at);
+                self.modes[s as usize] = Some(receiver);
+                return Ok(self.report(Vec::new(), Some(detail)));
+            }
+            self.store(s, receiver.w.as_ref(), receiver.f.as_ref());
+            self.modes[s as usize] = Some(receiver);
+        }
+        if self.received.len() == self.participants.len() {
+            return Ok(self.local_stage());
+        }
+        Ok(Vec::new())
+    }
+
+    fn next_output(&mut self) -> Option<Message> {
+        let p = self.solutions_left.next()?;
+        // The launcher keeps the solutions: written into the buffers of the one before, not
+        // into shared-memory blocks the launcher would hold while the next ones need new ones.
+        let (local, s, pool) = (&self.locals[p], &self.fields[p], &mut self.pool);
+        let h = &local.hat;
+        let solution = InterfaceSolution {
+            interface: self.owned[p] as u32,
+            w_a: pool.field_of_unlent(s.w_a.as_ref()),
+            w_b: pool.field_of_unlent(s.w_b.as_ref()),
+            f_a: pool.field_of_unlent(s.f_a.as_ref()),
+            f_b: pool.field_of_unlent(s.f_b.as_ref()),
+            w_a_hat: pool.field_of_unlent(h.w_a.as_ref()),
+            w_b_hat: pool.field_of_unlent(h.w_b.as_ref()),
+            f_a_hat: pool.field_of_unlent(h.f_a.as_ref()),
+            f_b_hat: pool.field_of_unlent(h.f_b.as_ref()),
+            status: local.status.iter().map(|s| *s as u8).collect(),
+        };
+        Some(self.msg(Stage::Final, self.iteration, Payload::InterfaceSolution(solution)))
+    }
+
+    fn is_finished(&self) -> bool {
+        self.finished
+    }
+
+    fn recycle(&mut self, msg: Message) {
+        self.pool.recycle(msg);
+    }
+
+    fn lend_fields(&mut self, lender: std::sync::Arc<dyn glissade_messages::BlockLender>) {
+        self.pool.lend_from(lender);
+    }
+}

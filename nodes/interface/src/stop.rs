@@ -1,0 +1,99 @@
+//! The stop decision's rule (DESIGN §3): tolerance, max iterations, stagnation, divergence.
+
+use glissade_mechanics::local::IndicatorSums;
+use glissade_messages::Verdict;
+
+/// The stop rules of DESIGN §3: tolerance, max iterations, stagnation, divergence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StopRule {
+    pub tolerance: f64,
+    pub contact_tolerance: Option<f64>,
+    pub max_iterations: usize,
+    pub stagnation_window: usize,
+    pub stagnation_ratio: f64,
+    /// Diverged when Σ(‖s‖² + ‖ŝ‖²) exceeds this factor times its value at iteration 1.
+    pub growth_limit: f64,
+    history: Vec<f64>,
+    first_norm: Option<f64>,
+}
+
+impl StopRule {
+    pub fn new(p: &glissade_mechanics::model::SolverParams) -> Self {
+        Self {
+            tolerance: p.tolerance,
+            contact_tolerance: p.contact_tolerance,
+            max_iterations: p.max_iterations,
+            stagnation_window: p.stagnation_window,
+            stagnation_ratio: p.stagnation_ratio,
+            growth_limit: 1e12,
+            history: Vec::new(),
+            first_norm: None,
+        }
+    }
+
+    /// Verdict after the local stage of iteration `n` (0-based).
+    pub fn decide(&mut self, n: u32, sums: &IndicatorSums) -> Verdict {
+        let eta = sums.eta();
+        self.history.push(eta);
+        if !eta.is_finite() || !sums.contact_indicator().is_finite() {
+            return Verdict::Diverged {
+                detail: format!("indicator is not finite at iteration {n} (η = {eta})"),
+            };
+        }
+        if n == 1 {
+            self.first_norm = Some(sums.eta_den);
+        }
+        if let Some(first) = self.first_norm {
+            if first > 0.0 && sums.eta_den > self.growth_limit * first {
+                return Verdict::Diverged {
+                    detail: format!(
+                        "the solution's norm grew {:.1e}-fold since iteration 1 (iteration {n})",
+                        sums.eta_den / first
+                    ),
+                };
+            }
+        }
+        let contact_ok = self.contact_tolerance.is_none_or(|t| sums.contact_indicator() <= t);
+        if eta <= self.tolerance && contact_ok {
+            return Verdict::Converged;
+        }
+        if n as usize + 1 >= self.max_iterations {
+            return Verdict::MaxIterations;
+        }
+        let w = self.stagnation_window;
+        if w > 0 && self.history.len() > 2 * w {
+            let k = self.history.len();
+            let recent = self.history[k - w..].iter().cloned().fold(f64::INFINITY, f64::min);
+            let before = self.history[..k - w].iter().cloned().fold(f64::INFINITY, f64::min);
+            if recent > self.stagnation_ratio * before {
+                let mut detail = format!(
+                    "min η over the last {w} iterations is {recent:.3e}, not below {} × the earlier minimum {before:.3e}",
+                    self.stagnation_ratio
+                );
+                if let Some((a, b)) = period_two(&self.history[k - w..]) {
+                    detail.push_str(&format!(
+                        "; η alternates between {a:.3e} and {b:.3e}: the iteration has a mode at −1 \
+                         (an undamped cycle; lower solver.relaxation below 1)"
+                    ));
+                }
+                return Verdict::Stagnated { detail };
+            }
+        }
+        Verdict::Continue
+    }
+}
+
+/// The two values η alternates between when the window is a period-2 cycle: its successive
+/// differences alternate in sign throughout, and every two-step change |η_k − η_{k−2}| is below a
+/// tenth of the smallest one-step change (the cycle may drift slowly, it does not converge).
+fn period_two(window: &[f64]) -> Option<(f64, f64)> {
+    if window.len() < 4 {
+        return None;
+    }
+    let steps: Vec<f64> = window.windows(2).map(|p| p[1] - p[0]).collect();
+    let alternating = steps.windows(2).all(|d| d[0] * d[1] < 0.0);
+    let smallest_step = steps.iter().fold(f64::INFINITY, |m, d| m.min(d.abs()));
+    let largest_drift = window.windows(3).fold(0.0f64, |m, p| m.max((p[2] - p[0]).abs()));
+    let k = window.len();
+    (alternating && largest_drift <= 0.1 * smallest_step).then_some((window[k - 2], window[k - 1]))
+}

@@ -1,0 +1,392 @@
+use super::*;
+use glissade_bus::convert::field_of;
+use glissade_bus::Node;
+use glissade_mechanics::local::IndicatorSums;
+use glissade_mechanics::model::SolverParams;
+use glissade_messages::{Envelope, Field, Message, Payload, Role, Stage, Verdict, SCHEMA_VERSION};
+use glissade_scene::load_str;
+
+fn sums(eta: f64, norm: f64) -> IndicatorSums {
+    // η² = num / (½ den)
+    IndicatorSums {
+        eta_num: 0.5 * eta * eta * norm,
+        eta_den: norm,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn stop_rules() {
+    let p = SolverParams {
+        tolerance: 1e-3,
+        max_iterations: 100,
+        stagnation_window: 5,
+        stagnation_ratio: 0.9,
+        ..Default::default()
+    };
+    let mut r = StopRule::new(&p);
+    assert_eq!(r.decide(0, &sums(0.5, 1.0)), Verdict::Continue);
+    assert_eq!(r.decide(1, &sums(1e-4, 1.0)), Verdict::Converged);
+
+    let mut r = StopRule::new(&p);
+    let mut v = Verdict::Continue;
+    for n in 0..20 {
+        v = r.decide(n, &sums(0.1, 1.0));
+        if v.is_stop() {
+            assert_eq!(n, 10, "stagnation is seen once the history holds two windows");
+            break;
+        }
+    }
+    assert!(
+        matches!(&v, Verdict::Stagnated { detail } if !detail.contains("alternates")),
+        "{v:?}"
+    );
+
+    // A period-2 cycle (η = 0.4, 0.3, 0.4, …) is named as such.
+    let mut r = StopRule::new(&p);
+    let mut v = Verdict::Continue;
+    for n in 0..20 {
+        v = r.decide(n, &sums(if n % 2 == 0 { 0.4 } else { 0.3 }, 1.0));
+        if v.is_stop() {
+            break;
+        }
+    }
+    assert!(
+        matches!(&v, Verdict::Stagnated { detail } if detail.contains("alternates between")),
+        "{v:?}"
+    );
+
+    let mut r = StopRule::new(&p);
+    r.decide(0, &sums(0.5, 1.0));
+    r.decide(1, &sums(0.5, 1.0));
+    let v = r.decide(2, &sums(0.5, 1e13));
+    assert!(
+        matches!(&v, Verdict::Diverged { detail } if detail.contains("grew")),
+        "{v:?}"
+    );
+
+    let mut r = StopRule::new(&SolverParams { max_iterations: 3, ..p });
+    assert_eq!(r.decide(0, &sums(0.5, 1.0)), Verdict::Continue);
+    assert_eq!(r.decide(1, &sums(0.4, 1.0)), Verdict::Continue);
+    assert_eq!(r.decide(2, &sums(0.3, 1.0)), Verdict::MaxIterations);
+}
+
+/// A block of `n` unit subdomains in a row, clamped at x = 0: interfaces 0 (b.1 | b.2),
+/// 1 (b.2 | b.3), …
+fn in_a_row(n: usize) -> (Arc<Model>, RunContext) {
+    let text = format!(
+        "[time]\nT = 1.0\nN = 2\n[materials.m]\nE = 1000.0\nnu = 0.3\n[[block]]\nname = \"b\"\n\
+         material = \"m\"\nx = [0.0, {n}.0]\ny = [0.0, 1.0]\nnx = {n}\nny = 1\nsplit = [{n}, 1]\n\
+         [[boundary]]\nx = 0.0\nux = 0.0\nuy = 0.0\n"
+    );
+    let sc = load_str(&text, "row.toml").unwrap();
+    let ctx = RunContext {
+        run_id: "r".into(),
+        scene_fingerprint: sc.fingerprint,
+    };
+    (Arc::new(sc.model), ctx)
+}
+
+fn message(ctx: &RunContext, sender: NodeId, iteration: u32, payload: Payload) -> Message {
+    Message {
+        envelope: ctx.envelope(sender, iteration, Stage::Linear),
+        payload,
+    }
+}
+
+/// Boundary states of iteration 0 with distinct values per entry, subdomains 0 to 2.
+fn states(model: &Model, ctx: &RunContext, k0: &[f64]) -> Vec<Message> {
+    (0..3u32)
+        .map(|s| {
+            let n_b = BoundaryLayout::new(model, s as usize, k0).len();
+            let w = Field::from_fn(n_b, 3, |r, c| 1e-3 * ((7 * r + 3 * c + s as usize) % 11) as f64);
+            let f = Field::from_fn(n_b, 3, |r, c| ((5 * r + c + 2 * s as usize) % 13) as f64 - 6.0);
+            let sender = NodeId {
+                role: Role::Subdomain,
+                index: s,
+            };
+            message(ctx, sender, 0, Payload::BoundaryState { subdomain: s, w, f })
+        })
+        .collect()
+}
+
+#[test]
+fn two_interface_nodes_decide_as_one() {
+    let (model, ctx) = in_a_row(3);
+    assert_eq!(model.interfaces.len(), 2);
+    let k0 = vec![1000.0; 2];
+    let mut one = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+    let groups = [vec![1], vec![0]];
+    let mut n0 = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0);
+    let mut n1 = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 1);
+    assert_eq!((n0.participants(), n1.participants()), (&[1, 2][..], &[0, 1][..]));
+    let (mut single, mut from0, mut from1) = (Vec::new(), Vec::new(), Vec::new());
+    for m in states(&model, &ctx, &k0) {
+        single.extend(one.handle(&m).unwrap());
+        from0.extend(n0.handle(&m).unwrap());
+        from1.extend(n1.handle(&m).unwrap());
+    }
+    assert!(from0.is_empty(), "node 0 waits for node 1's indicators");
+    let [partials] = &from1[..] else {
+        panic!("node 1 sends its indicators only: {from1:?}")
+    };
+    assert!(
+        matches!(&partials.payload, Payload::IndicatorPartials { interfaces, diverged: None }
+        if interfaces.len() == 1 && interfaces[0].interface == 0)
+    );
+    // A share that names node 0's interface is refused, naming it.
+    let mut wrong = partials.clone();
+    if let Payload::IndicatorPartials { interfaces, .. } = &mut wrong.payload {
+        interfaces[0].interface = 1;
+    }
+    let mut n0_copy = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0);
+    for m in states(&model, &ctx, &k0) {
+        n0_copy.handle(&m).unwrap();
+    }
+    let err = n0_copy.handle(&wrong).unwrap_err();
+    assert!(
+        err.detail
+            .contains("indicators of interfaces [1] from interface node 1, which owns [0]"),
+        "{err}"
+    );
+    assert!(err.is_rejection(), "{err:?}");
+
+    from0.extend(n0.handle(partials).unwrap());
+    let decision = |out: &[Message]| {
+        out.iter()
+            .find_map(|m| match &m.payload {
+                Payload::Decision(d) => Some(d.clone()),
+                _ => None,
+            })
+            .expect("a decision")
+    };
+    assert_eq!(decision(&single), decision(&from0));
+    assert_eq!(decision(&single).verdict, Verdict::Continue);
+    let err = n0.handle(partials).unwrap_err();
+    assert!(
+        err.detail
+            .contains("indicators of iteration 0 from interface node 1 while at iteration 1"),
+        "{err}"
+    );
+    // Node 1 sends its q̂ rows once it has the decision; with node 0's they make the one-node q̂.
+    let d = from0
+        .iter()
+        .find(|m| matches!(m.payload, Payload::Decision(_)))
+        .unwrap();
+    from1 = n1.handle(d).unwrap();
+    let q_of = |out: &[Message], s: u32| -> Vec<(Vec<u32>, Field)> {
+        out.iter()
+            .filter_map(|m| match &m.payload {
+                Payload::LocalDirections {
+                    subdomain,
+                    interfaces,
+                    q_hat,
+                } if *subdomain == s => Some((interfaces.clone(), q_hat.clone())),
+                _ => None,
+            })
+            .collect()
+    };
+    // Subdomain 1 has interface 0 (side b) then interface 1 (side a).
+    let [(all, q)] = &q_of(&single, 1)[..] else { panic!() };
+    assert_eq!(all, &[0, 1]);
+    let [(i0, q0)] = &q_of(&from1, 1)[..] else { panic!() };
+    let [(i1, q1)] = &q_of(&from0, 1)[..] else { panic!() };
+    assert_eq!((i0, i1), (&vec![0], &vec![1]));
+    assert_eq!(q0.rows() + q1.rows(), q.rows());
+    let mut joined = Vec::new();
+    for c in 0..q.cols() {
+        joined.extend((0..q0.rows()).map(|r| q0.get(r, c)));
+        joined.extend((0..q1.rows()).map(|r| q1.get(r, c)));
+    }
+    assert_eq!(joined, q.data, "the pieces are the one-node q̂, bit for bit");
+}
+
+#[test]
+fn final_solutions_follow_the_decision_one_at_a_time_in_the_same_buffers() {
+    // One iteration allowed: the first decision is a stop.
+    let (model, ctx) = in_a_row(3);
+    let mut capped = (*model).clone();
+    capped.solver.max_iterations = 1;
+    let model = Arc::new(capped);
+    let k0 = vec![1000.0; model.interfaces.len()];
+    let mut node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+    let mut out = Vec::new();
+    for m in states(&model, &ctx, &k0) {
+        out.extend(node.handle(&m).unwrap());
+    }
+    let [decision] = &out[..] else {
+        panic!("the stop's reply is its decision alone: {out:?}")
+    };
+    assert!(matches!(&decision.payload, Payload::Decision(d) if d.verdict.is_stop()));
+    assert!(node.is_finished());
+    // Solution p: of interface p, at the final stage, s and ŝ as the node holds them, bit
+    // for bit; returns its fields' buffers.
+    let check = |node: &InterfaceNode, m: &Message, p: usize| -> Vec<*const f64> {
+        let Payload::InterfaceSolution(sol) = &m.payload else {
+            panic!("an interface solution: {m:?}")
+        };
+        assert_eq!((sol.interface, m.envelope.stage), (p as u32, Stage::Final));
+        let (s, h) = (&node.fields[p], &node.locals[p].hat);
+        let expected = [&s.w_a, &s.w_b, &s.f_a, &s.f_b, &h.w_a, &h.w_b, &h.f_a, &h.f_b].map(|m| field_of(m.as_ref()));
+        let got = [
+            &sol.w_a,
+            &sol.w_b,
+            &sol.f_a,
+            &sol.f_b,
+            &sol.w_a_hat,
+            &sol.w_b_hat,
+            &sol.f_a_hat,
+            &sol.f_b_hat,
+        ];
+        assert!(got.iter().zip(&expected).all(|(g, e)| *g == e), "interface {p}");
+        let mut buffers: Vec<_> = got.iter().map(|f| f.data.as_ptr()).collect();
+        buffers.sort();
+        buffers
+    };
+    let first = node.next_output().expect("interface 0's solution");
+    let buffers = check(&node, &first, 0);
+    node.recycle(first);
+    // Once given back, its buffers hold the next solution.
+    let second = node.next_output().expect("interface 1's solution");
+    assert_eq!(
+        check(&node, &second, 1),
+        buffers,
+        "interface 1's fields reuse interface 0's buffers"
+    );
+    assert!(node.next_output().is_none(), "two interfaces, two solutions");
+}
+
+#[test]
+fn nan_stops_the_run_and_names_where() {
+    let (model, ctx) = in_a_row(2);
+    let k0 = vec![1000.0; model.interfaces.len()];
+    let mut node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+    let n_b = BoundaryLayout::new(&model, 1, &k0).len();
+    let mut w = Field::zeros(n_b, 3);
+    w.data[n_b + 3] = f64::NAN;
+    let msg = Message {
+        envelope: Envelope {
+            schema_version: SCHEMA_VERSION,
+            run_id: "r".into(),
+            scene_fingerprint: ctx.scene_fingerprint,
+            iteration: 0,
+            stage: Stage::Linear,
+            sender: NodeId {
+                role: Role::Subdomain,
+                index: 1,
+            },
+        },
+        payload: Payload::BoundaryState {
+            subdomain: 1,
+            w,
+            f: Field::zeros(n_b, 3),
+        },
+    };
+    let out = node.handle(&msg).unwrap();
+    let Payload::Decision(d) = &out[0].payload else {
+        panic!("expected a decision")
+    };
+    let Verdict::Diverged { detail } = &d.verdict else {
+        panic!("{:?}", d.verdict)
+    };
+    assert!(detail.contains("subdomain 1 (`b.2`) sent W = NaN"), "{detail}");
+    assert!(
+        detail.contains("pair 1") && detail.contains("component y") && detail.contains("t_1 = 0.5"),
+        "{detail}"
+    );
+    assert!(node.is_finished());
+}
+
+/// A PGD subdomain's state in mode form gives the local stage what the same state as full
+/// fields gives it, bit for bit; a mode form without its particular part, a second particular
+/// part or modes past those held are refused and change nothing.
+#[test]
+fn mode_form_states_give_the_full_fields() {
+    let (model, ctx) = in_a_row(3);
+    let k0 = vec![1000.0; model.interfaces.len()];
+    let full = states(&model, &ctx, &k0);
+    let sender = |s: u32| NodeId {
+        role: Role::Subdomain,
+        index: s,
+    };
+    // Each state as W = P_W φ + Z λ, F = P_F φ + G λ with one load case and two modes whose
+    // expansion the full-field node gets.
+    let (mut by_modes, mut by_fields) = (Vec::new(), Vec::new());
+    for s in 0..3u32 {
+        let n_b = BoundaryLayout::new(&model, s as usize, &k0).len();
+        let v = |n: usize, k: usize| {
+            (0..n)
+                .map(|i| ((i * 7 + k * 3 + s as usize) % 13) as f64 - 6.0)
+                .collect::<Vec<f64>>()
+        };
+        let (pw, pf, phi) = (v(n_b, 1), v(n_b, 2), v(3, 3));
+        let (z, g, lambda) = (v(2 * n_b, 4), v(2 * n_b, 5), v(2 * 3, 6));
+        let mut form = ModeForm::new(n_b, 3, 1, &pw, &pf, &phi).unwrap();
+        form.update(0, &z, &g, &lambda).unwrap();
+        let (mut w, mut f) = (Mat::zeros(n_b, 3), Mat::zeros(n_b, 3));
+        form.expand_into(w.as_mut(), f.as_mut());
+        by_fields.push(message(
+            &ctx,
+            sender(s),
+            0,
+            Payload::BoundaryState {
+                subdomain: s,
+                w: field_of(w.as_ref()),
+                f: field_of(f.as_ref()),
+            },
+        ));
+        let col = |data: Vec<f64>, rows: usize| Field {
+            rows: rows as u32,
+            cols: (data.len() / rows) as u32,
+            data: data.into(),
+        };
+        by_modes.push(message(
+            &ctx,
+            sender(s),
+            0,
+            Payload::BoundaryModes {
+                subdomain: s,
+                particular: Some(glissade_messages::ParticularModes {
+                    w: col(pw, n_b),
+                    f: col(pf, n_b),
+                    time: col(phi, 1),
+                }),
+                first_mode: 0,
+                z: col(z, n_b),
+                g: col(g, n_b),
+                lambda: col(lambda, 2),
+            },
+        ));
+    }
+    assert_eq!(full.len(), 3);
+    let mut node = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+    // Refused, nothing changes: no particular part yet, modes past those held.
+    let mut orphan = by_modes[0].clone();
+    if let Payload::BoundaryModes { particular, .. } = &mut orphan.payload {
+        *particular = None;
+    }
+    let e = node.handle(&orphan).unwrap_err();
+    assert!(e.to_string().contains("before its particular part"), "{e}");
+    let mut gap = by_modes[0].clone();
+    if let Payload::BoundaryModes { first_mode, lambda, .. } = &mut gap.payload {
+        *first_mode = 1;
+        *lambda = Field::zeros(3, 3);
+    }
+    let e = node.handle(&gap).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("modes from column 1 on, but only 0 modes are held"),
+        "{e}"
+    );
+    let mut from_modes = Vec::new();
+    for m in &by_modes {
+        from_modes.extend(node.handle(m).unwrap());
+    }
+    let mut reference = InterfaceNode::new(ctx.clone(), model.clone(), &k0);
+    let mut from_fields = Vec::new();
+    for m in &by_fields {
+        from_fields.extend(reference.handle(m).unwrap());
+    }
+    assert!(!from_fields.is_empty());
+    assert_eq!(from_modes, from_fields, "the same local stage, bit for bit");
+}

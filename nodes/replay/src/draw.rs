@@ -1,0 +1,161 @@
+//! What the Rerun logging draws with: a subdomain's deformed mesh coloured by a nodal field,
+//! the colour ramp and the contact status colours, the recording stream of a sink, and the
+//! scales (model diagonal, time point, colour range) a view is drawn at.
+
+use crate::{rerr, ColorBy, ReplayError, Sink};
+use glissade_mechanics::element::{elasticity, stress, NODE_XI};
+use glissade_mechanics::model::{Model, Plane};
+use glissade_messages::Field;
+use nalgebra::SVector;
+
+/// Six triangles of a QUA8 element (local node numbers).
+const TRIANGLES: [[usize; 3]; 6] = [[0, 4, 7], [4, 1, 5], [5, 2, 6], [6, 3, 7], [4, 5, 7], [5, 6, 7]];
+
+/// The colouring field at every node of subdomain `s` for displacement `u`.
+pub(crate) fn nodal_field(model: &Model, s: usize, u: &[f64], by: ColorBy) -> Vec<f64> {
+    let sub = &model.subdomains[s];
+    let n = sub.mesh.coords.len();
+    match by {
+        ColorBy::Displacement => (0..n).map(|k| u[2 * k].hypot(u[2 * k + 1])).collect(),
+        ColorBy::VonMises => {
+            let d = elasticity(sub.material, model.plane);
+            let nu = sub.material.nu;
+            let mut sum = vec![0.0; n];
+            let mut count = vec![0u32; n];
+            for el in &sub.mesh.elements {
+                let x: [[f64; 2]; 8] = std::array::from_fn(|a| sub.mesh.coords[el[a]]);
+                let ue = SVector::<f64, 16>::from_fn(|r, _| u[2 * el[r / 2] + r % 2]);
+                for (a, xi) in NODE_XI.iter().enumerate() {
+                    let Ok(sig) = stress(&x, &d, &ue, xi[0], xi[1]) else {
+                        continue;
+                    };
+                    let (sx, sy, txy) = (sig[0], sig[1], sig[2]);
+                    let sz = match model.plane {
+                        Plane::Strain => nu * (sx + sy),
+                        Plane::Stress => 0.0,
+                    };
+                    let vm =
+                        (0.5 * ((sx - sy).powi(2) + (sy - sz).powi(2) + (sz - sx).powi(2)) + 3.0 * txy * txy).sqrt();
+                    sum[el[a]] += vm;
+                    count[el[a]] += 1;
+                }
+            }
+            sum.iter().zip(&count).map(|(s, c)| s / (*c).max(1) as f64).collect()
+        }
+    }
+}
+
+/// Viridis-like colour ramp for v in [lo, hi].
+fn color(v: f64, lo: f64, hi: f64) -> rerun::Color {
+    const STOPS: [[f32; 3]; 5] = [
+        [68.0, 1.0, 84.0],
+        [59.0, 82.0, 139.0],
+        [33.0, 145.0, 140.0],
+        [94.0, 201.0, 98.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let s = if hi > lo {
+        ((v - lo) / (hi - lo)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    } as f32
+        * 4.0;
+    let k = (s.floor() as usize).min(3);
+    let f = s - k as f32;
+    let c: [u8; 3] = std::array::from_fn(|j| (STOPS[k][j] * (1.0 - f) + STOPS[k + 1][j] * f).round() as u8);
+    rerun::Color::from_rgb(c[0], c[1], c[2])
+}
+
+pub(crate) const STATUS_COLORS: [[u8; 3]; 3] = [[150, 150, 150], [40, 170, 60], [240, 130, 20]];
+pub(crate) const STATUS_NAMES: [&str; 3] = ["separated", "stick", "slip"];
+
+fn entity_name(name: &str) -> String {
+    name.chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect()
+}
+
+/// Logs one subdomain's deformed mesh.
+pub(crate) fn log_mesh(
+    rec: &rerun::RecordingStream,
+    model: &Model,
+    s: usize,
+    u: &[f64],
+    field: &[f64],
+    amplification: f64,
+    range: (f64, f64),
+) -> Result<(), ReplayError> {
+    let sub = &model.subdomains[s];
+    let positions: Vec<[f32; 3]> = sub
+        .mesh
+        .coords
+        .iter()
+        .enumerate()
+        .map(|(k, x)| {
+            [
+                (x[0] + amplification * u[2 * k]) as f32,
+                (x[1] + amplification * u[2 * k + 1]) as f32,
+                0.0,
+            ]
+        })
+        .collect();
+    let triangles: Vec<[u32; 3]> = sub
+        .mesh
+        .elements
+        .iter()
+        .flat_map(|el| {
+            TRIANGLES
+                .iter()
+                .map(move |t| [el[t[0]] as u32, el[t[1]] as u32, el[t[2]] as u32])
+        })
+        .collect();
+    let colors: Vec<rerun::Color> = field.iter().map(|v| color(*v, range.0, range.1)).collect();
+    rec.log(
+        format!("subdomains/{}", entity_name(&sub.name)),
+        &rerun::Mesh3D::new(positions)
+            .with_triangle_indices(triangles)
+            .with_vertex_colors(colors),
+    )
+    .map_err(rerr)
+}
+
+pub(crate) fn create_stream(sink: &Sink) -> Result<rerun::RecordingStream, ReplayError> {
+    let builder = rerun::RecordingStreamBuilder::new("glissade");
+    match sink {
+        Sink::Save(p) => builder.save(p),
+        Sink::Spawn => builder.spawn(),
+        Sink::Connect(url) => builder.connect_grpc_opts(url.clone()),
+    }
+    .map_err(rerr)
+}
+
+/// The diagonal of the model's bounding box (mm).
+pub(crate) fn diagonal(model: &Model) -> f64 {
+    let b = model.subdomains.iter().flat_map(|s| s.mesh.coords.iter()).fold(
+        [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
+        |b, x| [b[0].min(x[0]), b[1].max(x[0]), b[2].min(x[1]), b[3].max(x[1])],
+    );
+    (b[1] - b[0]).hypot(b[3] - b[2])
+}
+
+/// The time point with the largest boundary displacement ‖W(:, i)‖.
+pub(crate) fn largest_time_point(w: &Field) -> usize {
+    (0..w.cols())
+        .map(|i| (i, (0..w.rows()).map(|r| w.get(r, i).powi(2)).sum::<f64>()))
+        .fold((0, -1.0), |a, b| if b.1 > a.1 { b } else { a })
+        .0
+}
+
+/// (min, max) over fields; (0, 1) when there is nothing.
+pub(crate) fn range_of<'a>(fields: impl Iterator<Item = &'a [f64]>) -> (f64, f64) {
+    let (lo, hi) = fields
+        .flatten()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        });
+    if lo.is_finite() && hi.is_finite() {
+        (lo, hi)
+    } else {
+        (0.0, 1.0)
+    }
+}
