@@ -217,11 +217,11 @@ impl Inbox {
 
     /// `first` with the messages already waiting behind it, up to the next event of another
     /// kind (held back, handled next in its turn).
-    fn with_waiting(&mut self, first: Box<Received>) -> Vec<Box<Received>> {
-        let mut waiting = vec![first];
+    fn with_waiting(&mut self, first: Box<Received>) -> VecDeque<Box<Received>> {
+        let mut waiting = VecDeque::from([first]);
         loop {
             match self.rx.try_recv() {
-                Ok(Event::Data(r)) => waiting.push(r),
+                Ok(Event::Data(r)) => waiting.push_back(r),
                 Ok(other) => {
                     self.pending = Some(other);
                     break;
