@@ -583,7 +583,7 @@ pub fn run_distributed_observed(
         run_id: run_id.clone(),
         scene_fingerprint: scene.fingerprint,
     };
-    let token_of = |n: NodeName| transport::alive_key(run_id, n.role.key(), n.index);
+    let token_of = |n: NodeName| glissade_messages::topic::alive(run_id, n.role.key(), n.index);
     let tokens: BTreeMap<String, NodeName> = all_nodes.iter().map(|&n| (token_of(n), n)).collect();
 
     // Stops every node, then fails with `error`.

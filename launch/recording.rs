@@ -42,23 +42,6 @@ pub fn software() -> String {
     )
 }
 
-/// Key on which the launcher tells the recorder that the run is over, with the number of
-/// messages of the run it saw (u64, little-endian).
-pub fn end_key(run_id: &str) -> String {
-    format!("glissade/{run_id}/launcher/0/end")
-}
-
-/// Key of the launcher's `stop` (a failed or interrupted run; payload: the reason).
-fn launcher_stop_key(run_id: &str) -> String {
-    format!("glissade/{run_id}/launcher/0/stop")
-}
-
-/// Liveliness token of the recorder process. Not under the nodes' `alive/**`: the recorder is
-/// an observer, and a recorder that dies must not stop the nodes.
-pub fn recorder_alive_key(run_id: &str) -> String {
-    format!("glissade/{run_id}/recording/alive")
-}
-
 /// Where a run's recording goes, or None when the scene switches recording off.
 pub fn recording_path(scene: &LoadedScene, run_id: &str, out: &Path) -> Option<PathBuf> {
     scene
@@ -207,7 +190,7 @@ pub fn spawn_recorder_process(
     let flag = ready.clone();
     let watch = session
         .liveliness()
-        .declare_subscriber(recorder_alive_key(run_id))
+        .declare_subscriber(glissade_messages::topic::recorder_alive(run_id))
         .history(true)
         .callback(move |s| flag.store(s.kind() == zenoh::sample::SampleKind::Put, Ordering::SeqCst))
         .wait()
@@ -274,7 +257,7 @@ impl RecorderProcess {
             return Some(format!("{f}; {} holds the chunks written before", self.path.display()));
         }
         if let Err(e) = session
-            .put(end_key(run_id), seen.to_le_bytes().to_vec())
+            .put(glissade_messages::topic::end(run_id), seen.to_le_bytes().to_vec())
             .congestion_control(CongestionControl::Block)
             .wait()
         {
@@ -379,7 +362,7 @@ pub fn run_recorder_process(
     // through the same channel, so every message heard before it is in the file when it is
     // answered.
     let _log = session
-        .declare_queryable(glissade_zenoh::log_key(run_id))
+        .declare_queryable(glissade_messages::topic::log(run_id))
         .callback(move |q| {
             let _ = log_tx.send(Heard::LogQuery(q));
         })
@@ -388,10 +371,13 @@ pub fn run_recorder_process(
     let incomplete = scene.recording.incomplete();
     let _token = session
         .liveliness()
-        .declare_token(recorder_alive_key(run_id))
+        .declare_token(glissade_messages::topic::recorder_alive(run_id))
         .wait()
         .map_err(|e| anyhow::anyhow!("zenoh: liveliness token: {e}"))?;
-    let (end, stop) = (end_key(run_id), launcher_stop_key(run_id));
+    let (end, stop) = (
+        glissade_messages::topic::end(run_id),
+        glissade_messages::topic::stop(run_id),
+    );
     let mut seen: u64 = 0;
     let mut target: Option<(u64, Instant)> = None;
     let mut last = Instant::now();

@@ -264,7 +264,7 @@ fn access_control_keeps_a_name_not_allowed_out_of_the_run() {
     let listener = client(&endpoint, &tls("ca", Some("node"), false)).unwrap();
     let intruder = client(&endpoint, &tls("ca", Some("intruder"), false)).expect("same CA: the TLS link opens");
     let intruder_ear = client(&endpoint, &tls("ca", Some("intruder"), false)).unwrap();
-    let key = format!("glissade/{run}/subdomain/0/boundary");
+    let key = glissade_messages::topic::within_run(run, "subdomain/0/boundary");
     let (_s1, heard) = subscribe(&listener, &key);
     let (_s2, intruder_heard) = subscribe(&intruder_ear, &key);
     // Let the subscriptions reach the router (pub/sub is not durable).

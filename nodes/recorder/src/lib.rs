@@ -242,7 +242,7 @@ impl Recorder {
             patterns: options
                 .topics
                 .iter()
-                .map(|p| format!("glissade/{}/{p}", run.run_id))
+                .map(|p| glissade_messages::topic::within_run(&run.run_id, p))
                 .collect(),
             full_fields_every: options.full_fields_every,
             schemas: HashMap::new(),

@@ -1,0 +1,470 @@
+//! What a message carries: the [`Payload`]s of DESIGN §4 and their structs ([`Decision`],
+//! [`Verdict`], [`InterfaceIndicators`], [`ParticularModes`], [`InterfaceSolution`]), the checks
+//! of their sizes after decoding, and the [`Message`] (envelope + payload).
+
+use crate::{DecodeBuffers, DecodeError, Envelope, Field};
+use serde::{Deserialize, Serialize};
+
+/// How a run ended, or that it goes on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub enum Verdict {
+    Continue,
+    /// η (and the contact indicator, if required) reached the tolerance.
+    Converged,
+    MaxIterations,
+    /// η stopped decreasing.
+    Stagnated {
+        detail: String,
+    },
+    /// η grew without bound or a value became NaN/Inf; the detail names where.
+    Diverged {
+        detail: String,
+    },
+}
+
+impl Verdict {
+    pub fn is_stop(&self) -> bool {
+        !matches!(self, Verdict::Continue)
+    }
+}
+
+/// Indicators of one iteration and the stop decision (interface node → everyone).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct Decision {
+    /// LATIN indicator η (eq. 10).
+    pub eta: f64,
+    /// Contact indicator e_c = max(e_F, e_W) (independent of k).
+    pub contact_indicator: f64,
+    pub force_error: f64,
+    pub jump_error: f64,
+    /// Contact points (pair × time) separated, stuck, slipping.
+    pub counts: [u64; 3],
+    pub status_changes: u64,
+    /// Contact interfaces whose search direction was updated at this iteration.
+    pub direction_updates: Vec<u32>,
+    pub verdict: Verdict,
+}
+
+/// One interface's indicator sums after a local stage (the terms of η, e_F, e_W and the contact
+/// counts, DESIGN §3) and whether its search direction was updated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct InterfaceIndicators {
+    pub interface: u32,
+    pub eta_num: f64,
+    pub eta_den: f64,
+    pub force_num: f64,
+    pub force_den: f64,
+    pub jump_num: f64,
+    pub jump_den: f64,
+    pub counts: [u64; 3],
+    pub status_changes: u64,
+    pub direction_updated: bool,
+}
+
+/// The particular part s₀ = (W_d, −k⁻W_d) of a subdomain's state in separated form: the boundary
+/// responses to its load cases and their time functions, W_d = `w` φ, −k⁻W_d = `f` φ.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+#[bincode(decode_context = "DecodeBuffers")]
+pub struct ParticularModes {
+    /// n_b × n_c each.
+    pub w: Field,
+    pub f: Field,
+    /// φ, n_c × (N+1).
+    pub time: Field,
+}
+
+/// One interface's fields at the end of a run: s (last linear stage) and ŝ (last local stage),
+/// and the contact status per (pair, time) at index p + n_pairs·i (0 separated, 1 stick, 2 slip).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+#[bincode(decode_context = "DecodeBuffers")]
+pub struct InterfaceSolution {
+    pub interface: u32,
+    pub w_a: Field,
+    pub w_b: Field,
+    pub f_a: Field,
+    pub f_b: Field,
+    pub w_a_hat: Field,
+    pub w_b_hat: Field,
+    pub f_a_hat: Field,
+    pub f_b_hat: Field,
+    pub status: Vec<u8>,
+}
+
+/// The payloads of DESIGN §4.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+#[bincode(decode_context = "DecodeBuffers")]
+pub enum Payload {
+    /// The scene file's text, so that remote nodes need no file.
+    Scene {
+        text: String,
+    },
+    /// L_E of a subdomain over its macro slots (interface, number of modes), sent once.
+    HomogenizedOperator {
+        subdomain: u32,
+        slots: Vec<(u32, u32)>,
+        l_e: Field,
+    },
+    /// F̂ᴹ_{E,d} = 𝔼ᵀ M F₁ (n_m × (N+1)) after micro problem 1.
+    MacroForces {
+        subdomain: u32,
+        forces: Field,
+    },
+    /// w̃ over the subdomain's macro columns (n_m × (N+1)).
+    MacroDisplacements {
+        subdomain: u32,
+        w_tilde: Field,
+    },
+    /// s = (W, F) of a subdomain's boundary after a linear stage (n_b × (N+1) each).
+    BoundaryState {
+        subdomain: u32,
+        w: Field,
+        f: Field,
+    },
+    /// s = (W, F) of a subdomain's boundary after a linear stage, in PGD mode form (DESIGN §3–4):
+    /// W = P_W φ + Σ_k Z_k λ_k, F = P_F φ + Σ_k G_k λ_k. The receiver keeps the particular part
+    /// (in the subdomain's first message only) and the basis: it keeps its first `first_mode`
+    /// modes and replaces the rest by the columns of `z` and `g` (n_b × new: new modes, or the
+    /// free modes a compression rotated). `lambda` is the state's time functions, p × (N+1) with
+    /// p = `first_mode` + new.
+    BoundaryModes {
+        subdomain: u32,
+        particular: Option<ParticularModes>,
+        first_mode: u32,
+        z: Field,
+        g: Field,
+        lambda: Field,
+    },
+    /// q̂ = F̂ + k⁻Ŵ on a subdomain's boundary: all the linear stage needs from the local stage.
+    /// One interface node sends the rows of the interfaces it owns: `interfaces` in the order of
+    /// the subdomain's boundary layout, `q_hat` their rows one after the other. The subdomain
+    /// starts its linear stage once every interface of its boundary is covered.
+    LocalDirections {
+        subdomain: u32,
+        interfaces: Vec<u32>,
+        q_hat: Field,
+    },
+    /// A subdomain's share of the Anderson least-squares problem after its linear stage (DESIGN §3
+    /// "Acceleration"), over its k stored residual differences Δr_i (oldest first), forces only:
+    /// `gram` Δr_iᵀΔr_j (k × k), `projection` Δr_iᵀ r (k × 1), `residual2` ‖r‖².
+    AndersonGram {
+        subdomain: u32,
+        gram: Field,
+        projection: Field,
+        residual2: f64,
+    },
+    /// The mixing step every subdomain takes (summed Gram matrix solved by the interface node):
+    /// coefficients γ (oldest difference first), or empty for a plain relaxation step; `restart`
+    /// tells the subdomains to forget their differences.
+    AndersonStep {
+        gamma: Vec<f64>,
+        restart: bool,
+    },
+    Decision(Decision),
+    InterfaceSolution(InterfaceSolution),
+    /// Full displacement field of a subdomain (n_dofs × (N+1)), on request at the end.
+    Displacement {
+        subdomain: u32,
+        u: Field,
+    },
+    /// An interface node's share of an iteration's indicators, sent to the deciding interface
+    /// node (index 0) when the run has several: one entry per interface it owns, in interface
+    /// order, or the reason the iteration diverged (a non-finite value received).
+    IndicatorPartials {
+        interfaces: Vec<InterfaceIndicators>,
+        diverged: Option<String>,
+    },
+}
+
+/// The fields of a payload (`$p`), in wire order, each passed to `$visit` as `&` or `&mut`.
+macro_rules! for_each_field {
+    ($p:expr, $visit:ident, $($r:tt)+) => {{
+        let mut $visit = $visit;
+        match $p {
+            Payload::Scene { .. }
+            | Payload::AndersonStep { .. }
+            | Payload::Decision(_)
+            | Payload::IndicatorPartials { .. } => {}
+            Payload::HomogenizedOperator { l_e, .. } => $visit(l_e),
+            Payload::MacroForces { forces, .. } => $visit(forces),
+            Payload::MacroDisplacements { w_tilde, .. } => $visit(w_tilde),
+            Payload::BoundaryState { w, f, .. } => {
+                $visit(w);
+                $visit(f);
+            }
+            Payload::BoundaryModes {
+                particular,
+                z,
+                g,
+                lambda,
+                ..
+            } => {
+                if let Some(p) = particular {
+                    $visit($($r)+ p.w);
+                    $visit($($r)+ p.f);
+                    $visit($($r)+ p.time);
+                }
+                $visit(z);
+                $visit(g);
+                $visit(lambda);
+            }
+            Payload::LocalDirections { q_hat, .. } => $visit(q_hat),
+            Payload::AndersonGram { gram, projection, .. } => {
+                $visit(gram);
+                $visit(projection);
+            }
+            Payload::InterfaceSolution(s) => {
+                for f in [
+                    $($r)+ s.w_a,
+                    $($r)+ s.w_b,
+                    $($r)+ s.f_a,
+                    $($r)+ s.f_b,
+                    $($r)+ s.w_a_hat,
+                    $($r)+ s.w_b_hat,
+                    $($r)+ s.f_a_hat,
+                    $($r)+ s.f_b_hat,
+                ] {
+                    $visit(f);
+                }
+            }
+            Payload::Displacement { u, .. } => $visit(u),
+        }
+    }};
+}
+
+impl Payload {
+    /// The field chunk of the key expression.
+    pub fn field_key(&self) -> &'static str {
+        match self {
+            Payload::Scene { .. } => "scene",
+            Payload::HomogenizedOperator { .. } => "homogenized_operator",
+            Payload::MacroForces { .. } => "macro_forces",
+            Payload::MacroDisplacements { .. } => "macro_displacements",
+            Payload::BoundaryState { .. } => "boundary_state",
+            Payload::BoundaryModes { .. } => "boundary_modes",
+            Payload::LocalDirections { .. } => "local_directions",
+            Payload::AndersonGram { .. } => "anderson_gram",
+            Payload::AndersonStep { .. } => "anderson_step",
+            Payload::Decision(_) => "decision",
+            Payload::InterfaceSolution(_) => "interface_solution",
+            Payload::Displacement { .. } => "displacement",
+            Payload::IndicatorPartials { .. } => "indicator_partials",
+        }
+    }
+
+    /// Hands the value buffer of every field of the payload to `keep`, e.g. back to its sender's
+    /// pool once the message is delivered (other contents are dropped).
+    pub fn into_buffers(mut self, mut keep: impl FnMut(Vec<f64>)) {
+        // A lent block goes back to its lender when dropped, not to a pool.
+        self.fields_mut(|f| {
+            if let Some(v) = std::mem::take(&mut f.data).into_vec() {
+                keep(v)
+            }
+        });
+    }
+
+    /// Calls `visit` on every field of the payload, in wire order.
+    pub fn fields(&self, visit: impl FnMut(&Field)) {
+        for_each_field!(self, visit, &);
+    }
+
+    /// Calls `visit` on every field of the payload, in wire order, to change it.
+    pub fn fields_mut(&mut self, visit: impl FnMut(&mut Field)) {
+        for_each_field!(self, visit, &mut);
+    }
+
+    /// Subdomain a payload is addressed to, for payloads with one recipient subdomain.
+    pub fn destination(&self) -> Option<u32> {
+        match self {
+            Payload::MacroDisplacements { subdomain, .. } | Payload::LocalDirections { subdomain, .. } => {
+                Some(*subdomain)
+            }
+            _ => None,
+        }
+    }
+
+    pub(crate) fn check(&self) -> Result<(), DecodeError> {
+        match self {
+            Payload::Scene { .. } => Ok(()),
+            Payload::HomogenizedOperator { l_e, .. } => l_e.check("l_e"),
+            Payload::MacroForces { forces, .. } => forces.check("forces"),
+            Payload::MacroDisplacements { w_tilde, .. } => w_tilde.check("w_tilde"),
+            Payload::BoundaryState { w, f, .. } => {
+                w.check("w")?;
+                f.check("f")?;
+                if (w.rows, w.cols) != (f.rows, f.cols) {
+                    return Err(DecodeError::WrongSize {
+                        field: "f (differs from w)".into(),
+                        rows: f.rows,
+                        cols: f.cols,
+                        len: f.data.len(),
+                    });
+                }
+                Ok(())
+            }
+            Payload::BoundaryModes {
+                particular,
+                first_mode,
+                z,
+                g,
+                lambda,
+                ..
+            } => {
+                z.check("z")?;
+                g.check("g")?;
+                lambda.check("lambda")?;
+                if (g.rows, g.cols) != (z.rows, z.cols) {
+                    return Err(DecodeError::WrongSize {
+                        field: format!("g (z is {} × {})", z.rows, z.cols),
+                        rows: g.rows,
+                        cols: g.cols,
+                        len: g.data.len(),
+                    });
+                }
+                if lambda.rows as u64 != *first_mode as u64 + z.cols as u64 {
+                    return Err(DecodeError::WrongSize {
+                        field: format!("lambda (first mode {first_mode} + {} new modes)", z.cols),
+                        rows: lambda.rows,
+                        cols: lambda.cols,
+                        len: lambda.data.len(),
+                    });
+                }
+                if let Some(pm) = particular {
+                    pm.w.check("particular.w")?;
+                    pm.f.check("particular.f")?;
+                    pm.time.check("particular.time")?;
+                    if (pm.f.rows, pm.f.cols) != (pm.w.rows, pm.w.cols) || pm.time.rows != pm.w.cols {
+                        return Err(DecodeError::WrongSize {
+                            field: format!(
+                                "particular part (w {} × {}, f {} × {})",
+                                pm.w.rows, pm.w.cols, pm.f.rows, pm.f.cols
+                            ),
+                            rows: pm.time.rows,
+                            cols: pm.time.cols,
+                            len: pm.time.data.len(),
+                        });
+                    }
+                }
+                Ok(())
+            }
+            Payload::LocalDirections { q_hat, .. } => q_hat.check("q_hat"),
+            Payload::IndicatorPartials { .. } => Ok(()),
+            Payload::AndersonGram { gram, projection, .. } => {
+                gram.check("gram")?;
+                projection.check("projection")?;
+                if gram.rows != gram.cols || (projection.rows, projection.cols) != (gram.rows, 1) {
+                    return Err(DecodeError::WrongSize {
+                        field: format!("projection (gram is {} × {})", gram.rows, gram.cols),
+                        rows: projection.rows,
+                        cols: projection.cols,
+                        len: projection.data.len(),
+                    });
+                }
+                Ok(())
+            }
+            Payload::AndersonStep { .. } => Ok(()),
+            Payload::Decision(_) => Ok(()),
+            Payload::InterfaceSolution(s) => {
+                for (name, f) in [
+                    ("w_a", &s.w_a),
+                    ("w_b", &s.w_b),
+                    ("f_a", &s.f_a),
+                    ("f_b", &s.f_b),
+                    ("w_a_hat", &s.w_a_hat),
+                    ("w_b_hat", &s.w_b_hat),
+                    ("f_a_hat", &s.f_a_hat),
+                    ("f_b_hat", &s.f_b_hat),
+                ] {
+                    f.check(name)?;
+                }
+                Ok(())
+            }
+            Payload::Displacement { u, .. } => u.check("u"),
+        }
+    }
+}
+
+/// A message: envelope + payload.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Message {
+    pub envelope: Envelope,
+    pub payload: Payload,
+}
+
+impl Message {
+    /// The key expression this message is published on.
+    pub fn topic(&self) -> String {
+        crate::topic(&self.envelope.run_id, self.envelope.sender, &self.payload)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::{expected, msg};
+    use crate::{decode, encode};
+
+    #[test]
+    fn into_buffers_hands_back_every_field() {
+        let lengths = |p: Payload| {
+            let mut v = Vec::new();
+            p.into_buffers(|b| v.push(b.len()));
+            v
+        };
+        assert_eq!(lengths(msg().payload), [6, 6]);
+        let modes = Payload::BoundaryModes {
+            subdomain: 2,
+            particular: Some(ParticularModes {
+                w: Field::zeros(3, 1),
+                f: Field::zeros(3, 1),
+                time: Field::zeros(1, 2),
+            }),
+            first_mode: 0,
+            z: Field::zeros(3, 2),
+            g: Field::zeros(3, 2),
+            lambda: Field::zeros(2, 2),
+        };
+        assert_eq!(lengths(modes), [3, 3, 2, 6, 6, 4]);
+        let directions = Payload::LocalDirections {
+            subdomain: 0,
+            interfaces: vec![1],
+            q_hat: Field::zeros(4, 5),
+        };
+        assert_eq!(lengths(directions), [20]);
+        assert!(lengths(Payload::Scene { text: "x".into() }).is_empty());
+    }
+
+    #[test]
+    fn mode_form_sizes_are_checked() {
+        let mut m = msg();
+        let modes = |first_mode: u32, lambda_rows: usize, g_cols: usize| Payload::BoundaryModes {
+            subdomain: 2,
+            particular: Some(ParticularModes {
+                w: Field::zeros(3, 1),
+                f: Field::zeros(3, 1),
+                time: Field::zeros(1, 2),
+            }),
+            first_mode,
+            z: Field::zeros(3, 2),
+            g: Field::zeros(3, g_cols),
+            lambda: Field::zeros(lambda_rows, 2),
+        };
+        m.payload = modes(1, 3, 2);
+        assert_eq!(decode(&encode(&m), &expected()).unwrap(), m);
+        assert_eq!(m.topic(), "glissade/r1/subdomain/2/boundary_modes");
+        m.payload = modes(1, 2, 2);
+        let e = decode(&encode(&m), &expected()).unwrap_err();
+        assert!(e.to_string().contains("lambda (first mode 1 + 2 new modes)"), "{e}");
+        m.payload = modes(1, 3, 1);
+        let e = decode(&encode(&m), &expected()).unwrap_err();
+        assert!(e.to_string().contains("g (z is 3 × 2)"), "{e}");
+        m.payload = modes(1, 3, 2);
+        if let Payload::BoundaryModes {
+            particular: Some(p), ..
+        } = &mut m.payload
+        {
+            p.time = Field::zeros(2, 2);
+        }
+        let e = decode(&encode(&m), &expected()).unwrap_err();
+        assert!(e.to_string().contains("particular part"), "{e}");
+    }
+}

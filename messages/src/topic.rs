@@ -1,0 +1,215 @@
+//! Every key expression of a run (DESIGN §4), built here and nowhere else. All of a run's keys
+//! are under `glissade/<run>/` ([`run_topics`]):
+//!
+//! - messages: `<role>/<id>/<field>[/<destination subdomain>]` ([`topic`], [`role_field_topic`]);
+//! - the launcher's control keys: `launcher/0/scene` (queryable), `launcher/0/start`,
+//!   `launcher/0/stop`, `launcher/0/done`, `launcher/0/end` ([`scene`], [`start`], [`stop`],
+//!   [`done`], [`end`]);
+//! - liveliness tokens: `alive/<role>/<id>` for the nodes and the launcher ([`alive`]), and
+//!   `recording/alive` for the recorder, which is an observer, not a node ([`recorder_alive`]);
+//! - the recorder's log queryable: `recorder/0/log` ([`log`]).
+//!
+//! A key expression's chunks are separated by `/`; `*` matches one chunk, `**` any number
+//! ([`key_matches`]).
+
+use crate::{NodeId, Payload, Role};
+use std::fmt::Display;
+
+/// `glissade/<run>/<rest>`: a key (or key expression) of run `run_id`, e.g. a recorder's topic
+/// pattern `subdomain/*/boundary_state`.
+pub fn within_run(run_id: &str, rest: impl Display) -> String {
+    format!("glissade/{run_id}/{rest}")
+}
+
+/// `glissade/<run>/<role>/<id>/<field>[/<destination subdomain>]`.
+pub fn topic(run_id: &str, sender: NodeId, payload: &Payload) -> String {
+    let base = within_run(
+        run_id,
+        format_args!("{}/{}/{}", sender.role.key(), sender.index, payload.field_key()),
+    );
+    match payload.destination() {
+        Some(d) => format!("{base}/{d}"),
+        None => base,
+    }
+}
+
+/// The field chunk of a key `glissade/<run>/<role>/<id>/<field>[/<destination>]` (None if the key
+/// has fewer chunks).
+pub fn topic_field(topic: &str) -> Option<&str> {
+    topic.split('/').nth(4)
+}
+
+/// Everything of one run: `glissade/<run>/**`.
+pub fn run_topics(run_id: &str) -> String {
+    within_run(run_id, "**")
+}
+
+/// Key expression of one field from any sender of a role, optionally for one destination.
+pub fn role_field_topic(run_id: &str, role: Role, field: &str, destination: Option<u32>) -> String {
+    match destination {
+        Some(d) => within_run(run_id, format_args!("{}/*/{field}/{d}", role.key())),
+        None => within_run(run_id, format_args!("{}/*/{field}", role.key())),
+    }
+}
+
+/// Everything node `id` publishes: `glissade/<run>/<role>/<id>/**`.
+pub fn sent_by(run_id: &str, id: NodeId) -> String {
+    within_run(run_id, format_args!("{}/{}/**", id.role.key(), id.index))
+}
+
+/// `glissade/<run>/launcher/0/<what>`.
+fn launcher(run_id: &str, what: &str) -> String {
+    within_run(run_id, format_args!("{}/0/{what}", Role::Launcher.key()))
+}
+
+/// Key of the scene queryable of a run (the launcher's).
+pub fn scene(run_id: &str) -> String {
+    launcher(run_id, "scene")
+}
+
+/// Key the launcher publishes on once every node is ready.
+pub fn start(run_id: &str) -> String {
+    launcher(run_id, "start")
+}
+
+/// Key the launcher publishes on to stop every node of a run, and the recorder (a failed or
+/// interrupted run; payload: the reason, UTF-8).
+pub fn stop(run_id: &str) -> String {
+    launcher(run_id, "stop")
+}
+
+/// Key the launcher publishes on once it holds the run's results (the final decision and every
+/// final output): node processes leave only then.
+pub fn done(run_id: &str) -> String {
+    launcher(run_id, "done")
+}
+
+/// Key on which the launcher tells the recorder that the run is over, with the number of
+/// messages of the run it saw (u64, little-endian).
+pub fn end(run_id: &str) -> String {
+    launcher(run_id, "end")
+}
+
+/// Liveliness token of a node (the launcher's is role `launcher`, index 0):
+/// `glissade/<run>/alive/<role>/<index>`.
+pub fn alive(run_id: &str, role: &str, index: u32) -> String {
+    within_run(run_id, format_args!("alive/{role}/{index}"))
+}
+
+/// Every liveliness token of a run's nodes and launcher.
+pub fn alive_all(run_id: &str) -> String {
+    within_run(run_id, "alive/**")
+}
+
+/// `role:index` of a liveliness key (`glissade/<run>/alive/<role>/<index>`).
+pub fn node_of_alive(key: &str) -> String {
+    let mut chunks = key.rsplit('/');
+    match (chunks.next(), chunks.next()) {
+        (Some(index), Some(role)) => format!("{role}:{index}"),
+        _ => key.to_string(),
+    }
+}
+
+/// Liveliness token of the recorder process. Not under the nodes' `alive/**` ([`alive_all`]):
+/// the recorder is an observer, and a recorder that dies must not stop the nodes.
+pub fn recorder_alive(run_id: &str) -> String {
+    within_run(run_id, "recording/alive")
+}
+
+/// Key of the recorder's log queryable of a run: the recorded messages whose key matches one of
+/// the query's patterns, in recorded order.
+pub fn log(run_id: &str) -> String {
+    within_run(run_id, format_args!("{}/0/log", Role::Recorder.key()))
+}
+
+/// Does key `key` match the key expression `expr` (`*`: one chunk, `**`: any number of chunks)?
+pub fn key_matches(expr: &str, key: &str) -> bool {
+    fn rec(e: &[&str], k: &[&str]) -> bool {
+        match (e.first(), k.first()) {
+            (None, None) => true,
+            (Some(&"**"), _) => rec(&e[1..], k) || (!k.is_empty() && rec(e, &k[1..])),
+            (Some(&"*"), Some(_)) => rec(&e[1..], &k[1..]),
+            (Some(a), Some(b)) if a == b => rec(&e[1..], &k[1..]),
+            _ => false,
+        }
+    }
+    let e: Vec<&str> = expr.split('/').collect();
+    let k: Vec<&str> = key.split('/').collect();
+    rec(&e, &k)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixtures::msg;
+
+    #[test]
+    fn message_topics_and_matching() {
+        let m = msg();
+        assert_eq!(m.topic(), "glissade/r1/subdomain/2/boundary_state");
+        assert!(key_matches(
+            &role_field_topic("r1", Role::Subdomain, "boundary_state", None),
+            &m.topic()
+        ));
+        assert!(key_matches(&run_topics("r1"), &m.topic()));
+        assert!(!key_matches(&run_topics("r2"), &m.topic()));
+        assert!(key_matches(
+            "glissade/r1/*/*/local_directions/4",
+            "glissade/r1/interface/0/local_directions/4"
+        ));
+        assert!(!key_matches(
+            "glissade/r1/*/*/local_directions/4",
+            "glissade/r1/interface/0/local_directions/40"
+        ));
+    }
+
+    /// The wire format of every key of a run, as the processes of other builds expect it.
+    #[test]
+    fn every_key_of_a_run() {
+        let sender = NodeId {
+            role: Role::Interface,
+            index: 1,
+        };
+        let directions = Payload::LocalDirections {
+            subdomain: 4,
+            interfaces: vec![],
+            q_hat: crate::Field::zeros(0, 0),
+        };
+        assert_eq!(
+            topic("r", sender, &directions),
+            "glissade/r/interface/1/local_directions/4"
+        );
+        assert_eq!(
+            role_field_topic("r", Role::Coarse, "macro_displacements", Some(3)),
+            "glissade/r/coarse/*/macro_displacements/3"
+        );
+        assert_eq!(
+            role_field_topic("r", Role::Interface, "decision", None),
+            "glissade/r/interface/*/decision"
+        );
+        assert_eq!(
+            topic_field("glissade/r/interface/1/local_directions/4"),
+            Some("local_directions")
+        );
+        assert_eq!(topic_field("glissade/r/interface/1"), None);
+        assert_eq!(run_topics("r"), "glissade/r/**");
+        assert_eq!(
+            within_run("r", "subdomain/*/boundary_state"),
+            "glissade/r/subdomain/*/boundary_state"
+        );
+        assert_eq!(sent_by("r", sender), "glissade/r/interface/1/**");
+        assert_eq!(scene("r"), "glissade/r/launcher/0/scene");
+        assert_eq!(start("r"), "glissade/r/launcher/0/start");
+        assert_eq!(stop("r"), "glissade/r/launcher/0/stop");
+        assert_eq!(done("r"), "glissade/r/launcher/0/done");
+        assert_eq!(end("r"), "glissade/r/launcher/0/end");
+        assert_eq!(alive("r", "subdomain", 2), "glissade/r/alive/subdomain/2");
+        assert_eq!(alive_all("r"), "glissade/r/alive/**");
+        assert!(key_matches(&alive_all("r"), &alive("r", "launcher", 0)));
+        assert!(!key_matches(&alive_all("r"), &recorder_alive("r")));
+        assert_eq!(node_of_alive(&alive("r", "subdomain", 2)), "subdomain:2");
+        assert_eq!(node_of_alive("x"), "x");
+        assert_eq!(recorder_alive("r"), "glissade/r/recording/alive");
+        assert_eq!(log("r"), "glissade/r/recorder/0/log");
+    }
+}
