@@ -4,6 +4,7 @@
 //! children is dropped on any error path.
 
 use anyhow::Context;
+use glissade_messages::Role;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -19,12 +20,18 @@ pub enum NodeRole {
 }
 
 impl NodeRole {
-    pub fn key(self) -> &'static str {
+    /// The message role of the node.
+    pub fn role(self) -> Role {
         match self {
-            NodeRole::Subdomain => "subdomain",
-            NodeRole::Interface => "interface",
-            NodeRole::Coarse => "coarse",
+            NodeRole::Subdomain => Role::Subdomain,
+            NodeRole::Interface => Role::Interface,
+            NodeRole::Coarse => Role::Coarse,
         }
+    }
+
+    /// The role's chunk in key expressions and node names ([`Role::key`]).
+    pub fn key(self) -> &'static str {
+        self.role().key()
     }
 }
 

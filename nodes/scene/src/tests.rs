@@ -466,19 +466,35 @@ fn defaults_and_settings() {
     assert!(!s.recording.enabled && s.recording.full_fields_every == 10);
 }
 
+/// The annotated example of docs/scenes.md is the shipped stratified scene with comments: it
+/// loads, and builds the same model and settings, so the page cannot drift from the format.
 #[test]
-fn module_doc_example_loads() {
-    let example: String = include_str!("lib.rs")
+fn documented_example_is_the_stratified_scene() {
+    let page = include_str!("../../../docs/scenes.md");
+    let example: String = page
         .lines()
-        .skip_while(|l| *l != "//! ```toml")
+        .skip_while(|l| !l.starts_with("## Annotated example"))
+        .skip_while(|l| *l != "```toml")
         .skip(1)
-        .take_while(|l| *l != "//! ```")
-        .map(|l| format!("{}\n", l.strip_prefix("//!").unwrap_or(l).trim_start_matches(' ')))
+        .take_while(|l| *l != "```")
+        .map(|l| format!("{l}\n"))
         .collect();
-    assert!(example.contains("[[interface]]"));
-    let s = load_str(&example, "doc.toml").unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(s.model.name, "two-blocks");
-    assert_eq!(s.model.solver.contact_tolerance, Some(1e-4));
+    assert!(
+        example.contains("[[interface]]"),
+        "no annotated example in docs/scenes.md"
+    );
+    let documented = load_str(&example, "docs/scenes.md").unwrap_or_else(|e| panic!("{e}"));
+    let shipped = load_str(
+        include_str!("../../../launch/scenes/stratified.toml"),
+        "stratified.toml",
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(format!("{:?}", documented.model), format!("{:?}", shipped.model));
+    assert_eq!(documented.deployment, shipped.deployment);
+    assert_eq!(documented.recording, shipped.recording);
+    assert_eq!(documented.pgd, shipped.pgd);
+    assert_eq!(documented.linear_stage, shipped.linear_stage);
+    assert_eq!(documented.network, shipped.network);
 }
 
 #[test]
