@@ -80,11 +80,24 @@ impl Plan {
         }
     }
 
-    /// The participants split into `n` contiguous groups (one per subdomain node process).
+    /// The participants split into `n` contiguous groups, one per subdomain node process, whose
+    /// sizes differ by at most one (the first groups take the extra subdomains): `n` processes
+    /// whenever there are at least `n` participants, one per participant otherwise.
     pub fn groups(&self, n: usize) -> Vec<Vec<u32>> {
-        let n = n.clamp(1, self.participants.len().max(1));
-        let per = self.participants.len().div_ceil(n);
-        self.participants.chunks(per.max(1)).map(<[u32]>::to_vec).collect()
+        let p = self.participants.len();
+        if p == 0 {
+            return Vec::new();
+        }
+        let n = n.clamp(1, p);
+        let (base, extra) = (p / n, p % n);
+        let mut groups = Vec::with_capacity(n);
+        let mut start = 0;
+        for g in 0..n {
+            let len = base + usize::from(g < extra);
+            groups.push(self.participants[start..start + len].to_vec());
+            start += len;
+        }
+        groups
     }
 
     /// Nodes used (role × count) and what is left out and why.
@@ -239,4 +252,43 @@ pub fn build_nodes_with(
         )));
     }
     Ok(nodes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan_of(participants: usize) -> Plan {
+        Plan {
+            k0: Vec::new(),
+            bases: Vec::new(),
+            participants: (0..participants as u32).collect(),
+            coarse: false,
+            linear_stage: LinearStage::Condensed,
+            pgd: PgdParams::default(),
+            log: None,
+            interface_groups: Vec::new(),
+        }
+    }
+
+    fn sizes(participants: usize, n: usize) -> Vec<usize> {
+        let groups = plan_of(participants).groups(n);
+        // Contiguous and complete: the groups, in order, are the participants.
+        let flat: Vec<u32> = groups.concat();
+        assert_eq!(flat, (0..participants as u32).collect::<Vec<_>>());
+        groups.iter().map(Vec::len).collect()
+    }
+
+    /// As many processes as asked for while there are subdomains for them, sizes within one of
+    /// each other (before, 5 subdomains on 4 processes gave 3 processes of 2, 2 and 1).
+    #[test]
+    fn groups_are_as_many_as_asked_and_balanced() {
+        assert_eq!(sizes(18, 3), [6, 6, 6]);
+        assert_eq!(sizes(6, 2), [3, 3]);
+        assert_eq!(sizes(5, 4), [2, 1, 1, 1]);
+        assert_eq!(sizes(7, 3), [3, 2, 2]);
+        assert_eq!(sizes(3, 5), [1, 1, 1]);
+        assert_eq!(sizes(4, 0), [4]);
+        assert!(sizes(0, 3).is_empty());
+    }
 }
