@@ -1,0 +1,259 @@
+//! The command line: every subcommand and option of `glissade` (clap). `glissade <command>
+//! --help` prints these docs.
+
+use clap::{Parser, Subcommand};
+use glissade::children::NodeName;
+use std::path::PathBuf;
+
+/// Quasi-static 2D frictional contact between many elastic parts, by the mixed multiscale LATIN
+/// domain decomposition method.
+#[derive(Parser)]
+#[command(name = "glissade", version, about, long_about = None)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Subcommand)]
+pub(crate) enum Command {
+    /// Solve a scene with the LATIN method and write its summary and interface fields.
+    Run(RunArgs),
+    /// Validate a scene and print what it contains.
+    Check {
+        /// Scene file (TOML).
+        scene: PathBuf,
+    },
+    /// Solve a scene monolithically with every interface glued (linear elastic) and print a summary.
+    Monolithic {
+        /// Scene file (TOML).
+        scene: PathBuf,
+    },
+    /// Solve a scene with the monolithic incremental Newton contact solver (the reference) and
+    /// write its summary and interface fields.
+    Reference {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+    },
+    /// Run the reference and the LATIN solver, and write the error-against-run-time report
+    /// (`<scene>-report.json` and `<scene>-report.svg`).
+    Report {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+        /// LATIN stops at this η (overrides the scene's tolerance).
+        #[arg(long, default_value_t = 1e-6)]
+        tolerance: f64,
+        /// LATIN iteration cap (overrides the scene's).
+        #[arg(long)]
+        max_iterations: Option<usize>,
+        /// Compare solver variants against one reference solve: linear stages, each optionally
+        /// with `+anderson` or `+plain` and with `+start<c>` (a time-coarse start on every c-th
+        /// time point) or `+zero` (from ŝ = 0), e.g.
+        /// `condensed+plain,condensed+anderson,condensed+anderson+start10,pgd+anderson` or
+        /// `condensed,sparse,pgd` (writes `<scene>-<variant>-report.json` / `.svg` each, and
+        /// prints a comparison table).
+        #[arg(long, alias = "linear-stages", value_delimiter = ',')]
+        variants: Vec<String>,
+        /// Stop each run at the first iteration whose contact-traction error against the
+        /// reference is at most this (e.g. 1e-3), instead of at the tolerance or iteration cap.
+        #[arg(long)]
+        stop_at_error: Option<f64>,
+    },
+    /// Run a scene in-process and split an iteration's time by stage, against the machine's
+    /// measured dense-product rate and memory bandwidth (`<scene>-bench.json`; use a release build).
+    Bench {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+        /// LATIN iteration cap (overrides the scene's).
+        #[arg(long)]
+        max_iterations: Option<usize>,
+        /// Then run the scene this many rounds in-process, as processes over TCP and as processes
+        /// through shared memory (alternating, no recording) and report the ratios.
+        #[arg(long, value_name = "ROUNDS", value_parser = clap::value_parser!(u32).range(1..))]
+        processes: Option<u32>,
+        /// Vector extension of the element-wise kernels (default: the widest this CPU has; a
+        /// wider one than the CPU has falls back to the widest it has, and the report says which
+        /// ran). Results are the same bit for bit at every level. In-process only: node
+        /// processes pick their own, so it does not go with --processes.
+        #[arg(long, value_enum, conflicts_with = "processes")]
+        kernels: Option<KernelsArg>,
+    },
+    /// Load a recording into Rerun (an .rrd file by default, or a live viewer), or re-execute
+    /// nodes from their recorded inputs and check their outputs bit for bit (`--node`).
+    Replay(ReplayArgs),
+    /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
+    /// endpoint and receives the scene over the bus.
+    Node(NodeArgs),
+    /// Run the stability matrix of stiff and extreme cases and write the table
+    /// (`stability.md`, `stability.json`).
+    Stability {
+        /// Only the reduced, fast subset of the test suite.
+        #[arg(long)]
+        quick: bool,
+        /// Only the named case (repeatable; `glissade stability --list` names them).
+        #[arg(long = "case", value_name = "NAME")]
+        only: Vec<String>,
+        /// List the cases and what each varies, without running them.
+        #[arg(long)]
+        list: bool,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "recordings")]
+        out: PathBuf,
+    },
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum KernelsArg {
+    Baseline,
+    Avx2,
+    Avx512,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum RoleArg {
+    Subdomain,
+    Interface,
+    Coarse,
+    /// Records every message of the run to the MCAP file `--file`.
+    Recorder,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct NodeArgs {
+    /// Role of the node.
+    pub(crate) role: RoleArg,
+    /// Run id of the run to join (printed by the launcher).
+    #[arg(long)]
+    pub(crate) run: String,
+    /// Zenoh endpoint(s) to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).
+    #[arg(long, required = true)]
+    pub(crate) connect: Vec<String>,
+    /// Subdomains hosted (subdomain role), e.g. 0,1,2; default: group `--index` of the scene's
+    /// deployment (given, they must be that group).
+    #[arg(long, value_delimiter = ',')]
+    pub(crate) subdomains: Vec<u32>,
+    /// Index of this node process among those of its role (subdomain nodes: 0, 1, …).
+    #[arg(long, default_value_t = 0)]
+    pub(crate) index: u32,
+    /// Send the full displacement fields at the end (subdomain role).
+    #[arg(long)]
+    pub(crate) interior: bool,
+    /// The MCAP file to write (recorder role).
+    #[arg(long)]
+    pub(crate) file: Option<PathBuf>,
+    /// The launcher restarts node processes that die: a peer leaving does not stop this one.
+    #[arg(long)]
+    pub(crate) supervised: bool,
+    /// Replace a node process that died mid-run: rebuild its state from the recorder's log
+    /// instead of waiting for the start (the launcher passes it when it restarts a node).
+    #[arg(long)]
+    pub(crate) resume: bool,
+    /// TLS (`--connect tls/…`): the certificate authority of the run (PEM), which signed the
+    /// launcher's certificate.
+    #[arg(long, value_name = "PEM")]
+    pub(crate) tls_root_ca: Option<PathBuf>,
+    /// Mutual TLS: this node's certificate (PEM), signed by `--tls-root-ca`; its common name must
+    /// be in the scene's `network.allow` when the scene has one.
+    #[arg(long, value_name = "PEM", requires = "tls_key")]
+    pub(crate) tls_cert: Option<PathBuf>,
+    /// Mutual TLS: the private key of `--tls-cert` (PEM).
+    #[arg(long, value_name = "PEM", requires = "tls_cert")]
+    pub(crate) tls_key: Option<PathBuf>,
+    /// Exchange fields with processes on this machine through shared memory (the launcher passes
+    /// it when the scene says `network.shared_memory = true`, or leaves it unset and node
+    /// restarts are off anyway).
+    #[arg(long)]
+    pub(crate) shared_memory: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum ColorByArg {
+    /// Von Mises stress (MPa).
+    VonMises,
+    /// Displacement magnitude |u| (mm).
+    Displacement,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct ReplayArgs {
+    /// Recording (MCAP) of a run.
+    pub(crate) recording: PathBuf,
+    /// Write the Rerun data to this .rrd file (the default: the recording's name with .rrd).
+    #[arg(long, conflicts_with_all = ["spawn", "connect", "node"])]
+    pub(crate) save: Option<PathBuf>,
+    /// Start a Rerun viewer (the `rerun` executable on PATH) and stream to it.
+    #[arg(long, conflicts_with_all = ["connect", "node"])]
+    pub(crate) spawn: bool,
+    /// Stream to a running Rerun viewer (default address rerun+http://127.0.0.1:9876/proxy).
+    #[arg(long, num_args = 0..=1, default_missing_value = glissade_replay::DEFAULT_VIEWER, value_name = "URL", conflicts_with = "node")]
+    pub(crate) connect: Option<String>,
+    /// Field the meshes are coloured by.
+    #[arg(long, value_enum, default_value = "von-mises")]
+    pub(crate) color_by: ColorByArg,
+    /// Displacement amplification of the drawn meshes (default: the largest displacement drawn
+    /// as 5 % of the model's size).
+    #[arg(long)]
+    pub(crate) amplification: Option<f64>,
+    /// Time point of the per-iteration meshes (default: the one with the largest boundary
+    /// displacement).
+    #[arg(long)]
+    pub(crate) time_point: Option<usize>,
+    /// Solve the scene with the monolithic Newton reference first and log each iteration's error
+    /// against it (`error/traction`, `error/jump`), as `glissade report` measures it.
+    #[arg(long, conflicts_with = "node")]
+    pub(crate) reference: bool,
+    /// Re-execute this node (`subdomain:<i>`, `interface:0`, `coarse:0`, or `all`) from its
+    /// recorded inputs and check that its outputs are bit-identical (repeatable).
+    #[arg(long, value_name = "ROLE:ID")]
+    pub(crate) node: Vec<String>,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct RunArgs {
+    /// Scene file (TOML).
+    pub(crate) scene: PathBuf,
+    /// Run every node in this process instead of one process per node group (the default:
+    /// Zenoh on loopback, the launcher hosting the router, no router to install).
+    #[arg(long)]
+    pub(crate) in_process: bool,
+    /// Folder for the outputs.
+    #[arg(long, default_value = "recordings")]
+    pub(crate) out: PathBuf,
+    /// Run id (namespaces the run's messages and output files); default: 128 random bits in hex,
+    /// so that nobody on a shared router can guess the run's key expressions.
+    #[arg(long)]
+    pub(crate) run_id: Option<String>,
+    /// Also write every subdomain's displacement field.
+    #[arg(long)]
+    pub(crate) interior: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub(crate) quiet: bool,
+    /// Zenoh endpoint(s) the launcher's router listens on, e.g. tcp/0.0.0.0:7447, for nodes
+    /// started on other machines (default: a free loopback port). Repeatable.
+    #[arg(long, conflicts_with_all = ["in_process", "connect"])]
+    pub(crate) listen: Vec<String>,
+    /// Connect to this Zenoh router (e.g. zenohd) instead of hosting one. Repeatable.
+    #[arg(long, conflicts_with = "in_process")]
+    pub(crate) connect: Vec<String>,
+    /// Nodes the launcher does not start, to be started by hand with `glissade node`, e.g.
+    /// subdomain:1,interface (role[:index]).
+    #[arg(long, value_delimiter = ',', conflicts_with = "in_process")]
+    pub(crate) remote: Vec<NodeName>,
+    /// Longest wait for the nodes of --remote to be ready (s).
+    #[arg(long, default_value_t = 300)]
+    pub(crate) remote_timeout: u64,
+    /// Stream the run's Rerun view as it goes (in-process, or from the launcher of a
+    /// multi-process run): to a spawned viewer (`spawn`, the default), a running one (`connect`
+    /// or its rerun+http://… address), or an .rrd file.
+    #[arg(long, num_args = 0..=1, default_missing_value = "spawn", value_name = "SINK")]
+    pub(crate) rerun: Option<String>,
+}
