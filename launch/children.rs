@@ -73,9 +73,7 @@ pub(crate) struct NodeProcess {
     pub(crate) child: Child,
     /// Its `glissade node` arguments (a replacement gets them too, with `--resume`).
     pub(crate) args: Vec<String>,
-    pub(crate) last_lines: Arc<Mutex<Vec<String>>>,
-    /// The threads that read its stdout and stderr into `last_lines`.
-    pub(crate) readers: Vec<std::thread::JoinHandle<()>>,
+    pub(crate) output: ChildOutput,
     /// Exit status once it exited.
     pub(crate) status: Option<ExitStatus>,
     /// Its liveliness token was seen (a token of the same name that disappears before is its
@@ -87,9 +85,11 @@ pub(crate) struct NodeProcess {
 
 impl NodeProcess {
     pub(crate) fn last_lines(&self) -> String {
-        match self.last_lines.lock() {
-            Ok(l) if !l.is_empty() => l.join("\n    "),
-            _ => "(none)".to_string(),
+        let lines = self.output.lines();
+        if lines.is_empty() {
+            "(none)".to_string()
+        } else {
+            lines.join("\n    ")
         }
     }
 }
@@ -139,16 +139,30 @@ pub(crate) fn forward(
 }
 
 /// Longest wait, once a child process has exited, for the threads that read its output to reach
-/// its end ([`settle`]).
-pub(crate) const OUTPUT_SETTLE: Duration = Duration::from_secs(2);
+/// its end ([`ChildOutput::settle`]).
+const OUTPUT_SETTLE: Duration = Duration::from_secs(2);
 
-/// Waits (up to [`OUTPUT_SETTLE`]) for the threads of [`forward`] that read an exited child's
-/// output to have read it all, so that its last lines, its own error among them, are there to
-/// quote: the process's exit can be seen before its last writes are read.
-pub(crate) fn settle(readers: &[std::thread::JoinHandle<()>]) {
-    let deadline = Instant::now() + OUTPUT_SETTLE;
-    while readers.iter().any(|r| !r.is_finished()) && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(2));
+/// What the launcher keeps of a spawned child's output: its last lines and the threads of
+/// [`forward`] that read them.
+pub(crate) struct ChildOutput {
+    last_lines: Arc<Mutex<Vec<String>>>,
+    readers: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl ChildOutput {
+    /// Waits (up to [`OUTPUT_SETTLE`]) for the readers of an exited child's output to have read
+    /// it all, so that its last lines, its own error among them, are there to quote: the
+    /// process's exit can be seen before its last writes are read.
+    pub(crate) fn settle(&self) {
+        let deadline = Instant::now() + OUTPUT_SETTLE;
+        while self.readers.iter().any(|r| !r.is_finished()) && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// The last lines read so far (at most 10).
+    pub(crate) fn lines(&self) -> Vec<String> {
+        self.last_lines.lock().map(|l| l.clone()).unwrap_or_default()
     }
 }
 
@@ -162,14 +176,13 @@ pub(crate) fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow:
         // stops every node through the bus.
         cmd.process_group(0);
     }
-    let (child, last_lines, readers) = spawn_child(cmd, &name.to_string(), libc::SIGKILL)
+    let (child, output) = spawn_child(cmd, &name.to_string(), libc::SIGKILL)
         .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
     Ok(NodeProcess {
         name,
         child,
         args: args.to_vec(),
-        last_lines,
-        readers,
+        output,
         status: None,
         token_seen: false,
         token_lost: None,
@@ -178,8 +191,12 @@ pub(crate) fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow:
 
 /// Spawns `cmd` with its standard output and error forwarded under `[prefix]` ([`forward`]) and
 /// `death_signal` sent to it when the launcher dies (Linux's parent-death signal: no orphans even
-/// if the launcher is killed). Returns the child, its last lines and the threads reading them.
-pub(crate) fn spawn_child(mut cmd: Command, prefix: &str, death_signal: libc::c_int) -> std::io::Result<Spawned> {
+/// if the launcher is killed). Returns the child and what is kept of its output.
+pub(crate) fn spawn_child(
+    mut cmd: Command,
+    prefix: &str,
+    death_signal: libc::c_int,
+) -> std::io::Result<(Child, ChildOutput)> {
     cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
     #[cfg(target_os = "linux")]
     // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
@@ -199,8 +216,11 @@ pub(crate) fn spawn_child(mut cmd: Command, prefix: &str, death_signal: libc::c_
     if let Some(err) = child.stderr.take() {
         readers.push(forward(prefix.to_string(), err, last.clone()));
     }
-    Ok((child, last, readers))
+    Ok((
+        child,
+        ChildOutput {
+            last_lines: last,
+            readers,
+        },
+    ))
 }
-
-/// A spawned child: the process, its last output lines, the threads that read its output.
-pub(crate) type Spawned = (Child, Arc<Mutex<Vec<String>>>, Vec<std::thread::JoinHandle<()>>);

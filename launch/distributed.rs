@@ -12,7 +12,7 @@
 //! what is left. Every node also watches the others' tokens and the launcher's, so a run stops
 //! even if the launcher itself is killed (local children also die with it: parent-death signal).
 
-use crate::children::{settle, spawn_node, Children, NodeName, NodeRole};
+use crate::children::{spawn_node, Children, NodeName, NodeRole};
 use crate::runner::{IterationRecord, RunOptions, RunResult};
 use anyhow::{bail, Context};
 use glissade_bus::RunContext;
@@ -639,7 +639,7 @@ pub fn run_distributed_observed(
             if let Some(status) = p.child.try_wait()? {
                 p.status = Some(status);
                 if !status.success() {
-                    settle(&p.readers);
+                    p.output.settle();
                     child_failure = Some(format!(
                         "node {} failed ({status}); its last lines:\n    {}",
                         p.name,

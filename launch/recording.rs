@@ -14,6 +14,7 @@
 //! A scene with `[recording] enabled = false` starts no recorder. The recording file is created
 //! before anything is solved, so an unwritable folder fails the run at once, naming the path.
 
+use crate::children::ChildOutput;
 use crate::runner::{run_in_process_logged, IterationRecord, RunOptions, RunResult};
 use anyhow::{bail, Context};
 use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
@@ -23,7 +24,7 @@ use glissade_subdomain::LinearStageRecord;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 use zenoh::qos::CongestionControl;
 use zenoh::Wait;
@@ -153,9 +154,7 @@ pub struct RecorderProcess {
     ready: Arc<AtomicBool>,
     _watch: zenoh::pubsub::Subscriber<()>,
     path: PathBuf,
-    last_lines: Arc<Mutex<Vec<String>>>,
-    /// The threads that read its stdout and stderr into `last_lines`.
-    readers: Vec<std::thread::JoinHandle<()>>,
+    output: ChildOutput,
 }
 
 impl Drop for RecorderProcess {
@@ -201,15 +200,14 @@ pub fn spawn_recorder_process(
         .arg("--file")
         .arg(path);
     // The recorder finalises its file if the launcher dies (SIGTERM, not SIGKILL).
-    let (child, last_lines, readers) = crate::children::spawn_child(cmd, "recorder:0", libc::SIGTERM)
+    let (child, output) = crate::children::spawn_child(cmd, "recorder:0", libc::SIGTERM)
         .with_context(|| format!("cannot start the recorder process ({})", exe.display()))?;
     Ok(RecorderProcess {
         child,
         ready,
         _watch: watch,
         path: path.to_path_buf(),
-        last_lines,
-        readers,
+        output,
     })
 }
 
@@ -230,8 +228,8 @@ impl RecorderProcess {
     fn failure(&mut self) -> Option<String> {
         match self.child.try_wait() {
             Ok(Some(status)) if !status.success() => {
-                crate::children::settle(&self.readers);
-                let lines = self.last_lines.lock().map(|l| l.join("\n    ")).unwrap_or_default();
+                self.output.settle();
+                let lines = self.output.lines().join("\n    ");
                 Some(format!(
                     "the recorder process failed ({status}); its last lines:\n    {lines}"
                 ))
