@@ -31,8 +31,9 @@ pub struct PairHat {
     pub f_a: [f64; 2],
 }
 
+/// a·b of two plane vectors (a normal or tangent with a jump or a force).
 #[inline(always)]
-fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
+pub fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[0] + a[1] * b[1]
 }
 

@@ -71,7 +71,7 @@ pub use verify::{verify, Checks};
 
 use faer::Mat;
 use glissade_mechanics::assembly::AssemblyError;
-use glissade_mechanics::laws::Status;
+use glissade_mechanics::laws::{dot, Status};
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::Model;
 use newton::{Problem, StepState};
@@ -175,11 +175,6 @@ pub enum ReferenceError {
         r_factors: Vec<f64>,
         violation: f64,
     },
-}
-
-#[inline]
-pub(crate) fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
-    a[0] * b[0] + a[1] * b[1]
 }
 
 /// Solves the model by semi-smooth Newton on the Alart–Curnier augmented Lagrangian, time point

@@ -3,12 +3,13 @@
 use crate::numbering::*;
 use crate::sparse::*;
 use crate::verify::*;
-use crate::{dot, LinearSolver, ReferenceError, ReferenceOptions, NONE};
+use crate::{LinearSolver, ReferenceError, ReferenceOptions, NONE};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Lu;
 use faer::sparse::SparseColMat;
 use faer::Mat;
 use glissade_mechanics::assembly::stiffness_triplets;
+use glissade_mechanics::laws::dot;
 use glissade_mechanics::laws::Status;
 use glissade_mechanics::model::{InterfaceKind, Model};
 use std::collections::BTreeMap;

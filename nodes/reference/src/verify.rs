@@ -3,9 +3,10 @@
 
 use crate::newton::*;
 use crate::sparse::*;
-use crate::{dot, ReferenceError, ReferenceSolution};
+use crate::{ReferenceError, ReferenceSolution};
 use faer::Mat;
 use glissade_mechanics::assembly::{stiffness_triplets, AssemblyError};
+use glissade_mechanics::laws::dot;
 use glissade_mechanics::model::{InterfaceKind, Model};
 
 /// Largest relative violations of the discrete problem by a solution (see [`verify`]).

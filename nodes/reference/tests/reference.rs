@@ -2,14 +2,10 @@
 
 mod solves {
     use faer::Mat;
-    use glissade_mechanics::laws::Status;
+    use glissade_mechanics::laws::{dot, Status};
     use glissade_mechanics::model::{InterfaceKind, Model};
     use glissade_reference::*;
     use glissade_scene::load_str;
-
-    fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
-        a[0] * b[0] + a[1] * b[1]
-    }
     use serde_json::Value;
     use std::time::Instant;
 
