@@ -45,9 +45,13 @@ pub(crate) enum Command {
         /// Folder for the outputs.
         #[arg(long, default_value = "recordings")]
         out: PathBuf,
-        /// LATIN stops at this η (overrides the scene's tolerance).
-        #[arg(long, default_value_t = 1e-6)]
-        tolerance: f64,
+        /// LATIN stops once its estimated contact-traction error is at most this (overrides the
+        /// scene's `solver.accuracy`).
+        #[arg(long)]
+        accuracy: Option<f64>,
+        /// LATIN also waits for η ≤ this (overrides the scene's `solver.tolerance`).
+        #[arg(long)]
+        tolerance: Option<f64>,
         /// LATIN iteration cap (overrides the scene's).
         #[arg(long)]
         max_iterations: Option<usize>,
@@ -231,6 +235,10 @@ pub(crate) struct RunArgs {
     /// so that nobody on a shared router can guess the run's key expressions.
     #[arg(long)]
     pub(crate) run_id: Option<String>,
+    /// Stop once the estimated contact-traction error is at most this (overrides the scene's
+    /// `solver.accuracy`, default 1e-3).
+    #[arg(long)]
+    pub(crate) accuracy: Option<f64>,
     /// Also write every subdomain's displacement field.
     #[arg(long)]
     pub(crate) interior: bool,

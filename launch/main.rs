@@ -18,6 +18,7 @@ use glissade_messages::Verdict;
 use glissade_reference::glued::solve_glued;
 use glissade_reference::{solve_reference, verify, ReferenceOptions};
 use glissade_scene::LoadedScene;
+use glissade_scene::SolverOverrides;
 use indicatif::{ProgressBar, ProgressStyle};
 use std::process::ExitCode;
 
@@ -149,20 +150,26 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Report {
             scene,
             out,
+            accuracy,
             tolerance,
             max_iterations,
             variants,
             stop_at_error,
         } => {
+            let overrides = SolverOverrides {
+                accuracy,
+                tolerance,
+                max_iterations,
+            };
             if let Some(e) = stop_at_error {
                 if !(e > 0.0 && e.is_finite()) {
                     anyhow::bail!("--stop-at-error {e}: must be a positive number");
                 }
             }
             if variants.is_empty() {
-                report(&scene, &out, tolerance, max_iterations, stop_at_error)
+                report(&scene, &out, &overrides, stop_at_error)
             } else {
-                report_variants(&scene, &out, tolerance, max_iterations, &variants, stop_at_error)
+                report_variants(&scene, &out, &overrides, &variants, stop_at_error)
             }
         }
         Command::Stability { quick, only, list, out } => stability(quick, &only, list, &out),
@@ -249,7 +256,11 @@ fn default_run_id() -> anyhow::Result<String> {
 }
 
 fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
-    let sc = load_scene(&args.scene)?;
+    let overrides = SolverOverrides {
+        accuracy: args.accuracy,
+        ..Default::default()
+    };
+    let sc = load_with_overrides(&args.scene, &args.out, &overrides)?;
     let run_id = match args.run_id.clone() {
         Some(id) => id,
         None => default_run_id()?,
@@ -288,8 +299,15 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         let d = &r.decision;
         bar.set_position(r.iteration as u64 + 1);
         bar.set_message(format!(
-            "η {:.3e}  e_c {:.3e}  sep/stick/slip {}/{}/{}  changed {}  {:.2} s",
-            d.eta, d.contact_indicator, d.counts[0], d.counts[1], d.counts[2], d.status_changes, r.elapsed_s
+            "error ≈ {}  η {:.3e}  e_c {:.3e}  sep/stick/slip {}/{}/{}  changed {}  {:.2} s",
+            d.estimate.map_or("?".to_string(), |e| format!("{e:.2e}")),
+            d.eta,
+            d.contact_indicator,
+            d.counts[0],
+            d.counts[1],
+            d.counts[2],
+            d.status_changes,
+            r.elapsed_s
         ));
     };
     let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
@@ -392,10 +410,13 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         )?;
         println!("displacements: {}", p.display());
     }
-    let last = result.iterations.last();
-    println!("scene `{}`: {:?} after {} iterations, η = {:.3e}, contact indicator = {:.3e}; setup {:.2} s, iterations {:.2} s",
-        sc.model.name, result.verdict, result.iterations.len(), last.map_or(0.0, |r| r.decision.eta),
-        last.map_or(0.0, |r| r.decision.contact_indicator), result.setup_s, result.solve_s);
+    println!(
+        "scene `{}`: {}; setup {:.2} s, iterations {:.2} s",
+        sc.model.name,
+        glissade::output::outcome(&sc.model, &result),
+        result.setup_s,
+        result.solve_s
+    );
     for t in linear_stages.iter().flatten() {
         println!("{}", t.line());
     }
@@ -543,27 +564,31 @@ fn reference(scene: &std::path::Path, out: &std::path::Path) -> anyhow::Result<E
     Ok(ExitCode::SUCCESS)
 }
 
-/// The scene with the command line's `--tolerance` and `--max-iterations` applied, after checking
-/// them and that the output folder is writable (before anything is solved).
+/// The scene with the command line's `--accuracy`, `--tolerance` and `--max-iterations` applied,
+/// after checking them and that the output folder is writable (before anything is solved).
 fn load_with_overrides(
     scene: &std::path::Path,
     out: &std::path::Path,
-    tolerance: Option<f64>,
-    max_iterations: Option<usize>,
+    overrides: &SolverOverrides,
 ) -> anyhow::Result<glissade_scene::LoadedScene> {
     let sc = load_scene(scene)?;
-    if let Some(tolerance) = tolerance {
+    if let Some(tolerance) = overrides.tolerance {
         if !(tolerance > 0.0 && tolerance.is_finite()) {
             anyhow::bail!("--tolerance {tolerance}: must be a positive number");
         }
     }
-    if max_iterations == Some(0) {
+    if let Some(accuracy) = overrides.accuracy {
+        if !(accuracy > 0.0 && accuracy < 1.0) {
+            anyhow::bail!("--accuracy {accuracy}: must be a relative error in (0, 1)");
+        }
+    }
+    if overrides.max_iterations == Some(0) {
         anyhow::bail!("--max-iterations 0: must be at least 1");
     }
     ensure_writable(out)?;
     // Into the scene text, not only this process's model: node processes (`bench --processes`)
     // build their model from the text.
-    Ok(sc.with_solver_overrides(&scene.display().to_string(), tolerance, max_iterations)?)
+    Ok(sc.with_solver_overrides(&scene.display().to_string(), overrides)?)
 }
 
 fn bench(
@@ -572,7 +597,11 @@ fn bench(
     max_iterations: Option<usize>,
     processes: Option<u32>,
 ) -> anyhow::Result<ExitCode> {
-    let sc = load_with_overrides(scene, out, None, max_iterations)?;
+    let overrides = SolverOverrides {
+        max_iterations,
+        ..Default::default()
+    };
+    let sc = load_with_overrides(scene, out, &overrides)?;
     let run_id = default_run_id()?;
     let report = glissade::bench::bench(&sc, &run_id)?;
     print!("{}", glissade::bench::render(&report));
@@ -594,11 +623,10 @@ fn bench(
 fn report(
     scene: &std::path::Path,
     out: &std::path::Path,
-    tolerance: f64,
-    max_iterations: Option<usize>,
+    overrides: &SolverOverrides,
     stop_at: Option<f64>,
 ) -> anyhow::Result<ExitCode> {
-    let sc = load_with_overrides(scene, out, Some(tolerance), max_iterations)?;
+    let sc = load_with_overrides(scene, out, overrides)?;
     let run_id = default_run_id()?;
     let (report, _, _) = build_report(&sc, &run_id, stop_at)?;
     let name = &sc.model.name;
@@ -636,8 +664,7 @@ fn report(
 fn report_variants(
     scene: &std::path::Path,
     out: &std::path::Path,
-    tolerance: f64,
-    max_iterations: Option<usize>,
+    overrides: &SolverOverrides,
     names: &[String],
     stop_at: Option<f64>,
 ) -> anyhow::Result<ExitCode> {
@@ -648,7 +675,7 @@ fn report_variants(
                 .map_err(|e| anyhow::anyhow!("--variants: {e}"))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    let sc = load_with_overrides(scene, out, Some(tolerance), max_iterations)?;
+    let sc = load_with_overrides(scene, out, overrides)?;
     // In-process runs only: the run id names nothing on a network.
     let run_id = format!("{}-report", sc.model.name);
     let (reports, _) = glissade::report::build_reports(&sc, &run_id, &variants, stop_at)?;

@@ -6,7 +6,7 @@ use glissade_deploy::Plan;
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{InterfaceKind, Model};
-use glissade_messages::InterfaceSolution;
+use glissade_messages::{InterfaceSolution, Verdict};
 use glissade_reference::ReferenceSolution;
 use glissade_scene::LoadedScene;
 use glissade_subdomain::LinearStageRecord;
@@ -28,6 +28,53 @@ pub fn status_counts_per_time(model: &Model, result: &RunResult) -> Vec<[u64; 3]
         }
     }
     counts
+}
+
+/// What a run's stop means, in one sentence: which of the requested accuracy and tolerances the
+/// last iteration met and which it did not. "Converged" only when all are met.
+pub fn outcome(model: &Model, result: &RunResult) -> String {
+    let Some(last) = result.iterations.last() else {
+        return format!("{:?} before any iteration", result.verdict);
+    };
+    let d = &last.decision;
+    let s = &model.solver;
+    let n = result.iterations.len();
+    let mut met = Vec::new();
+    let mut missed = Vec::new();
+    let estimate = d.estimate.map_or(
+        "no estimate yet (the iteration has not shown a contraction)".to_string(),
+        |e| format!("estimated contact-traction error {e:.2e}"),
+    );
+    match s.accuracy {
+        Some(a) if d.estimate.is_some_and(|e| e <= a) => met.push(format!("{estimate} ≤ accuracy {a:e}")),
+        Some(a) if d.estimate.is_some() => missed.push(format!("{estimate} > accuracy {a:e}")),
+        Some(a) => missed.push(format!("{estimate} for accuracy {a:e}")),
+        None => met.push(estimate),
+    }
+    match s.tolerance {
+        Some(t) if d.eta <= t => met.push(format!("η = {:.2e} ≤ tolerance {t:e}", d.eta)),
+        Some(t) => missed.push(format!("η = {:.2e} > tolerance {t:e}", d.eta)),
+        None => met.push(format!("η = {:.2e}", d.eta)),
+    }
+    match s.contact_tolerance {
+        Some(t) if d.contact_indicator <= t => {
+            met.push(format!("e_c = {:.2e} ≤ contact tolerance {t:e}", d.contact_indicator))
+        }
+        Some(t) => missed.push(format!("e_c = {:.2e} > contact tolerance {t:e}", d.contact_indicator)),
+        None => met.push(format!("e_c = {:.2e}", d.contact_indicator)),
+    }
+    let how = match &result.verdict {
+        Verdict::Converged => format!("Converged after {n} iterations"),
+        Verdict::MaxIterations => format!("NOT converged: stopped at the iteration cap ({n} iterations)"),
+        Verdict::Stagnated { detail } => format!("NOT converged: stagnated after {n} iterations ({detail})"),
+        Verdict::Diverged { detail } => format!("NOT converged: diverged after {n} iterations ({detail})"),
+        Verdict::Continue => format!("NOT converged: stopped after {n} iterations"),
+    };
+    if missed.is_empty() {
+        format!("{how}: {}", met.join(", "))
+    } else {
+        format!("{how}: {}; met: {}", missed.join(", "), met.join(", "))
+    }
 }
 
 /// The JSON summary of a run.
@@ -54,6 +101,10 @@ pub fn summary(scene: &LoadedScene, result: &RunResult, run_id: &str) -> Value {
         "iterations": result.iterations.len(),
         "eta": last.map(|r| r.decision.eta),
         "contact_indicator": last.map(|r| r.decision.contact_indicator),
+        "estimated_error": last.and_then(|r| r.decision.estimate),
+        "accuracy": model.solver.accuracy,
+        "tolerance": model.solver.tolerance,
+        "outcome": outcome(model, result),
         "setup_s": result.setup_s,
         "solve_s": result.solve_s,
         "status_counts_per_time": per_time.iter().enumerate().map(|(i, c)| json!({"t": model.time.t(i), "separated": c[0], "stick": c[1], "slip": c[2]})).collect::<Vec<_>>(),

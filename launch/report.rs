@@ -32,6 +32,12 @@ pub struct ReportPoint {
     pub traction_error: f64,
     /// Relative space-time error of the contact jumps of s against the reference.
     pub jump_error: f64,
+    /// The run's own estimate of `traction_error` (`glissade_mechanics::estimate`), when it has one.
+    pub estimate: Option<f64>,
+    /// The contraction the estimate was made with.
+    pub contraction: Option<f64>,
+    /// Relative step of the contact forces since the previous iteration.
+    pub force_step: f64,
     /// Wall time of this iteration's linear stages, summed over the subdomains (s).
     pub linear_s: f64,
     /// Floating-point operations of this iteration's linear stages, summed over the subdomains,
@@ -338,6 +344,9 @@ fn report_against(
                 contact_indicator: r.decision.contact_indicator,
                 traction_error: e_f,
                 jump_error: e_w,
+                estimate: r.decision.estimate,
+                contraction: r.decision.contraction,
+                force_step: r.decision.force_step,
                 linear_s: of_it().map(|x| x.seconds).sum(),
                 linear_flops: of_it().map(|x| x.flops).sum(),
                 bus_bytes: bytes.get(r.iteration as usize).copied().unwrap_or(0),
@@ -615,8 +624,13 @@ pub fn plot_basis_svg(report: &Report) -> Option<String> {
 fn plot_errors_svg(report: &Report) -> String {
     let (w, h) = (900.0, 560.0);
     let (left, right, top, bottom) = (80.0, 200.0, 40.0, 60.0);
-    let series: [Series; 4] = [
+    let series: [Series; 5] = [
         ("traction error vs reference", "#d62728", Box::new(|p| p.traction_error)),
+        (
+            "estimated traction error",
+            "#ff7f0e",
+            Box::new(|p| p.estimate.unwrap_or(f64::NAN)),
+        ),
         ("jump error vs reference", "#1f77b4", Box::new(|p| p.jump_error)),
         ("η (LATIN indicator)", "#2ca02c", Box::new(|p| p.eta)),
         ("contact indicator e_c", "#9467bd", Box::new(|p| p.contact_indicator)),

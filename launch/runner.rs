@@ -349,7 +349,7 @@ pub fn time_start(
     let model = &scene.model;
     let mut coarse = scene.clone();
     coarse.model.time.n_steps = model.time.n_steps / ts.coarsening;
-    coarse.model.solver.tolerance = ts.tolerance;
+    (coarse.model.solver.accuracy, coarse.model.solver.tolerance) = (None, Some(ts.tolerance));
     coarse.model.solver.contact_tolerance = None;
     coarse.model.solver.time_start = None;
     let opts = RunOptions {

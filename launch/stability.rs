@@ -755,7 +755,7 @@ pub fn run_case(case: &Case) -> CaseResult {
         case: case.name.into(),
         varies: case.varies.clone(),
         expect: case.expect.clone(),
-        tolerance: plain_run.as_ref().map(|(sc, _)| sc.model.solver.tolerance),
+        tolerance: plain_run.as_ref().and_then(|(sc, _)| sc.model.solver.tolerance),
         plain: RunRow::new(),
         anderson: RunRow::new(),
         acceleration: AccelerationEffect::Kept,

@@ -36,5 +36,6 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
 /// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
-/// `BoundaryModes`, a PGD subdomain's state in mode form.
-pub const SCHEMA_VERSION: u32 = 3;
+/// `BoundaryModes`, a PGD subdomain's state in mode form. Version 4: the decision carries the step
+/// of the contact forces and the error estimate, `InterfaceIndicators` the step's sums.
+pub const SCHEMA_VERSION: u32 = 4;

@@ -9,7 +9,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub enum Verdict {
     Continue,
-    /// η (and the contact indicator, if required) reached the tolerance.
+    /// The estimated contact-traction error reached the requested accuracy (and η, e_c their
+    /// tolerances where the scene sets them).
     Converged,
     MaxIterations,
     /// η stopped decreasing.
@@ -42,6 +43,12 @@ pub struct Decision {
     pub status_changes: u64,
     /// Contact interfaces whose search direction was updated at this iteration.
     pub direction_updates: Vec<u32>,
+    /// Relative step of the contact forces since the previous iteration, ‖Fₙ − Fₙ₋₁‖/‖Fₙ‖.
+    pub force_step: f64,
+    /// Estimated relative error of the contact tractions and the contraction it was estimated
+    /// with (`glissade_mechanics::estimate`); none until the iteration shows a contraction.
+    pub estimate: Option<f64>,
+    pub contraction: Option<f64>,
     pub verdict: Verdict,
 }
 
@@ -59,6 +66,9 @@ pub struct InterfaceIndicators {
     pub counts: [u64; 3],
     pub status_changes: u64,
     pub direction_updated: bool,
+    /// Σ w_i ‖Fₙ − Fₙ₋₁‖²_M and Σ w_i ‖Fₙ‖²_M over both sides (contact interfaces).
+    pub step_num: f64,
+    pub step_den: f64,
 }
 
 /// The particular part s₀ = (W_d, −k⁻W_d) of a subdomain's state in separated form: the boundary

@@ -163,6 +163,9 @@ fn other_payload() -> impl Strategy<Value = Payload> {
                     counts,
                     status_changes: counts[0],
                     direction_updates,
+                    force_step: contact_indicator,
+                    estimate: Some(eta).filter(|_| counts[1] % 2 == 0),
+                    contraction: None,
                     verdict,
                 })
             }),
@@ -209,6 +212,8 @@ fn other_payload() -> impl Strategy<Value = Payload> {
                             counts,
                             status_changes,
                             direction_updated,
+                            step_num: v[0],
+                            step_den: v[5],
                         }
                     )
                     .collect(),

@@ -53,7 +53,7 @@ fn field_allocations(iterations: u32) -> (u64, usize) {
     let text = scene_text("small-three-layer").replace("N = 10\n", &format!("N = {N}\n"));
     let mut sc = scene(&text);
     assert_eq!(sc.model.time.n_points(), N + 1);
-    sc.model.solver.tolerance = 1e-300;
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(1e-300));
     sc.model.solver.max_iterations = iterations as usize;
     sc.model.solver.stagnation_window = 100_000;
     let opts = RunOptions {

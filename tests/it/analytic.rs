@@ -79,7 +79,7 @@ uy = {uy}
 fn solve(text: &str, tolerance: f64, k0_factor: f64) -> (LoadedScene, RunResult, f64) {
     let mut sc = scene(text);
     sc.model.solver.k0_factor = k0_factor;
-    sc.model.solver.tolerance = tolerance;
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(tolerance));
     sc.model.solver.max_iterations = 50_000;
     sc.model.solver.stagnation_window = 0;
     let clock = Instant::now();

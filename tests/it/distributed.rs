@@ -511,6 +511,9 @@ fn messages_of_another_run_are_ignored() {
                 counts: [0; 3],
                 status_changes: 0,
                 direction_updates: Vec::new(),
+                force_step: 0.0,
+                estimate: None,
+                contraction: None,
                 verdict: Verdict::Converged,
             });
             let foreign = [

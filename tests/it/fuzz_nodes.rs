@@ -36,8 +36,8 @@ fn scene(solver: &str, deployment: &str) -> LoadedScene {
     let text = scene_text("small-three-layer");
     let fuzzed = text
         .replace(
-            "[solver]\ntolerance = 1e-4\n",
-            &format!("[solver]\ntolerance = 1e-14\nmax_iterations = 8\n{solver}"),
+            "accuracy = 1e-3\n",
+            &format!("tolerance = 1e-14\nmax_iterations = 8\n{solver}"),
         )
         .replace("[deployment]\n", &format!("[deployment]\n{deployment}"));
     assert_ne!(fuzzed, text, "the scene's [solver] and [deployment] tables moved");

@@ -18,11 +18,11 @@ fn exe() -> &'static Path {
 /// The small three-layer scene with stop rules that never end the run (it runs until stopped).
 fn endless_scene(dir: &Path) -> PathBuf {
     let text = scene_text("small-three-layer");
-    let solver = "[solver]\ntolerance = 1e-4\n";
+    let solver = "accuracy = 1e-3\n";
     assert!(text.contains(solver), "the scene's solver section changed");
     let text = text.replace(
         solver,
-        "[solver]\ntolerance = 1e-300\nmax_iterations = 1000000\nstagnation_window = 1000000\n",
+        "tolerance = 1e-300\nmax_iterations = 1000000\nstagnation_window = 1000000\n",
     );
     let path = dir.join("endless.toml");
     std::fs::write(&path, text).expect("write the scene");

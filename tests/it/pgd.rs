@@ -38,7 +38,7 @@ fn all_fields(r: &RunResult) -> Vec<f64> {
 #[test]
 fn sparse_stage_gives_the_condensed_iterates() {
     let mut sc = scene_file("small-three-layer");
-    sc.model.solver.tolerance = 1e-300;
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(1e-300));
     sc.model.solver.contact_tolerance = None;
     sc.model.solver.max_iterations = 30;
     sc.model.solver.stagnation_window = 1000;
@@ -72,7 +72,7 @@ fn same_limit(sc: LoadedScene, pgd: PgdParams, tolerance: f64) -> (f64, f64) {
 /// [`same_limit`] with the PGD run accelerated by `acceleration` (the exact run stays plain).
 fn same_limit_with(mut sc: LoadedScene, pgd: PgdParams, tolerance: f64, acceleration: Acceleration) -> (f64, f64) {
     sc.model.solver.acceleration = Acceleration::None;
-    sc.model.solver.tolerance = tolerance;
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(tolerance));
     sc.model.solver.contact_tolerance = None;
     sc.model.solver.max_iterations = 20_000;
     sc.model.solver.stagnation_window = 20_000;
@@ -198,6 +198,8 @@ fn pgd_keeps_the_stratified_limit() {
 #[test]
 fn reports_compare_linear_stages() {
     let mut sc = scene_file("two-blocks");
+    // Every variant runs the 30 iterations: no stop on accuracy or η.
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(1e-300));
     sc.model.solver.max_iterations = 30;
     sc.model.solver.acceleration = Acceleration::None;
     let mut variants = [LinearStage::Condensed, LinearStage::Pgd].map(Variant::from).to_vec();

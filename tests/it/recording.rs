@@ -268,7 +268,7 @@ fn multi_process_recording_matches_in_process() {
 fn long_run_scene(tag: &str) -> (Scratch, PathBuf, String) {
     let dir = temp_dir(tag);
     let text = scene_text("small-three-layer").replace(
-        "tolerance = 1e-4",
+        "accuracy = 1e-3",
         "tolerance = 1e-300\nmax_iterations = 400\nstagnation_window = 1000",
     );
     let scene_path = dir.join("long.toml");

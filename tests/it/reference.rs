@@ -25,7 +25,7 @@ fn compare_with(
 ) -> ([f64; 4], glissade::runner::RunResult) {
     let mut sc = scene(&scene_text(name));
     adjust(&mut sc.model);
-    sc.model.solver.tolerance = tolerance;
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(tolerance));
     sc.model.solver.max_iterations = 20000;
     sc.model.solver.stagnation_window = 0;
     let result = run_in_process(

@@ -25,7 +25,7 @@ fn opts(run_id: &str) -> RunOptions {
 fn solve(sc: &LoadedScene, start: Option<TimeStart>, tolerance: f64, k0_factor: f64) -> (RunResult, Vec<u32>) {
     let mut sc = sc.clone();
     sc.model.solver.time_start = start;
-    sc.model.solver.tolerance = tolerance;
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(tolerance));
     sc.model.solver.k0_factor = k0_factor;
     sc.model.solver.max_iterations = 20_000;
     sc.model.solver.stagnation_window = 20_000;

@@ -20,6 +20,8 @@ pub(crate) fn indicators_of(interface: usize, s: &IndicatorSums, direction_updat
         counts: s.counts,
         status_changes: s.status_changes,
         direction_updated,
+        step_num: s.step_num,
+        step_den: s.step_den,
     }
 }
 
@@ -33,6 +35,8 @@ fn sums_of(i: &InterfaceIndicators) -> IndicatorSums {
         jump_den: i.jump_den,
         counts: i.counts,
         status_changes: i.status_changes,
+        step_num: i.step_num,
+        step_den: i.step_den,
     }
 }
 
@@ -100,6 +104,9 @@ impl InterfaceNode {
             counts: sums.counts,
             status_changes: sums.status_changes,
             direction_updates: updates,
+            force_step: sums.force_step(),
+            estimate: d.rule.estimate().map(|e| e.error),
+            contraction: d.rule.estimate().map(|e| e.rate),
             verdict,
         };
         let stop = decision.verdict.is_stop();

@@ -78,6 +78,10 @@ pub struct InterfaceNode {
     participants: Vec<u32>,
     locals: Vec<InterfaceLocal>,
     fields: Vec<InterfaceFields>,
+    /// Per owned interface followed by the error estimate (contact interfaces; every interface
+    /// of a scene without contact), the sums of the forces' step of the current iteration
+    /// (`IndicatorSums::step_num`, `step_den`).
+    steps: Vec<Option<(f64, f64)>>,
     received: BTreeSet<u32>,
     /// Per subdomain, its mode form once its first `BoundaryModes` arrived (PGD linear stage).
     modes: Vec<Option<ModeReceiver>>,

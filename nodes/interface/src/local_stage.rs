@@ -20,9 +20,14 @@ impl InterfaceNode {
             .par_iter_mut()
             .zip(self.fields.par_iter())
             .zip(self.owned.par_iter())
-            .map(|((local, fields), &i)| {
+            .zip(self.steps.par_iter_mut())
+            .map(|(((local, fields), &i), step)| {
                 let itf = &model.interfaces[i];
-                let sums = local.local_stage_with_sums(itf, weights, fields, n == 0);
+                let mut sums = local.local_stage_with_sums(itf, weights, fields, n == 0);
+                if let Some((num, den)) = step {
+                    (sums.step_num, sums.step_den) = (*num, *den);
+                    (*num, *den) = (0.0, 0.0);
+                }
                 let updated = model.solver.search_direction_update
                     && local.update_directions(itf, model.solver.alpha, model.solver.i0);
                 indicators_of(i, &sums, updated)

@@ -7,7 +7,7 @@ use glissade_bus::convert::{view, FieldPool};
 use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonCoordinator, MAX_CONDITION};
 use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::local::{InterfaceFields, InterfaceLocal};
+use glissade_mechanics::local::{force_step_sums, InterfaceFields, InterfaceLocal};
 use glissade_mechanics::model::{Acceleration, Model};
 use glissade_mechanics::modes::ModeForm;
 use glissade_messages::{role_field_topic, InterfaceSolution, Message, NodeId, Payload, Role, Stage};
@@ -93,6 +93,11 @@ impl InterfaceNode {
             .map(|&i| InterfaceFields::zeros(model.interfaces[i].n_pairs(), nt))
             .collect();
         let n_subdomains = model.subdomains.len();
+        let any_contact = model.interfaces.iter().any(|i| i.is_contact());
+        let steps = owned
+            .iter()
+            .map(|&i| (model.interfaces[i].is_contact() || !any_contact).then_some((0.0, 0.0)))
+            .collect();
         Self {
             id: NodeId {
                 role: Role::Interface,
@@ -107,6 +112,7 @@ impl InterfaceNode {
             participants,
             locals,
             fields,
+            steps,
             received: BTreeSet::new(),
             modes: std::iter::repeat_with(|| None).take(n_subdomains).collect(),
             iteration: 0,
@@ -172,15 +178,28 @@ impl InterfaceNode {
 
     /// Copies subdomain `s`'s rows of W and F into its interfaces' fields: the traces on one
     /// thread and the forces on another (the other nodes wait for the local stage).
+    /// The step of the forces since the previous iteration is summed on the way, on the
+    /// interfaces the error estimate follows ([`force_step_sums`]).
     fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
         let layout = self.layouts[s as usize].as_ref().expect("participant");
         for slot in &layout.slots {
             if let Some(p) = self.position[slot.interface] {
                 let (to_w, to_f) = self.fields[p].side_mut(slot.side);
                 let rows = to_w.nrows();
+                let new_f = f.subrows(slot.offset, rows);
+                let step = &mut self.steps[p];
+                let pair_weights = &self.model.interfaces[slot.interface].weights;
+                let time_weights = &self.time_weights;
                 rayon::join(
                     || to_w.copy_from(w.subrows(slot.offset, rows)),
-                    || to_f.copy_from(f.subrows(slot.offset, rows)),
+                    || {
+                        if let Some((num, den)) = step {
+                            let (n, d) = force_step_sums(pair_weights, time_weights, to_f.as_ref(), new_f);
+                            *num += n;
+                            *den += d;
+                        }
+                        to_f.copy_from(new_f)
+                    },
                 );
             }
         }

@@ -1,12 +1,17 @@
-//! The stop decision's rule (DESIGN §3): tolerance, max iterations, stagnation, divergence.
+//! The stop decision's rule (DESIGN §3): accuracy on the error estimate, tolerances, max
+//! iterations, stagnation, divergence.
 
+use glissade_mechanics::estimate::{ErrorEstimate, Estimated};
 use glissade_mechanics::local::IndicatorSums;
 use glissade_messages::Verdict;
 
-/// The stop rules of DESIGN §3: tolerance, max iterations, stagnation, divergence.
+/// The stop rules of DESIGN §3: converged when the estimated contact-traction error is at most
+/// the accuracy and η, e_c at most their tolerances (each where set); else max iterations,
+/// stagnation, divergence.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StopRule {
-    pub tolerance: f64,
+    pub accuracy: Option<f64>,
+    pub tolerance: Option<f64>,
     pub contact_tolerance: Option<f64>,
     pub max_iterations: usize,
     pub stagnation_window: usize,
@@ -15,11 +20,14 @@ pub struct StopRule {
     pub growth_limit: f64,
     history: Vec<f64>,
     first_norm: Option<f64>,
+    estimate: ErrorEstimate,
+    last: Option<Estimated>,
 }
 
 impl StopRule {
     pub fn new(p: &glissade_mechanics::model::SolverParams) -> Self {
         Self {
+            accuracy: p.accuracy,
             tolerance: p.tolerance,
             contact_tolerance: p.contact_tolerance,
             max_iterations: p.max_iterations,
@@ -28,13 +36,33 @@ impl StopRule {
             growth_limit: 1e12,
             history: Vec::new(),
             first_norm: None,
+            estimate: ErrorEstimate::default(),
+            last: None,
         }
+    }
+
+    /// The error estimate of the last decided iteration, if the iteration showed a contraction.
+    pub fn estimate(&self) -> Option<Estimated> {
+        self.last
     }
 
     /// Verdict after the local stage of iteration `n` (0-based).
     pub fn decide(&mut self, n: u32, sums: &IndicatorSums) -> Verdict {
         let eta = sums.eta();
         self.history.push(eta);
+        let residual = match sums.contact_indicator() {
+            r if r > 0.0 => r,
+            _ => eta,
+        };
+        // Every contact point of ŝ separated: ŝ has no contact force, and s's are round-off
+        // (relative to nothing); their step carries no information, the tractions are zero.
+        let separated = sums.counts[0] > 0 && sums.counts[1] + sums.counts[2] == 0;
+        let step = if separated { 0.0 } else { sums.force_step() };
+        self.last = self.estimate.push(step, residual);
+        if eta == 0.0 {
+            // s = ŝ exactly: this iterate is the fixed point (e.g. a scene without load).
+            self.last = Some(Estimated { rate: 0.0, error: 0.0 });
+        }
         if !eta.is_finite() || !sums.contact_indicator().is_finite() {
             return Verdict::Diverged {
                 detail: format!("indicator is not finite at iteration {n} (η = {eta})"),
@@ -53,8 +81,11 @@ impl StopRule {
                 };
             }
         }
+        let accurate = self.accuracy.is_none_or(|a| self.last.is_some_and(|e| e.error <= a));
+        let eta_ok = self.tolerance.is_none_or(|t| eta <= t);
         let contact_ok = self.contact_tolerance.is_none_or(|t| sums.contact_indicator() <= t);
-        if eta <= self.tolerance && contact_ok {
+        let asked = self.accuracy.is_some() || self.tolerance.is_some() || self.contact_tolerance.is_some();
+        if asked && accurate && eta_ok && contact_ok {
             return Verdict::Converged;
         }
         if n as usize + 1 >= self.max_iterations {

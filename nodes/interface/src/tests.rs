@@ -18,7 +18,8 @@ fn sums(eta: f64, norm: f64) -> IndicatorSums {
 #[test]
 fn stop_rules() {
     let p = SolverParams {
-        tolerance: 1e-3,
+        accuracy: None,
+        tolerance: Some(1e-3),
         max_iterations: 100,
         stagnation_window: 5,
         stagnation_ratio: 0.9,
@@ -69,6 +70,62 @@ fn stop_rules() {
     assert_eq!(r.decide(0, &sums(0.5, 1.0)), Verdict::Continue);
     assert_eq!(r.decide(1, &sums(0.4, 1.0)), Verdict::Continue);
     assert_eq!(r.decide(2, &sums(0.3, 1.0)), Verdict::MaxIterations);
+}
+
+/// With an accuracy the run converges only once the error estimate is at most it: a small η
+/// alone does not stop it, and with a tolerance as well both must hold.
+#[test]
+fn accuracy_stops_on_the_estimate_not_on_eta() {
+    // The forces' relative steps and the contact indicator halve every iteration: ρ̂ = ½, and the
+    // estimate is the largest of the last 10 steps over 1 − ρ̂: 2⁻⁽ⁿ⁻⁹⁾ · 2 = 2⁻⁽ⁿ⁻¹⁰⁾.
+    let step_sums = |eta: f64, n: u32| IndicatorSums {
+        step_num: 0.25f64.powi(n as i32),
+        step_den: 1.0,
+        force_num: 0.25f64.powi(n as i32),
+        force_den: 1.0,
+        ..sums(eta, 1.0)
+    };
+    let p = SolverParams {
+        accuracy: Some(1e-3),
+        tolerance: None,
+        max_iterations: 100,
+        stagnation_window: 0,
+        ..Default::default()
+    };
+    let mut r = StopRule::new(&p);
+    let mut converged_at = None;
+    for n in 0..40 {
+        // η is tiny from the start: it must not stop the run.
+        if r.decide(n, &step_sums(1e-12, n)) == Verdict::Converged {
+            converged_at = Some(n);
+            break;
+        }
+    }
+    // 2⁻⁽ⁿ⁻¹⁰⁾ ≤ 1e-3 from n = 20, which is also the first iteration with a full rate window.
+    let n = converged_at.expect("converges on the estimate");
+    assert_eq!(n, 20);
+    let e = r.estimate().expect("an estimate at the stop");
+    assert!((e.rate - 0.5).abs() < 1e-12 && e.error <= 1e-3, "{e:?}");
+
+    // Accuracy and tolerance: the estimate is met at 20 but η only at 25.
+    let mut r = StopRule::new(&SolverParams {
+        tolerance: Some(1e-6),
+        ..p.clone()
+    });
+    let stop = (0..40)
+        .find(|&n| r.decide(n, &step_sums(if n < 25 { 1e-3 } else { 1e-7 }, n)) == Verdict::Converged)
+        .expect("converges");
+    assert_eq!(stop, 25);
+
+    // Nothing requested: only the cap stops the run.
+    let mut r = StopRule::new(&SolverParams {
+        accuracy: None,
+        max_iterations: 5,
+        ..p
+    });
+    let verdicts: Vec<Verdict> = (0..5).map(|n| r.decide(n, &step_sums(0.0, n))).collect();
+    assert_eq!(verdicts[4], Verdict::MaxIterations, "{verdicts:?}");
+    assert!(verdicts[..4].iter().all(|v| *v == Verdict::Continue), "{verdicts:?}");
 }
 
 /// A block of `n` unit subdomains in a row, clamped at x = 0: interfaces 0 (b.1 | b.2),

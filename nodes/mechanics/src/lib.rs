@@ -10,6 +10,7 @@ pub mod assembly;
 pub mod coarse;
 pub mod condensed;
 pub mod element;
+pub mod estimate;
 pub mod expr;
 pub mod laws;
 pub mod linear;

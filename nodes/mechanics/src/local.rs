@@ -201,6 +201,35 @@ pub fn error_against_reference(
     (ratio(f_num, f_den), ratio(w_num, w_den))
 }
 
+/// One side's share of [`IndicatorSums::step_num`] and [`IndicatorSums::step_den`]: `old` and
+/// `new` are that side's forces (2·n_pairs × (N+1)), `pair_weights` the lumped mass of each pair
+/// and `time_weights` the trapezoid weights. Returns (Σ_i w_i Σ_p m_p |new − old|²,
+/// Σ_i w_i Σ_p m_p |new|²).
+pub fn force_step_sums(
+    pair_weights: &[f64],
+    time_weights: &[f64],
+    old: MatRef<'_, f64>,
+    new: MatRef<'_, f64>,
+) -> (f64, f64) {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (i, &wt) in time_weights.iter().enumerate() {
+        let (o, n) = (
+            old.col(i).try_as_col_major().expect("column-major"),
+            new.col(i).try_as_col_major().expect("column-major"),
+        );
+        let (o, n) = (o.as_slice(), n.as_slice());
+        let (mut col_num, mut col_den) = (0.0, 0.0);
+        for (e, (&a, &b)) in o.iter().zip(n).enumerate() {
+            let m = pair_weights[e / 2];
+            col_num += m * (b - a) * (b - a);
+            col_den += m * b * b;
+        }
+        num += wt * col_num;
+        den += wt * col_den;
+    }
+    (num, den)
+}
+
 /// Search directions k⁺ of a contact interface, per pair and time point (n_pairs × (N+1)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ContactDirections {
@@ -232,6 +261,12 @@ pub struct IndicatorSums {
     pub counts: [u64; 3],
     /// Contact points whose status changed since the previous local stage.
     pub status_changes: u64,
+    /// Step of the interface forces since the previous iteration, on contact interfaces (on
+    /// every interface of a scene without contact): Σ_i w_i Σ_sides (Fₙ − Fₙ₋₁)ᵀM(Fₙ − Fₙ₋₁)
+    /// ([`force_step_sums`]); the error estimate of [`crate::estimate`] is built on it.
+    pub step_num: f64,
+    /// Σ_i w_i Σ_sides FₙᵀMFₙ over the same interfaces.
+    pub step_den: f64,
 }
 
 fn ratio(num: f64, den: f64) -> f64 {
@@ -254,6 +289,17 @@ impl IndicatorSums {
             self.counts[k] += o.counts[k];
         }
         self.status_changes += o.status_changes;
+        self.step_num += o.step_num;
+        self.step_den += o.step_den;
+    }
+
+    /// dₙ = ‖Fₙ − Fₙ₋₁‖ / ‖Fₙ‖: the relative step of the interface forces (contact interfaces)
+    /// at this iteration.
+    pub fn force_step(&self) -> f64 {
+        if self.step_den == 0.0 {
+            return 0.0;
+        }
+        ratio(self.step_num, self.step_den)
     }
 
     /// η of eq. (10).

@@ -203,8 +203,11 @@ pub struct SolverParams {
     pub k0_factor: f64,
     /// Relaxation μ ∈ (0, 1].
     pub relaxation: f64,
-    /// Stop when η ≤ tolerance.
-    pub tolerance: f64,
+    /// Stop when the estimated relative contact-traction error ([`crate::estimate`]) is at most
+    /// this (default 1e-3); `None`: the run does not stop on the estimate.
+    pub accuracy: Option<f64>,
+    /// Also require η ≤ this (if set).
+    pub tolerance: Option<f64>,
     /// Also require the contact indicator ≤ this (if set).
     pub contact_tolerance: Option<f64>,
     pub max_iterations: usize,
@@ -242,6 +245,10 @@ pub struct TimeStart {
     pub tolerance: f64,
 }
 
+/// `solver.accuracy` when a scene does not set it: the estimated relative error of the contact
+/// tractions at the stop.
+pub const DEFAULT_ACCURACY: f64 = 1e-3;
+
 /// `solver.time_coarsening_tolerance` when a scene sets `time_coarsening` only.
 pub const DEFAULT_TIME_START_TOLERANCE: f64 = 1e-4;
 
@@ -260,7 +267,8 @@ impl Default for SolverParams {
         Self {
             k0_factor: 1.0,
             relaxation: 0.8,
-            tolerance: 1e-6,
+            accuracy: Some(DEFAULT_ACCURACY),
+            tolerance: None,
             contact_tolerance: None,
             max_iterations: 1000,
             stagnation_window: 50,

@@ -50,7 +50,8 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 13] = [
         "decision",
         "glissade.Decision",
         "(Decision { eta: f64, contact_indicator: f64, force_error: f64, jump_error: f64, counts: [u64; 3], \
-         status_changes: u64, direction_updates: Vec<u32>, verdict: Verdict })",
+         status_changes: u64, direction_updates: Vec<u32>, force_step: f64, estimate: Option<f64>, \
+         contraction: Option<f64>, verdict: Verdict })",
     ),
     (
         "interface_solution",
@@ -63,7 +64,8 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 13] = [
         "indicator_partials",
         "glissade.IndicatorPartials",
         "{ interfaces: Vec<InterfaceIndicators { interface: u32, eta_num: f64, eta_den: f64, force_num: f64, \
-         force_den: f64, jump_num: f64, jump_den: f64, counts: [u64; 3], status_changes: u64, direction_updated: bool }>, \
+         force_den: f64, jump_num: f64, jump_den: f64, counts: [u64; 3], status_changes: u64, direction_updated: bool, step_num: f64, \
+         step_den: f64 }>, \
          diverged: Option<String> }",
     ),
 ];

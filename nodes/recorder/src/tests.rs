@@ -79,6 +79,9 @@ fn iteration(n: u32) -> Vec<Message> {
             counts: [1, 2, 3],
             status_changes: n as u64,
             direction_updates: vec![],
+            force_step: 0.0,
+            estimate: None,
+            contraction: None,
             verdict: Verdict::Continue,
         }),
     ));

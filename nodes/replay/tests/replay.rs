@@ -72,6 +72,9 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
                 counts: [1, 2, 3],
                 status_changes: 0,
                 direction_updates: vec![],
+                force_step: 0.0,
+                estimate: None,
+                contraction: None,
                 verdict: if n + 1 == iterations {
                     Verdict::Converged
                 } else {

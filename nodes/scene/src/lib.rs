@@ -14,6 +14,7 @@
 //! the shipped `launch/scenes/stratified.toml` exactly.
 
 mod build;
+pub use build::options::{auto_coarsening, AUTO_COARSENING_MIN_STEPS, AUTO_COARSE_STEPS};
 mod diagnostics;
 mod raw;
 mod settings;
@@ -90,21 +91,24 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
     })
 }
 
+/// `[solver]` settings given on the command line, applied by [`LoadedScene::with_solver_overrides`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SolverOverrides {
+    pub accuracy: Option<f64>,
+    pub tolerance: Option<f64>,
+    pub max_iterations: Option<usize>,
+}
+
 impl LoadedScene {
-    /// This scene with `[solver] tolerance` and/or `max_iterations` set as if written in its
+    /// This scene with `[solver] accuracy`, `tolerance` and/or `max_iterations` set as if written in its
     /// file: the scene text is rewritten with them (a first comment line says so), so that its
     /// fingerprint, the text that node processes fetch from the bus and the text a recording
     /// attaches all describe the run, not only this process's model. `file` names the scene in
     /// errors and gives the default model name, as in [`load_str`]; the network settings (TLS
     /// paths already resolved against the scene's folder) are kept. An invalid value is the
     /// scene error the file would give.
-    pub fn with_solver_overrides(
-        &self,
-        file: &str,
-        tolerance: Option<f64>,
-        max_iterations: Option<usize>,
-    ) -> Result<LoadedScene, SceneError> {
-        if tolerance.is_none() && max_iterations.is_none() {
+    pub fn with_solver_overrides(&self, file: &str, overrides: &SolverOverrides) -> Result<LoadedScene, SceneError> {
+        if *overrides == SolverOverrides::default() {
             return Ok(self.clone());
         }
         let mut table: toml::Table = self.text.parse().map_err(|e| toml_error(&self.text, file, &e, true))?;
@@ -119,11 +123,13 @@ impl LoadedScene {
             .as_table_mut()
             .ok_or_else(|| err("solver", "is not a table".into()))?;
         let mut said = Vec::new();
-        if let Some(t) = tolerance {
-            solver.insert("tolerance".into(), toml::Value::Float(t));
-            said.push(format!("tolerance = {t:e}"));
+        for (key, value) in [("accuracy", overrides.accuracy), ("tolerance", overrides.tolerance)] {
+            if let Some(v) = value {
+                solver.insert(key.into(), toml::Value::Float(v));
+                said.push(format!("{key} = {v:e}"));
+            }
         }
-        if let Some(m) = max_iterations {
+        if let Some(m) = overrides.max_iterations {
             let m = i64::try_from(m).map_err(|_| err("solver.max_iterations", format!("{m} is too large")))?;
             solver.insert("max_iterations".into(), toml::Value::Integer(m));
             said.push(format!("max_iterations = {m}"));

@@ -114,7 +114,7 @@ pub(crate) struct RawBoundary {
     pub(crate) p: Option<toml::Value>,
 }
 
-/// `solver.macro_degree`: a number or "auto".
+/// `solver.macro_degree` and `solver.time_coarsening`: a number or a name ("auto", "off").
 #[derive(Deserialize, Clone)]
 #[serde(untagged)]
 pub(crate) enum RawDegree {
@@ -127,6 +127,7 @@ pub(crate) enum RawDegree {
 pub(crate) struct RawSolver {
     pub(crate) k0_factor: Option<f64>,
     pub(crate) relaxation: Option<f64>,
+    pub(crate) accuracy: Option<f64>,
     pub(crate) tolerance: Option<f64>,
     pub(crate) contact_tolerance: Option<f64>,
     pub(crate) max_iterations: Option<usize>,
@@ -139,7 +140,7 @@ pub(crate) struct RawSolver {
     pub(crate) macro_degree: Option<RawDegree>,
     pub(crate) acceleration: Option<RawAcceleration>,
     pub(crate) anderson_window: Option<usize>,
-    pub(crate) time_coarsening: Option<usize>,
+    pub(crate) time_coarsening: Option<RawDegree>,
     pub(crate) time_coarsening_tolerance: Option<f64>,
     pub(crate) linear_stage: Option<RawLinearStage>,
     pub(crate) pgd: Option<RawPgd>,

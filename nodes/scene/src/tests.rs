@@ -3,7 +3,8 @@
 use super::*;
 use glissade_mechanics::mesh::BlockSide;
 use glissade_mechanics::model::{
-    Acceleration, Interface, InterfaceKind, Plane, SolverParams, TimeFunction, TimeStart, DEFAULT_TIME_START_TOLERANCE,
+    Acceleration, Interface, InterfaceKind, Plane, SolverParams, TimeFunction, TimeStart, DEFAULT_ACCURACY,
+    DEFAULT_TIME_START_TOLERANCE,
 };
 use glissade_mechanics::pgd::PgdCriterion;
 
@@ -72,30 +73,44 @@ fn replaced(from: &str, to: &str) -> String {
 fn solver_overrides_rewrite_the_scene_text() {
     let s = load(TWO_BLOCKS).unwrap();
     assert_eq!(
-        s.with_solver_overrides("scenes/test.toml", None, None).unwrap().text,
+        s.with_solver_overrides("scenes/test.toml", &SolverOverrides::default())
+            .unwrap()
+            .text,
         s.text
     );
     let o = s
-        .with_solver_overrides("scenes/test.toml", Some(2.5e-9), Some(7))
+        .with_solver_overrides(
+            "scenes/test.toml",
+            &SolverOverrides {
+                accuracy: Some(1e-4),
+                tolerance: Some(2.5e-9),
+                max_iterations: Some(7),
+            },
+        )
         .unwrap();
-    assert_eq!((o.model.solver.tolerance, o.model.solver.max_iterations), (2.5e-9, 7));
+    let solver = &o.model.solver;
+    assert_eq!(
+        (solver.accuracy, solver.tolerance, solver.max_iterations),
+        (Some(1e-4), Some(2.5e-9), 7)
+    );
     assert_ne!(o.fingerprint, s.fingerprint);
     assert!(
-        o.text
-            .starts_with("# scenes/test.toml with [solver] tolerance = 2.5e-9, max_iterations = 7 set"),
+        o.text.starts_with(
+            "# scenes/test.toml with [solver] accuracy = 1e-4, tolerance = 2.5e-9, max_iterations = 7 set"
+        ),
         "{}",
         o.text
     );
     let again = load(&o.text).unwrap();
     assert_eq!(
         (again.model.solver.tolerance, again.model.solver.max_iterations),
-        (2.5e-9, 7)
+        (Some(2.5e-9), 7)
     );
     // Everything else is the scene as written.
     assert_eq!(again.model.name, "two");
     let unchanged = |m: &Model| {
         let mut m = m.clone();
-        m.solver.tolerance = 0.0;
+        (m.solver.accuracy, m.solver.tolerance) = (None, None);
         m.solver.max_iterations = 0;
         format!("{m:?}")
     };
@@ -104,13 +119,33 @@ fn solver_overrides_rewrite_the_scene_text() {
     // own error.
     let with_solver = load(&format!("{TWO_BLOCKS}[solver]\nrelaxation = 0.5\n")).unwrap();
     let o = with_solver
-        .with_solver_overrides("scenes/test.toml", None, Some(3))
+        .with_solver_overrides(
+            "scenes/test.toml",
+            &SolverOverrides {
+                max_iterations: Some(3),
+                ..Default::default()
+            },
+        )
         .unwrap();
     assert_eq!((o.model.solver.relaxation, o.model.solver.max_iterations), (0.5, 3));
-    let e = s.with_solver_overrides("scenes/test.toml", None, Some(0)).unwrap_err();
+    let e = s
+        .with_solver_overrides(
+            "scenes/test.toml",
+            &SolverOverrides {
+                max_iterations: Some(0),
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
     assert_eq!(e.key, "solver.max_iterations", "{e}");
     let e = s
-        .with_solver_overrides("scenes/test.toml", Some(-1.0), None)
+        .with_solver_overrides(
+            "scenes/test.toml",
+            &SolverOverrides {
+                tolerance: Some(-1.0),
+                ..Default::default()
+            },
+        )
         .unwrap_err();
     assert_eq!(e.key, "solver.tolerance", "{e}");
 }
@@ -227,7 +262,7 @@ fn stratified_scene() {
         .sum();
     assert!((fx - 6000.0).abs() < 1e-8, "{fx}");
     assert_eq!(s.deployment.subdomain_nodes, 3);
-    assert_eq!(m.solver.tolerance, 1e-4);
+    assert_eq!((m.solver.accuracy, m.solver.tolerance), (Some(DEFAULT_ACCURACY), None));
     assert_eq!((s.pgd.xi1, s.pgd.xi2), (0.1, 0.01));
 }
 
@@ -691,6 +726,8 @@ fn rejects_bad_solver_settings() {
     expect_err(&with("relaxation = 1.5"), "solver.relaxation", "outside (0, 1]");
     expect_err(&with("tolerance = 0.0"), "solver.tolerance", "must be > 0");
     expect_err(&with("tolerance = -1e-6"), "solver.tolerance", "must be > 0");
+    expect_err(&with("accuracy = 0.0"), "solver.accuracy", "outside (0, 1)");
+    expect_err(&with("accuracy = 1.5"), "solver.accuracy", "outside (0, 1)");
     expect_err(&with("k0_factor = 0"), "solver.k0_factor", "must be > 0");
     expect_err(&with("alpha = 1.0"), "solver.alpha", "outside [0, 1)");
     // 2(1 − 0.8)/(2 − 0.8) = 1/3: 0.34 is above, and accepted only with the update off.
@@ -862,10 +899,11 @@ fn time_coarsening_keys() {
         &format!("does not divide time.N = {n}"),
     );
     expect_err(
-        &with("time_coarsening_tolerance = 1e-5"),
+        &with("time_coarsening = \"off\"\ntime_coarsening_tolerance = 1e-5"),
         "solver.time_coarsening_tolerance",
-        "solver.time_coarsening is not",
+        "solver.time_coarsening is \"off\"",
     );
+    expect_err(&with("time_coarsening = \"fine\""), "solver.time_coarsening", "neither");
     expect_err(
         &with("time_coarsening = 2\ntime_coarsening_tolerance = 0.0"),
         "solver.time_coarsening_tolerance",
@@ -877,6 +915,45 @@ fn time_coarsening_keys() {
         "not available with the PGD linear stage",
     );
     assert!(load(&with("time_coarsening = -2")).is_err());
+}
+
+/// `time_coarsening = "auto"` (the default) starts from a coarse solve of about 100 steps from
+/// N = 400 on, never with the PGD stage; "off" never does.
+#[test]
+fn automatic_time_coarsening() {
+    assert_eq!(auto_coarsening(100), None);
+    assert_eq!(auto_coarsening(399), None);
+    assert_eq!(auto_coarsening(400), Some(4));
+    assert_eq!(auto_coarsening(1000), Some(10));
+    assert_eq!(auto_coarsening(1500), Some(15));
+    assert_eq!(auto_coarsening(1024), Some(8), "128 coarse steps is the nearest to 100");
+    assert_eq!(auto_coarsening(401), None, "a prime N has no coarse grid");
+    let at = |n: usize, extra: &str| {
+        let text = TWO_BLOCKS.replacen("N = 4", &format!("N = {n}"), 1);
+        assert!(TWO_BLOCKS.contains("\nN = 4\n"), "the two-blocks text sets N = 4");
+        load(&format!("{text}[solver]\n{extra}\n"))
+            .unwrap()
+            .model
+            .solver
+            .time_start
+    };
+    assert_eq!(at(4, ""), None);
+    assert_eq!(
+        at(1000, ""),
+        Some(TimeStart {
+            coarsening: 10,
+            tolerance: DEFAULT_TIME_START_TOLERANCE
+        })
+    );
+    assert_eq!(
+        at(1000, "time_coarsening = \"auto\"\ntime_coarsening_tolerance = 2e-5"),
+        Some(TimeStart {
+            coarsening: 10,
+            tolerance: 2e-5
+        })
+    );
+    assert_eq!(at(1000, "time_coarsening = \"off\""), None);
+    assert_eq!(at(1000, "linear_stage = \"pgd\""), None);
 }
 
 #[test]

@@ -4,7 +4,7 @@
 
 mod interfaces;
 mod loads;
-mod options;
+pub(crate) mod options;
 mod rigid;
 
 use crate::raw::*;
@@ -149,22 +149,11 @@ impl Ctx<'_> {
             Some(RawPlane::Stress) => Plane::Stress,
         };
         let time = self.time_grid(&raw.time)?;
-        let solver = self.solver(&raw.solver)?;
+        let mut solver = self.solver(&raw.solver)?;
         let pgd = self.pgd(raw.solver.pgd.as_ref())?;
         let linear_stage = self.linear_stage(&raw.solver)?;
-        if let Some(ts) = solver.time_start {
-            self.check(time.n_steps % ts.coarsening == 0, "solver.time_coarsening", || {
-                format!(
-                    "{} does not divide time.N = {} (the coarse grid takes every {}-th time point)",
-                    ts.coarsening, time.n_steps, ts.coarsening
-                )
-            })?;
-            self.check(linear_stage != LinearStage::Pgd, "solver.time_coarsening", || {
-                "is not available with the PGD linear stage (its basis is built from ŝ = 0); \
-                 use linear_stage = \"condensed\" or \"sparse\""
-                    .to_string()
-            })?;
-        }
+        let coarsening = self.time_start(&raw.solver)?;
+        solver.time_start = self.resolve_time_start(coarsening, time.n_steps, linear_stage)?;
         let recording = self.recording(&raw.recording)?;
         let materials = self.materials(&raw.materials)?;
         self.blocks(raw, &materials)?;

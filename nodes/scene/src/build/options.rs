@@ -2,13 +2,41 @@
 
 use super::*;
 
+/// `solver.time_coarsening` as written, before N and the linear stage resolve it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Coarsening {
+    /// "auto" (the default), with the coarse solve's tolerance.
+    Auto(f64),
+    Off,
+    Fixed(TimeStart),
+}
+
+/// Fewest time steps at which `time_coarsening = "auto"` starts from a coarse solve.
+pub const AUTO_COARSENING_MIN_STEPS: usize = 400;
+/// Steps of the coarse grid that `"auto"` aims for.
+pub const AUTO_COARSE_STEPS: usize = 100;
+
+/// The factor `time_coarsening = "auto"` chooses for N time steps: none below
+/// [`AUTO_COARSENING_MIN_STEPS`] (a coarse solve saves few iterations on short grids:
+/// docs/accuracy.md), else the divisor c ≥ 2 of N whose coarse grid N/c is nearest to
+/// [`AUTO_COARSE_STEPS`] steps (the larger c on a tie), none if N is prime.
+pub fn auto_coarsening(n_steps: usize) -> Option<usize> {
+    if n_steps < AUTO_COARSENING_MIN_STEPS {
+        return None;
+    }
+    (2..n_steps)
+        .filter(|c| n_steps.is_multiple_of(*c))
+        .min_by_key(|&c| ((n_steps / c).abs_diff(AUTO_COARSE_STEPS), std::cmp::Reverse(c)))
+}
+
 impl Ctx<'_> {
     pub(crate) fn solver(&self, r: &RawSolver) -> Result<SolverParams, SceneError> {
         let d = SolverParams::default();
         let s = SolverParams {
             k0_factor: r.k0_factor.unwrap_or(d.k0_factor),
             relaxation: r.relaxation.unwrap_or(d.relaxation),
-            tolerance: r.tolerance.unwrap_or(d.tolerance),
+            accuracy: r.accuracy.or(d.accuracy),
+            tolerance: r.tolerance.or(d.tolerance),
             contact_tolerance: r.contact_tolerance.or(d.contact_tolerance),
             max_iterations: r.max_iterations.unwrap_or(d.max_iterations),
             stagnation_window: r.stagnation_window.unwrap_or(d.stagnation_window),
@@ -33,7 +61,7 @@ impl Ctx<'_> {
                 }
             },
             acceleration: self.acceleration(r, d.acceleration)?,
-            time_start: self.time_start(r)?,
+            time_start: None,
         };
         let positive = |v: f64| v > 0.0 && v.is_finite();
         self.check(positive(s.k0_factor), "solver.k0_factor", || {
@@ -42,9 +70,14 @@ impl Ctx<'_> {
         self.check(s.relaxation > 0.0 && s.relaxation <= 1.0, "solver.relaxation", || {
             format!("{} is outside (0, 1]", s.relaxation)
         })?;
-        self.check(positive(s.tolerance), "solver.tolerance", || {
-            format!("{} must be > 0", s.tolerance)
-        })?;
+        if let Some(a) = s.accuracy {
+            self.check(positive(a) && a < 1.0, "solver.accuracy", || {
+                format!("{a} is outside (0, 1) (a relative error of the contact tractions)")
+            })?;
+        }
+        if let Some(t) = s.tolerance {
+            self.check(positive(t), "solver.tolerance", || format!("{t} must be > 0"))?;
+        }
         if let Some(c) = s.contact_tolerance {
             self.check(positive(c), "solver.contact_tolerance", || format!("{c} must be > 0"))?;
         }
@@ -76,30 +109,71 @@ impl Ctx<'_> {
         Ok(s)
     }
 
-    /// `time_coarsening` and its tolerance; N is checked against the coarsening in [`Self::build`].
-    pub(crate) fn time_start(&self, r: &RawSolver) -> Result<Option<TimeStart>, SceneError> {
-        let Some(c) = r.time_coarsening else {
-            return match r.time_coarsening_tolerance {
-                Some(t) => Err(self.err(
-                    "solver.time_coarsening_tolerance",
-                    format!("{t} is set but solver.time_coarsening is not (set time_coarsening = 5, say)"),
-                )),
-                None => Ok(None),
-            };
-        };
-        self.check(c >= 2, "solver.time_coarsening", || {
-            format!("{c} must be ≥ 2 (the coarse grid takes every c-th time point)")
-        })?;
+    /// `time_coarsening` ("auto" when absent, "off" or c) and its tolerance; resolved against N
+    /// and the linear stage in [`Self::build`] ([`Self::resolve_time_start`]).
+    pub(crate) fn time_start(&self, r: &RawSolver) -> Result<Coarsening, SceneError> {
         let tolerance = r.time_coarsening_tolerance.unwrap_or(DEFAULT_TIME_START_TOLERANCE);
         self.check(
             tolerance > 0.0 && tolerance.is_finite(),
             "solver.time_coarsening_tolerance",
             || format!("{tolerance} must be > 0"),
         )?;
-        Ok(Some(TimeStart {
-            coarsening: c,
-            tolerance,
-        }))
+        match &r.time_coarsening {
+            None => Ok(Coarsening::Auto(tolerance)),
+            Some(RawDegree::Name(n)) if n == "auto" => Ok(Coarsening::Auto(tolerance)),
+            Some(RawDegree::Name(n)) if n == "off" => match r.time_coarsening_tolerance {
+                Some(t) => Err(self.err(
+                    "solver.time_coarsening_tolerance",
+                    format!("{t} is set but solver.time_coarsening is \"off\""),
+                )),
+                None => Ok(Coarsening::Off),
+            },
+            Some(RawDegree::Name(n)) => Err(self.err(
+                "solver.time_coarsening",
+                format!("\"{n}\" is neither \"auto\", \"off\" nor a factor c ≥ 2"),
+            )),
+            Some(RawDegree::Degree(c)) => {
+                self.check(*c >= 2, "solver.time_coarsening", || {
+                    format!("{c} must be ≥ 2 (the coarse grid takes every c-th time point)")
+                })?;
+                Ok(Coarsening::Fixed(TimeStart {
+                    coarsening: *c as usize,
+                    tolerance,
+                }))
+            }
+        }
+    }
+
+    /// The time-coarse start of a scene with `n_steps` steps and linear stage `stage`: a fixed
+    /// factor is checked against them; "auto" starts from a coarse solve where it pays
+    /// ([`auto_coarsening`]) and from ŝ = 0 elsewhere.
+    pub(crate) fn resolve_time_start(
+        &self,
+        choice: Coarsening,
+        n_steps: usize,
+        stage: LinearStage,
+    ) -> Result<Option<TimeStart>, SceneError> {
+        match choice {
+            Coarsening::Off => Ok(None),
+            Coarsening::Auto(tolerance) => Ok((stage != LinearStage::Pgd)
+                .then(|| auto_coarsening(n_steps))
+                .flatten()
+                .map(|coarsening| TimeStart { coarsening, tolerance })),
+            Coarsening::Fixed(ts) => {
+                self.check(n_steps.is_multiple_of(ts.coarsening), "solver.time_coarsening", || {
+                    format!(
+                        "{} does not divide time.N = {n_steps} (the coarse grid takes every {}-th time point)",
+                        ts.coarsening, ts.coarsening
+                    )
+                })?;
+                self.check(stage != LinearStage::Pgd, "solver.time_coarsening", || {
+                    "is not available with the PGD linear stage (its basis is built from ŝ = 0); \
+                     use linear_stage = \"condensed\" or \"sparse\""
+                        .to_string()
+                })?;
+                Ok(Some(ts))
+            }
+        }
     }
 
     pub(crate) fn acceleration(&self, r: &RawSolver, default: Acceleration) -> Result<Acceleration, SceneError> {
