@@ -148,7 +148,7 @@ fn several_interface_nodes_match_one_bit_for_bit() {
 /// the in-process one-interface-node run bit for bit.
 #[test]
 fn stratified_over_three_interface_processes() {
-    let text = scene_text("stratified").replace("N = 100", "N = 10");
+    let text = scene_text("stratified").replace("N = 1000", "N = 10");
     let one = crate::common::run(&scene(&text));
     let sc = scene(&with_deployment(&text, "interface_nodes = 3"));
     let groups = sc.deployment.interface_groups(&sc.model);
@@ -281,7 +281,7 @@ fn pgd_mode_form_processes_match_in_process_bit_for_bit() {
 /// coarse node (N = 10 to keep the debug-profile test short).
 #[test]
 fn stratified_over_three_subdomain_processes() {
-    let text = scene_text("stratified").replace("N = 100", "N = 10");
+    let text = scene_text("stratified").replace("N = 1000", "N = 10");
     let sc = scene(&text);
     assert_eq!(sc.deployment.subdomain_nodes, 3);
     let local = run_in_process(
@@ -322,7 +322,7 @@ fn stratified_over_three_subdomain_processes() {
 /// waits for them), is bit-identical to the in-process run.
 #[test]
 fn shared_memory_processes_match_in_process_bit_for_bit() {
-    let text = scene_text("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";
+    let text = scene_text("stratified").replace("N = 1000", "N = 30") + "\n[network]\nshared_memory = true\n";
     let sc = scene(&text);
     assert_eq!(sc.network.shared_memory, Some(true));
     let opts = |run_id: &str| RunOptions {
@@ -423,7 +423,7 @@ fn with_shared_memory_large_fields_are_sent_without_a_copy() {
     }
     let dir = crate::common::scratch("lent-fields");
     let scene_file = dir.join("stratified.toml");
-    let text = scene_text("stratified").replace("N = 100", "N = 30") + "\n[network]\nshared_memory = true\n";
+    let text = scene_text("stratified").replace("N = 1000", "N = 30") + "\n[network]\nshared_memory = true\n";
     std::fs::write(&scene_file, text).expect("scene file");
     let output = std::process::Command::new(exe())
         .args(["run", "--quiet", "--out"])

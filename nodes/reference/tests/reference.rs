@@ -277,12 +277,11 @@ mod timing {
     use glissade_reference::*;
 
     fn stratified(linear_solver: LinearSolver) {
-        let model = glissade_scene::load_str(
-            include_str!("../../../launch/scenes/stratified.toml"),
-            "stratified.toml",
-        )
-        .map(|s| s.model)
-        .unwrap_or_else(|e| panic!("{e}"));
+        // At the N = 100 the timings below were measured on (the shipped scene has N = 1000).
+        let text = include_str!("../../../launch/scenes/stratified.toml").replace("\nN = 1000\n", "\nN = 100\n");
+        let model = glissade_scene::load_str(&text, "stratified.toml")
+            .map(|s| s.model)
+            .unwrap_or_else(|e| panic!("{e}"));
         let start = std::time::Instant::now();
         let opts = ReferenceOptions {
             linear_solver,

@@ -207,7 +207,15 @@ fn stratified_scene() {
     assert_eq!(m.subdomains[0].name, "bottom.1");
     assert_eq!(m.subdomains[6].name, "core.1");
     assert_eq!(m.subdomains[17].name, "top.6");
-    assert_eq!(m.time.n_steps, 100);
+    assert_eq!(m.time.n_steps, 1000);
+    // The paper's N = 1000 starts from a coarse solve on every 10th time point ("auto").
+    assert_eq!(
+        m.solver.time_start,
+        Some(TimeStart {
+            coarsening: 10,
+            tolerance: DEFAULT_TIME_START_TOLERANCE
+        })
+    );
     assert_eq!(m.interfaces.len(), 27);
     let perfect: Vec<&Interface> = m.interfaces.iter().filter(|i| !i.is_contact()).collect();
     let contact: Vec<&Interface> = m.interfaces.iter().filter(|i| i.is_contact()).collect();
@@ -918,11 +926,12 @@ fn time_coarsening_keys() {
 }
 
 /// `time_coarsening = "auto"` (the default) starts from a coarse solve of about 100 steps from
-/// N = 400 on, never with the PGD stage; "off" never does.
+/// N = 200 on, never with the PGD stage; "off" never does.
 #[test]
 fn automatic_time_coarsening() {
     assert_eq!(auto_coarsening(100), None);
-    assert_eq!(auto_coarsening(399), None);
+    assert_eq!(auto_coarsening(199), None);
+    assert_eq!(auto_coarsening(200), Some(2));
     assert_eq!(auto_coarsening(400), Some(4));
     assert_eq!(auto_coarsening(1000), Some(10));
     assert_eq!(auto_coarsening(1500), Some(15));

@@ -12,7 +12,7 @@ pub(crate) enum Coarsening {
 }
 
 /// Fewest time steps at which `time_coarsening = "auto"` starts from a coarse solve.
-pub const AUTO_COARSENING_MIN_STEPS: usize = 400;
+pub const AUTO_COARSENING_MIN_STEPS: usize = 200;
 /// Steps of the coarse grid that `"auto"` aims for.
 pub const AUTO_COARSE_STEPS: usize = 100;
 
