@@ -108,6 +108,11 @@ pub(crate) enum Command {
         /// List the cases and what each varies, without running them.
         #[arg(long)]
         list: bool,
+        /// Instead of the matrix, check the stop on accuracy on every converging case: where the
+        /// default solver's estimate first reaches 1e-2, 1e-3 and 1e-4, and the true error there
+        /// (`stability-accuracy.md`, `stability-accuracy.json`).
+        #[arg(long)]
+        accuracy: bool,
         /// Folder for the outputs.
         #[arg(long, default_value = "recordings")]
         out: PathBuf,

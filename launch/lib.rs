@@ -1,6 +1,7 @@
 //! The glissade launcher as a library: loads scenes, builds the nodes of a run and drives them on
 //! a bus, and writes run outputs. The `glissade` binary only parses arguments and calls this.
 
+pub mod accuracy;
 pub mod bench;
 pub mod children;
 pub mod distributed;

@@ -172,7 +172,13 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 report_variants(&scene, &out, &overrides, &variants, stop_at_error)
             }
         }
-        Command::Stability { quick, only, list, out } => stability(quick, &only, list, &out),
+        Command::Stability {
+            quick,
+            only,
+            list,
+            accuracy,
+            out,
+        } => stability(quick, &only, list, accuracy, &out),
         Command::Bench {
             scene,
             out,
@@ -696,7 +702,56 @@ fn report_variants(
     Ok(ExitCode::SUCCESS)
 }
 
-fn stability(quick: bool, only: &[String], list: bool, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+/// `glissade stability --accuracy`: the stop on accuracy checked on every converging case.
+fn stability_accuracy(cases: &[glissade::stability::Case], out: &std::path::Path) -> anyhow::Result<ExitCode> {
+    use glissade::accuracy::{check_cases, markdown, summary};
+    let results = check_cases(cases, |r| match r {
+        Ok(c) => eprintln!(
+            "{}: {}",
+            c.name,
+            c.stops
+                .iter()
+                .map(|s| format!(
+                    "{:.0e} → {}",
+                    s.accuracy,
+                    s.ratio().map_or("not reached".into(), |r| format!("{r:.2}×"))
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Err(e) => eprintln!("{e}"),
+    });
+    let (checks, failures): (Vec<_>, Vec<_>) = results.into_iter().partition(Result::is_ok);
+    let checks: Vec<_> = checks.into_iter().map(Result::unwrap).collect();
+    let failures: Vec<String> = failures.into_iter().map(|f| f.unwrap_err()).collect();
+    let mut table = markdown(&checks);
+    table += &format!("\n{}\n", summary(&checks));
+    for f in &failures {
+        table += &format!("\nnot checked: {f}\n");
+    }
+    let md = out.join("stability-accuracy.md");
+    std::fs::write(&md, &table).with_context(|| format!("cannot write {}", md.display()))?;
+    let j = write_json(
+        out,
+        "stability-accuracy.json",
+        &serde_json::json!({ "checks": checks, "not_checked": failures }),
+    )?;
+    println!("{table}");
+    println!("table: {}\njson: {}", md.display(), j.display());
+    Ok(if failures.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(NOT_CONVERGED)
+    })
+}
+
+fn stability(
+    quick: bool,
+    only: &[String],
+    list: bool,
+    accuracy: bool,
+    out: &std::path::Path,
+) -> anyhow::Result<ExitCode> {
     use glissade::stability::{cases, markdown, run_cases, Assessment};
     let mut selected = cases(quick && only.is_empty());
     if list {
@@ -712,6 +767,9 @@ fn stability(quick: bool, only: &[String], list: bool, out: &std::path::Path) ->
         selected.retain(|c| only.iter().any(|n| n == c.name));
     }
     ensure_writable(out)?;
+    if accuracy {
+        return stability_accuracy(&selected, out);
+    }
     let rows = run_cases(&selected, |r| {
         let its = |n: Option<usize>| n.map_or("—".into(), |n| n.to_string());
         eprintln!(

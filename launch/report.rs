@@ -271,7 +271,7 @@ fn start_name(model: &glissade_mechanics::model::Model) -> String {
 }
 
 /// The LATIN run of `scene` measured against a solved reference.
-fn report_against(
+pub fn report_against(
     scene: &LoadedScene,
     run_id: &str,
     reference: &ReferenceSolution,

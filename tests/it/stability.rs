@@ -199,3 +199,34 @@ fn full_matrix_scenes_load() {
         );
     }
 }
+
+/// The stop on accuracy on every converging quick case (DESIGN §3, "Stopping on an error
+/// estimate"): where the default solver's estimate first reaches 1e-2, 1e-3 and 1e-4, the true
+/// contact-traction error against the reference is at most the accuracy in at least 95 % of the
+/// stops and never above 3× it (the issue's bar). A case whose reference or run fails is a
+/// failure here, not a skipped row; the two gap-open cases, whose reference has no contact force
+/// at all (a relative traction error is undefined), have no true error to compare. Measured
+/// (dev build, 2026-11-25): 60 defined stops, one above the accuracy (ν = 0.499 at 1e-2, 1.43×).
+#[test]
+fn quick_cases_stop_within_the_requested_accuracy() {
+    use glissade::accuracy::{check_cases, summary};
+    let results = check_cases(&cases(true), |_| {});
+    let failures: Vec<&String> = results.iter().filter_map(|r| r.as_ref().err()).collect();
+    assert!(failures.is_empty(), "{failures:?}");
+    let checks: Vec<_> = results.into_iter().map(Result::unwrap).collect();
+    println!("{}", glissade::accuracy::markdown(&checks));
+    println!("{}", summary(&checks));
+    let ratios: Vec<(String, f64, f64)> = checks
+        .iter()
+        .flat_map(|c| {
+            c.stops
+                .iter()
+                .filter_map(|s| s.ratio().map(|r| (c.name.clone(), s.accuracy, r)))
+        })
+        .collect();
+    assert!(ratios.len() >= 54, "too few stops to judge: {ratios:?}");
+    let within = ratios.iter().filter(|r| r.2 <= 1.0).count() as f64 / ratios.len() as f64;
+    assert!(within >= 0.95, "{within} of the stops within the accuracy: {ratios:?}");
+    let worst = ratios.iter().max_by(|a, b| a.2.total_cmp(&b.2)).expect("stops");
+    assert!(worst.2 <= 3.0, "{worst:?}");
+}
