@@ -152,15 +152,21 @@ fn main() {
         for (itf, f) in latin.model.interfaces.iter().zip(&latin.interface_fields) {
             if itf.is_contact() {
                 for side in [&f.f_a, &f.f_b] {
-                    let (n, d) =
-                        glissade_mechanics::local::force_step_sums(&itf.weights, &weights, side.as_ref(), side.as_ref());
+                    let (n, d) = glissade_mechanics::local::force_step_sums(
+                        &itf.weights,
+                        &weights,
+                        side.as_ref(),
+                        side.as_ref(),
+                    );
                     sink += n + d;
                 }
             }
         }
         let mut e = glissade_mechanics::estimate::ErrorEstimate::default();
         for k in 0..=glissade_mechanics::estimate::RATE_WINDOW {
-            sink += e.push(0.5f64.powi(k as i32), 0.5f64.powi(k as i32)).map_or(0.0, |x| x.error);
+            sink += e
+                .push(0.5f64.powi(k as i32), 0.5f64.powi(k as i32))
+                .map_or(0.0, |x| x.error);
         }
     }
     std::hint::black_box(sink);

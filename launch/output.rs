@@ -41,10 +41,14 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     let n = result.iterations.len();
     let mut met = Vec::new();
     let mut missed = Vec::new();
-    let estimate = d.estimate.map_or(
-        "no estimate yet (the iteration has not shown a contraction)".to_string(),
-        |e| format!("estimated contact-traction error {e:.2e}"),
-    );
+    let window = glissade_mechanics::estimate::RATE_WINDOW;
+    let estimate = match d.estimate {
+        Some(e) => format!("estimated contact-traction error {e:.2e}"),
+        None if n > window => {
+            format!("no error estimate (the contact indicator did not decrease over the last {window} iterations)")
+        }
+        None => format!("no error estimate yet (it needs {} iterations)", window + 1),
+    };
     match s.accuracy {
         Some(a) if d.estimate.is_some_and(|e| e <= a) => met.push(format!("{estimate} ≤ accuracy {a:e}")),
         Some(a) if d.estimate.is_some() => missed.push(format!("{estimate} > accuracy {a:e}")),

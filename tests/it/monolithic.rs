@@ -123,3 +123,46 @@ fn accuracy_stop_meets_the_requested_accuracy() {
         }
     }
 }
+
+/// The last line says plainly what a run that stopped without converging did not meet: "NOT
+/// converged", the cause, and the estimate against the accuracy (or why there is none), with η
+/// shown as met when it is small.
+#[test]
+fn a_run_that_misses_the_accuracy_says_so() {
+    let run_with = |max_iterations: usize, accuracy: f64| {
+        let mut sc = scene(&scene_text("small-three-layer"));
+        sc.model.solver.max_iterations = max_iterations;
+        sc.model.solver.accuracy = Some(accuracy);
+        sc.model.solver.tolerance = Some(1e-2);
+        let result = run_in_process(
+            &sc,
+            &RunOptions {
+                run_id: "outcome".into(),
+                interior: false,
+            },
+            |_| {},
+        )
+        .unwrap();
+        glissade::output::outcome(&sc.model, &result)
+    };
+    let early = run_with(10, 1e-3);
+    assert!(
+        early.starts_with("NOT converged: stopped at the iteration cap (10 iterations): no error estimate yet (it needs 21 iterations) for accuracy 1e-3; met: η = "),
+        "{early}"
+    );
+    assert!(early.contains("≤ tolerance 1e-2"), "{early}");
+    let strict = run_with(40, 1e-9);
+    assert!(
+        strict.starts_with(
+            "NOT converged: stopped at the iteration cap (40 iterations): estimated contact-traction error "
+        ),
+        "{strict}"
+    );
+    assert!(strict.contains("> accuracy 1e-9; met: η = "), "{strict}");
+    let fine = run_with(1000, 1e-3);
+    assert!(fine.starts_with("Converged after "), "{fine}");
+    assert!(
+        fine.contains("≤ accuracy 1e-3, η = ") && !fine.contains("met:"),
+        "{fine}"
+    );
+}
