@@ -199,7 +199,7 @@ pub enum Side {
 /// Solver parameters of a scene (DESIGN §3), already validated.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SolverParams {
-    /// k₀ = k0_factor · E/L_Γ.
+    /// k₀ = k0_factor · E/L_Γ, E the interface modulus √(2G·M) of the two sides ([`crate::linear::default_k0`]).
     pub k0_factor: f64,
     /// Relaxation μ ∈ (0, 1].
     pub relaxation: f64,
