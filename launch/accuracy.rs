@@ -44,6 +44,9 @@ pub struct AccuracyCheck {
     pub compared: usize,
     pub within_3x: f64,
     pub underestimated: f64,
+    /// Every iteration's (true error, estimate, force step, contact indicator), to study the
+    /// estimate offline.
+    pub trace: Vec<(f64, Option<f64>, f64, f64)>,
 }
 
 /// The check of one report (a run followed past its stop).
@@ -84,6 +87,11 @@ pub fn check_report(name: &str, report: &Report) -> AccuracyCheck {
         compared: ratios.len(),
         within_3x: share(&|r| (1.0 / 3.0..=3.0).contains(&r)),
         underestimated: share(&|r| r < 1.0),
+        trace: report
+            .points
+            .iter()
+            .map(|p| (p.traction_error, p.estimate, p.force_step, p.contact_indicator))
+            .collect(),
     }
 }
 
