@@ -98,7 +98,7 @@ pub(crate) const NONE: usize = usize::MAX;
 pub struct ReferenceOptions {
     /// Relative tolerance of every convergence check (see the module docs).
     pub tolerance: f64,
-    /// Newton iterations (linear solves) per attempt of a step.
+    /// Newton iterations (linear solves) of each monotone attempt at a step (see [`Self::attempts`]).
     pub max_newton_iterations: usize,
     /// r = r_factor · E · W / h.
     pub r_factor: f64,
