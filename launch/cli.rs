@@ -36,6 +36,10 @@ pub(crate) enum Command {
         /// Folder for the outputs.
         #[arg(long, default_value = "recordings")]
         out: PathBuf,
+        /// Newton iterations of the reference per attempt of a time step (the non-monotone attempt
+        /// gets 20 times as many).
+        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..))]
+        newton_iterations: u32,
     },
     /// Run the reference and the LATIN solver, and write the error-against-run-time report
     /// (`<scene>-report.json` and `<scene>-report.svg`).
@@ -67,6 +71,10 @@ pub(crate) enum Command {
         /// reference is at most this (e.g. 1e-3), instead of at the tolerance or iteration cap.
         #[arg(long)]
         stop_at_error: Option<f64>,
+        /// Newton iterations of the reference per attempt of a time step (the non-monotone attempt
+        /// gets 20 times as many).
+        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..))]
+        newton_iterations: u32,
     },
     /// Run a scene in-process and split an iteration's time by stage, against the machine's
     /// measured dense-product rate and memory bandwidth (`<scene>-bench.json`; use a release build).

@@ -12,11 +12,11 @@ use glissade::distributed::{
 };
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
-use glissade::report::{build_report, linear_stage_table, plot_svg};
+use glissade::report::{build_report_with, linear_stage_table, plot_svg};
 use glissade::runner::{IterationRecord, RunOptions};
 use glissade_messages::Verdict;
 use glissade_reference::glued::solve_glued;
-use glissade_reference::{solve_reference, verify, ReferenceOptions};
+use glissade_reference::{solve_reference_steps, verify, ReferenceError, ReferenceOptions, ReferenceRun};
 use glissade_scene::LoadedScene;
 use glissade_scene::SolverOverrides;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -70,8 +70,62 @@ impl LiveView {
     }
 }
 
-/// Exit code of a run that ended without converging (outputs are still written).
+/// Exit code of a run, or of a reference solve, that ended without converging (outputs are still
+/// written).
 const NOT_CONVERGED: u8 = 3;
+
+/// What a user can do about a reference that did not converge at a time step.
+const REFERENCE_HINT: &str = "hint: the reference solves the same discrete problem as LATIN, step by step; \
+a step it cannot solve usually has many contact pairs at the edge of their law (gaps or stick margins near zero). \
+The steps solved are written. \
+A larger --newton-iterations may get through the step; \
+a different time discretisation (N) changes the problem but may avoid it. Please report the scene.";
+
+/// The reference's options for `--newton-iterations n`: n per attempt, 20 n for the non-monotone
+/// one (the defaults for n = 50).
+fn reference_options(newton_iterations: u32) -> ReferenceOptions {
+    let n = newton_iterations as usize;
+    ReferenceOptions {
+        max_newton_iterations: n,
+        nonmonotone_iterations: 20 * n,
+        ..ReferenceOptions::default()
+    }
+}
+
+/// "k Newton iterations", or that the reference failed and after how many time points.
+fn reference_outcome(report: &glissade::report::Report, n_points: usize) -> String {
+    match report.reference_failure {
+        None => format!("{} Newton iterations", report.reference_newton_iterations),
+        Some(_) => format!(
+            "FAILED after {} of {n_points} time points; no errors against it",
+            report.reference_steps_solved
+        ),
+    }
+}
+
+/// Writes the interface fields of the time points a failed reference solved, prints its error
+/// and the hint; the exit code of a reference failure.
+fn reference_failed(
+    model: &glissade_mechanics::model::Model,
+    run: &ReferenceRun,
+    error: &ReferenceError,
+    out: &std::path::Path,
+) -> anyhow::Result<ExitCode> {
+    let solved = run.solution.newton_iterations.len();
+    let f = write_json(
+        out,
+        &format!("{}-reference-partial.fields.json", model.name),
+        &glissade::output::interface_fields_upto(model, &reference_interfaces(model, &run.solution), solved),
+    )?;
+    eprintln!("error: reference: {error}");
+    eprintln!("{REFERENCE_HINT}");
+    eprintln!(
+        "reference: {solved} of {} time points solved, written to {} (PARTIAL)",
+        model.time.n_points(),
+        f.display()
+    );
+    Ok(ExitCode::from(NOT_CONVERGED))
+}
 /// Exit code of a run stopped by Ctrl-C or SIGTERM (128 + SIGINT, as shells report it).
 const INTERRUPTED: u8 = 130;
 
@@ -146,7 +200,11 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
-        Command::Reference { scene, out } => reference(&scene, &out),
+        Command::Reference {
+            scene,
+            out,
+            newton_iterations,
+        } => reference(&scene, &out, &reference_options(newton_iterations)),
         Command::Report {
             scene,
             out,
@@ -155,21 +213,23 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             max_iterations,
             variants,
             stop_at_error,
+            newton_iterations,
         } => {
             let overrides = SolverOverrides {
                 accuracy,
                 tolerance,
                 max_iterations,
             };
+            let ropts = reference_options(newton_iterations);
             if let Some(e) = stop_at_error {
                 if !(e > 0.0 && e.is_finite()) {
                     anyhow::bail!("--stop-at-error {e}: must be a positive number");
                 }
             }
             if variants.is_empty() {
-                report(&scene, &out, &overrides, stop_at_error)
+                report(&scene, &out, &overrides, stop_at_error, &ropts)
             } else {
-                report_variants(&scene, &out, &overrides, &variants, stop_at_error)
+                report_variants(&scene, &out, &overrides, &variants, stop_at_error, &ropts)
             }
         }
         Command::Stability {
@@ -533,11 +593,15 @@ fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn reference(scene: &std::path::Path, out: &std::path::Path) -> anyhow::Result<ExitCode> {
+fn reference(scene: &std::path::Path, out: &std::path::Path, opts: &ReferenceOptions) -> anyhow::Result<ExitCode> {
     let sc = load_scene(scene)?;
     ensure_writable(out)?;
     let t0 = std::time::Instant::now();
-    let sol = solve_reference(&sc.model, &ReferenceOptions::default())?;
+    let run = solve_reference_steps(&sc.model, opts)?;
+    if let Some(e) = &run.failure {
+        return reference_failed(&sc.model, &run, e, out);
+    }
+    let sol = run.solution;
     let wall = t0.elapsed().as_secs_f64();
     let checks = verify(&sc.model, &sol)?;
     let total: usize = sol.newton_iterations.iter().sum();
@@ -631,18 +695,19 @@ fn report(
     out: &std::path::Path,
     overrides: &SolverOverrides,
     stop_at: Option<f64>,
+    reference_options: &ReferenceOptions,
 ) -> anyhow::Result<ExitCode> {
     let sc = load_with_overrides(scene, out, overrides)?;
     let run_id = default_run_id()?;
-    let (report, _, _) = build_report(&sc, &run_id, stop_at)?;
+    let (report, reference, _) = build_report_with(&sc, &run_id, stop_at, reference_options)?;
     let name = &sc.model.name;
     let j = write_json(out, &format!("{name}-report.json"), &serde_json::to_value(&report)?)?;
     let svg_path = out.join(format!("{name}-report.svg"));
     std::fs::write(&svg_path, plot_svg(&report)).with_context(|| format!("cannot write {}", svg_path.display()))?;
     println!(
-        "scene `{name}`: reference {:.2} s ({} Newton iterations); LATIN setup {:.2} s + {:.2} s, {} iterations, {}",
+        "scene `{name}`: reference {:.2} s ({}); LATIN setup {:.2} s + {:.2} s, {} iterations, {}",
         report.reference_s,
-        report.reference_newton_iterations,
+        reference_outcome(&report, sc.model.time.n_points()),
         report.latin_setup_s,
         report.latin_solve_s,
         report.points.len(),
@@ -663,7 +728,13 @@ fn report(
     }
     print!("{}", linear_stage_table(&report));
     println!("report: {}\nplot: {}", j.display(), svg_path.display());
-    Ok(ExitCode::SUCCESS)
+    match &reference.failure {
+        Some(e) => {
+            println!("NO ERRORS AGAINST THE REFERENCE: it failed (see below); the LATIN run above is complete");
+            reference_failed(&sc.model, &reference, e, out)
+        }
+        None => Ok(ExitCode::SUCCESS),
+    }
 }
 
 /// `glissade report --variants a,b,…`: one reference, one LATIN run per variant.
@@ -673,6 +744,7 @@ fn report_variants(
     overrides: &SolverOverrides,
     names: &[String],
     stop_at: Option<f64>,
+    reference_options: &ReferenceOptions,
 ) -> anyhow::Result<ExitCode> {
     let variants = names
         .iter()
@@ -684,12 +756,13 @@ fn report_variants(
     let sc = load_with_overrides(scene, out, overrides)?;
     // In-process runs only: the run id names nothing on a network.
     let run_id = format!("{}-report", sc.model.name);
-    let (reports, _) = glissade::report::build_reports(&sc, &run_id, &variants, stop_at)?;
+    let (reports, reference) =
+        glissade::report::build_reports_with(&sc, &run_id, &variants, stop_at, reference_options)?;
     let name = &sc.model.name;
     println!(
-        "scene `{name}`: reference {:.2} s ({} Newton iterations), N = {}",
+        "scene `{name}`: reference {:.2} s ({}), N = {}",
         reports[0].reference_s,
-        reports[0].reference_newton_iterations,
+        reference_outcome(&reports[0], sc.model.time.n_points()),
         sc.model.time.n_points() - 1
     );
     print!("{}", glissade::report::comparison_table(&reports));
@@ -699,7 +772,13 @@ fn report_variants(
         std::fs::write(&svg_path, plot_svg(r)).with_context(|| format!("cannot write {}", svg_path.display()))?;
         println!("report: {}\nplot: {}", j.display(), svg_path.display());
     }
-    Ok(ExitCode::SUCCESS)
+    match &reference.failure {
+        Some(e) => {
+            println!("NO ERRORS AGAINST THE REFERENCE: it failed (see below); the LATIN runs above are complete");
+            reference_failed(&sc.model, &reference, e, out)
+        }
+        None => Ok(ExitCode::SUCCESS),
+    }
 }
 
 /// `glissade stability --accuracy`: the stop on accuracy checked on every converging case.

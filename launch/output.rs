@@ -203,12 +203,18 @@ pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord]) -
 /// Interface fields of ŝ (the last local stage) in each interface's local frame: normal and
 /// tangential force on side a (N/mm) and jump [Ŵ] (mm), per time point and pair; plus status.
 pub fn interface_fields(model: &Model, interfaces: &[InterfaceSolution]) -> Value {
+    interface_fields_upto(model, interfaces, model.time.n_points())
+}
+
+/// [`interface_fields`] over the first `n_times` time points only (the steps a failed reference
+/// solved; its fields have that many columns).
+pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_times: usize) -> Value {
     let items: Vec<Value> = interfaces
         .iter()
         .map(|sol| {
             let itf = &model.interfaces[sol.interface as usize];
             let np = itf.n_pairs();
-            let nt = model.time.n_points();
+            let nt = n_times;
             let proj = |f: &glissade_messages::Field, g: Option<&glissade_messages::Field>, dir: [f64; 2]| -> Vec<Vec<f64>> {
                 (0..nt)
                     .map(|i| {
@@ -242,7 +248,7 @@ pub fn interface_fields(model: &Model, interfaces: &[InterfaceSolution]) -> Valu
             })
         })
         .collect();
-    json!({ "scene": model.name, "times": (0..model.time.n_points()).map(|i| model.time.t(i)).collect::<Vec<_>>(), "interfaces": items })
+    json!({ "scene": model.name, "times": (0..n_times).map(|i| model.time.t(i)).collect::<Vec<_>>(), "interfaces": items })
 }
 
 /// Writes `value` as JSON to `dir/name`, creating `dir`; returns the path.

@@ -1,6 +1,8 @@
 //! The error-against-run-time report (issue "monolithic reference"): the monolithic Newton
 //! reference of a scene, then the LATIN run, whose contact tractions and jumps are compared with
-//! the reference at every iteration; written as JSON and as an SVG plot. The report also holds
+//! the reference at every iteration; written as JSON and as an SVG plot. If the reference fails
+//! at a time step, the LATIN run is still made and reported (its errors against the reference
+//! are then null), with the reference's failure and the number of time points it solved. The report also holds
 //! what the linear stage cost per iteration (wall time summed over subdomains), the bytes of the
 //! iteration's messages on the bus and, with PGD, every subdomain's basis size per iteration
 //! (plotted under the errors).
@@ -12,7 +14,7 @@ use glissade_mechanics::local::ReferenceErrors;
 use glissade_mechanics::model::{Acceleration, TimeStart, DEFAULT_TIME_START_TOLERANCE};
 use glissade_mechanics::pgd::PgdCriterion;
 use glissade_messages::{encode, Stage, Verdict};
-use glissade_reference::{solve_reference, ReferenceOptions, ReferenceSolution};
+use glissade_reference::{solve_reference_steps, ReferenceOptions, ReferenceRun};
 use glissade_replay::BoundaryStates;
 use glissade_scene::LoadedScene;
 use serde::Serialize;
@@ -28,9 +30,11 @@ pub struct ReportPoint {
     pub elapsed_s: f64,
     pub eta: f64,
     pub contact_indicator: f64,
-    /// Relative space-time error of the contact tractions of s against the reference.
+    /// Relative space-time error of the contact tractions of s against the reference (NaN,
+    /// null in JSON, when the reference failed).
     pub traction_error: f64,
-    /// Relative space-time error of the contact jumps of s against the reference.
+    /// Relative space-time error of the contact jumps of s against the reference (NaN, null in
+    /// JSON, when the reference failed).
     pub jump_error: f64,
     /// The run's own estimate of `traction_error` (`glissade_mechanics::estimate`), when it has one.
     pub estimate: Option<f64>,
@@ -76,6 +80,11 @@ pub struct Report {
     pub reference_s: f64,
     pub reference_newton_iterations: usize,
     pub reference_max_newton_per_step: usize,
+    /// Why the reference stopped before the last time point (None: it solved them all; then
+    /// the errors of the points are against it).
+    pub reference_failure: Option<String>,
+    /// Time points the reference solved (all N + 1 unless it failed).
+    pub reference_steps_solved: usize,
     pub latin_setup_s: f64,
     pub latin_solve_s: f64,
     pub latin_verdict: String,
@@ -96,15 +105,27 @@ pub struct Report {
 }
 
 /// Solves the reference and runs LATIN (with the scene's solver settings), measuring the error at
-/// every iteration.
+/// every iteration. A reference that fails at a time step is not an error here: the LATIN run is
+/// made and reported without errors against it, and the returned [`ReferenceRun`] holds the
+/// failure and the steps solved.
 /// `stop_at` as in [`build_reports`].
 pub fn build_report(
     scene: &LoadedScene,
     run_id: &str,
     stop_at: Option<f64>,
-) -> anyhow::Result<(Report, ReferenceSolution, RunResult)> {
+) -> anyhow::Result<(Report, ReferenceRun, RunResult)> {
+    build_report_with(scene, run_id, stop_at, &ReferenceOptions::default())
+}
+
+/// [`build_report`] with the reference solved with `reference_options`.
+pub fn build_report_with(
+    scene: &LoadedScene,
+    run_id: &str,
+    stop_at: Option<f64>,
+    reference_options: &ReferenceOptions,
+) -> anyhow::Result<(Report, ReferenceRun, RunResult)> {
     let t0 = Instant::now();
-    let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
+    let reference = solve_reference_steps(&scene.model, reference_options)?;
     let reference_s = t0.elapsed().as_secs_f64();
     let (report, result) = report_against(scene, run_id, &reference, reference_s, stop_at)?;
     Ok((report, reference, result))
@@ -225,19 +246,31 @@ pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> anyhow::Result<LoadedS
 /// One report per variant against one reference solve (back to back in one process, so their
 /// times compare on a shared machine). With `stop_at`, each variant stops at the first iteration
 /// whose contact-traction error is at most that (the accuracies below it are then not reached).
-/// Every variant is checked before the reference is solved.
+/// Every variant is checked before the reference is solved. A reference that fails at a time
+/// step is reported as in [`build_report`].
 pub fn build_reports(
     scene: &LoadedScene,
     run_id: &str,
     variants: &[Variant],
     stop_at: Option<f64>,
-) -> anyhow::Result<(Vec<Report>, ReferenceSolution)> {
+) -> anyhow::Result<(Vec<Report>, ReferenceRun)> {
+    build_reports_with(scene, run_id, variants, stop_at, &ReferenceOptions::default())
+}
+
+/// [`build_reports`] with the reference solved with `reference_options`.
+pub fn build_reports_with(
+    scene: &LoadedScene,
+    run_id: &str,
+    variants: &[Variant],
+    stop_at: Option<f64>,
+    reference_options: &ReferenceOptions,
+) -> anyhow::Result<(Vec<Report>, ReferenceRun)> {
     let scenes = variants
         .iter()
         .map(|v| variant_scene(scene, v))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let t0 = Instant::now();
-    let reference = solve_reference(&scene.model, &ReferenceOptions::default())?;
+    let reference = solve_reference_steps(&scene.model, reference_options)?;
     let reference_s = t0.elapsed().as_secs_f64();
     let mut reports = Vec::with_capacity(variants.len());
     for sc in &scenes {
@@ -270,15 +303,16 @@ fn start_name(model: &glissade_mechanics::model::Model) -> String {
     }
 }
 
-/// The LATIN run of `scene` measured against a solved reference.
+/// The LATIN run of `scene` measured against the reference if it solved every time point.
 pub fn report_against(
     scene: &LoadedScene,
     run_id: &str,
-    reference: &ReferenceSolution,
+    reference: &ReferenceRun,
     reference_s: f64,
     stop_at: Option<f64>,
 ) -> anyhow::Result<(Report, RunResult)> {
     let model = &scene.model;
+    let complete = reference.failure.is_none().then_some(&reference.solution);
     let mut tracker = ReferenceErrors::new(model);
     let mut errors: Vec<(u32, f64, f64)> = Vec::new();
     let mut anderson = AndersonTally::default();
@@ -312,7 +346,7 @@ pub fn report_against(
                 }
                 other => other.and_then(Result::ok),
             };
-            if let Some((subdomain, w, f)) = state {
+            if let (Some((subdomain, w, f)), Some(reference)) = (state, complete) {
                 if let Some((e_f, e_w)) = tracker.boundary_state(
                     &model.interfaces,
                     subdomain as usize,
@@ -335,7 +369,10 @@ pub fn report_against(
         .iterations
         .iter()
         .filter_map(|r| {
-            let &(_, e_f, e_w) = errors.iter().find(|e| e.0 == r.iteration)?;
+            let (e_f, e_w) = match complete {
+                Some(_) => errors.iter().find(|e| e.0 == r.iteration).map(|e| (e.1, e.2))?,
+                None => (f64::NAN, f64::NAN),
+            };
             let of_it = || records.iter().filter(|x| x.iteration == r.iteration);
             Some(ReportPoint {
                 iteration: r.iteration,
@@ -391,8 +428,10 @@ pub fn report_against(
         build_profile: if cfg!(debug_assertions) { "debug" } else { "release" }.to_string(),
         cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
         reference_s,
-        reference_newton_iterations: reference.newton_iterations.iter().sum(),
-        reference_max_newton_per_step: reference.newton_iterations.iter().copied().max().unwrap_or(0),
+        reference_newton_iterations: reference.solution.newton_iterations.iter().sum(),
+        reference_max_newton_per_step: reference.solution.newton_iterations.iter().copied().max().unwrap_or(0),
+        reference_failure: reference.failure.as_ref().map(ToString::to_string),
+        reference_steps_solved: reference.solution.newton_iterations.len(),
         latin_setup_s: result.setup_s,
         latin_solve_s: result.solve_s,
         latin_verdict: match (result.verdict.clone(), stop_at) {
@@ -702,8 +741,15 @@ fn plot_errors_svg(report: &Report) -> String {
         h - 15.0
     );
     let xr = x(report.reference_s);
+    let reference_label = match report.reference_failure {
+        None => "monolithic Newton reference".to_string(),
+        Some(_) => format!(
+            "monolithic Newton reference FAILED after {} time points (no errors)",
+            report.reference_steps_solved
+        ),
+    };
     svg += &format!(
-        "<line x1=\"{xr}\" y1=\"{top}\" x2=\"{xr}\" y2=\"{}\" stroke=\"black\" stroke-dasharray=\"6,4\"/><text x=\"{}\" y=\"{}\" transform=\"rotate(-90 {} {})\">monolithic Newton reference: {:.2} s</text>\n",
+        "<line x1=\"{xr}\" y1=\"{top}\" x2=\"{xr}\" y2=\"{}\" stroke=\"black\" stroke-dasharray=\"6,4\"/><text x=\"{}\" y=\"{}\" transform=\"rotate(-90 {} {})\">{reference_label}: {:.2} s</text>\n",
         h - bottom,
         xr - 6.0,
         top + 240.0,

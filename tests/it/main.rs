@@ -16,6 +16,7 @@ mod pgd;
 mod recording;
 mod recovery;
 mod reference;
+mod reference_failure;
 mod replay;
 mod run_id;
 mod stability;

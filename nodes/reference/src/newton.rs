@@ -3,7 +3,7 @@
 use crate::numbering::*;
 use crate::sparse::*;
 use crate::verify::*;
-use crate::{LinearSolver, ReferenceError, ReferenceOptions, NONE};
+use crate::{Attempt, LinearSolver, ReferenceError, ReferenceOptions, NONE};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::Lu;
 use faer::sparse::SparseColMat;
@@ -436,21 +436,24 @@ impl<'m> Problem<'m> {
         r.iter().all(|v| v.is_finite()).then_some(())
     }
 
-    /// One attempt of a step: Newton from `start`. Ok((state, iterations, statuses)) or
-    /// Err((iterations, worst violation)).
+    /// One attempt of a step: Newton from `start` with the attempt's r factor, line search and
+    /// iteration budget. Ok((state, iterations, statuses)) or Err((iterations, worst violation)).
     pub(crate) fn newton(
         &self,
         start: &StepState,
         f: &[f64],
         prescribed: &[f64],
         slip_prev: &[f64],
-        r_factor: f64,
+        attempt: &Attempt,
         opts: &ReferenceOptions,
     ) -> Result<(StepState, usize, Vec<Status>), (usize, f64)> {
+        let r_factor = attempt.r_factor;
         let mut x = start.x.clone();
         let mut work = NewtonWork::new(&self.solver, self.pairs.len());
         let mut worst = f64::INFINITY;
-        for it in 0..=opts.max_newton_iterations {
+        // ψ of the last `window` iterates: the Armijo test compares with the largest of them.
+        let mut recent: std::collections::VecDeque<f64> = std::collections::VecDeque::with_capacity(attempt.window);
+        for it in 0..=attempt.max_iterations {
             let u = self.displacement(&x, prescribed);
             let (mut r, w) = self.residual(&x, &u, f, slip_prev);
             worst = w;
@@ -461,16 +464,24 @@ impl<'m> Problem<'m> {
             if w <= opts.tolerance {
                 return Ok((StepState { x }, it, status));
             }
-            if it == opts.max_newton_iterations {
+            if it == attempt.max_iterations {
                 break;
             }
             let psi0: f64 = r.iter().map(|v| v * v).sum();
+            if recent.len() == attempt.window.max(1) {
+                recent.pop_front();
+            }
+            recent.push_back(psi0);
+            let psi_ref = recent.iter().copied().fold(psi0, f64::max);
             if self.newton_step(&jac, &mut r, &mut work).is_none() {
                 return Err((it + 1, worst));
             }
             // Backtracking on ψ = ‖[R_u; C]‖² (both in N): the semi-smooth Newton direction is a
             // descent direction of ψ where Φ is differentiable; full steps are taken whenever
-            // they decrease ψ, so the local quadratic convergence is kept.
+            // they pass the Armijo test, so the local quadratic convergence is kept. With a
+            // window of 1 the test is monotone (against this iterate's ψ); a longer window
+            // (Grippo–Lampariello–Lucidi) lets ψ rise for a while, so that a step may move many
+            // pairs across the kinks of their laws at once.
             let mut alpha = 1.0;
             let mut best = (f64::INFINITY, 1.0);
             for _ in 0..=opts.line_search_halvings {
@@ -479,7 +490,7 @@ impl<'m> Problem<'m> {
                 if psi < best.0 {
                     best = (psi, alpha);
                 }
-                if psi <= (1.0 - 1e-4 * alpha) * psi0 {
+                if psi <= (1.0 - 1e-4 * alpha) * psi_ref {
                     break;
                 }
                 alpha *= 0.5;
@@ -489,6 +500,6 @@ impl<'m> Problem<'m> {
                 *xi += alpha * dx;
             }
         }
-        Err((opts.max_newton_iterations, worst))
+        Err((attempt.max_iterations, worst))
     }
 }
