@@ -256,6 +256,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
         }
         Command::Replay(args) => replay(args),
         Command::Node(args) => {
+            check_run_id("--run", &args.run)?;
             let tls = glissade::distributed::node_tls(
                 args.tls_root_ca.as_deref(),
                 args.tls_cert.as_deref(),
@@ -314,6 +315,27 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
 /// A run id nobody can guess: 128 bits from the operating system's random source, in hex. The
 /// run's key expressions (`glissade/<run id>/…`) are namespaced by it, so runs on a shared router
 /// cannot collide and a client cannot publish into a run by naming it without being told the id.
+/// Longest run id: with a scene name of up to 100 characters, every output file name stays
+/// well under the 255 bytes file systems allow.
+const MAX_RUN_ID_CHARS: usize = 64;
+
+/// A run id becomes a key-expression chunk and part of file names: 1 to 64 letters, digits, `-`
+/// or `_` (no wildcard, no path).
+fn check_run_id(option: &str, run_id: &str) -> anyhow::Result<()> {
+    let ok = (1..=MAX_RUN_ID_CHARS).contains(&run_id.len())
+        && run_id
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if !ok {
+        anyhow::bail!(
+            "{option} `{}`: a run id is 1 to {MAX_RUN_ID_CHARS} letters, digits, `-` or `_` (it becomes a \
+             key-expression chunk and part of file names)",
+            run_id.chars().take(80).collect::<String>()
+        );
+    }
+    Ok(())
+}
+
 fn default_run_id() -> anyhow::Result<String> {
     let mut bytes = [0u8; 16];
     getrandom::fill(&mut bytes)
@@ -331,16 +353,24 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         Some(id) => id,
         None => default_run_id()?,
     };
-    if !run_id
-        .chars()
-        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-        || run_id.is_empty()
-    {
-        anyhow::bail!("--run-id `{run_id}`: only letters, digits, `-` and `_` are allowed (it becomes a key-expression chunk and a file name)");
-    }
+    check_run_id("--run-id", &run_id)?;
     // Fail before solving if the outputs cannot be written.
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    let existing = glissade::output::existing_outputs(&args.out, &sc.model.name, &run_id);
+    if !existing.is_empty() {
+        anyhow::bail!(
+            "--out {}: run {run_id} of scene `{}` already has outputs there ({}); nothing was overwritten: \
+             choose another --run-id (or leave it out for a new random one) or another --out",
+            args.out.display(),
+            sc.model.name,
+            existing
+                .iter()
+                .map(|p| p.file_name().unwrap_or_default().to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     let probe = args.out.join(format!(".{run_id}.probe"));
     std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", args.out.display()))?;
     let _ = std::fs::remove_file(&probe);

@@ -81,6 +81,24 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     }
 }
 
+/// The files of run `run_id` of scene `name` that already exist in `out` (summary, fields,
+/// displacements, recording, and their partial copies) as regular files: a run refuses to start
+/// over them.
+pub fn existing_outputs(out: &Path, name: &str, run_id: &str) -> Vec<PathBuf> {
+    let stem = format!("{name}-{run_id}");
+    let names = [
+        format!("{stem}.summary.json"),
+        format!("{stem}.fields.json"),
+        format!("{stem}.displacement.json"),
+        glissade_recorder::recording_file_name(name, run_id),
+    ];
+    names
+        .iter()
+        .flat_map(|n| [out.join(n), out.join(format!(".{n}.partial"))])
+        .filter(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_file()))
+        .collect()
+}
+
 /// The JSON summary of a run.
 pub fn summary(scene: &LoadedScene, result: &RunResult, run_id: &str) -> Value {
     let model = &scene.model;

@@ -148,7 +148,11 @@ impl Base {
     pub fn to_toml(&self) -> String {
         let mut s = format!(
             "name = \"{}\"\nplane = \"{}\"\n\n[time]\nT = {:?}\nN = {}\n\n",
-            self.name, self.plane, self.t_end, self.n_steps
+            // A scene name is a file name: the case's `thin-layers-1:100` becomes `thin-layers-1-100`.
+            self.name.replace(':', "-"),
+            self.plane,
+            self.t_end,
+            self.n_steps
         );
         for l in &self.layers {
             let _ = write!(s, "[materials.{}]\nE = {:e}\nnu = {:?}\n\n", l.name, l.e, l.nu);

@@ -54,6 +54,24 @@ const CASES: &[Case] = &[
         error: "bad.toml: time.N: line 10, column 5: invalid type: string \"forty\", expected usize",
     },
     Case {
+        name: "run id too long",
+        args: &["run", "--in-process", "--run-id", "rrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrr", "--out", "{out}", "{scene}"],
+        edits: &[],
+        error: "--run-id `rrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrr`: a run id is 1 to 64 letters",
+    },
+    Case {
+        name: "node run id that is a wildcard",
+        args: &["node", "subdomain", "--run", "**", "--connect", "tcp/127.0.0.1:9"],
+        edits: &[],
+        error: "--run `**`: a run id is 1 to 64 letters, digits, `-` or `_`",
+    },
+    Case {
+        name: "scene name that is a path",
+        args: RUN,
+        edits: &[("name = \"two-blocks\"", "name = \"../../evil/x\"")],
+        error: "bad.toml: name: `../../evil/x` is not a file name",
+    },
+    Case {
         name: "zero time steps",
         args: RUN,
         edits: &[("N = 40", "N = 0")],
@@ -96,7 +114,7 @@ const CASES: &[Case] = &[
         name: "negative friction",
         args: RUN,
         edits: &[("friction = 0.2", "friction = -0.2")],
-        error: "bad.toml: interface[0].friction: friction coefficient -0.2 must be ≥ 0",
+        error: "bad.toml: interface[0].friction: friction coefficient -0.2 must be a finite number ≥ 0",
     },
     Case {
         name: "interface rule naming an unknown block",
@@ -362,4 +380,55 @@ fn a_bad_rust_log_exits_2_and_writes_nothing() {
         "{stderr}"
     );
     assert!(written.is_empty(), "files written: {written:?}");
+}
+
+/// A second run with the run id of one whose outputs are in `--out` is refused before solving:
+/// exit 2, the files named, and the first run's files left exactly as they were.
+#[test]
+fn a_run_never_overwrites_an_earlier_runs_outputs() {
+    let dir = crate::common::scratch("no-overwrite");
+    let scene = dir.join("two-blocks.toml");
+    std::fs::write(&scene, GOOD).expect("scene file");
+    let out = dir.join("out");
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .args(["run", "--in-process", "--quiet", "--run-id", "same", "--out"])
+            .arg(&out)
+            .arg(&scene)
+            .output()
+            .expect("spawn glissade")
+    };
+    let first = run();
+    assert_eq!(
+        first.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let before: Vec<(PathBuf, Vec<u8>)> = {
+        let mut files = files_in(&out);
+        files.sort();
+        files
+            .into_iter()
+            .map(|p| (p.clone(), std::fs::read(&p).expect("read")))
+            .collect()
+    };
+    assert!(
+        before.iter().any(|(p, _)| p.ends_with("two-blocks-same.summary.json")),
+        "{before:?}"
+    );
+    let second = run();
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("run same of scene `two-blocks` already has outputs there (two-blocks-same.summary.json")
+            && stderr.contains("nothing was overwritten"),
+        "{stderr}"
+    );
+    let mut after = files_in(&out);
+    after.sort();
+    assert_eq!(after, before.iter().map(|(p, _)| p.clone()).collect::<Vec<_>>());
+    for (p, bytes) in &before {
+        assert_eq!(&std::fs::read(p).expect("read"), bytes, "{} changed", p.display());
+    }
 }

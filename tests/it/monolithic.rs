@@ -100,16 +100,7 @@ fn accuracy_stop_meets_the_requested_accuracy() {
             let last = &result.iterations.last().expect("iterations").decision;
             let estimate = last.estimate.expect("an estimate at the stop");
             assert!(estimate <= accuracy, "{name}: estimate {estimate:e}");
-            let s: Vec<InterfaceFields> = result
-                .interfaces
-                .iter()
-                .map(|sol| InterfaceFields {
-                    w_a: mat_of(&sol.w_a),
-                    w_b: mat_of(&sol.w_b),
-                    f_a: mat_of(&sol.f_a),
-                    f_b: mat_of(&sol.f_b),
-                })
-                .collect();
+            let s = result.interface_fields();
             let w = sc.model.time.trapezoid_weights();
             let (e_f, _) = error_against_reference(&sc.model.interfaces, &s, &reference.interfaces, &w);
             println!(

@@ -15,6 +15,7 @@
 
 mod build;
 pub use build::options::{auto_coarsening, AUTO_COARSENING_MIN_STEPS, AUTO_COARSE_STEPS};
+pub use build::{is_file_stem, MAX_NAME_CHARS};
 mod diagnostics;
 mod raw;
 mod settings;

@@ -578,7 +578,12 @@ fn rejects_negative_friction() {
     expect_err(
         &replaced("friction = 0.2", "friction = -0.1"),
         "interface[0].friction",
-        "must be ≥ 0",
+        "must be a finite number ≥ 0",
+    );
+    expect_err(
+        &replaced("friction = 0.2", "friction = inf"),
+        "interface[0].friction",
+        "friction coefficient inf must be a finite number ≥ 0",
     );
 }
 
@@ -1119,4 +1124,34 @@ fn network_files_resolve_and_are_checked() {
         "{e}"
     );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The scene name starts every output file's name: a path, a hidden name or an overlong one is
+/// refused at the key `name`; a file stem that is no file name is cleaned instead.
+#[test]
+fn scene_names_are_file_names() {
+    let named = |n: &str| TWO_BLOCKS.replacen("name = \"two\"", &format!("name = {n:?}"), 1);
+    assert!(TWO_BLOCKS.contains("name = \"two\""));
+    for bad in [
+        "../../evil/x",
+        "/abs/x",
+        "",
+        ".",
+        ".hidden",
+        "a b",
+        "x/y",
+        "a\\b",
+        &"n".repeat(101),
+    ] {
+        expect_err(&named(bad), "name", "is not a file name");
+    }
+    for good in ["two", "ply-4_v2.1", &"n".repeat(100)] {
+        assert_eq!(load(&named(good)).unwrap().model.name, good);
+    }
+    let unnamed = TWO_BLOCKS.replacen("name = \"two\"\n", "", 1);
+    let from = |file: &str| load_str(&unnamed, file).unwrap().model.name;
+    assert_eq!(from("scenes/my scene (v2).toml"), "my_scene__v2_");
+    assert_eq!(from("scenes/.hidden.toml"), "hidden");
+    assert_eq!(from("scenes/..toml"), "scene");
+    assert_eq!(from("scenes/two-blocks.toml"), "two-blocks");
 }

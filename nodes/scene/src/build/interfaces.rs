@@ -156,7 +156,7 @@ impl Ctx<'_> {
                         ));
                     };
                     self.check(f >= 0.0 && f.is_finite(), &format!("{key}.friction"), || {
-                        format!("friction coefficient {f} must be ≥ 0")
+                        format!("friction coefficient {f} must be a finite number ≥ 0")
                     })?;
                     KindRule::Contact(r)
                 }

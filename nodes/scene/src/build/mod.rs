@@ -119,6 +119,45 @@ pub(crate) fn outward_normal(side: BlockSide) -> [f64; 2] {
     }
 }
 
+/// Longest scene name (it starts every output file's name, before the 32-character run id).
+pub const MAX_NAME_CHARS: usize = 100;
+
+/// Whether `name` can start an output file's name as it is: 1 to [`MAX_NAME_CHARS`] ASCII letters,
+/// digits, `-`, `_` or `.`, not starting with `.` (no path, no hidden file).
+pub fn is_file_stem(name: &str) -> bool {
+    (1..=MAX_NAME_CHARS).contains(&name.len())
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+/// The default name of a scene read from `file`: its stem with every other character replaced by
+/// `_`, cut to [`MAX_NAME_CHARS`] (`scene` if nothing is left).
+fn file_stem_name(file: &str) -> String {
+    let stem = std::path::Path::new(file)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let clean: String = stem
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(MAX_NAME_CHARS)
+        .collect();
+    let clean = clean.trim_start_matches('.').to_string();
+    if clean.is_empty() {
+        "scene".to_string()
+    } else {
+        clean
+    }
+}
+
 impl Ctx<'_> {
     pub(crate) fn err(&self, key: impl Into<String>, problem: impl Into<String>) -> SceneError {
         SceneError {
@@ -137,12 +176,19 @@ impl Ctx<'_> {
     }
 
     pub(crate) fn build(&self, raw: &RawScene) -> Result<Built, SceneError> {
+        // The name starts every output file's name: a file name, never a path.
         let name = match &raw.name {
-            Some(n) => n.clone(),
-            None => std::path::Path::new(self.file)
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "scene".to_string()),
+            Some(n) => {
+                self.check(is_file_stem(n), "name", || {
+                    format!(
+                        "`{}` is not a file name: it starts every output file's name, so it takes \
+                         1 to {MAX_NAME_CHARS} letters, digits, `-`, `_` or `.`, not starting with `.`",
+                        n.chars().take(80).collect::<String>()
+                    )
+                })?;
+                n.clone()
+            }
+            None => file_stem_name(self.file),
         };
         let plane = match raw.plane {
             None | Some(RawPlane::Strain) => Plane::Strain,
