@@ -32,6 +32,41 @@ pub struct RecordedMessage<'a> {
     pub data: Cow<'a, [u8]>,
 }
 
+/// The byte offset of the first uncompressed chunk whose records do not match its CRC, and the
+/// two CRCs; None when every such chunk checks (compressed chunks are checked by the reader as
+/// they are decompressed). Walks the records' framing (opcode, length) from the magic to the data
+/// end or the first incomplete record.
+fn first_damaged_chunk(bytes: &[u8]) -> Option<(usize, String)> {
+    const CHUNK: u8 = 0x06;
+    const DATA_END: u8 = 0x0F;
+    let u64_at = |at: usize| -> Option<u64> { Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?)) };
+    let u32_at = |at: usize| -> Option<u32> { Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?)) };
+    let mut pos = mcap::MAGIC.len();
+    while let (Some(&op), Some(len)) = (bytes.get(pos), u64_at(pos + 1)) {
+        let body = pos + 9;
+        let end = body.checked_add(usize::try_from(len).ok()?)?;
+        if end > bytes.len() || op == DATA_END {
+            return None;
+        }
+        if op == CHUNK {
+            // start time, end time, uncompressed size (8 bytes each), CRC, compression, records.
+            let crc = u32_at(body + 24)?;
+            let name_len = u32_at(body + 28)? as usize;
+            let records_len = usize::try_from(u64_at(body + 32 + name_len)?).ok()?;
+            let records_at = body + 40 + name_len;
+            let records = bytes.get(records_at..records_at.checked_add(records_len)?)?;
+            if name_len == 0 && crc != 0 {
+                let computed = crc32fast::hash(records);
+                if computed != crc {
+                    return Some((pos, format!("CRC {computed:08x}, recorded {crc:08x}")));
+                }
+            }
+        }
+        pos = end;
+    }
+    None
+}
+
 /// A recording loaded in memory and indexed in one pass.
 pub struct Recording {
     path: PathBuf,
@@ -58,8 +93,14 @@ impl Recording {
         Self::from_bytes(path, bytes)
     }
 
-    /// As [`Recording::open`], from bytes already read (`path` names them in errors).
-    pub fn from_bytes(path: &Path, bytes: Vec<u8>) -> Result<Self, RecorderError> {
+    /// As [`Recording::open`], from bytes already read (`path` names them in errors). An
+    /// uncompressed chunk whose CRC does not match its records ends the readable part before it,
+    /// as a cut would, and [`Recording::truncated`] names it.
+    pub fn from_bytes(path: &Path, mut bytes: Vec<u8>) -> Result<Self, RecorderError> {
+        let damaged = first_damaged_chunk(&bytes);
+        if let Some((offset, _)) = &damaged {
+            bytes.truncate(*offset);
+        }
         let format = |detail: String| RecorderError::Format {
             path: path.to_path_buf(),
             detail,
@@ -70,16 +111,21 @@ impl Recording {
         let mut metadata = BTreeMap::new();
         let mut scene_text = None;
         let mut truncated = None;
-        let records = ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic.into())
+        let records = ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
             .map_err(|e| format(format!("not an MCAP file: {e}")))?;
+        let mut records_read = 0u64;
         for record in records {
+            let records = records_read;
+            records_read += 1;
             let record = match record {
                 Ok(r) => r,
                 Err(e) => {
                     if bytes.len() < 8 || !bytes.starts_with(mcap::MAGIC) {
                         return Err(format(format!("not an MCAP file: {e}")));
                     }
-                    truncated = Some(e.to_string());
+                    // A cut file or a damaged chunk (its CRC does not match): everything before it
+                    // is read, nothing from it on.
+                    truncated = Some(format!("{e} (after {records} records)"));
                     break;
                 }
             };
@@ -113,6 +159,11 @@ impl Recording {
                 Record::DataEnd(_) => break,
                 _ => {}
             }
+        }
+        if let Some((offset, why)) = damaged {
+            truncated = Some(format!(
+                "the chunk at byte {offset} is damaged ({why}); reading stopped before it"
+            ));
         }
         if metadata.is_empty() {
             return Err(format(format!(
@@ -174,15 +225,17 @@ impl Recording {
         self.finished
     }
 
-    /// Why reading stopped early, for a file cut short.
+    /// Why reading stopped early: a file cut short, or a chunk whose CRC does not match its
+    /// content (reading stops before that chunk's messages).
     pub fn truncated(&self) -> Option<&str> {
         self.truncated.as_deref()
     }
 
-    /// Every message in file order (up to the point where a cut-short file stops).
+    /// Every message in file order (up to the point where a cut-short file or a damaged chunk
+    /// stops reading).
     pub fn messages(&self) -> impl Iterator<Item = RecordedMessage<'_>> + '_ {
         let topics: BTreeMap<u16, &str> = self.channels.iter().map(|c| (c.id, c.topic.as_str())).collect();
-        ChunkFlattener::new_with_options(&self.bytes, Options::IgnoreEndMagic.into())
+        ChunkFlattener::new_with_options(&self.bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
             .into_iter()
             .flatten()
             .map_while(Result::ok)

@@ -323,3 +323,35 @@ fn survives_sigkill() {
     assert_eq!(back[..expected.len()], expected[..]);
     assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
 }
+
+/// A chunk whose bytes changed after it was written (its CRC no longer matches) is reported, and
+/// reading stops before its messages: every message read back is one that was recorded.
+#[test]
+fn a_damaged_chunk_is_reported_and_not_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("damaged.mcap");
+    let msgs: Vec<Message> = (0..4).flat_map(iteration).collect();
+    let options = RecorderOptions {
+        chunk_size: 1 << 10,
+        ..RecorderOptions::default()
+    };
+    let mut rec = Recorder::create(&path, &run_info(), &options).unwrap();
+    record_all(&mut rec, &msgs);
+    rec.finish().unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let wire: Vec<Vec<u8>> = msgs.iter().map(encode).collect();
+    // One byte of the last third's first message, inside its chunk.
+    let k = 2 * wire.len() / 3;
+    let at = bytes
+        .windows(wire[k].len())
+        .position(|w| w == wire[k].as_slice())
+        .expect("the message's bytes are in the file");
+    bytes[at + wire[k].len() / 2] ^= 0x01;
+    let r = Recording::from_bytes(&path, bytes).unwrap();
+    let why = r.truncated().expect("the damaged chunk is reported");
+    assert!(why.contains("CRC"), "{why}");
+    let back: Vec<Vec<u8>> = r.messages().map(|m| m.data.into_owned()).collect();
+    assert!(back.len() <= k, "{} messages read, the damaged one is {k}", back.len());
+    assert!(!back.is_empty(), "the chunks before the damaged one are read");
+    assert_eq!(back[..], wire[..back.len()]);
+}
