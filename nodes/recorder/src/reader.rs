@@ -113,10 +113,7 @@ impl Recording {
         let mut truncated = None;
         let records = ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
             .map_err(|e| format(format!("not an MCAP file: {e}")))?;
-        let mut records_read = 0u64;
-        for record in records {
-            let records = records_read;
-            records_read += 1;
+        for (records, record) in records.enumerate() {
             let record = match record {
                 Ok(r) => r,
                 Err(e) => {
