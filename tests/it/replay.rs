@@ -370,3 +370,36 @@ fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
     );
     rerun_verify(&dir.join("pgd.rrd"));
 }
+
+/// Without a display, `glissade replay --spawn` fails at once, saying why and what to do
+/// instead, rather than waiting on a viewer that cannot open (issue: it hung until killed).
+#[test]
+fn spawning_a_viewer_without_a_display_fails_at_once() {
+    if !cfg!(target_os = "linux") {
+        println!("skipped: the display check is Linux's");
+        return;
+    }
+    let dir = temp_dir("no-display");
+    let path = record(&scene_text("two-blocks"), &dir, "nodisplay");
+    let start = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .args(["replay", "--spawn"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("no display to spawn a viewer on (DISPLAY and WAYLAND_DISPLAY are unset)")
+            && stderr.contains("--save <f.rrd>"),
+        "{stderr}"
+    );
+    // The bar is 10 s: the check comes before any viewer is started.
+    assert!(
+        start.elapsed() < std::time::Duration::from_secs(10),
+        "{:?}",
+        start.elapsed()
+    );
+}

@@ -120,6 +120,9 @@ pub(crate) fn log_mesh(
 }
 
 pub(crate) fn create_stream(sink: &Sink) -> Result<rerun::RecordingStream, ReplayError> {
+    if *sink == Sink::Spawn {
+        no_display().map_or(Ok(()), Err)?;
+    }
     let builder = rerun::RecordingStreamBuilder::new("glissade");
     match sink {
         Sink::Save(p) => builder.save(p),
@@ -127,6 +130,20 @@ pub(crate) fn create_stream(sink: &Sink) -> Result<rerun::RecordingStream, Repla
         Sink::Connect(url) => builder.connect_grpc_opts(url.clone()),
     }
     .map_err(rerr)
+}
+
+/// Why a spawned viewer could not show anything here: on Linux, neither `DISPLAY` nor
+/// `WAYLAND_DISPLAY` is set (a viewer would wait for a display that never comes).
+fn no_display() -> Option<ReplayError> {
+    let set = |v: &str| std::env::var_os(v).is_some_and(|x| !x.is_empty());
+    (cfg!(target_os = "linux") && !set("DISPLAY") && !set("WAYLAND_DISPLAY")).then(|| {
+        ReplayError::Rerun(
+            "no display to spawn a viewer on (DISPLAY and WAYLAND_DISPLAY are unset): write the view to a \
+             file with --save <f.rrd> (or --rerun <f.rrd> on `run`) and open it with `rerun <f.rrd>` where \
+             there is a display, or stream it to a running viewer with --connect"
+                .to_string(),
+        )
+    })
 }
 
 /// The diagonal of the model's bounding box (mm).
