@@ -18,47 +18,11 @@ pub struct GluedNumbering {
 impl GluedNumbering {
     /// Merges the node pairs of every interface of `model` (union–find, smallest id as root).
     pub fn new(model: &Model) -> Self {
-        let mut node_offset = Vec::with_capacity(model.subdomains.len());
-        let mut n = 0;
-        for s in &model.subdomains {
-            node_offset.push(n);
-            n += s.mesh.n_nodes();
-        }
-        let mut parent: Vec<usize> = (0..n).collect();
-        fn find(parent: &mut [usize], mut x: usize) -> usize {
-            while parent[x] != x {
-                parent[x] = parent[parent[x]];
-                x = parent[x];
-            }
-            x
-        }
-        for itf in &model.interfaces {
-            for &(na, nb) in &itf.pairs {
-                let (ra, rb) = (
-                    find(&mut parent, node_offset[itf.a] + na),
-                    find(&mut parent, node_offset[itf.b] + nb),
-                );
-                if ra != rb {
-                    let (lo, hi) = (ra.min(rb), ra.max(rb));
-                    parent[hi] = lo;
-                }
-            }
-        }
-        let mut id = vec![usize::MAX; n];
-        let mut merged = vec![0; n];
-        let mut n_merged = 0;
-        for (x, m) in merged.iter_mut().enumerate() {
-            let r = find(&mut parent, x);
-            if id[r] == usize::MAX {
-                id[r] = n_merged;
-                n_merged += 1;
-            }
-            *m = id[r];
-        }
+        let n = crate::numbering::Numbering::merging(model, |_| true);
         Self {
-            node_offset,
-            merged,
-            n_merged,
+            node_offset: n.node_offset,
+            merged: n.merged,
+            n_merged: n.n_merged,
         }
     }
 

@@ -2,7 +2,7 @@
 //! interface copies, and the groups of perfect copies that share a node's interface force.
 
 use crate::NONE;
-use glissade_mechanics::model::Model;
+use glissade_mechanics::model::{Interface, Model};
 use std::collections::BTreeMap;
 
 /// Global numbering with perfect-interface node pairs merged.
@@ -13,12 +13,19 @@ pub(crate) struct Numbering {
 }
 
 impl Numbering {
+    /// Perfect-interface node pairs merged (contact pairs keep their two nodes).
     pub(crate) fn new(model: &Model) -> Self {
+        Self::merging(model, |i| !i.is_contact())
+    }
+
+    /// The node pairs of every interface `merge` accepts merged (union–find, the smallest id as
+    /// root; merged nodes numbered in order of their first node).
+    pub(crate) fn merging(model: &Model, merge: impl Fn(&Interface) -> bool) -> Self {
         let mut node_offset = Vec::with_capacity(model.subdomains.len());
         let mut n = 0;
         for s in &model.subdomains {
             node_offset.push(n);
-            n += s.mesh.coords.len();
+            n += s.mesh.n_nodes();
         }
         let mut parent: Vec<usize> = (0..n).collect();
         fn find(parent: &mut [usize], mut x: usize) -> usize {
@@ -28,7 +35,7 @@ impl Numbering {
             }
             x
         }
-        for itf in model.interfaces.iter().filter(|i| !i.is_contact()) {
+        for itf in model.interfaces.iter().filter(|i| merge(i)) {
             for &(na, nb) in &itf.pairs {
                 let ra = find(&mut parent, node_offset[itf.a] + na);
                 let rb = find(&mut parent, node_offset[itf.b] + nb);
