@@ -23,13 +23,15 @@ pub const RATE_WINDOW: usize = 20;
 /// Iterations whose largest step enters the bound.
 pub const STEP_WINDOW: usize = 10;
 
-/// The estimate's state: the steps and residuals seen so far.
+/// The estimate's state: the steps and residuals of the last iterations (as many as the larger
+/// window), and how many iterations it has seen.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorEstimate {
     pub rate_window: usize,
     pub step_window: usize,
     steps: Vec<f64>,
     residuals: Vec<f64>,
+    seen: usize,
 }
 
 /// One iteration's estimate and what it is made of.
@@ -53,24 +55,32 @@ impl ErrorEstimate {
             rate_window >= 2 && step_window >= 1,
             "a contraction fit needs two points"
         );
+        let kept = rate_window.max(step_window);
         Self {
             rate_window,
             step_window,
-            steps: Vec::new(),
-            residuals: Vec::new(),
+            steps: Vec::with_capacity(kept + 1),
+            residuals: Vec::with_capacity(kept + 1),
+            seen: 0,
         }
     }
 
     /// Takes the next iteration's force step dₙ and residual rₙ; returns its estimate when there
     /// is one.
     pub fn push(&mut self, step: f64, residual: f64) -> Option<Estimated> {
+        let kept = self.rate_window.max(self.step_window);
         self.steps.push(step);
         self.residuals.push(residual);
-        let n = self.steps.len();
+        if self.steps.len() > kept {
+            self.steps.remove(0);
+            self.residuals.remove(0);
+        }
+        self.seen += 1;
         // The first step is from s = 0: it measures the solution's size, not a step.
-        if n < self.rate_window.max(self.step_window) + 1 {
+        if self.seen < kept + 1 {
             return None;
         }
+        let n = self.steps.len();
         let largest = self.steps[n - self.step_window..].iter().cloned().fold(0.0, f64::max);
         if largest == 0.0 {
             // The forces stopped moving exactly (or there are none): nothing is left to go.
