@@ -11,7 +11,7 @@ use glissade::distributed::{
     install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Network, Supervision,
 };
 use glissade::load_scene;
-use glissade::output::{interface_fields, reference_interfaces, summary, write_json};
+use glissade::output::{interface_fields, reference_interfaces, summary, write_json, RunFile};
 use glissade::report::{build_report_with, linear_stage_table, plot_svg};
 use glissade::runner::{IterationRecord, RunOptions};
 use glissade_messages::Verdict;
@@ -348,15 +348,13 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         accuracy: args.accuracy,
         ..Default::default()
     };
-    let sc = load_with_overrides(&args.scene, &args.out, &overrides)?;
     let run_id = match args.run_id.clone() {
         Some(id) => id,
         None => default_run_id()?,
     };
     check_run_id("--run-id", &run_id)?;
-    // Fail before solving if the outputs cannot be written.
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    // Fails before solving if the outputs cannot be written.
+    let sc = load_with_overrides(&args.scene, &args.out, &overrides)?;
     let existing = glissade::output::existing_outputs(&args.out, &sc.model.name, &run_id);
     if !existing.is_empty() {
         anyhow::bail!(
@@ -371,10 +369,6 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 .join(", ")
         );
     }
-    let probe = args.out.join(format!(".{run_id}.probe"));
-    std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", args.out.display()))?;
-    let _ = std::fs::remove_file(&probe);
-
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {
@@ -468,7 +462,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 let mut s = summary(&sc, partial, &run_id);
                 s["verdict"] = serde_json::json!("Interrupted");
                 s["interrupted"] = serde_json::json!(true);
-                let p = write_json(&args.out, &format!("{}-{run_id}.summary.json", sc.model.name), &s)?;
+                let p = write_json(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &s)?;
                 println!(
                     "scene `{}`: interrupted after {} iterations; every node was stopped\nsummary: {}",
                     sc.model.name,
@@ -483,7 +477,6 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     for l in &result.left_out {
         println!("left out: {l}");
     }
-    let stem = format!("{}-{run_id}", sc.model.name);
     let mut run_summary = summary(&sc, &result, &run_id);
     run_summary["linear_stages"] = match &linear_stages {
         Some(totals) => serde_json::json!(totals.iter().map(|t| t.json()).collect::<Vec<_>>()),
@@ -491,17 +484,17 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             serde_json::json!("not measured: a multi-process run's subdomain nodes keep their linear-stage records")
         }
     };
-    let summary_path = write_json(&args.out, &format!("{stem}.summary.json"), &run_summary)?;
+    let summary_path = write_json(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)?;
     let fields_path = write_json(
         &args.out,
-        &format!("{stem}.fields.json"),
+        &RunFile::Fields.name(&sc.model.name, &run_id),
         &interface_fields(&sc.model, &result.interfaces),
     )?;
     if args.interior || sc.model.interfaces.is_empty() {
         let u: Vec<_> = result.displacements.iter().map(|(s, f)| serde_json::json!({"subdomain": sc.model.subdomains[*s as usize].name, "rows": f.rows, "cols": f.cols, "u": f.data})).collect();
         let p = write_json(
             &args.out,
-            &format!("{stem}.displacement.json"),
+            &RunFile::Displacement.name(&sc.model.name, &run_id),
             &serde_json::json!({"displacements": u}),
         )?;
         println!("displacements: {}", p.display());
@@ -830,9 +823,13 @@ fn stability_accuracy(cases: &[glissade::stability::Case], out: &std::path::Path
         ),
         Err(e) => eprintln!("{e}"),
     });
-    let (checks, failures): (Vec<_>, Vec<_>) = results.into_iter().partition(Result::is_ok);
-    let checks: Vec<_> = checks.into_iter().map(Result::unwrap).collect();
-    let failures: Vec<String> = failures.into_iter().map(|f| f.unwrap_err()).collect();
+    let (mut checks, mut failures) = (Vec::new(), Vec::new());
+    for r in results {
+        match r {
+            Ok(c) => checks.push(c),
+            Err(f) => failures.push(f),
+        }
+    }
     let mut table = markdown(&checks);
     table += &format!("\n{}\n", summary(&checks));
     for f in &failures {

@@ -81,20 +81,38 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     }
 }
 
+/// What `glissade run` writes besides its recording: `<scene>-<run>.<kind>`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunFile {
+    Summary,
+    Fields,
+    Displacement,
+}
+
+impl RunFile {
+    pub const ALL: [RunFile; 3] = [RunFile::Summary, RunFile::Fields, RunFile::Displacement];
+
+    /// The file's name for run `run_id` of scene `name`.
+    pub fn name(self, name: &str, run_id: &str) -> String {
+        let kind = match self {
+            RunFile::Summary => "summary",
+            RunFile::Fields => "fields",
+            RunFile::Displacement => "displacement",
+        };
+        format!("{name}-{run_id}.{kind}.json")
+    }
+}
+
 /// The files of run `run_id` of scene `name` that already exist in `out` (summary, fields,
 /// displacements, recording, and their partial copies) as regular files: a run refuses to start
 /// over them.
 pub fn existing_outputs(out: &Path, name: &str, run_id: &str) -> Vec<PathBuf> {
-    let stem = format!("{name}-{run_id}");
-    let names = [
-        format!("{stem}.summary.json"),
-        format!("{stem}.fields.json"),
-        format!("{stem}.displacement.json"),
-        glissade_recorder::recording_file_name(name, run_id),
-    ];
+    let names = RunFile::ALL
+        .map(|f| f.name(name, run_id))
+        .into_iter()
+        .chain([glissade_recorder::recording_file_name(name, run_id)]);
     names
-        .iter()
-        .flat_map(|n| [out.join(n), out.join(format!(".{n}.partial"))])
+        .flat_map(|n| [out.join(&n), out.join(format!(".{n}.partial"))])
         .filter(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_file()))
         .collect()
 }
