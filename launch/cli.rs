@@ -101,6 +101,18 @@ pub(crate) enum Command {
     /// Load a recording into Rerun (an .rrd file by default, or a live viewer), or re-execute
     /// nodes from their recorded inputs and check their outputs bit for bit (`--node`).
     Replay(ReplayArgs),
+    /// Write a finished run's results from its recording in formats other tools read: a ParaView
+    /// time series (`--vtu`) and a CSV of the interface fields (`--csv`).
+    Export {
+        /// Recording (MCAP) of a run.
+        recording: PathBuf,
+        /// Folder for a ParaView time series: `<scene>-<run>.pvd` and `<scene>-<run>-vtu/`.
+        #[arg(long, value_name = "DIR")]
+        vtu: Option<PathBuf>,
+        /// Folder for `<scene>-<run>.interfaces.csv`: one row per interface node pair and time point.
+        #[arg(long, value_name = "DIR")]
+        csv: Option<PathBuf>,
+    },
     /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
     /// endpoint and receives the scene over the bus.
     Node(NodeArgs),
@@ -255,6 +267,15 @@ pub(crate) struct RunArgs {
     /// Also write every subdomain's displacement field.
     #[arg(long)]
     pub(crate) interior: bool,
+    /// Also write a ParaView time series: `<scene>-<run>.pvd` and the folder `<scene>-<run>-vtu/`
+    /// (subdomains with displacement and stresses, interfaces with tractions, jumps and status;
+    /// docs/outputs.md).
+    #[arg(long)]
+    pub(crate) vtu: bool,
+    /// Also write `<scene>-<run>.interfaces.csv`: the interface fields, one row per node pair and
+    /// time point (docs/outputs.md).
+    #[arg(long)]
+    pub(crate) csv: bool,
     /// No progress bar.
     #[arg(long)]
     pub(crate) quiet: bool,

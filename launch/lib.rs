@@ -10,6 +10,7 @@ pub mod recording;
 pub mod report;
 pub mod runner;
 pub mod stability;
+pub mod vtu;
 
 use anyhow::Context;
 use glissade_scene::{load_str, LoadedScene};

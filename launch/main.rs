@@ -255,6 +255,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             bench(&scene, &out, max_iterations, processes)
         }
         Command::Replay(args) => replay(args),
+        Command::Export { recording, vtu, csv } => export(&recording, vtu.as_deref(), csv.as_deref()),
         Command::Node(args) => {
             check_run_id("--run", &args.run)?;
             let tls = glissade::distributed::node_tls(
@@ -383,7 +384,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     ));
     let opts = RunOptions {
         run_id: run_id.clone(),
-        interior: args.interior,
+        interior: args.interior || args.vtu,
     };
     let progress = |r: &IterationRecord| {
         let d = &r.decision;
@@ -490,15 +491,27 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         &RunFile::Fields.name(&sc.model.name, &run_id),
         &interface_fields(&sc.model, &result.interfaces),
     )?;
-    if args.interior || sc.model.interfaces.is_empty() {
-        let u: Vec<_> = result.displacements.iter().map(|(s, f)| serde_json::json!({"subdomain": sc.model.subdomains[*s as usize].name, "rows": f.rows, "cols": f.cols, "u": f.data})).collect();
+    if args.interior || (sc.model.interfaces.is_empty() && !args.vtu) {
         let p = write_json(
             &args.out,
             &RunFile::Displacement.name(&sc.model.name, &run_id),
-            &serde_json::json!({"displacements": u}),
+            &glissade::output::displacements(&sc.model, &result.displacements),
         )?;
         println!("displacements: {}", p.display());
     }
+    let series = if args.vtu {
+        let u = glissade::output::displacement_slices(&sc.model, &result.displacements)?;
+        let stem = format!("{}-{run_id}", sc.model.name);
+        Some(glissade::vtu::write_series(
+            &sc.model,
+            &u,
+            &result.interfaces,
+            &args.out,
+            &stem,
+        )?)
+    } else {
+        None
+    };
     println!(
         "scene `{}`: {}; setup {:.2} s, iterations {:.2} s",
         sc.model.name,
@@ -510,6 +523,22 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         println!("{}", t.line());
     }
     println!("summary: {}\nfields: {}", summary_path.display(), fields_path.display());
+    if args.csv {
+        let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
+        glissade::vtu::write_new_file(
+            &path,
+            glissade::output::interface_csv(&sc.model, &result.interfaces)?.as_bytes(),
+        )?;
+        println!("csv: {}", path.display());
+    }
+    if let Some(v) = series {
+        println!(
+            "paraview: {} ({} files, {:.1} MB)",
+            v.pvd.display(),
+            v.files,
+            v.bytes as f64 * 1e-6
+        );
+    }
     Ok(match result.verdict {
         Verdict::Converged => ExitCode::SUCCESS,
         _ => ExitCode::from(NOT_CONVERGED),
@@ -604,6 +633,54 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     }
     if let glissade_replay::Sink::Save(p) = sink {
         println!("rerun: {} (open with `rerun {}`)", p.display(), p.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn export(
+    recording: &std::path::Path,
+    vtu: Option<&std::path::Path>,
+    csv: Option<&std::path::Path>,
+) -> anyhow::Result<ExitCode> {
+    if vtu.is_none() && csv.is_none() {
+        anyhow::bail!("nothing to export: give --vtu <DIR>, --csv <DIR> or both");
+    }
+    for dir in vtu.iter().chain(csv.iter()) {
+        ensure_writable(dir)?;
+    }
+    let rec = glissade_recorder::Recording::open(recording)?;
+    let state = glissade_replay::final_state(&rec)?;
+    let model = &state.model;
+    let stem = format!("{}-{}", model.name, rec.run_id());
+    if let Some(dir) = vtu {
+        let u: Vec<Vec<&[f64]>> = (0..model.subdomains.len() as u32)
+            .map(|s| {
+                state
+                    .u
+                    .get(&s)
+                    .map(|per_time| per_time.iter().map(Vec::as_slice).collect())
+                    .with_context(|| {
+                        format!(
+                            "{}: no displacement of subdomain `{}` can be recovered (no boundary state recorded)",
+                            recording.display(),
+                            model.subdomains[s as usize].name
+                        )
+                    })
+            })
+            .collect::<anyhow::Result<_>>()?;
+        let v = glissade::vtu::write_series(model, &u, &state.interfaces, dir, &stem)?;
+        println!(
+            "paraview: {} ({} files, {:.1} MB)",
+            v.pvd.display(),
+            v.files,
+            v.bytes as f64 * 1e-6
+        );
+    }
+    if let Some(dir) = csv {
+        let path = dir.join(format!("{stem}.interfaces.csv"));
+        let text = glissade::output::interface_csv(model, &state.interfaces)?;
+        glissade::vtu::write_new_file(&path, text.as_bytes())?;
+        println!("csv: {}", path.display());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -5,7 +5,7 @@ use anyhow::Context;
 use glissade_deploy::Plan;
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::InterfaceFields;
-use glissade_mechanics::model::{InterfaceKind, Model};
+use glissade_mechanics::model::{Interface, InterfaceKind, Model};
 use glissade_messages::{InterfaceSolution, Verdict};
 use glissade_reference::ReferenceSolution;
 use glissade_scene::LoadedScene;
@@ -104,16 +104,22 @@ impl RunFile {
 }
 
 /// The files of run `run_id` of scene `name` that already exist in `out` (summary, fields,
-/// displacements, recording, and their partial copies) as regular files: a run refuses to start
+/// displacements, CSV, recording, and their partial copies, as regular files; the ParaView series
+/// and its folder): a run refuses to start
 /// over them.
 pub fn existing_outputs(out: &Path, name: &str, run_id: &str) -> Vec<PathBuf> {
     let names = RunFile::ALL
         .map(|f| f.name(name, run_id))
         .into_iter()
         .chain([glissade_recorder::recording_file_name(name, run_id)]);
+    let stem = format!("{name}-{run_id}");
+    let (pvd, vtu) = crate::vtu::series_paths(out, &stem);
+    let csv = format!("{stem}.interfaces.csv");
     names
+        .chain([csv])
         .flat_map(|n| [out.join(&n), out.join(format!(".{n}.partial"))])
-        .filter(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_file()))
+        .chain([pvd, vtu])
+        .filter(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_file() || m.is_dir()))
         .collect()
 }
 
@@ -148,7 +154,12 @@ pub fn summary(scene: &LoadedScene, result: &RunResult, run_id: &str) -> Value {
         "setup_s": result.setup_s,
         "solve_s": result.solve_s,
         "status_counts_per_time": per_time.iter().enumerate().map(|(i, c)| json!({"t": model.time.t(i), "separated": c[0], "stick": c[1], "slip": c[2]})).collect::<Vec<_>>(),
-        "history": result.iterations,
+        "history": result.iterations.iter().map(|r| {
+            let mut v = json!(r);
+            let [separated, stick, slip] = r.decision.counts;
+            v["decision"]["counts"] = json!({"separated": separated, "stick": stick, "slip": slip});
+            v
+        }).collect::<Vec<_>>(),
     })
 }
 
@@ -237,7 +248,8 @@ pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord]) -
 }
 
 /// Interface fields of ŝ (the last local stage) in each interface's local frame: normal and
-/// tangential force on side a (N/mm) and jump [Ŵ] (mm), per time point and pair; plus status.
+/// tangential traction on side a (MPa) and jump [Ŵ] = Ŵ_b − Ŵ_a (mm), per time point and pair;
+/// plus each pair's status by name. docs/outputs.md describes every field.
 pub fn interface_fields(model: &Model, interfaces: &[InterfaceSolution]) -> Value {
     interface_fields_upto(model, interfaces, model.time.n_points())
 }
@@ -251,18 +263,19 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
             let itf = &model.interfaces[sol.interface as usize];
             let np = itf.n_pairs();
             let nt = n_times;
-            let proj = |f: &glissade_messages::Field, g: Option<&glissade_messages::Field>, dir: [f64; 2]| -> Vec<Vec<f64>> {
-                (0..nt)
-                    .map(|i| {
-                        (0..np)
-                            .map(|p| {
-                                let v = |c: usize| f.get(2 * p + c, i) - g.map_or(0.0, |g| g.get(2 * p + c, i));
-                                v(0) * dir[0] + v(1) * dir[1]
-                            })
-                            .collect()
-                    })
-                    .collect()
-            };
+            let proj =
+                |f: &glissade_messages::Field, g: Option<&glissade_messages::Field>, dir: [f64; 2]| -> Vec<Vec<f64>> {
+                    (0..nt)
+                        .map(|i| {
+                            (0..np)
+                                .map(|p| {
+                                    let v = |c: usize| f.get(2 * p + c, i) - g.map_or(0.0, |g| g.get(2 * p + c, i));
+                                    v(0) * dir[0] + v(1) * dir[1]
+                                })
+                                .collect()
+                        })
+                        .collect()
+                };
             let kind = match &itf.kind {
                 InterfaceKind::Perfect => json!("perfect"),
                 InterfaceKind::Contact { friction, .. } => json!({"contact": {"friction": friction}}),
@@ -280,11 +293,164 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
                 "f_t": proj(&sol.f_a_hat, None, itf.tangent),
                 "jump_n": proj(&sol.w_b_hat, Some(&sol.w_a_hat), itf.normal),
                 "jump_t": proj(&sol.w_b_hat, Some(&sol.w_a_hat), itf.tangent),
-                "status": if itf.is_contact() { (0..nt).map(|i| sol.status[i * np..(i + 1) * np].to_vec()).collect::<Vec<_>>() } else { Vec::new() },
+                "status": if itf.is_contact() {
+                    (0..nt)
+                        .map(|i| sol.status[i * np..(i + 1) * np].iter().map(|&c| status_name(c)).collect())
+                        .collect::<Vec<Vec<String>>>()
+                } else {
+                    Vec::new()
+                },
             })
         })
         .collect();
-    json!({ "scene": model.name, "times": (0..n_times).map(|i| model.time.t(i)).collect::<Vec<_>>(), "interfaces": items })
+    json!({
+        "scene": model.name,
+        "units": {
+            "times": "s",
+            "coords": "mm",
+            "weights": "mm (lumped edge length of each pair)",
+            "f_n": "MPa: traction on side a along the normal (compression negative)",
+            "f_t": "MPa: traction on side a along the tangent",
+            "jump_n": "mm: (Ŵ_b − Ŵ_a)·normal; jump_n + gap ≥ 0, = 0 where in contact",
+            "jump_t": "mm: (Ŵ_b − Ŵ_a)·tangent",
+            "normal": "unit vector out of side a towards side b; tangent = (−normal_y, normal_x)",
+            "status": "separated, stick or slip per pair (contact interfaces only)",
+        },
+        "times": (0..n_times).map(|i| model.time.t(i)).collect::<Vec<_>>(),
+        "interfaces": items,
+    })
+}
+
+/// Each subdomain's displacement per time point, as slices of a run's displacement fields (one
+/// column per time point): `u[s][i]`.
+pub fn displacement_slices<'a>(
+    model: &Model,
+    displacements: &'a [(u32, glissade_messages::Field)],
+) -> anyhow::Result<Vec<Vec<&'a [f64]>>> {
+    let nt = model.time.n_points();
+    (0..model.subdomains.len())
+        .map(|s| {
+            let sub = &model.subdomains[s];
+            let (_, f) = displacements
+                .iter()
+                .find(|(k, _)| *k as usize == s)
+                .with_context(|| format!("the run returned no displacement of subdomain `{}`", sub.name))?;
+            let rows = f.rows();
+            if rows != sub.n_dofs() || f.cols() != nt {
+                anyhow::bail!(
+                    "displacement of subdomain `{}` is {rows} × {}, the scene gives {} × {nt}",
+                    sub.name,
+                    f.cols(),
+                    sub.n_dofs()
+                );
+            }
+            Ok((0..nt).map(|i| &f.data[i * rows..(i + 1) * rows]).collect())
+        })
+        .collect()
+}
+
+/// The displacement file: per subdomain its mesh (node coordinates, QUA8 connectivity) and its
+/// displacement at every time point, `u[i·rows + 2·node + c]` (time point i, component c: 0 x,
+/// 1 y). docs/outputs.md.
+pub fn displacements(model: &Model, displacements: &[(u32, glissade_messages::Field)]) -> Value {
+    let items: Vec<Value> = displacements
+        .iter()
+        .map(|(s, f)| {
+            let sub = &model.subdomains[*s as usize];
+            json!({
+                "subdomain": sub.name,
+                "coords": sub.mesh.coords,
+                "elements": sub.mesh.elements,
+                "rows": f.rows,
+                "cols": f.cols,
+                "u": *f.data,
+            })
+        })
+        .collect();
+    json!({
+        "scene": model.name,
+        "units": {"times": "s", "coords": "mm", "u": "mm"},
+        "layout": "u[i·rows + 2·node + c]: time point i (column), node (0-based, order of coords), component c (0: x, 1: y); elements: 8 nodes each, corners counter-clockwise then mid-sides (VTK quadratic quad order)",
+        "times": (0..model.time.n_points()).map(|i| model.time.t(i)).collect::<Vec<_>>(),
+        "displacements": items,
+    })
+}
+
+/// Pair `p` of interface `itf` at time point `i` in the interface's frame: the traction on side a
+/// (normal, tangential; MPa) and the jump Ŵ_b − Ŵ_a (normal, tangential; mm).
+pub fn pair_values(itf: &Interface, sol: &InterfaceSolution, i: usize, p: usize) -> [f64; 4] {
+    let dot = |v: [f64; 2], d: [f64; 2]| v[0] * d[0] + v[1] * d[1];
+    let f = [sol.f_a_hat.get(2 * p, i), sol.f_a_hat.get(2 * p + 1, i)];
+    let jump = [
+        sol.w_b_hat.get(2 * p, i) - sol.w_a_hat.get(2 * p, i),
+        sol.w_b_hat.get(2 * p + 1, i) - sol.w_a_hat.get(2 * p + 1, i),
+    ];
+    [
+        dot(f, itf.normal),
+        dot(f, itf.tangent),
+        dot(jump, itf.normal),
+        dot(jump, itf.tangent),
+    ]
+}
+
+/// Names of the contact statuses, by code (0, 1, 2).
+pub const STATUS_NAMES: [&str; 3] = ["separated", "stick", "slip"];
+
+/// The name of status code `c`, or `invalid status code <c>` (which no node sends).
+pub fn status_name(c: u8) -> String {
+    STATUS_NAMES
+        .get(c as usize)
+        .map_or_else(|| format!("invalid status code {c}"), |s| s.to_string())
+}
+
+/// The interface fields of ŝ as CSV: one row per time point and node pair, with the pair's
+/// position, the tractions on side a and the jumps in the interface's frame, and the status
+/// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface). docs/outputs.md.
+pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> anyhow::Result<String> {
+    use std::fmt::Write as _;
+    let nt = model.time.n_points();
+    let mut out = String::from("time,interface,a,b,pair,x,y,traction_n,traction_t,jump_n,jump_t,status\n");
+    for i in 0..nt {
+        let t = model.time.t(i);
+        for sol in interfaces {
+            let itf = model
+                .interfaces
+                .get(sol.interface as usize)
+                .with_context(|| format!("solution of interface {}, which the scene does not have", sol.interface))?;
+            let np = itf.n_pairs();
+            if sol.f_a_hat.rows() != 2 * np || sol.f_a_hat.cols() != nt {
+                anyhow::bail!(
+                    "interface {}: F̂_a is {} × {}, the scene gives {} × {nt}",
+                    sol.interface,
+                    sol.f_a_hat.rows(),
+                    sol.f_a_hat.cols(),
+                    2 * np
+                );
+            }
+            let (a, b) = (&model.subdomains[itf.a].name, &model.subdomains[itf.b].name);
+            for p in 0..np {
+                let [f_n, f_t, jump_n, jump_t] = pair_values(itf, sol, i, p);
+                let status = if itf.is_contact() {
+                    let code = *sol
+                        .status
+                        .get(i * np + p)
+                        .with_context(|| format!("interface {}: statuses missing", sol.interface))?;
+                    *STATUS_NAMES
+                        .get(code as usize)
+                        .with_context(|| format!("interface {}: status code {code}", sol.interface))?
+                } else {
+                    "perfect"
+                };
+                let [x, y] = itf.coords[p];
+                let _ = writeln!(
+                    out,
+                    "{t:?},{},{a},{b},{p},{x:?},{y:?},{f_n:?},{f_t:?},{jump_n:?},{jump_t:?},{status}",
+                    sol.interface
+                );
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Writes `value` as JSON to `dir/name`, creating `dir`; returns the path.

@@ -72,3 +72,37 @@ pub fn scratch(name: &str) -> Scratch {
     std::fs::create_dir_all(&dir).expect("scratch folder");
     Scratch(dir)
 }
+
+/// A Python interpreter with `modules` importable, to check outputs with a foreign reader. None
+/// (with the reason printed) when Python or a module is missing, unless `GLISSADE_REQUIRE_PYTHON`
+/// is set (CI sets it after installing the modules), where a missing one fails the test.
+pub fn python_with(modules: &[&str]) -> Option<&'static str> {
+    let required = std::env::var_os("GLISSADE_REQUIRE_PYTHON").is_some();
+    let skip = |why: String| {
+        assert!(!required, "GLISSADE_REQUIRE_PYTHON is set but {why}");
+        println!("skipped the Python reader: {why}");
+        None
+    };
+    let python = ["python3", "python"].into_iter().find(|p| {
+        std::process::Command::new(p)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    let Some(python) = python else {
+        return skip("no python3 on PATH".into());
+    };
+    for m in modules {
+        let probe = std::process::Command::new(python)
+            .args(["-c", &format!("import {m}")])
+            .output()
+            .expect("python runs");
+        if !probe.status.success() {
+            return skip(format!(
+                "the `{m}` package is not installed (pip install {m}): {}",
+                String::from_utf8_lossy(&probe.stderr).trim()
+            ));
+        }
+    }
+    Some(python)
+}

@@ -23,6 +23,7 @@ mod stability;
 mod time_start;
 mod tls;
 mod two_hosts;
+mod vtu;
 
 #[global_allocator]
 static ALLOCATOR: allocations::Counting = allocations::Counting;

@@ -78,24 +78,7 @@ with open(sys.argv[1], "rb") as f:
         out.write(b"M" + struct.pack("<H", len(t)) + t + struct.pack("<Q", len(message.data)) + message.data)
 out.close()
 "#;
-    let python = ["python3", "python"].into_iter().find(|p| {
-        Command::new(p)
-            .arg("--version")
-            .output()
-            .is_ok_and(|o| o.status.success())
-    });
-    let Some(python) = python else {
-        println!("skipped the Python reader: no python3 on PATH");
-        return None;
-    };
-    let probe = Command::new(python).args(["-c", "import mcap"]).output().unwrap();
-    if !probe.status.success() {
-        println!(
-            "skipped the Python reader: the `mcap` package is not installed (pip install mcap): {}",
-            String::from_utf8_lossy(&probe.stderr).trim()
-        );
-        return None;
-    }
+    let python = crate::common::python_with(&["mcap"])?;
     let dump = path.with_extension("python-dump");
     let o = Command::new(python)
         .args(["-c", SCRIPT])

@@ -19,6 +19,7 @@ pub mod mesh;
 pub mod model;
 pub mod modes;
 pub mod pgd;
+pub mod post;
 pub mod simd;
 
 /// Passes over full boundary fields (n_b × (N+1)) that one plain iteration makes per subdomain,

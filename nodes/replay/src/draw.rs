@@ -3,46 +3,28 @@
 //! scales (model diagonal, time point, colour range) a view is drawn at.
 
 use crate::{rerr, ColorBy, ReplayError, Sink};
-use glissade_mechanics::element::{elasticity, stress, NODE_XI};
-use glissade_mechanics::model::{Model, Plane};
+use glissade_mechanics::model::Model;
+use glissade_mechanics::post::{nodal_stresses, von_mises};
 use glissade_messages::Field;
-use nalgebra::SVector;
 
 /// Six triangles of a QUA8 element (local node numbers).
 const TRIANGLES: [[usize; 3]; 6] = [[0, 4, 7], [4, 1, 5], [5, 2, 6], [6, 3, 7], [4, 5, 7], [5, 6, 7]];
 
 /// The colouring field at every node of subdomain `s` for displacement `u`.
-pub(crate) fn nodal_field(model: &Model, s: usize, u: &[f64], by: ColorBy) -> Vec<f64> {
+pub(crate) fn nodal_field(model: &Model, s: usize, u: &[f64], by: ColorBy) -> Result<Vec<f64>, ReplayError> {
     let sub = &model.subdomains[s];
     let n = sub.mesh.coords.len();
-    match by {
+    Ok(match by {
         ColorBy::Displacement => (0..n).map(|k| u[2 * k].hypot(u[2 * k + 1])).collect(),
-        ColorBy::VonMises => {
-            let d = elasticity(sub.material, model.plane);
-            let nu = sub.material.nu;
-            let mut sum = vec![0.0; n];
-            let mut count = vec![0u32; n];
-            for el in &sub.mesh.elements {
-                let x: [[f64; 2]; 8] = std::array::from_fn(|a| sub.mesh.coords[el[a]]);
-                let ue = SVector::<f64, 16>::from_fn(|r, _| u[2 * el[r / 2] + r % 2]);
-                for (a, xi) in NODE_XI.iter().enumerate() {
-                    let Ok(sig) = stress(&x, &d, &ue, xi[0], xi[1]) else {
-                        continue;
-                    };
-                    let (sx, sy, txy) = (sig[0], sig[1], sig[2]);
-                    let sz = match model.plane {
-                        Plane::Strain => nu * (sx + sy),
-                        Plane::Stress => 0.0,
-                    };
-                    let vm =
-                        (0.5 * ((sx - sy).powi(2) + (sy - sz).powi(2) + (sz - sx).powi(2)) + 3.0 * txy * txy).sqrt();
-                    sum[el[a]] += vm;
-                    count[el[a]] += 1;
-                }
-            }
-            sum.iter().zip(&count).map(|(s, c)| s / (*c).max(1) as f64).collect()
-        }
-    }
+        ColorBy::VonMises => nodal_stresses(sub, model.plane, u)
+            .map_err(|e| ReplayError::Content {
+                path: format!("subdomain `{}`", sub.name),
+                detail: format!("stress: {e}"),
+            })?
+            .iter()
+            .map(von_mises)
+            .collect(),
+    })
 }
 
 /// Viridis-like colour ramp for v in [lo, hi].

@@ -29,7 +29,7 @@ mod walk;
 pub use states::BoundaryStates;
 use std::path::PathBuf;
 pub use view::View;
-pub use walk::replay;
+pub use walk::{final_state, replay, FinalState};
 
 /// Where the Rerun data goes.
 #[derive(Debug, Clone, PartialEq)]

@@ -215,7 +215,7 @@ impl View {
                     path: format!("iteration {n}"),
                     detail,
                 })?;
-            let field = nodal_field(&self.model, *s as usize, &u, self.color_by);
+            let field = nodal_field(&self.model, *s as usize, &u, self.color_by)?;
             frames.push((*s, u, field));
         }
         let amplification = *self.amplification.get_or_insert_with(|| {
@@ -259,18 +259,14 @@ impl View {
             path: "final state".into(),
             detail,
         })?;
-        let final_fields: BTreeMap<u32, Vec<Vec<f64>>> = final_u
-            .iter()
-            .map(|(&s, per_time)| {
-                (
-                    s,
-                    per_time
-                        .iter()
-                        .map(|u| nodal_field(model, s as usize, u, self.color_by))
-                        .collect(),
-                )
-            })
-            .collect();
+        let mut final_fields: BTreeMap<u32, Vec<Vec<f64>>> = BTreeMap::new();
+        for (&s, per_time) in &final_u {
+            let fields = per_time
+                .iter()
+                .map(|u| nodal_field(model, s as usize, u, self.color_by))
+                .collect::<Result<_, _>>()?;
+            final_fields.insert(s, fields);
+        }
         let range = self
             .range
             .unwrap_or_else(|| range_of(final_fields.values().flatten().map(Vec::as_slice)));

@@ -4,38 +4,53 @@
 use crate::draw::{diagonal, largest_time_point, nodal_field, range_of};
 use crate::recovery::{final_displacements, Recovery};
 use crate::{BoundaryStates, ReplayError, ReplayOptions, ReplaySummary, View};
-use glissade_messages::Payload;
+use glissade_messages::{InterfaceSolution, Payload};
 use glissade_recorder::Recording;
 use glissade_scene::load_str;
 use std::collections::BTreeMap;
 
-/// Replays `recording` into the sink of `opts`: the colour range and amplification come from the
-/// final state, then every message goes through a [`View`].
-pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
-    let path = recording.path().display().to_string();
-    let content = |detail: String| ReplayError::Content {
-        path: path.clone(),
+/// A run's final state as its recording holds it: the scene's model, every subdomain's
+/// displacement at every time point (recorded with `--interior`, else recovered from the
+/// boundary states) and the last interface solution (ŝ) of each interface.
+pub struct FinalState {
+    pub model: glissade_mechanics::model::Model,
+    /// `u[s][i]`: subdomain s's displacement at time point i (2 values per node).
+    pub u: BTreeMap<u32, Vec<Vec<f64>>>,
+    pub interfaces: Vec<InterfaceSolution>,
+    /// The time point with the largest displacement of the first boundary state, if any.
+    first_w: Option<usize>,
+}
+
+/// An error about the content of `recording`.
+fn content(recording: &Recording, detail: String) -> ReplayError {
+    ReplayError::Content {
+        path: recording.path().display().to_string(),
         detail,
-    };
+    }
+}
+
+/// The scene text a recording holds, and the name it is known by in messages.
+fn recorded_scene(recording: &Recording) -> Result<(&str, String), ReplayError> {
     let text = recording
         .scene_text()
-        .ok_or_else(|| content("the recording holds no scene (attachment scene.toml)".into()))?;
-    let origin = format!("{path} (scene.toml)");
-    let model = load_str(text, &origin).map_err(|e| content(e.to_string()))?.model;
-    let decode = |m: &glissade_recorder::RecordedMessage<'_>| {
-        recording
-            .decode(m)
-            .map_err(|e| content(format!("message on `{}`: {e}", m.topic)))
-    };
+        .ok_or_else(|| content(recording, "the recording holds no scene (attachment scene.toml)".into()))?;
+    Ok((text, format!("{} (scene.toml)", recording.path().display())))
+}
 
-    // Pass 1: the final state, and the time point of the per-iteration meshes.
-    let mut interfaces = Vec::new();
+/// Reads the final state of the run recorded in `recording` (one pass over its messages).
+pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
+    let content = |detail: String| content(recording, detail);
+    let (text, origin) = recorded_scene(recording)?;
+    let model = load_str(text, &origin).map_err(|e| content(e.to_string()))?.model;
+    let mut interfaces: BTreeMap<u32, InterfaceSolution> = BTreeMap::new();
     let mut displacements = BTreeMap::new();
     let mut last_states = BTreeMap::new();
     let mut first_w = None;
     let mut states = BoundaryStates::new();
     for m in recording.messages() {
-        let msg = decode(&m)?;
+        let msg = recording
+            .decode(&m)
+            .map_err(|e| content(format!("message on `{}`: {e}", m.topic)))?;
         if let Some(state) = states.fields(&msg.payload) {
             let (subdomain, w, f) = state.map_err(|e| content(format!("message on `{}`: {e}", m.topic)))?;
             if first_w.is_none() {
@@ -45,22 +60,50 @@ pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySumma
             continue;
         }
         match msg.payload {
-            Payload::InterfaceSolution(s) => interfaces.push(s),
+            Payload::InterfaceSolution(s) => {
+                interfaces.insert(s.interface, s);
+            }
             Payload::Displacement { subdomain, u } => {
                 displacements.insert(subdomain, u);
             }
             _ => {}
         }
     }
+    let interfaces: Vec<InterfaceSolution> = interfaces.into_values().collect();
     let mut recovery = Recovery::new(&model);
-    let final_u =
-        final_displacements(&model, &mut recovery, &interfaces, &displacements, &last_states).map_err(content)?;
+    let u = final_displacements(&model, &mut recovery, &interfaces, &displacements, &last_states).map_err(content)?;
+    Ok(FinalState {
+        model,
+        u,
+        interfaces,
+        first_w,
+    })
+}
+
+/// Replays `recording` into the sink of `opts`: the colour range and amplification come from the
+/// final state, then every message goes through a [`View`].
+pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
+    let content = |detail: String| content(recording, detail);
+    let (text, origin) = recorded_scene(recording)?;
+    let decode = |m: &glissade_recorder::RecordedMessage<'_>| {
+        recording
+            .decode(m)
+            .map_err(|e| content(format!("message on `{}`: {e}", m.topic)))
+    };
+
+    // Pass 1: the final state, and the time point of the per-iteration meshes.
+    let FinalState {
+        model,
+        u: final_u,
+        first_w,
+        ..
+    } = final_state(recording)?;
     let mut fields = Vec::new();
     let mut umax = 0.0f64;
     for (&s, per_time) in &final_u {
         for u in per_time {
             umax = u.iter().fold(umax, |m, v| m.max(v.abs()));
-            fields.push(nodal_field(&model, s as usize, u, opts.color_by));
+            fields.push(nodal_field(&model, s as usize, u, opts.color_by)?);
         }
     }
     let range = range_of(fields.iter().map(Vec::as_slice));

@@ -1,0 +1,443 @@
+//! ParaView output: a `.pvd` time series with, per time point, one VTK XML unstructured grid of
+//! the subdomains and one of the interfaces (binary appended data, raw, little-endian, UInt64
+//! block headers). docs/outputs.md describes every array.
+//!
+//! - Solid (`solid-NNNN.vtu`): every subdomain's nodes in the reference configuration (z = 0),
+//!   its QUA8 elements as quadratic quadrilaterals (VTK type 23, the same node order), point data
+//!   `displacement` (3 components, u_z = 0), `stress` (σ_xx, σ_yy, σ_zz, σ_xy, σ_yz, σ_xz, the
+//!   order of ParaView's symmetric tensors; nodal averages), `von_mises`; cell data `subdomain`.
+//! - Interfaces (`interfaces-NNNN.vtu`): each interface's node pairs at their coordinates, its
+//!   3-node edges (those of side a whose middle node is a pair) as quadratic edges (VTK type 21:
+//!   end, end, middle), point data `traction_n`, `traction_t` (F̂ on side a in the interface's
+//!   frame, MPa), `jump_n`, `jump_t` (Ŵ_b − Ŵ_a, mm), `status` (0 separated, 1 stick, 2 slip,
+//!   −1 on perfect interfaces, −2 at an edge end clamped on both sides, which is no pair), `normal`
+//!   and `tangent`; cell data `interface` and `contact` (1 on contact interfaces).
+
+use crate::output::pair_values;
+use anyhow::{bail, Context};
+use glissade_mechanics::model::Model;
+use glissade_mechanics::post::{nodal_stresses_into, von_mises, NodalStress};
+use glissade_messages::InterfaceSolution;
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+/// VTK cell type of a quadratic quadrilateral (8 nodes).
+const VTK_QUADRATIC_QUAD: u8 = 23;
+/// VTK cell type of a quadratic edge (3 nodes).
+const VTK_QUADRATIC_EDGE: u8 = 21;
+/// `status` of an interface point clamped on both sides: not an unknown of the problem; its
+/// traction (a support reaction) is not computed (NaN) and its jump is 0.
+const CLAMPED: i32 = -2;
+
+/// What [`write_series`] wrote.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// The `.pvd` collection, to open in ParaView.
+    pub pvd: PathBuf,
+    /// The folder of the `.vtu` files, next to it.
+    pub dir: PathBuf,
+    pub files: usize,
+    pub bytes: u64,
+}
+
+/// The `.pvd` file and the `.vtu` folder of outputs named `stem` in `out`.
+pub fn series_paths(out: &Path, stem: &str) -> (PathBuf, PathBuf) {
+    (out.join(format!("{stem}.pvd")), out.join(format!("{stem}-vtu")))
+}
+
+/// Writes the time series of `model` to `out/<stem>.pvd` and `out/<stem>-vtu/`: `u[s][i]` is
+/// subdomain s's displacement at time point i (2 values per node), `interfaces` the interface
+/// solutions (ŝ) of the run. Refuses to write over an existing series; the folder appears under
+/// its name only once complete.
+pub fn write_series(
+    model: &Model,
+    u: &[Vec<&[f64]>],
+    interfaces: &[InterfaceSolution],
+    out: &Path,
+    stem: &str,
+) -> anyhow::Result<Series> {
+    let nt = model.time.n_points();
+    if u.len() != model.subdomains.len() {
+        bail!(
+            "displacements of {} subdomains, the scene has {}",
+            u.len(),
+            model.subdomains.len()
+        );
+    }
+    for (s, per_time) in u.iter().enumerate() {
+        let sub = &model.subdomains[s];
+        if per_time.len() != nt || per_time.iter().any(|v| v.len() != sub.n_dofs()) {
+            bail!(
+                "displacement of subdomain `{}`: {} time points of {:?} values, the scene gives {nt} of {}",
+                sub.name,
+                per_time.len(),
+                per_time.first().map(|v| v.len()),
+                sub.n_dofs()
+            );
+        }
+    }
+    let mut by_interface: Vec<Option<&InterfaceSolution>> = vec![None; model.interfaces.len()];
+    for sol in interfaces {
+        let slot = by_interface
+            .get_mut(sol.interface as usize)
+            .with_context(|| format!("solution of interface {}, which the scene does not have", sol.interface))?;
+        *slot = Some(sol);
+    }
+    for (i, itf) in model.interfaces.iter().enumerate() {
+        let Some(sol) = by_interface[i] else {
+            bail!(
+                "no solution of interface {i} ({} | {})",
+                model.subdomains[itf.a].name,
+                model.subdomains[itf.b].name
+            );
+        };
+        let rows = 2 * itf.n_pairs();
+        for (name, f) in [("F̂_a", &sol.f_a_hat), ("Ŵ_a", &sol.w_a_hat), ("Ŵ_b", &sol.w_b_hat)] {
+            if f.rows() != rows || f.cols() != nt {
+                bail!(
+                    "interface {i}: {name} is {} × {}, the scene gives {rows} × {nt}",
+                    f.rows(),
+                    f.cols()
+                );
+            }
+        }
+        if itf.is_contact() && sol.status.len() != itf.n_pairs() * nt {
+            bail!(
+                "interface {i}: {} statuses, the scene gives {}",
+                sol.status.len(),
+                itf.n_pairs() * nt
+            );
+        }
+    }
+    let (pvd, dir) = series_paths(out, stem);
+    for p in [&pvd, &dir] {
+        if std::fs::symlink_metadata(p).is_ok() {
+            bail!("{} already exists; nothing was overwritten", p.display());
+        }
+    }
+    let partial = out.join(format!(".{stem}-vtu.partial"));
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).with_context(|| format!("cannot remove {}", partial.display()))?;
+    }
+    std::fs::create_dir_all(&partial).with_context(|| format!("cannot create {}", partial.display()))?;
+
+    let solid = SolidGrid::new(model);
+    let edges = InterfaceGrid::new(model);
+    let mut bytes = 0u64;
+    let mut buf = Vec::new();
+    let mut collection = String::new();
+    let dir_name = dir.file_name().expect("a folder name").to_string_lossy().into_owned();
+    for i in 0..nt {
+        let t = model.time.t(i);
+        for (part, name) in [(0, format!("solid-{i:04}.vtu")), (1, format!("interfaces-{i:04}.vtu"))] {
+            buf.clear();
+            if part == 0 {
+                solid.write(model, u, i, &mut buf)?;
+            } else {
+                edges.write(model, &by_interface, i, &mut buf);
+            }
+            let path = partial.join(&name);
+            std::fs::write(&path, &buf).with_context(|| format!("cannot write {}", path.display()))?;
+            bytes += buf.len() as u64;
+            let _ = writeln!(
+                collection,
+                r#"    <DataSet timestep="{t:?}" part="{part}" file="{dir_name}/{name}"/>"#
+            );
+        }
+    }
+    let text = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"1.0\" byte_order=\"LittleEndian\">\n  <Collection>\n{collection}  </Collection>\n</VTKFile>\n"
+    );
+    std::fs::rename(&partial, &dir)
+        .with_context(|| format!("cannot move {} to {}", partial.display(), dir.display()))?;
+    let tmp = out.join(format!(".{stem}.pvd.partial"));
+    std::fs::write(&tmp, &text).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, &pvd).with_context(|| format!("cannot move {} to {}", tmp.display(), pvd.display()))?;
+    Ok(Series {
+        pvd,
+        dir,
+        files: 2 * nt,
+        bytes: bytes + text.len() as u64,
+    })
+}
+
+/// Points and cells of a grid, as the bytes of their arrays.
+#[derive(Default)]
+struct Geometry {
+    points: Vec<u8>,
+    connectivity: Vec<u8>,
+    offsets: Vec<u8>,
+    types: Vec<u8>,
+    n_points: usize,
+    n_cells: usize,
+    /// Length of the connectivity (the last offset).
+    n_refs: usize,
+}
+
+impl Geometry {
+    fn point(&mut self, [x, y]: [f64; 2]) {
+        put_f64(&mut self.points, &[x, y, 0.0]);
+        self.n_points += 1;
+    }
+
+    fn cell(&mut self, kind: u8, nodes: &[usize]) {
+        for &n in nodes {
+            self.connectivity.extend_from_slice(&(n as i64).to_le_bytes());
+        }
+        self.n_cells += 1;
+        self.n_refs += nodes.len();
+        self.offsets.extend_from_slice(&(self.n_refs as i64).to_le_bytes());
+        self.types.push(kind);
+    }
+
+    /// A new piece of this geometry, its points and cells written.
+    fn piece(&self) -> Appended {
+        let mut w = Appended::new(self.n_points, self.n_cells);
+        w.section("Points");
+        w.array("Points", "Float64", 3, &self.points);
+        w.end("Points");
+        w.section("Cells");
+        w.array("connectivity", "Int64", 1, &self.connectivity);
+        w.array("offsets", "Int64", 1, &self.offsets);
+        w.array("types", "UInt8", 1, &self.types);
+        w.end("Cells");
+        w
+    }
+}
+
+/// The subdomains' geometry, the same at every time point.
+struct SolidGrid {
+    geometry: Geometry,
+    subdomain: Vec<u8>,
+}
+
+impl SolidGrid {
+    fn new(model: &Model) -> Self {
+        let mut geometry = Geometry::default();
+        let mut subdomain = Vec::new();
+        for (s, sub) in model.subdomains.iter().enumerate() {
+            let base = geometry.n_points;
+            for &x in &sub.mesh.coords {
+                geometry.point(x);
+            }
+            for el in &sub.mesh.elements {
+                geometry.cell(VTK_QUADRATIC_QUAD, &el.map(|n| base + n));
+                subdomain.extend_from_slice(&(s as i32).to_le_bytes());
+            }
+        }
+        SolidGrid { geometry, subdomain }
+    }
+
+    fn write(&self, model: &Model, u: &[Vec<&[f64]>], i: usize, out: &mut Vec<u8>) -> anyhow::Result<()> {
+        let n_points = self.geometry.n_points;
+        let mut displacement = Vec::with_capacity(24 * n_points);
+        let mut stress = Vec::with_capacity(48 * n_points);
+        let mut vm = Vec::with_capacity(8 * n_points);
+        let mut nodal: Vec<NodalStress> = Vec::new();
+        let mut count = Vec::new();
+        for (s, sub) in model.subdomains.iter().enumerate() {
+            let v = u[s][i];
+            let n = sub.mesh.coords.len();
+            nodal.resize(n, [0.0; 4]);
+            count.resize(n, 0);
+            nodal_stresses_into(sub, model.plane, v, &mut nodal, &mut count)
+                .with_context(|| format!("stresses of subdomain `{}`", sub.name))?;
+            for k in 0..n {
+                put_f64(&mut displacement, &[v[2 * k], v[2 * k + 1], 0.0]);
+                let [sx, sy, sz, txy] = nodal[k];
+                put_f64(&mut stress, &[sx, sy, sz, txy, 0.0, 0.0]);
+                put_f64(&mut vm, &[von_mises(&nodal[k])]);
+            }
+        }
+        let mut w = self.geometry.piece();
+        w.section("PointData");
+        w.array("displacement", "Float64", 3, &displacement);
+        w.array("stress", "Float64", 6, &stress);
+        w.array("von_mises", "Float64", 1, &vm);
+        w.end("PointData");
+        w.section("CellData");
+        w.array("subdomain", "Int32", 1, &self.subdomain);
+        w.end("CellData");
+        w.finish(out);
+        Ok(())
+    }
+}
+
+/// The interfaces' geometry (node pairs and 3-node edges), the same at every time point.
+struct InterfaceGrid {
+    geometry: Geometry,
+    interface: Vec<u8>,
+    contact: Vec<u8>,
+    normal: Vec<u8>,
+    tangent: Vec<u8>,
+    /// Per interface, its points after the node pairs: nodes of side a on an interface edge
+    /// that are clamped on both sides (not unknowns, so not pairs).
+    extra: Vec<usize>,
+}
+
+impl InterfaceGrid {
+    fn new(model: &Model) -> Self {
+        let mut g = InterfaceGrid {
+            geometry: Geometry::default(),
+            interface: Vec::new(),
+            contact: Vec::new(),
+            normal: Vec::new(),
+            tangent: Vec::new(),
+            extra: Vec::new(),
+        };
+        for (k, itf) in model.interfaces.iter().enumerate() {
+            let base = g.geometry.n_points;
+            let mesh = &model.subdomains[itf.a].mesh;
+            let pair_of: HashMap<usize, usize> = itf.pairs.iter().enumerate().map(|(p, &(n, _))| (n, p)).collect();
+            // Nodes of side a on an interface edge that are not pairs (clamped on both sides).
+            let mut extra: Vec<usize> = Vec::new();
+            let mut point = |n: usize| match pair_of.get(&n) {
+                Some(&p) => base + p,
+                None => {
+                    let e = extra.iter().position(|&m| m == n).unwrap_or_else(|| {
+                        extra.push(n);
+                        extra.len() - 1
+                    });
+                    base + itf.n_pairs() + e
+                }
+            };
+            for el in &mesh.elements {
+                for side in 0..4 {
+                    let (c0, mid, c1) = (el[side], el[4 + side], el[(side + 1) % 4]);
+                    if !pair_of.contains_key(&mid) {
+                        continue;
+                    }
+                    g.geometry.cell(VTK_QUADRATIC_EDGE, &[point(c0), point(c1), point(mid)]);
+                    g.interface.extend_from_slice(&(k as i32).to_le_bytes());
+                    g.contact.extend_from_slice(&(itf.is_contact() as i32).to_le_bytes());
+                }
+            }
+            let coords = itf.coords.iter().copied().chain(extra.iter().map(|&n| mesh.coords[n]));
+            for x in coords {
+                g.geometry.point(x);
+                put_f64(&mut g.normal, &[itf.normal[0], itf.normal[1], 0.0]);
+                put_f64(&mut g.tangent, &[itf.tangent[0], itf.tangent[1], 0.0]);
+            }
+            g.extra.push(extra.len());
+        }
+        g
+    }
+
+    fn write(&self, model: &Model, solutions: &[Option<&InterfaceSolution>], i: usize, out: &mut Vec<u8>) {
+        let n = self.geometry.n_points;
+        let (mut f_n, mut f_t, mut j_n, mut j_t, mut status) = (
+            Vec::with_capacity(8 * n),
+            Vec::with_capacity(8 * n),
+            Vec::with_capacity(8 * n),
+            Vec::with_capacity(8 * n),
+            Vec::with_capacity(4 * n),
+        );
+        for (k, itf) in model.interfaces.iter().enumerate() {
+            let sol = solutions[k].expect("checked by write_series");
+            let np = itf.n_pairs();
+            for p in 0..np {
+                let [n, t, jn, jt] = pair_values(itf, sol, i, p);
+                put_f64(&mut f_n, &[n]);
+                put_f64(&mut f_t, &[t]);
+                put_f64(&mut j_n, &[jn]);
+                put_f64(&mut j_t, &[jt]);
+                let st = if itf.is_contact() {
+                    sol.status[i * np + p] as i32
+                } else {
+                    -1
+                };
+                status.extend_from_slice(&st.to_le_bytes());
+            }
+            for _ in 0..self.extra[k] {
+                put_f64(&mut f_n, &[f64::NAN]);
+                put_f64(&mut f_t, &[f64::NAN]);
+                put_f64(&mut j_n, &[0.0]);
+                put_f64(&mut j_t, &[0.0]);
+                status.extend_from_slice(&CLAMPED.to_le_bytes());
+            }
+        }
+        let mut w = self.geometry.piece();
+        w.section("PointData");
+        w.array("traction_n", "Float64", 1, &f_n);
+        w.array("traction_t", "Float64", 1, &f_t);
+        w.array("jump_n", "Float64", 1, &j_n);
+        w.array("jump_t", "Float64", 1, &j_t);
+        w.array("status", "Int32", 1, &status);
+        w.array("normal", "Float64", 3, &self.normal);
+        w.array("tangent", "Float64", 3, &self.tangent);
+        w.end("PointData");
+        w.section("CellData");
+        w.array("interface", "Int32", 1, &self.interface);
+        w.array("contact", "Int32", 1, &self.contact);
+        w.end("CellData");
+        w.finish(out);
+    }
+}
+
+fn put_f64(out: &mut Vec<u8>, values: &[f64]) {
+    for v in values {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// One piece of a VTK XML unstructured grid with its arrays in raw appended data: each block is
+/// its byte count (UInt64) followed by the bytes.
+struct Appended {
+    xml: String,
+    data: Vec<u8>,
+}
+
+impl Appended {
+    fn new(n_points: usize, n_cells: usize) -> Self {
+        let xml = format!(
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n    <Piece NumberOfPoints=\"{n_points}\" NumberOfCells=\"{n_cells}\">\n"
+        );
+        Appended { xml, data: Vec::new() }
+    }
+
+    fn section(&mut self, name: &str) {
+        let _ = writeln!(self.xml, "      <{name}>");
+    }
+
+    fn end(&mut self, name: &str) {
+        let _ = writeln!(self.xml, "      </{name}>");
+    }
+
+    fn array(&mut self, name: &str, ty: &str, components: usize, bytes: &[u8]) {
+        let components = if components > 1 {
+            format!(" NumberOfComponents=\"{components}\"")
+        } else {
+            String::new()
+        };
+        let _ = writeln!(
+            self.xml,
+            "        <DataArray type=\"{ty}\" Name=\"{name}\"{components} format=\"appended\" offset=\"{}\"/>",
+            self.data.len()
+        );
+        self.data.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+        self.data.extend_from_slice(bytes);
+    }
+
+    fn finish(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(self.xml.as_bytes());
+        out.extend_from_slice(b"    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _");
+        out.extend_from_slice(&self.data);
+        out.extend_from_slice(b"\n  </AppendedData>\n</VTKFile>\n");
+    }
+}
+
+/// Writes `data` (already complete) to `path` through a partial file, refusing to overwrite.
+pub fn write_new_file(path: &Path, data: &[u8]) -> anyhow::Result<()> {
+    if std::fs::symlink_metadata(path).is_ok() {
+        bail!("{} already exists; nothing was overwritten", path.display());
+    }
+    let name = path.file_name().context("a file name")?.to_string_lossy();
+    let tmp = path.with_file_name(format!(".{name}.partial"));
+    let mut f = std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
+    f.write_all(data)
+        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))?;
+    Ok(())
+}

@@ -1,0 +1,230 @@
+//! ParaView and CSV outputs read by foreign readers: `glissade run --vtu --csv` and
+//! `glissade export`, read back with Python's `meshio` and `csv` and compared with the run's
+//! JSON outputs.
+
+use crate::common::{python_with, scratch};
+use std::path::Path;
+use std::process::Command;
+
+/// Reads a run's `.pvd`, every `.vtu` it lists (meshio) and its CSV, and compares them with the
+/// run's `fields.json` and `displacement.json` (when given). Prints one JSON object: the largest
+/// differences and what was read.
+const CHECK: &str = r#"
+import sys, json, csv, os
+import xml.etree.ElementTree as ET
+import numpy as np
+import meshio
+
+pvd, fields_path, disp_path, csv_path = sys.argv[1:5]
+fields = json.load(open(fields_path))
+times = fields["times"]
+sets = ET.parse(pvd).getroot().find("Collection").findall("DataSet")
+base = os.path.dirname(pvd)
+by_time = {}
+for d in sets:
+    by_time.setdefault(float(d.get("timestep")), {})[d.get("part")] = os.path.join(base, d.get("file"))
+out = {"time_points": len(by_time), "datasets": len(sets), "times_equal": sorted(by_time) == sorted(times)}
+disp = json.load(open(disp_path))["displacements"] if disp_path != "-" else None
+d_u = d_f = d_vm = 0.0
+u_scale = f_scale = 0.0
+status_mismatch = 0
+clamped = 0
+codes = {"separated": 0, "stick": 1, "slip": 2}
+for i, t in enumerate(times):
+    parts = by_time[t]
+    solid = meshio.read(parts["0"])
+    assert [c.type for c in solid.cells] == ["quad8"], [c.type for c in solid.cells]
+    u = solid.point_data["displacement"]
+    s = solid.point_data["stress"]
+    sx, sy, sz, txy = s[:, 0], s[:, 1], s[:, 2], s[:, 3]
+    vm = np.sqrt(0.5 * ((sx - sy) ** 2 + (sy - sz) ** 2 + (sz - sx) ** 2) + 3 * txy ** 2)
+    d_vm = max(d_vm, float(np.max(np.abs(vm - solid.point_data["von_mises"]))) / max(1e-300, float(np.max(vm))))
+    if disp is not None:
+        k = 0
+        for sub in disp:
+            rows = sub["rows"]
+            col = np.array(sub["u"][i * rows:(i + 1) * rows]).reshape(-1, 2)
+            n = col.shape[0]
+            d_u = max(d_u, float(np.max(np.abs(u[k:k + n, :2] - col))))
+            u_scale = max(u_scale, float(np.max(np.abs(col))))
+            k += n
+        assert k == u.shape[0], (k, u.shape)
+    itf = meshio.read(parts["1"])
+    assert [c.type for c in itf.cells] == ["line3"], [c.type for c in itf.cells]
+    pd = itf.point_data
+    k = 0
+    for f in fields["interfaces"]:
+        np_ = len(f["coords"])
+        for key, name in [("f_n", "traction_n"), ("f_t", "traction_t"), ("jump_n", "jump_n"), ("jump_t", "jump_t")]:
+            d_f = max(d_f, float(np.max(np.abs(pd[name][k:k + np_] - np.array(f[key][i])))))
+        f_scale = max(f_scale, max(abs(v) for v in f["f_n"][i]))
+        st = pd["status"][k:k + np_]
+        expected = [codes[w] for w in f["status"][i]] if f["status"] else [-1] * np_
+        status_mismatch += int(np.sum(st != np.array(expected)))
+        k += np_
+        while k < len(pd["status"]) and pd["status"][k] == -2:
+            clamped += 1
+            k += 1
+    assert k == itf.points.shape[0], (k, itf.points.shape)
+rows = list(csv.DictReader(open(csv_path)))
+d_csv = 0.0
+k = 0
+for i, t in enumerate(times):
+    for f in fields["interfaces"]:
+        for p in range(len(f["coords"])):
+            r = rows[k]
+            k += 1
+            assert float(r["time"]) == t and int(r["interface"]) == f["interface"] and int(r["pair"]) == p
+            for key, name in [("f_n", "traction_n"), ("f_t", "traction_t"), ("jump_n", "jump_n"), ("jump_t", "jump_t")]:
+                d_csv = max(d_csv, abs(float(r[name]) - f[key][i][p]))
+            w = f["status"][i][p] if f["status"] else "perfect"
+            status_mismatch += int(r["status"] != w)
+out.update(csv_rows=len(rows), expected_rows=k, d_u=d_u, u_scale=u_scale, d_f=d_f, d_csv=d_csv,
+           f_scale=f_scale, d_vm=d_vm, status_mismatch=status_mismatch, clamped_points=clamped)
+print(json.dumps(out))
+"#;
+
+fn run_check(python: &str, pvd: &Path, fields: &Path, displacement: Option<&Path>, csv: &Path) -> serde_json::Value {
+    let o = Command::new(python)
+        .args(["-c", CHECK])
+        .arg(pvd)
+        .arg(fields)
+        .arg(displacement.map_or("-".into(), |p| p.display().to_string()))
+        .arg(csv)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "python check failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let text = String::from_utf8_lossy(&o.stdout);
+    serde_json::from_str(text.trim()).unwrap_or_else(|e| panic!("python printed {text}: {e}"))
+}
+
+fn glissade(args: &[&str]) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "glissade {args:?} failed: {}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// The VTU series, the CSV and the JSON outputs of one run carry the same doubles: VTU stores
+/// them raw, JSON and CSV in shortest round-trip decimal, so they agree to 1e-12 (the issue's bar;
+/// in practice exactly). The scene has interface edges ending at a pair clamped on both sides, so
+/// the clamped-point case is exercised.
+#[test]
+fn a_runs_paraview_series_and_csv_equal_its_json_outputs() {
+    let Some(python) = python_with(&["meshio", "numpy"]) else {
+        return;
+    };
+    let dir = scratch("vtu-run");
+    let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
+    let out = dir.display().to_string();
+    let printed = glissade(&[
+        "run",
+        &scene,
+        "--in-process",
+        "--interior",
+        "--vtu",
+        "--csv",
+        "--out",
+        &out,
+        "--run-id",
+        "v",
+    ]);
+    assert!(printed.contains("paraview: "), "{printed}");
+    let stem = dir.join("small-three-layer-v");
+    let r = run_check(
+        python,
+        &stem.with_extension("pvd"),
+        &stem.with_extension("fields.json"),
+        Some(&stem.with_extension("displacement.json")),
+        &stem.with_extension("interfaces.csv"),
+    );
+    println!("{r}");
+    // N = 10: 11 time points, a solid and an interface dataset each.
+    assert_eq!(r["time_points"], 11);
+    assert_eq!(r["datasets"], 22);
+    assert_eq!(r["times_equal"], true);
+    assert_eq!(r["csv_rows"], r["expected_rows"]);
+    assert_eq!(r["status_mismatch"], 0);
+    assert!(r["clamped_points"].as_u64().unwrap() > 0, "{r}");
+    let f = |k: &str| r[k].as_f64().unwrap();
+    assert!(f("u_scale") > 0.0 && f("f_scale") > 0.0);
+    assert!(f("d_u") <= 1e-12 * f("u_scale"), "{r}");
+    assert!(f("d_f") <= 1e-12 * f("f_scale"), "{r}");
+    assert!(f("d_csv") <= 1e-12 * f("f_scale"), "{r}");
+    // von Mises as recomputed from the stress array: the same formula in numpy, round-off only.
+    assert!(f("d_vm") <= 1e-12, "{r}");
+
+    // Refuses to write over the series of the same run.
+    let o = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["run", &scene, "--in-process", "--vtu", "--out", &out, "--run-id", "v"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("small-three-layer-v.pvd") && err.contains("nothing was overwritten"),
+        "{err}"
+    );
+}
+
+/// `glissade export` of a recording made without `--interior` recovers the displacements from
+/// the recorded boundary states; they equal the interior displacements of a run of the same
+/// scene (in-process runs are deterministic) to the recovery's sparse-solve round-off, 1e-9 of
+/// the largest displacement; the interface fields are the recorded ones, exactly.
+#[test]
+fn export_of_a_recording_equals_the_runs_own_outputs() {
+    let Some(python) = python_with(&["meshio", "numpy"]) else {
+        return;
+    };
+    let dir = scratch("vtu-export");
+    let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
+    let out = dir.display().to_string();
+    glissade(&[
+        "run",
+        &scene,
+        "--in-process",
+        "--interior",
+        "--out",
+        &out,
+        "--run-id",
+        "a",
+    ]);
+    glissade(&["run", &scene, "--in-process", "--out", &out, "--run-id", "b"]);
+    let exported = dir.join("exported");
+    let ex = exported.display().to_string();
+    let rec = dir.join("small-three-layer-b.mcap").display().to_string();
+    let printed = glissade(&["export", &rec, "--vtu", &ex, "--csv", &ex]);
+    assert!(printed.contains("paraview: ") && printed.contains("csv: "), "{printed}");
+    let r = run_check(
+        python,
+        &exported.join("small-three-layer-b.pvd"),
+        &dir.join("small-three-layer-b.fields.json"),
+        Some(&dir.join("small-three-layer-a.displacement.json")),
+        &exported.join("small-three-layer-b.interfaces.csv"),
+    );
+    println!("{r}");
+    assert_eq!(r["time_points"], 11);
+    assert_eq!(r["status_mismatch"], 0);
+    let f = |k: &str| r[k].as_f64().unwrap();
+    assert!(f("d_u") <= 1e-9 * f("u_scale"), "{r}");
+    assert!(f("d_f") <= 1e-12 * f("f_scale"), "{r}");
+
+    // A second export into the same folder overwrites nothing.
+    let o = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["export", &rec, "--vtu", &ex])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("nothing was overwritten"));
+}
