@@ -126,7 +126,9 @@ pub(crate) fn forward(
 ) -> std::thread::JoinHandle<()> {
     std::thread::spawn(move || {
         for line in BufReader::new(stream).lines().map_while(Result::ok) {
-            eprintln!("[{prefix}] {line}");
+            if crate::console::shows_child_line(&line) {
+                eprintln!("[{prefix}] {line}");
+            }
             if let Ok(mut l) = last.lock() {
                 l.push(line);
                 let n = l.len();

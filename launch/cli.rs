@@ -279,6 +279,10 @@ pub(crate) struct RunArgs {
     /// No progress bar.
     #[arg(long)]
     pub(crate) quiet: bool,
+    /// Also print how the run is set up and goes: how fields travel, node restarts, node
+    /// readiness, each node process's notes, the bytes on the bus per message kind.
+    #[arg(long, short)]
+    pub(crate) verbose: bool,
     /// Zenoh endpoint(s) the launcher's router listens on, e.g. tcp/0.0.0.0:7447, for nodes
     /// started on other machines (default: a free loopback port). Repeatable.
     #[arg(long, conflicts_with_all = ["in_process", "connect"])]

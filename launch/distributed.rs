@@ -364,7 +364,7 @@ pub fn run_distributed_observed(
         None,
     )?;
     if let Some(t) = &time_start {
-        eprintln!("run {run_id}: {}", t.describe());
+        crate::console::note(&format!("run {run_id}: {}", t.describe()));
     }
     let groups = plan.groups(scene.deployment.subdomain_nodes);
     let all_nodes = run_nodes_of(&plan, groups.len());
@@ -421,7 +421,7 @@ pub fn run_distributed_observed(
             };
             let auto = auto_shared_memory(scene, &host);
             if let Ok(why) = &auto {
-                eprintln!("fields through shared memory ({why})");
+                crate::console::note(&format!("fields through shared memory ({why})"));
             }
             auto.is_ok()
         }
@@ -513,7 +513,9 @@ pub fn run_distributed_observed(
     });
     let supervised = restarts > 0 && no_resume.is_none();
     if let (true, Some(why)) = (restarts > 0, &no_resume) {
-        eprintln!("node restarts off ({why}): a node process that dies stops the run");
+        crate::console::note(&format!(
+            "node restarts off ({why}): a node process that dies stops the run"
+        ));
     }
     let with_supervision = |mut args: Vec<String>| {
         if supervised {
@@ -721,7 +723,7 @@ pub fn run_distributed_observed(
                 got.setup_s = t0.elapsed().as_secs_f64();
                 got.started = Some(Instant::now());
                 last_message = Instant::now();
-                eprintln!("run {run_id}: {} node(s) ready, iterating", all_nodes.len());
+                crate::console::note(&format!("run {run_id}: {} node(s) ready, iterating", all_nodes.len()));
             } else {
                 let local_late = missing.iter().any(|n| !net.remote.contains(n)) && t0.elapsed() > READY_TIMEOUT;
                 let remote_late = missing.iter().any(|n| net.remote.contains(n)) && t0.elapsed() > remote_timeout;

@@ -4,6 +4,7 @@
 pub mod accuracy;
 pub mod bench;
 pub mod children;
+pub mod console;
 pub mod distributed;
 pub mod output;
 pub mod recording;

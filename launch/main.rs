@@ -345,6 +345,7 @@ fn default_run_id() -> anyhow::Result<String> {
 }
 
 fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
+    glissade::console::set_verbose(args.verbose);
     let overrides = SolverOverrides {
         accuracy: args.accuracy,
         ..Default::default()
@@ -375,9 +376,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         ProgressBar::new(sc.model.solver.max_iterations as u64)
     };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {pos} it  {msg}").expect("valid template"),
-    );
+    bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed}] it {pos}  {msg}").expect("valid template"));
     bar.set_message(format!(
         "building operators of {} subdomains",
         sc.model.subdomains.len()
@@ -387,24 +386,14 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         interior: args.interior || args.vtu,
     };
     let progress = |r: &IterationRecord| {
-        let d = &r.decision;
         bar.set_position(r.iteration as u64 + 1);
-        bar.set_message(format!(
-            "error ≈ {}  η {:.3e}  e_c {:.3e}  sep/stick/slip {}/{}/{}  changed {}  {:.2} s",
-            d.estimate.map_or("?".to_string(), |e| format!("{e:.2e}")),
-            d.eta,
-            d.contact_indicator,
-            d.counts[0],
-            d.counts[1],
-            d.counts[2],
-            d.status_changes,
-            r.elapsed_s
-        ));
+        bar.set_message(glissade::output::progress_line(&sc.model, r));
     };
     let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
     let mut live = LiveView::new(&args, &sc, &run_id)?;
     // Linear-stage totals per linear stage: in process only (a node process keeps its records).
     let mut linear_stages = None;
+    let mut bus = None;
     let result = if args.in_process {
         let (result, records, outcome) =
             glissade::recording::run_in_process_recorded_logged(&sc, &opts, recording.as_deref(), progress, |m| {
@@ -414,16 +403,11 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             })?;
         linear_stages = Some(glissade::output::linear_stage_totals(&sc, &records));
         live.finish()?;
-        if let Some(o) = outcome {
-            if let Some(st) = &o.stats {
-                println!(
-                    "recording: {} ({} messages on {} channels, {} bytes)",
-                    o.path.display(),
-                    st.messages,
-                    st.channels,
-                    st.file_bytes
-                );
-            }
+        if let Some(st) = outcome.and_then(|o| o.stats) {
+            glissade::console::note(&format!(
+                "recorded {} messages on {} channels",
+                st.messages, st.channels
+            ));
         }
         result
     } else {
@@ -451,8 +435,12 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                     } else {
                         "set-up or final, not per iteration".to_string()
                     };
-                    println!("bus: {kind}: {} message(s), {} bytes ({rate})", t.messages, t.bytes);
+                    glissade::console::note(&format!(
+                        "bus: {kind}: {} message(s), {} bytes ({rate})",
+                        t.messages, t.bytes
+                    ));
                 }
+                bus = Some(traffic);
                 result
             }
             Err(e) => {
@@ -485,6 +473,9 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             serde_json::json!("not measured: a multi-process run's subdomain nodes keep their linear-stage records")
         }
     };
+    if let Some(traffic) = &bus {
+        run_summary["bus"] = serde_json::json!(traffic);
+    }
     let summary_path = write_json(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)?;
     let fields_path = write_json(
         &args.out,
@@ -521,6 +512,14 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     );
     for t in linear_stages.iter().flatten() {
         println!("{}", t.line());
+    }
+    if let Some(size) = recording
+        .as_deref()
+        .and_then(|p| std::fs::metadata(p).ok())
+        .map(|m| m.len())
+    {
+        let path = recording.as_deref().expect("a recording path").display();
+        println!("recording: {path} ({:.1} MB)", size as f64 * 1e-6);
     }
     println!("summary: {}\nfields: {}", summary_path.display(), fields_path.display());
     if args.csv {

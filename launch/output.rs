@@ -81,6 +81,44 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     }
 }
 
+/// Seconds left until an estimate `estimate` that contracts by `rate` per iteration reaches
+/// `target`, at `per_iteration` seconds an iteration: 0 when it is there, None without a
+/// contraction (rate not in (0, 1)).
+pub fn time_left(estimate: f64, target: f64, rate: f64, per_iteration: f64) -> Option<f64> {
+    if estimate <= target {
+        return Some(0.0);
+    }
+    if !(rate > 0.0 && rate < 1.0) {
+        return None;
+    }
+    Some(((estimate / target).ln() / rate.recip().ln()).ceil() * per_iteration)
+}
+
+/// The progress line of `glissade run` after an iteration: the estimated error and its target,
+/// η (and its tolerance when set), e_c, stick/slip (and separated) counts, status changes and the
+/// time left at the observed rate.
+pub fn progress_line(model: &Model, r: &crate::runner::IterationRecord) -> String {
+    let d = &r.decision;
+    let s = &model.solver;
+    let target = |t: Option<f64>| t.map_or(String::new(), |t| format!(" → {t:.0e}"));
+    let error = d.estimate.map_or("?".to_string(), |e| format!("{e:.2e}"));
+    let per_iteration = r.elapsed_s / (r.iteration as f64 + 1.0);
+    let left = match (d.estimate, d.contraction, s.accuracy) {
+        (Some(e), Some(rate), Some(a)) => time_left(e, a, rate, per_iteration),
+        _ => None,
+    };
+    let left = left.map_or(String::new(), |t| format!("  ~{t:.0} s left"));
+    let [separated, stick, slip] = d.counts;
+    format!(
+        "error ≈ {error}{}  η {:.2e}{}  e_c {:.2e}  stick/slip {stick}/{slip} (separated {separated}, changed {}){left}",
+        target(s.accuracy),
+        d.eta,
+        target(s.tolerance),
+        d.contact_indicator,
+        d.status_changes,
+    )
+}
+
 /// What `glissade run` writes besides its recording: `<scene>-<run>.<kind>`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RunFile {
@@ -493,4 +531,18 @@ pub fn reference_interfaces(model: &Model, reference: &ReferenceSolution) -> Vec
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::time_left;
+
+    /// 1e-2 to 1e-3 at a contraction of 0.5 per iteration: ln 10 / ln 2 = 3.3, so 4 iterations.
+    #[test]
+    fn time_left_counts_the_iterations_to_the_target_at_the_observed_rate() {
+        assert_eq!(time_left(1e-2, 1e-3, 0.5, 0.25), Some(1.0));
+        assert_eq!(time_left(1e-4, 1e-3, 0.5, 0.25), Some(0.0));
+        assert_eq!(time_left(1e-2, 1e-3, 1.0, 0.25), None);
+        assert_eq!(time_left(1e-2, 1e-3, f64::NAN, 0.25), None);
+    }
 }

@@ -342,7 +342,12 @@ pub fn run_recorder_process(
     }
     let scene = load_str(&text, "<scene from the bus>")?;
     let mut recorder = create_recorder(&scene, run_id, path)?;
-    eprintln!("recording to {} (pid {})", path.display(), std::process::id());
+    eprintln!(
+        "{}recording to {} (pid {})",
+        glissade_zenoh::NOTE,
+        path.display(),
+        std::process::id()
+    );
     let (tx, rx) = mpsc::channel::<Heard>();
     let log_tx = tx.clone();
     let _sub = session
@@ -461,7 +466,8 @@ pub fn run_recorder_process(
     }
     let stats = recorder.finish()?;
     eprintln!(
-        "recorded {} messages on {} channels, {} bytes: {}",
+        "{}recorded {} messages on {} channels, {} bytes: {}",
+        glissade_zenoh::NOTE,
         stats.messages,
         stats.channels,
         stats.file_bytes,

@@ -426,7 +426,7 @@ fn with_shared_memory_large_fields_are_sent_without_a_copy() {
     let text = scene_text("stratified").replace("N = 1000", "N = 30") + "\n[network]\nshared_memory = true\n";
     std::fs::write(&scene_file, text).expect("scene file");
     let output = std::process::Command::new(exe())
-        .args(["run", "--quiet", "--out"])
+        .args(["run", "--quiet", "--verbose", "--out"])
         .arg(dir.join("out"))
         .arg(&scene_file)
         .output()
@@ -665,4 +665,57 @@ fn rust_log_shows_every_process_log_lines() {
         !without.contains("INFO zenoh"),
         "a log line without RUST_LOG:\n{without}"
     );
+}
+
+/// The console of a run as processes says what matters: the verdict, the recording with its
+/// size and the output files (4 lines, the progress line aside, which is hidden when the output
+/// is not a terminal). How it went (shared memory, readiness, bytes on the bus per kind, each
+/// node's notes) only with `--verbose`, and the bus statistics are in the summary either way.
+#[test]
+fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
+    let dir = crate::common::scratch("console");
+    let scene = dir.join("small-three-layer.toml");
+    std::fs::write(&scene, scene_text("small-three-layer")).expect("scene file");
+    let run = |run_id: &str, verbose: bool| {
+        let mut cmd = std::process::Command::new(exe());
+        cmd.args(["run", "--run-id", run_id, "--out"]).arg(&*dir).arg(&scene);
+        if verbose {
+            cmd.arg("--verbose");
+        }
+        let o = cmd.output().expect("spawn glissade");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (out, err) = run("quiet", false);
+    let lines: Vec<&str> = out.lines().chain(err.lines()).collect();
+    assert_eq!(lines.len(), 4, "{out}{err}");
+    assert!(
+        lines[0].starts_with("scene `small-three-layer`: Converged after "),
+        "{out}"
+    );
+    assert!(
+        lines[1].starts_with("recording: ") && lines[1].ends_with(" MB)"),
+        "{out}"
+    );
+    assert!(
+        lines[2].starts_with("summary: ") && lines[3].starts_with("fields: "),
+        "{out}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("small-three-layer-quiet.summary.json")).unwrap())
+            .unwrap();
+    assert!(
+        summary["bus"]["by_kind"]["boundary_state"]["bytes"].as_u64().unwrap() > 0,
+        "{}",
+        summary["bus"]
+    );
+
+    let (out, err) = run("verbose", true);
+    assert!(err.contains("node(s) ready, iterating"), "{err}");
+    assert!(err.contains("[recorder:0] note: recorded "), "{err}");
+    assert!(err.contains("bus: boundary_state: "), "{err}");
+    assert!(out.contains("summary: "), "{out}");
 }

@@ -158,7 +158,7 @@ fn launch_endless_with(name: &str, deployment: &str, sections: &str) -> (Launche
     let mut cmd = Command::new(exe());
     cmd.arg("run")
         .arg(&scene)
-        .args(["--quiet", "--run-id", &run_id, "--out"])
+        .args(["--quiet", "--verbose", "--run-id", &run_id, "--out"])
         .arg(&*dir);
     let mut launcher = Launcher::spawn(&mut cmd);
     launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
@@ -315,6 +315,7 @@ fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String, Scr
         .arg(&scene)
         .args([
             "--quiet",
+            "--verbose",
             "--run-id",
             &run_id,
             "--listen",

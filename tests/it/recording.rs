@@ -389,7 +389,9 @@ fn a_full_disk_fails_the_run_before_solving() {
         let file = dir.join(format!("small-three-layer-{run_id}.mcap"));
         std::os::unix::fs::symlink("/dev/full", &file).unwrap();
         let mut cmd = Command::new(env!("CARGO_BIN_EXE_glissade"));
-        cmd.args(["run", "--quiet", "--run-id", run_id, "--out"]).arg(&dir);
+        // --verbose: a run that started would say `iterating`.
+        cmd.args(["run", "--quiet", "--verbose", "--run-id", run_id, "--out"])
+            .arg(&dir);
         if in_process {
             cmd.arg("--in-process");
         }

@@ -53,6 +53,10 @@ mod shm;
 #[cfg(test)]
 mod test_support;
 
+/// The start of a node process's informational lines (`glissade run` shows them with `--verbose`);
+/// other lines (warnings, errors, `RUST_LOG` logs) are always shown.
+pub const NOTE: &str = "note: ";
+
 pub use config::{config, free_loopback_port, open, secure_config, set_shared_memory, Access, Tls, LEASE};
 pub use error::TransportError;
 pub use handshake::{fetch_scene, publish_done, publish_start, publish_stop, scene_fingerprint_of, serve_scene};

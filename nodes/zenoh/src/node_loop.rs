@@ -390,8 +390,9 @@ fn report_lending(lender: &ShmLender, log: &mut dyn FnMut(&str)) {
     let (lent, refused) = lender.counts();
     if lent + refused > 0 {
         log(&format!(
-            "shared memory: {lent} large field(s) written in place and sent without a copy, {refused} copied \
+            "{}shared memory: {lent} large field(s) written in place and sent without a copy, {refused} copied \
              for lack of room{}",
+            crate::NOTE,
             if refused > 0 {
                 " (every pool full, or no room in /dev/shm for another)"
             } else {
