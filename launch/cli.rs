@@ -75,6 +75,9 @@ pub(crate) enum Command {
         /// gets 20 times as many).
         #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..))]
         newton_iterations: u32,
+        /// Plot the wall time on a logarithmic axis.
+        #[arg(long)]
+        log_time: bool,
     },
     /// Run a scene in-process and split an iteration's time by stage, against the machine's
     /// measured dense-product rate and memory bandwidth (`<scene>-bench.json`; use a release build).

@@ -12,7 +12,7 @@ use glissade::distributed::{
 };
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json, RunFile};
-use glissade::report::{build_report_with, linear_stage_table, plot_svg};
+use glissade::report::{build_report_with, linear_stage_table, plot_svg, TimeAxis};
 use glissade::runner::{IterationRecord, RunOptions};
 use glissade_messages::Verdict;
 use glissade_reference::glued::solve_glued;
@@ -214,6 +214,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             variants,
             stop_at_error,
             newton_iterations,
+            log_time,
         } => {
             let overrides = SolverOverrides {
                 accuracy,
@@ -226,10 +227,11 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     anyhow::bail!("--stop-at-error {e}: must be a positive number");
                 }
             }
+            let axis = if log_time { TimeAxis::Log } else { TimeAxis::Linear };
             if variants.is_empty() {
-                report(&scene, &out, &overrides, stop_at_error, &ropts)
+                report(&scene, &out, &overrides, stop_at_error, &ropts, axis)
             } else {
-                report_variants(&scene, &out, &overrides, &variants, stop_at_error, &ropts)
+                report_variants(&scene, &out, &overrides, &variants, stop_at_error, &ropts, axis)
             }
         }
         Command::Stability {
@@ -795,6 +797,7 @@ fn report(
     overrides: &SolverOverrides,
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,
+    time_axis: TimeAxis,
 ) -> anyhow::Result<ExitCode> {
     let sc = load_with_overrides(scene, out, overrides)?;
     let run_id = default_run_id()?;
@@ -802,7 +805,8 @@ fn report(
     let name = &sc.model.name;
     let j = write_json(out, &format!("{name}-report.json"), &serde_json::to_value(&report)?)?;
     let svg_path = out.join(format!("{name}-report.svg"));
-    std::fs::write(&svg_path, plot_svg(&report)).with_context(|| format!("cannot write {}", svg_path.display()))?;
+    std::fs::write(&svg_path, plot_svg(&report, time_axis))
+        .with_context(|| format!("cannot write {}", svg_path.display()))?;
     println!(
         "scene `{name}`: reference {:.2} s ({}); LATIN setup {:.2} s + {:.2} s, {} iterations, {}",
         report.reference_s,
@@ -844,6 +848,7 @@ fn report_variants(
     names: &[String],
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,
+    time_axis: TimeAxis,
 ) -> anyhow::Result<ExitCode> {
     let variants = names
         .iter()
@@ -868,7 +873,8 @@ fn report_variants(
     for (r, stage) in reports.iter().zip(names) {
         let j = write_json(out, &format!("{name}-{stage}-report.json"), &serde_json::to_value(r)?)?;
         let svg_path = out.join(format!("{name}-{stage}-report.svg"));
-        std::fs::write(&svg_path, plot_svg(r)).with_context(|| format!("cannot write {}", svg_path.display()))?;
+        std::fs::write(&svg_path, plot_svg(r, time_axis))
+            .with_context(|| format!("cannot write {}", svg_path.display()))?;
         println!("report: {}\nplot: {}", j.display(), svg_path.display());
     }
     match &reference.failure {

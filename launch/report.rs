@@ -566,12 +566,18 @@ pub fn linear_stage_table(report: &Report) -> String {
 }
 
 /// A plotted series: name, colour, value of a point.
-type Series = (&'static str, &'static str, Box<dyn Fn(&ReportPoint) -> f64>);
+/// A curve of the plot: name, colour, dash pattern, value per point.
+type Series = (
+    &'static str,
+    &'static str,
+    &'static str,
+    Box<dyn Fn(&ReportPoint) -> f64>,
+);
 
 /// SVG plot of the errors and indicators against wall time (log scale), with the reference's
 /// run time marked; with PGD, the basis size of every subdomain against the iterations under it.
-pub fn plot_svg(report: &Report) -> String {
-    let errors = plot_errors_svg(report);
+pub fn plot_svg(report: &Report, time_axis: TimeAxis) -> String {
+    let errors = plot_errors_svg(report, time_axis);
     match plot_basis_svg(report) {
         None => errors,
         Some(basis) => format!(
@@ -660,19 +666,67 @@ pub fn plot_basis_svg(report: &Report) -> Option<String> {
     Some(svg)
 }
 
-fn plot_errors_svg(report: &Report) -> String {
+/// The wall-time axis of the report's plot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TimeAxis {
+    #[default]
+    Linear,
+    /// Logarithmic: the first iterations and the reference apart when they are far apart.
+    Log,
+}
+
+/// Ticks of a linear axis from 0 to `max`: steps of 1, 2 or 5 × 10ᵏ, at most about 6, each
+/// label with as many decimals as the step needs (so no two labels are equal).
+pub fn linear_ticks(max: f64) -> Vec<(f64, String)> {
+    if !(max > 0.0 && max.is_finite()) {
+        return vec![(0.0, "0".into())];
+    }
+    let raw = max / 5.0;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
+    let decimals = (-step.log10().floor()).max(0.0) as usize;
+    (0..)
+        .map(|k| k as f64 * step)
+        .take_while(|v| *v <= max * (1.0 + 1e-12))
+        .map(|v| (v, format!("{v:.decimals$}")))
+        .collect()
+}
+
+/// Ticks of a logarithmic axis over [lo, hi]: the powers of ten within, labelled `1e<k>`.
+pub fn log_ticks(lo: f64, hi: f64) -> Vec<(f64, String)> {
+    let (a, b) = (lo.log10().ceil() as i32, hi.log10().floor() as i32);
+    (a..=b).map(|k| (10f64.powi(k), format!("1e{k}"))).collect()
+}
+
+fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
     let (w, h) = (900.0, 560.0);
-    let (left, right, top, bottom) = (80.0, 200.0, 40.0, 60.0);
+    let (left, right, top, bottom) = (80.0, 230.0, 40.0, 60.0);
+    // Colour and dash pattern per curve, so that curves on top of each other stay apart.
     let series: [Series; 5] = [
-        ("traction error vs reference", "#d62728", Box::new(|p| p.traction_error)),
+        (
+            "traction error vs reference",
+            "#d62728",
+            "",
+            Box::new(|p| p.traction_error),
+        ),
         (
             "estimated traction error",
             "#ff7f0e",
+            "8,4",
             Box::new(|p| p.estimate.unwrap_or(f64::NAN)),
         ),
-        ("jump error vs reference", "#1f77b4", Box::new(|p| p.jump_error)),
-        ("η (LATIN indicator)", "#2ca02c", Box::new(|p| p.eta)),
-        ("contact indicator e_c", "#9467bd", Box::new(|p| p.contact_indicator)),
+        ("jump error vs reference", "#1f77b4", "2,3", Box::new(|p| p.jump_error)),
+        ("η (LATIN indicator)", "#2ca02c", "10,3,2,3", Box::new(|p| p.eta)),
+        (
+            "contact indicator e_c",
+            "#9467bd",
+            "4,4",
+            Box::new(|p| p.contact_indicator),
+        ),
     ];
     let t_of = |p: &ReportPoint| report.latin_setup_s + p.elapsed_s;
     let t_max = report
@@ -685,7 +739,7 @@ fn plot_errors_svg(report: &Report) -> String {
     let values: Vec<f64> = report
         .points
         .iter()
-        .flat_map(|p| series.iter().map(move |s| (s.2)(p)))
+        .flat_map(|p| series.iter().map(move |s| (s.3)(p)))
         .filter(|v| *v > 0.0 && v.is_finite())
         .collect();
     let lo = values
@@ -702,7 +756,19 @@ fn plot_errors_svg(report: &Report) -> String {
         .max(10f64.powf(lo + 1.0))
         .log10()
         .ceil();
-    let x = |t: f64| left + (w - left - right) * t / t_max;
+    let t_min = report
+        .points
+        .iter()
+        .map(t_of)
+        .chain([report.reference_s])
+        .filter(|t| *t > 0.0)
+        .fold(t_max, f64::min)
+        / 1.5;
+    let (t_lo, t_hi) = (10f64.powf(t_min.log10().floor()), 10f64.powf(t_max.log10().ceil()));
+    let x = |t: f64| match time_axis {
+        TimeAxis::Linear => left + (w - left - right) * t / t_max,
+        TimeAxis::Log => left + (w - left - right) * (t.max(t_lo).log10() - t_lo.log10()) / (t_hi / t_lo).log10(),
+    };
     let y = |v: f64| top + (h - top - bottom) * (hi - v.max(1e-300).log10()) / (hi - lo).max(1.0);
     let mut svg = format!(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}" font-family="sans-serif" font-size="12">
@@ -727,18 +793,27 @@ fn plot_errors_svg(report: &Report) -> String {
         );
         e += 1.0;
     }
-    for k in 0..=5 {
-        let t = t_max * k as f64 / 5.0;
+    let ticks = match time_axis {
+        TimeAxis::Linear => linear_ticks(t_max),
+        TimeAxis::Log => log_ticks(t_lo, t_hi),
+    };
+    for (t, label) in ticks {
+        let xx = x(t);
         svg += &format!(
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{t:.2}</text>\n",
-            x(t),
+            "<line x1=\"{xx}\" y1=\"{top}\" x2=\"{xx}\" y2=\"{}\" stroke=\"#eee\"/><text x=\"{xx}\" y=\"{}\" text-anchor=\"middle\">{label}</text>\n",
+            h - bottom,
             h - bottom + 18.0
         );
     }
     svg += &format!(
-        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">wall time (s), operator setup included</text>\n",
+        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">wall time (s{}), operator setup included</text>\n",
         (left + w - right) / 2.0,
-        h - 15.0
+        h - 15.0,
+        if time_axis == TimeAxis::Log { ", log scale" } else { "" }
+    );
+    let mid = top + (h - top - bottom) / 2.0;
+    svg += &format!(
+        "<text x=\"20\" y=\"{mid}\" text-anchor=\"middle\" transform=\"rotate(-90 20 {mid})\">relative error, indicator (log scale)</text>\n"
     );
     let xr = x(report.reference_s);
     let reference_label = match report.reference_failure {
@@ -757,7 +832,7 @@ fn plot_errors_svg(report: &Report) -> String {
         top + 240.0,
         report.reference_s
     );
-    for (k, (name, color, f)) in series.iter().enumerate() {
+    for (k, (name, color, dash, f)) in series.iter().enumerate() {
         let pts: Vec<String> = report
             .points
             .iter()
@@ -765,18 +840,51 @@ fn plot_errors_svg(report: &Report) -> String {
             .map(|p| format!("{:.2},{:.2}", x(t_of(p)), y(f(p))))
             .collect();
         svg += &format!(
-            "<polyline fill=\"none\" stroke=\"{color}\" stroke-width=\"1.8\" points=\"{}\"/>\n",
+            "<polyline fill=\"none\" stroke=\"{color}\" stroke-width=\"1.8\" stroke-dasharray=\"{dash}\" points=\"{}\"/>\n",
             pts.join(" ")
         );
         let ly = top + 20.0 + 20.0 * k as f64;
         svg += &format!(
-            "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{color}\" stroke-width=\"2\"/><text x=\"{}\" y=\"{}\">{name}</text>\n",
+            "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{color}\" stroke-width=\"2\" stroke-dasharray=\"{dash}\"/><text x=\"{}\" y=\"{}\">{name}</text>\n",
             w - right + 10.0,
-            w - right + 30.0,
-            w - right + 35.0,
+            w - right + 40.0,
+            w - right + 45.0,
             ly + 4.0
         );
     }
     svg += "</svg>\n";
     svg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{linear_ticks, log_ticks};
+
+    /// Tick labels are distinct and cover the axis: 0.0137 s used to give 0.00, 0.00, 0.01, ….
+    #[test]
+    fn tick_labels_are_unique_and_round() {
+        for max in [0.0137, 0.9, 1.0, 7.3, 12.5, 260.0, 1.0e4] {
+            let ticks = linear_ticks(max);
+            let labels: Vec<&str> = ticks.iter().map(|(_, l)| l.as_str()).collect();
+            let mut unique = labels.clone();
+            unique.dedup();
+            assert_eq!(unique, labels, "max {max}: {labels:?}");
+            assert!((3..=11).contains(&ticks.len()), "max {max}: {labels:?}");
+            assert!(
+                ticks.last().unwrap().0 <= max && ticks.last().unwrap().0 >= max / 2.5,
+                "max {max}: {labels:?}"
+            );
+        }
+        assert_eq!(
+            linear_ticks(0.0137).iter().map(|(_, l)| l.as_str()).collect::<Vec<_>>(),
+            ["0.000", "0.005", "0.010"]
+        );
+        assert_eq!(
+            log_ticks(0.05, 20.0)
+                .iter()
+                .map(|(_, l)| l.as_str())
+                .collect::<Vec<_>>(),
+            ["1e-1", "1e0", "1e1"]
+        );
+    }
 }

@@ -249,8 +249,8 @@ fn reports_compare_linear_stages() {
             x.bus_bytes
         );
     }
-    assert!(plot_svg(p).contains("PGD basis size per subdomain"));
-    assert!(!plot_svg(c).contains("PGD basis size per subdomain"));
+    assert!(plot_svg(p, Default::default()).contains("PGD basis size per subdomain"));
+    assert!(!plot_svg(c, Default::default()).contains("PGD basis size per subdomain"));
 }
 
 /// `glissade report --stop-at-error e`: each run stops at the first iteration whose traction
