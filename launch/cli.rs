@@ -112,6 +112,9 @@ pub(crate) enum Command {
         /// Folder for a ParaView time series: `<scene>-<run>.pvd` and `<scene>-<run>-vtu/`.
         #[arg(long, value_name = "DIR")]
         vtu: Option<PathBuf>,
+        /// With --vtu: only every k-th time point (and the last).
+        #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+        vtu_every: u32,
         /// Folder for `<scene>-<run>.interfaces.csv`: one row per interface node pair and time point.
         #[arg(long, value_name = "DIR")]
         csv: Option<PathBuf>,
@@ -275,6 +278,9 @@ pub(crate) struct RunArgs {
     /// docs/outputs.md).
     #[arg(long)]
     pub(crate) vtu: bool,
+    /// With --vtu: only every k-th time point (and the last).
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) vtu_every: u32,
     /// Also write `<scene>-<run>.interfaces.csv`: the interface fields, one row per node pair and
     /// time point (docs/outputs.md).
     #[arg(long)]

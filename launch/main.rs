@@ -257,7 +257,16 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             bench(&scene, &out, max_iterations, processes)
         }
         Command::Replay(args) => replay(args),
-        Command::Export { recording, vtu, csv } => export(&recording, vtu.as_deref(), csv.as_deref()),
+        Command::Export {
+            recording,
+            vtu,
+            vtu_every,
+            csv,
+        } => export(
+            &recording,
+            vtu.as_deref().map(|d| (d, vtu_every as usize)),
+            csv.as_deref(),
+        ),
         Command::Node(args) => {
             check_run_id("--run", &args.run)?;
             let tls = glissade::distributed::node_tls(
@@ -501,6 +510,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             &result.interfaces,
             &args.out,
             &stem,
+            args.vtu_every as usize,
         )?)
     } else {
         None
@@ -638,22 +648,23 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// `glissade export`: `vtu` is the folder of the ParaView series and its time-point stride.
 fn export(
     recording: &std::path::Path,
-    vtu: Option<&std::path::Path>,
+    vtu: Option<(&std::path::Path, usize)>,
     csv: Option<&std::path::Path>,
 ) -> anyhow::Result<ExitCode> {
     if vtu.is_none() && csv.is_none() {
         anyhow::bail!("nothing to export: give --vtu <DIR>, --csv <DIR> or both");
     }
-    for dir in vtu.iter().chain(csv.iter()) {
+    for dir in vtu.iter().map(|v| v.0).chain(csv.iter().copied()) {
         ensure_writable(dir)?;
     }
     let rec = glissade_recorder::Recording::open(recording)?;
     let state = glissade_replay::final_state(&rec)?;
     let model = &state.model;
     let stem = format!("{}-{}", model.name, rec.run_id());
-    if let Some(dir) = vtu {
+    if let Some((dir, every)) = vtu {
         let u: Vec<Vec<&[f64]>> = (0..model.subdomains.len() as u32)
             .map(|s| {
                 state
@@ -669,7 +680,7 @@ fn export(
                     })
             })
             .collect::<anyhow::Result<_>>()?;
-        let v = glissade::vtu::write_series(model, &u, &state.interfaces, dir, &stem)?;
+        let v = glissade::vtu::write_series(model, &u, &state.interfaces, dir, &stem, every)?;
         println!(
             "paraview: {} ({} files, {:.1} MB)",
             v.pvd.display(),

@@ -47,16 +47,27 @@ pub fn series_paths(out: &Path, stem: &str) -> (PathBuf, PathBuf) {
     (out.join(format!("{stem}.pvd")), out.join(format!("{stem}-vtu")))
 }
 
-/// Writes the time series of `model` to `out/<stem>.pvd` and `out/<stem>-vtu/`: `u[s][i]` is
-/// subdomain s's displacement at time point i (2 values per node), `interfaces` the interface
-/// solutions (ŝ) of the run. Refuses to write over an existing series; the folder appears under
-/// its name only once complete.
+/// The time points a series written every `every` time points holds: 0, every, 2·every, … and
+/// the last.
+pub fn series_times(n_points: usize, every: usize) -> Vec<usize> {
+    let mut times: Vec<usize> = (0..n_points).step_by(every.max(1)).collect();
+    if times.last() != Some(&(n_points - 1)) {
+        times.push(n_points - 1);
+    }
+    times
+}
+
+/// Writes the time series of `model` to `out/<stem>.pvd` and `out/<stem>-vtu/`, every `every`
+/// time points and the last ([`series_times`]): `u[s][i]` is subdomain s's displacement at time
+/// point i (2 values per node), `interfaces` the interface solutions (ŝ) of the run. Refuses to
+/// write over an existing series; the folder appears under its name only once complete.
 pub fn write_series(
     model: &Model,
     u: &[Vec<&[f64]>],
     interfaces: &[InterfaceSolution],
     out: &Path,
     stem: &str,
+    every: usize,
 ) -> anyhow::Result<Series> {
     let nt = model.time.n_points();
     if u.len() != model.subdomains.len() {
@@ -129,7 +140,8 @@ pub fn write_series(
     let mut buf = Vec::new();
     let mut collection = String::new();
     let dir_name = dir.file_name().expect("a folder name").to_string_lossy().into_owned();
-    for i in 0..nt {
+    let times = series_times(nt, every);
+    for &i in &times {
         let t = model.time.t(i);
         for (part, name) in [(0, format!("solid-{i:04}.vtu")), (1, format!("interfaces-{i:04}.vtu"))] {
             buf.clear();
@@ -158,7 +170,7 @@ pub fn write_series(
     Ok(Series {
         pvd,
         dir,
-        files: 2 * nt,
+        files: 2 * times.len(),
         bytes: bytes + text.len() as u64,
     })
 }
@@ -440,4 +452,17 @@ pub fn write_new_file(path: &Path, data: &[u8]) -> anyhow::Result<()> {
         .with_context(|| format!("cannot write {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::series_times;
+
+    #[test]
+    fn a_thinned_series_keeps_the_last_time_point() {
+        assert_eq!(series_times(11, 1), (0..11).collect::<Vec<_>>());
+        assert_eq!(series_times(11, 4), [0, 4, 8, 10]);
+        assert_eq!(series_times(11, 5), [0, 5, 10]);
+        assert_eq!(series_times(1, 3), [0]);
+    }
 }

@@ -220,6 +220,24 @@ fn export_of_a_recording_equals_the_runs_own_outputs() {
     assert!(f("d_u") <= 1e-9 * f("u_scale"), "{r}");
     assert!(f("d_f") <= 1e-12 * f("f_scale"), "{r}");
 
+    // Every 4th time point and the last: 0, 4, 8, 10.
+    let thinned = dir.join("thinned");
+    glissade(&[
+        "export",
+        &rec,
+        "--vtu",
+        &thinned.display().to_string(),
+        "--vtu-every",
+        "4",
+    ]);
+    let pvd = std::fs::read_to_string(thinned.join("small-three-layer-b.pvd")).unwrap();
+    let steps: Vec<&str> = pvd
+        .lines()
+        .filter(|l| l.contains("part=\"0\""))
+        .filter_map(|l| l.split("timestep=\"").nth(1)?.split('"').next())
+        .collect();
+    assert_eq!(steps, ["0.0", "0.4", "0.8", "1.0"], "{pvd}");
+
     // A second export into the same folder overwrites nothing.
     let o = Command::new(env!("CARGO_BIN_EXE_glissade"))
         .args(["export", &rec, "--vtu", &ex])
