@@ -146,6 +146,12 @@ pub(crate) enum Command {
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum RecordArg {
+    Full,
+    Off,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
 pub(crate) enum KernelsArg {
     Baseline,
     Avx2,
@@ -273,6 +279,13 @@ pub(crate) struct RunArgs {
     /// Also write every subdomain's displacement field.
     #[arg(long)]
     pub(crate) interior: bool,
+    /// What to record, whatever the scene's [recording] says: `full` (every message, full
+    /// fields at every iteration: what node restarts and `replay --node` need) or `off`.
+    #[arg(long, value_enum, value_name = "full|off")]
+    pub(crate) record: Option<RecordArg>,
+    /// Record nothing (the same as --record off).
+    #[arg(long, conflicts_with = "record")]
+    pub(crate) no_record: bool,
     /// Also write a ParaView time series: `<scene>-<run>.pvd` and the folder `<scene>-<run>-vtu/`
     /// (subdomains with displacement and stresses, interfaces with tractions, jumps and status;
     /// docs/outputs.md).

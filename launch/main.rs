@@ -18,7 +18,7 @@ use glissade_messages::Verdict;
 use glissade_reference::glued::solve_glued;
 use glissade_reference::{solve_reference_steps, verify, ReferenceError, ReferenceOptions, ReferenceRun};
 use glissade_scene::LoadedScene;
-use glissade_scene::SolverOverrides;
+use glissade_scene::{Overrides, RecordOverride};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::process::ExitCode;
 
@@ -216,10 +216,11 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             newton_iterations,
             log_time,
         } => {
-            let overrides = SolverOverrides {
+            let overrides = Overrides {
                 accuracy,
                 tolerance,
                 max_iterations,
+                record: None,
             };
             let ropts = reference_options(newton_iterations);
             if let Some(e) = stop_at_error {
@@ -357,8 +358,13 @@ fn default_run_id() -> anyhow::Result<String> {
 
 fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     glissade::console::set_verbose(args.verbose);
-    let overrides = SolverOverrides {
+    let overrides = Overrides {
         accuracy: args.accuracy,
+        record: match (args.no_record, args.record) {
+            (true, _) | (false, Some(cli::RecordArg::Off)) => Some(RecordOverride::Off),
+            (false, Some(cli::RecordArg::Full)) => Some(RecordOverride::Full),
+            (false, None) => None,
+        },
         ..Default::default()
     };
     let run_id = match args.run_id.clone() {
@@ -401,6 +407,13 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         bar.set_message(glissade::output::progress_line(&sc.model, r));
     };
     let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
+    if let Some(p) = &recording {
+        println!(
+            "recording to {}: {}",
+            p.display(),
+            glissade::recording::expected_size(&sc)
+        );
+    }
     let mut live = LiveView::new(&args, &sc, &run_id)?;
     // Linear-stage totals per linear stage: in process only (a node process keeps its records).
     let mut linear_stages = None;
@@ -751,7 +764,7 @@ fn reference(scene: &std::path::Path, out: &std::path::Path, opts: &ReferenceOpt
 fn load_with_overrides(
     scene: &std::path::Path,
     out: &std::path::Path,
-    overrides: &SolverOverrides,
+    overrides: &Overrides,
 ) -> anyhow::Result<glissade_scene::LoadedScene> {
     let sc = load_scene(scene)?;
     if let Some(tolerance) = overrides.tolerance {
@@ -770,7 +783,7 @@ fn load_with_overrides(
     ensure_writable(out)?;
     // Into the scene text, not only this process's model: node processes (`bench --processes`)
     // build their model from the text.
-    Ok(sc.with_solver_overrides(&scene.display().to_string(), overrides)?)
+    Ok(sc.with_overrides(&scene.display().to_string(), overrides)?)
 }
 
 fn bench(
@@ -779,7 +792,7 @@ fn bench(
     max_iterations: Option<usize>,
     processes: Option<u32>,
 ) -> anyhow::Result<ExitCode> {
-    let overrides = SolverOverrides {
+    let overrides = Overrides {
         max_iterations,
         ..Default::default()
     };
@@ -805,7 +818,7 @@ fn bench(
 fn report(
     scene: &std::path::Path,
     out: &std::path::Path,
-    overrides: &SolverOverrides,
+    overrides: &Overrides,
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,
     time_axis: TimeAxis,
@@ -855,7 +868,7 @@ fn report(
 fn report_variants(
     scene: &std::path::Path,
     out: &std::path::Path,
-    overrides: &SolverOverrides,
+    overrides: &Overrides,
     names: &[String],
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,

@@ -43,6 +43,40 @@ pub fn software() -> String {
     )
 }
 
+/// What a run's recording will hold, said before it starts: how often full fields are recorded,
+/// their size per iteration and the size at the scene's iteration cap (full fields of the
+/// iterations recorded in full and the final interface solutions; the small messages, a few kB
+/// per iteration, and `--interior` displacements come on top).
+pub fn expected_size(scene: &LoadedScene) -> String {
+    let model = &scene.model;
+    let r = &scene.recording;
+    let full = glissade_scene::full_field_bytes_per_iteration(model) as f64;
+    let cap = model.solver.max_iterations;
+    let recorded_in_full = cap.div_ceil(r.full_fields_every.max(1));
+    let at_cap = recorded_in_full as f64 * full + glissade_scene::final_field_bytes(model) as f64;
+    let every = match r.full_fields_every {
+        1 => "at every iteration".to_string(),
+        k => format!(
+            "every {k}th iteration{}",
+            if r.full_fields_auto {
+                " (--record full: all)"
+            } else {
+                ""
+            }
+        ),
+    };
+    let topics = if r.topics.iter().any(|t| t == "**") {
+        String::new()
+    } else {
+        format!(", only {:?}", r.topics)
+    };
+    format!(
+        "full fields {every}{topics}, {:.1} MB each; at most about {:.0} MB at the iteration cap ({cap})",
+        full * 1e-6,
+        at_cap * 1e-6
+    )
+}
+
 /// Where a run's recording goes, or None when the scene switches recording off.
 pub fn recording_path(scene: &LoadedScene, run_id: &str, out: &Path) -> Option<PathBuf> {
     scene

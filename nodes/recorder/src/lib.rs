@@ -31,6 +31,15 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+/// Fields of space-time size that `full_fields_every = k` records only every k-th iteration (and at
+/// the end): boundary states, local directions and the macro fields (n × (N + 1) values each).
+pub const THINNED_FIELDS: [&str; 4] = [
+    "boundary_state",
+    "local_directions",
+    "macro_forces",
+    "macro_displacements",
+];
+
 /// Message encoding of every channel and encoding of every schema.
 pub const ENCODING: &str = "bincode2";
 /// Name of the metadata record describing the run.
@@ -287,7 +296,7 @@ impl Recorder {
             ));
         };
         if self.full_fields_every > 1
-            && matches!(field, "boundary_state" | "local_directions")
+            && THINNED_FIELDS.contains(&field)
             && envelope.stage != Stage::Final
             && envelope.iteration % self.full_fields_every != 0
         {

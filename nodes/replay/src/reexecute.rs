@@ -7,7 +7,7 @@
 use glissade_bus::{Node, NodeError, RunContext};
 use glissade_deploy::{build_nodes, BuildError, Plan, Selection};
 use glissade_messages::{encode, key_matches, DecodeError, Message, NodeId, Role};
-use glissade_recorder::Recording;
+use glissade_recorder::{Recording, THINNED_FIELDS};
 use glissade_scene::{load_str, SceneError};
 use glissade_subdomain::{LinearStageLog, LinearStageRecord};
 use std::collections::BTreeMap;
@@ -41,9 +41,6 @@ pub enum ReexecuteError {
         source: NodeError,
     },
 }
-
-/// Full fields a recorder may thin out (`recording.full_fields_every`).
-const THINNED_FIELDS: [&str; 2] = ["boundary_state", "local_directions"];
 
 /// The first difference between a re-executed node's outputs and the recording.
 #[derive(Debug, Clone, PartialEq)]

@@ -22,7 +22,10 @@ mod settings;
 #[cfg(test)]
 mod tests;
 
-pub use settings::{balanced_interface_groups, Deployment, Network, Recording, TlsFiles};
+pub use settings::{
+    balanced_interface_groups, final_field_bytes, full_field_bytes_per_iteration, Deployment, Network, Recording,
+    TlsFiles, AUTO_FULL_FIELDS_EVERY, AUTO_FULL_FIELD_BYTES,
+};
 
 use build::Ctx;
 use diagnostics::{parse_raw, toml_error};
@@ -92,24 +95,35 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
     })
 }
 
-/// `[solver]` settings given on the command line, applied by [`LoadedScene::with_solver_overrides`].
+/// Scene settings given on the command line, applied by [`LoadedScene::with_overrides`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct SolverOverrides {
+pub struct Overrides {
     pub accuracy: Option<f64>,
     pub tolerance: Option<f64>,
     pub max_iterations: Option<usize>,
+    pub record: Option<RecordOverride>,
+}
+
+/// What `--record` / `--no-record` ask of the recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RecordOverride {
+    /// No recording (`[recording] enabled = false`).
+    Off,
+    /// Every message, full fields at every iteration (`enabled = true`, `topics = ["**"]`,
+    /// `full_fields_every = 1`).
+    Full,
 }
 
 impl LoadedScene {
-    /// This scene with `[solver] accuracy`, `tolerance` and/or `max_iterations` set as if written in its
-    /// file: the scene text is rewritten with them (a first comment line says so), so that its
+    /// This scene with `[solver] accuracy`, `tolerance` and/or `max_iterations`, and the
+    /// recording (`--record`), set as if written in its file: the scene text is rewritten with them (a first comment line says so), so that its
     /// fingerprint, the text that node processes fetch from the bus and the text a recording
     /// attaches all describe the run, not only this process's model. `file` names the scene in
     /// errors and gives the default model name, as in [`load_str`]; the network settings (TLS
     /// paths already resolved against the scene's folder) are kept. An invalid value is the
     /// scene error the file would give.
-    pub fn with_solver_overrides(&self, file: &str, overrides: &SolverOverrides) -> Result<LoadedScene, SceneError> {
-        if *overrides == SolverOverrides::default() {
+    pub fn with_overrides(&self, file: &str, overrides: &Overrides) -> Result<LoadedScene, SceneError> {
+        if *overrides == Overrides::default() {
             return Ok(self.clone());
         }
         let mut table: toml::Table = self.text.parse().map_err(|e| toml_error(&self.text, file, &e, true))?;
@@ -127,19 +141,38 @@ impl LoadedScene {
         for (key, value) in [("accuracy", overrides.accuracy), ("tolerance", overrides.tolerance)] {
             if let Some(v) = value {
                 solver.insert(key.into(), toml::Value::Float(v));
-                said.push(format!("{key} = {v:e}"));
+                said.push(format!("[solver] {key} = {v:e}"));
             }
         }
         if let Some(m) = overrides.max_iterations {
             let m = i64::try_from(m).map_err(|_| err("solver.max_iterations", format!("{m} is too large")))?;
             solver.insert("max_iterations".into(), toml::Value::Integer(m));
-            said.push(format!("max_iterations = {m}"));
+            said.push(format!("[solver] max_iterations = {m}"));
+        }
+        if let Some(record) = overrides.record {
+            let recording = table
+                .entry("recording")
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                .as_table_mut()
+                .ok_or_else(|| err("recording", "is not a table".into()))?;
+            match record {
+                RecordOverride::Off => {
+                    recording.insert("enabled".into(), toml::Value::Boolean(false));
+                    said.push("[recording] enabled = false".into());
+                }
+                RecordOverride::Full => {
+                    recording.insert("enabled".into(), toml::Value::Boolean(true));
+                    recording.insert(
+                        "topics".into(),
+                        toml::Value::Array(vec![toml::Value::String("**".into())]),
+                    );
+                    recording.insert("full_fields_every".into(), toml::Value::Integer(1));
+                    said.push("[recording] complete".into());
+                }
+            }
         }
         let body = toml::to_string(&table).map_err(|e| err("(syntax)", format!("cannot write the scene back: {e}")))?;
-        let text = format!(
-            "# {file} with [solver] {} set on the command line\n{body}",
-            said.join(", ")
-        );
+        let text = format!("# {file} with {} set on the command line\n{body}", said.join(", "));
         let mut scene = load_str(&text, file)?;
         scene.network = self.network.clone();
         Ok(scene)

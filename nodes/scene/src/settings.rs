@@ -124,6 +124,14 @@ pub fn balanced_interface_groups(model: &Model, n: usize) -> Vec<Vec<usize>> {
     groups
 }
 
+/// Full fields (boundary states and local directions) per iteration, in bytes, up to which a
+/// scene that does not set `recording.full_fields_every` records them at every iteration.
+pub const AUTO_FULL_FIELD_BYTES: u64 = 1_000_000;
+
+/// `recording.full_fields_every` of a scene that does not set it and has more full-field bytes
+/// per iteration than [`AUTO_FULL_FIELD_BYTES`].
+pub const AUTO_FULL_FIELDS_EVERY: usize = 20;
+
 /// What the recorder writes.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Recording {
@@ -132,6 +140,24 @@ pub struct Recording {
     pub topics: Vec<String>,
     /// Record full fields every k-th iteration (everything small every iteration).
     pub full_fields_every: usize,
+    /// The scene does not set `full_fields_every`: it was chosen from the scene's size (1 up to
+    /// [`AUTO_FULL_FIELD_BYTES`] of full fields per iteration, else [`AUTO_FULL_FIELDS_EVERY`]).
+    pub full_fields_auto: bool,
+}
+
+/// Bytes of full fields one iteration of `model` sends: per subdomain its boundary state (W and
+/// F) and its local directions, each n_b × (N + 1) doubles, where n_b counts 2 values per node
+/// pair on each side of each interface.
+pub fn full_field_bytes_per_iteration(model: &glissade_mechanics::model::Model) -> u64 {
+    let boundary_values: usize = model.interfaces.iter().map(|i| 2 * 2 * i.n_pairs()).sum();
+    3 * 8 * (boundary_values * model.time.n_points()) as u64
+}
+
+/// Bytes of the interface solutions a run sends at its end (s and ŝ of every interface: 8 fields
+/// of 2 values per pair and time point).
+pub fn final_field_bytes(model: &glissade_mechanics::model::Model) -> u64 {
+    let pairs: usize = model.interfaces.iter().map(|i| i.n_pairs()).sum();
+    8 * 8 * (2 * pairs * model.time.n_points()) as u64
 }
 
 impl Recording {
@@ -142,6 +168,14 @@ impl Recording {
             Some("recording.enabled = false".into())
         } else if self.topics.iter().all(|t| t != "**") {
             Some(format!("recording.topics = {:?} leaves messages out", self.topics))
+        } else if self.full_fields_every > 1 && self.full_fields_auto {
+            Some(format!(
+                "recording.full_fields_every is unset: this scene's full fields exceed {} MB per iteration, \
+                 so they are recorded every {}th iteration only; set it to 1, or run with --record full, \
+                 for a complete recording",
+                AUTO_FULL_FIELD_BYTES / 1_000_000,
+                self.full_fields_every
+            ))
         } else if self.full_fields_every > 1 {
             Some(format!(
                 "recording.full_fields_every = {} leaves full fields out",
@@ -159,6 +193,7 @@ impl Default for Recording {
             enabled: true,
             topics: vec!["**".to_string()],
             full_fields_every: 1,
+            full_fields_auto: true,
         }
     }
 }

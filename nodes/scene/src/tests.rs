@@ -73,18 +73,19 @@ fn replaced(from: &str, to: &str) -> String {
 fn solver_overrides_rewrite_the_scene_text() {
     let s = load(TWO_BLOCKS).unwrap();
     assert_eq!(
-        s.with_solver_overrides("scenes/test.toml", &SolverOverrides::default())
+        s.with_overrides("scenes/test.toml", &Overrides::default())
             .unwrap()
             .text,
         s.text
     );
     let o = s
-        .with_solver_overrides(
+        .with_overrides(
             "scenes/test.toml",
-            &SolverOverrides {
+            &Overrides {
                 accuracy: Some(1e-4),
                 tolerance: Some(2.5e-9),
                 max_iterations: Some(7),
+                record: None,
             },
         )
         .unwrap();
@@ -96,7 +97,7 @@ fn solver_overrides_rewrite_the_scene_text() {
     assert_ne!(o.fingerprint, s.fingerprint);
     assert!(
         o.text.starts_with(
-            "# scenes/test.toml with [solver] accuracy = 1e-4, tolerance = 2.5e-9, max_iterations = 7 set"
+            "# scenes/test.toml with [solver] accuracy = 1e-4, [solver] tolerance = 2.5e-9, [solver] max_iterations = 7 set"
         ),
         "{}",
         o.text
@@ -119,9 +120,9 @@ fn solver_overrides_rewrite_the_scene_text() {
     // own error.
     let with_solver = load(&format!("{TWO_BLOCKS}[solver]\nrelaxation = 0.5\n")).unwrap();
     let o = with_solver
-        .with_solver_overrides(
+        .with_overrides(
             "scenes/test.toml",
-            &SolverOverrides {
+            &Overrides {
                 max_iterations: Some(3),
                 ..Default::default()
             },
@@ -129,9 +130,9 @@ fn solver_overrides_rewrite_the_scene_text() {
         .unwrap();
     assert_eq!((o.model.solver.relaxation, o.model.solver.max_iterations), (0.5, 3));
     let e = s
-        .with_solver_overrides(
+        .with_overrides(
             "scenes/test.toml",
-            &SolverOverrides {
+            &Overrides {
                 max_iterations: Some(0),
                 ..Default::default()
             },
@@ -139,9 +140,9 @@ fn solver_overrides_rewrite_the_scene_text() {
         .unwrap_err();
     assert_eq!(e.key, "solver.max_iterations", "{e}");
     let e = s
-        .with_solver_overrides(
+        .with_overrides(
             "scenes/test.toml",
-            &SolverOverrides {
+            &Overrides {
                 tolerance: Some(-1.0),
                 ..Default::default()
             },
@@ -1154,4 +1155,65 @@ fn scene_names_are_file_names() {
     assert_eq!(from("scenes/.hidden.toml"), "hidden");
     assert_eq!(from("scenes/..toml"), "scene");
     assert_eq!(from("scenes/two-blocks.toml"), "two-blocks");
+}
+
+/// `--record` rewrites the scene's [recording] table: off, or complete (every message, full
+/// fields at every iteration) whatever the scene says.
+#[test]
+fn record_overrides_switch_the_recording_off_or_make_it_complete() {
+    let thinned = load(&format!(
+        "{TWO_BLOCKS}[recording]\ntopics = [\"interface/*/decision\"]\nfull_fields_every = 4\n"
+    ))
+    .unwrap();
+    let with = |r| {
+        thinned
+            .with_overrides(
+                "scenes/test.toml",
+                &Overrides {
+                    record: Some(r),
+                    ..Default::default()
+                },
+            )
+            .unwrap()
+    };
+    let off = with(RecordOverride::Off);
+    assert!(!off.recording.enabled);
+    let full = with(RecordOverride::Full);
+    assert_eq!(full.recording.incomplete(), None, "{:?}", full.recording);
+    assert!(
+        full.text.contains("[recording] complete set on the command line"),
+        "{}",
+        full.text
+    );
+    assert!(thinned.recording.incomplete().is_some());
+}
+
+/// A scene that does not set `recording.full_fields_every` records full fields at every
+/// iteration while they are at most 1 MB an iteration, and every 20th above: two-blocks (N = 4)
+/// is small; the same blocks at N = 20000 are 24 bytes × 20001 time points × the boundary values,
+/// above 1 MB.
+#[test]
+fn full_fields_every_follows_the_scenes_size_unless_set() {
+    let small = load(TWO_BLOCKS).unwrap();
+    assert!(crate::full_field_bytes_per_iteration(&small.model) <= crate::AUTO_FULL_FIELD_BYTES);
+    assert_eq!(
+        (small.recording.full_fields_every, small.recording.full_fields_auto),
+        (1, true)
+    );
+    assert_eq!(small.recording.incomplete(), None);
+    let long = load(&TWO_BLOCKS.replace("N = 4\n", "N = 20000\n")).unwrap();
+    assert_eq!(long.model.time.n_points(), 20001);
+    assert!(crate::full_field_bytes_per_iteration(&long.model) > crate::AUTO_FULL_FIELD_BYTES);
+    assert_eq!(long.recording.full_fields_every, crate::AUTO_FULL_FIELDS_EVERY);
+    let why = long.recording.incomplete().expect("thinned");
+    assert!(why.contains("--record full"), "{why}");
+    let set = load(&format!(
+        "{}[recording]\nfull_fields_every = 1\n",
+        TWO_BLOCKS.replace("N = 4\n", "N = 20000\n")
+    ))
+    .unwrap();
+    assert_eq!(
+        (set.recording.full_fields_every, set.recording.full_fields_auto),
+        (1, false)
+    );
 }

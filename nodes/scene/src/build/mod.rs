@@ -241,6 +241,12 @@ impl Ctx<'_> {
             interfaces,
             solver,
         };
+        let mut recording = recording;
+        if recording.full_fields_auto
+            && crate::settings::full_field_bytes_per_iteration(&model) > crate::settings::AUTO_FULL_FIELD_BYTES
+        {
+            recording.full_fields_every = crate::settings::AUTO_FULL_FIELDS_EVERY;
+        }
         Ok(Built {
             model,
             deployment,

@@ -255,6 +255,7 @@ impl Ctx<'_> {
             enabled: r.enabled.unwrap_or(d.enabled),
             topics: r.topics.clone().unwrap_or(d.topics),
             full_fields_every: r.full_fields_every.unwrap_or(d.full_fields_every),
+            full_fields_auto: r.full_fields_every.is_none(),
         };
         self.check(rec.full_fields_every >= 1, "recording.full_fields_every", || {
             "must be ≥ 1".to_string()
