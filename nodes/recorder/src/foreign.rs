@@ -33,23 +33,14 @@ pub const CODEC: &str = "protobuf (proto3, glissade.proto): each schema is a ser
                          google.protobuf.FileDescriptorSet naming its message glissade.<Payload>";
 
 /// The protobuf message (and schema) name of a payload: `glissade.<Payload type>`, the name of
-/// the recording's bincode schema too.
+/// the recording's bincode schema too ([`crate::PAYLOAD_FIELDS`]).
 pub fn message_name(p: &Payload) -> &'static str {
-    match p {
-        Payload::Scene { .. } => "glissade.Scene",
-        Payload::HomogenizedOperator { .. } => "glissade.HomogenizedOperator",
-        Payload::MacroForces { .. } => "glissade.MacroForces",
-        Payload::MacroDisplacements { .. } => "glissade.MacroDisplacements",
-        Payload::BoundaryState { .. } => "glissade.BoundaryState",
-        Payload::BoundaryModes { .. } => "glissade.BoundaryModes",
-        Payload::LocalDirections { .. } => "glissade.LocalDirections",
-        Payload::AndersonGram { .. } => "glissade.AndersonGram",
-        Payload::AndersonStep { .. } => "glissade.AndersonStep",
-        Payload::Decision(_) => "glissade.Decision",
-        Payload::InterfaceSolution(_) => "glissade.InterfaceSolution",
-        Payload::Displacement { .. } => "glissade.Displacement",
-        Payload::IndicatorPartials { .. } => "glissade.IndicatorPartials",
-    }
+    let field = p.field_key();
+    crate::PAYLOAD_FIELDS
+        .iter()
+        .find(|(f, _, _)| *f == field)
+        .map(|(_, name, _)| *name)
+        .unwrap_or_else(|| panic!("PAYLOAD_FIELDS has no schema for payload `{field}`"))
 }
 
 /// What an export wrote.

@@ -11,6 +11,23 @@ use prost::Message as _;
 use prost_reflect::{DescriptorPool, DynamicMessage, ReflectMessage, Value};
 use std::borrow::Cow;
 
+/// In the order of the proto enums' values.
+const STAGES: [Stage; 6] = [
+    Stage::Setup,
+    Stage::Micro1,
+    Stage::Macro,
+    Stage::Linear,
+    Stage::Local,
+    Stage::Final,
+];
+const ROLES: [Role; 5] = [
+    Role::Subdomain,
+    Role::Interface,
+    Role::Coarse,
+    Role::Launcher,
+    Role::Recorder,
+];
+
 fn pool() -> DescriptorPool {
     DescriptorPool::decode(&file_descriptor_set_bytes()[..]).expect("the descriptor set is valid")
 }
@@ -180,26 +197,11 @@ fn samples() -> Vec<Message> {
             diverged: Some("inf from subdomain 2".into()),
         },
     ];
-    let stages = [
-        Stage::Setup,
-        Stage::Micro1,
-        Stage::Macro,
-        Stage::Linear,
-        Stage::Local,
-        Stage::Final,
-    ];
-    let roles = [
-        Role::Subdomain,
-        Role::Interface,
-        Role::Coarse,
-        Role::Launcher,
-        Role::Recorder,
-    ];
     payloads
         .into_iter()
         .enumerate()
         .map(|(k, payload)| Message {
-            envelope: envelope(k as u32 * 3, stages[k % 6], roles[k % 5], k as u32),
+            envelope: envelope(k as u32 * 3, STAGES[k % 6], ROLES[k % 5], k as u32),
             payload,
         })
         .collect()
@@ -264,29 +266,14 @@ fn field_of(m: &DynamicMessage, name: &str) -> Field {
 fn from_proto(m: &DynamicMessage) -> Message {
     let e = message(m, "envelope");
     let sender = message(&e, "sender");
-    let stages = [
-        Stage::Setup,
-        Stage::Micro1,
-        Stage::Macro,
-        Stage::Linear,
-        Stage::Local,
-        Stage::Final,
-    ];
-    let roles = [
-        Role::Subdomain,
-        Role::Interface,
-        Role::Coarse,
-        Role::Launcher,
-        Role::Recorder,
-    ];
     let envelope = Envelope {
         schema_version: u32_(&e, "schema_version"),
         run_id: string(&e, "run_id"),
         scene_fingerprint: u64_(&e, "scene_fingerprint"),
         iteration: u32_(&e, "iteration"),
-        stage: stages[enum_(&e, "stage") as usize],
+        stage: STAGES[enum_(&e, "stage") as usize],
         sender: NodeId {
-            role: roles[enum_(&sender, "role") as usize],
+            role: ROLES[enum_(&sender, "role") as usize],
             index: u32_(&sender, "index"),
         },
     };
