@@ -105,7 +105,8 @@ pub(crate) enum Command {
     /// nodes from their recorded inputs and check their outputs bit for bit (`--node`).
     Replay(ReplayArgs),
     /// Write a finished run's results from its recording in formats other tools read: a ParaView
-    /// time series (`--vtu`) and a CSV of the interface fields (`--csv`).
+    /// time series (`--vtu`), a CSV of the interface fields (`--csv`), and a copy of the recording
+    /// any MCAP tool decodes (`--foreign`, protobuf).
     Export {
         /// Recording (MCAP) of a run.
         recording: PathBuf,
@@ -118,6 +119,11 @@ pub(crate) enum Command {
         /// Folder for `<scene>-<run>.interfaces.csv`: one row per interface node pair and time point.
         #[arg(long, value_name = "DIR")]
         csv: Option<PathBuf>,
+        /// Folder for `<recording's file name>`: the recording with every message as protobuf
+        /// (schemas as FileDescriptorSets, `glissade.proto` attached), for Foxglove, `mcap cat
+        /// --json` or Python's mcap-protobuf-support (docs/recording.md).
+        #[arg(long, value_name = "DIR")]
+        foreign: Option<PathBuf>,
     },
     /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
     /// endpoint and receives the scene over the bus.

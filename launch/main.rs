@@ -263,10 +263,12 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             vtu,
             vtu_every,
             csv,
+            foreign,
         } => export(
             &recording,
             vtu.as_deref().map(|d| (d, vtu_every as usize)),
             csv.as_deref(),
+            foreign.as_deref(),
         ),
         Command::Node(args) => {
             check_run_id("--run", &args.run)?;
@@ -666,12 +668,32 @@ fn export(
     recording: &std::path::Path,
     vtu: Option<(&std::path::Path, usize)>,
     csv: Option<&std::path::Path>,
+    foreign: Option<&std::path::Path>,
 ) -> anyhow::Result<ExitCode> {
-    if vtu.is_none() && csv.is_none() {
-        anyhow::bail!("nothing to export: give --vtu <DIR>, --csv <DIR> or both");
+    if vtu.is_none() && csv.is_none() && foreign.is_none() {
+        anyhow::bail!("nothing to export: give --vtu <DIR>, --csv <DIR>, --foreign <DIR> or several");
     }
     for dir in vtu.iter().map(|v| v.0).chain(csv.iter().copied()) {
         ensure_writable(dir)?;
+    }
+    if let Some(dir) = foreign {
+        let e = glissade_recorder::foreign::export(recording, dir, &glissade::recording::software())?;
+        if let Some(why) = &e.source_truncated {
+            eprintln!(
+                "warning: {}: {why}; the export holds the messages before it",
+                recording.display()
+            );
+        }
+        println!(
+            "foreign-readable (protobuf): {} ({} messages on {} channels, {:.1} MB)",
+            e.path.display(),
+            e.messages,
+            e.channels,
+            e.bytes as f64 * 1e-6
+        );
+        if vtu.is_none() && csv.is_none() {
+            return Ok(ExitCode::SUCCESS);
+        }
     }
     let rec = glissade_recorder::Recording::open(recording)?;
     let state = glissade_replay::final_state(&rec)?;

@@ -99,7 +99,7 @@ pub fn python_with(modules: &[&str]) -> Option<&'static str> {
             .expect("python runs");
         if !probe.status.success() {
             return skip(format!(
-                "the `{m}` package is not installed (pip install {m}): {}",
+                "the `{m}` package is not installed (pip install -r .ci/python-requirements.txt): {}",
                 String::from_utf8_lossy(&probe.stderr).trim()
             ));
         }

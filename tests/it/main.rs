@@ -8,6 +8,7 @@ mod bad_input;
 mod bench;
 mod common;
 mod distributed;
+mod foreign;
 mod fuzz_nodes;
 mod latin_perfect;
 mod monolithic;

@@ -19,6 +19,7 @@
 //! recorder killed by SIGKILL leaves a file whose chunks up to the last completed iteration are
 //! readable by [`Recording::open`] (which reports the file as unfinished).
 
+pub mod foreign;
 mod reader;
 mod schema;
 

@@ -29,6 +29,7 @@ pub struct RecordedMessage<'a> {
     pub sequence: u32,
     /// ns since the Unix epoch.
     pub log_time: u64,
+    pub publish_time: u64,
     pub data: Cow<'a, [u8]>,
 }
 
@@ -74,6 +75,8 @@ pub struct Recording {
     channels: Vec<ChannelInfo>,
     metadata: BTreeMap<String, String>,
     scene_text: Option<String>,
+    /// Log and create time of the scene attachment.
+    scene_times: (u64, u64),
     /// The file ends with a summary and the closing magic.
     finished: bool,
     /// Why reading stopped before the data end (a file cut short, e.g. by a killed recorder).
@@ -110,6 +113,7 @@ impl Recording {
         let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
         let mut metadata = BTreeMap::new();
         let mut scene_text = None;
+        let mut scene_times = (0, 0);
         let mut truncated = None;
         let records = ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
             .map_err(|e| format(format!("not an MCAP file: {e}")))?;
@@ -148,6 +152,7 @@ impl Recording {
                 },
                 Record::Metadata(m) if m.name == METADATA_NAME => metadata = m.metadata,
                 Record::Attachment { header, data, .. } if header.name == SCENE_ATTACHMENT => {
+                    scene_times = (header.log_time, header.create_time);
                     scene_text = Some(
                         String::from_utf8(data.into_owned())
                             .map_err(|_| format("the scene attachment is not UTF-8".into()))?,
@@ -167,6 +172,12 @@ impl Recording {
                 "no `{METADATA_NAME}` metadata record: not a glissade recording"
             )));
         }
+        if let Some(of) = metadata.get(crate::foreign::EXPORT_OF) {
+            return Err(format(format!(
+                "a foreign-readable export (protobuf) of `{of}`, for other MCAP tools; glissade reads the \
+                 original recording"
+            )));
+        }
         let fingerprint = metadata
             .get("scene_fingerprint")
             .and_then(|s| u64::from_str_radix(s, 16).ok())
@@ -181,6 +192,7 @@ impl Recording {
             channels: channels.into_values().collect(),
             metadata,
             scene_text,
+            scene_times,
             finished,
             truncated,
             expected: Expected {
@@ -217,6 +229,11 @@ impl Recording {
         self.scene_text.as_deref()
     }
 
+    /// Log and create time (ns since the Unix epoch) of the scene attachment; zeros without one.
+    pub fn scene_times(&self) -> (u64, u64) {
+        self.scene_times
+    }
+
     /// The file was finalised (summary section and closing magic present).
     pub fn is_finished(&self) -> bool {
         self.finished
@@ -243,6 +260,7 @@ impl Recording {
                     channel: header.channel_id,
                     sequence: header.sequence,
                     log_time: header.log_time,
+                    publish_time: header.publish_time,
                     data,
                 }),
                 _ => None,
