@@ -17,6 +17,20 @@ use anyhow::Context;
 use glissade_scene::{load_str, LoadedScene};
 use std::path::Path;
 
+/// This machine's memory in bytes (`MemTotal` of /proc/meminfo), if the system says.
+pub fn machine_memory() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let kb: u64 = info
+        .lines()
+        .find_map(|l| l.strip_prefix("MemTotal:"))?
+        .trim()
+        .strip_suffix("kB")?
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kb * 1024)
+}
+
 /// Reads and validates a scene file; its TLS files (`network.tls`) become relative to its folder
 /// and must be readable.
 pub fn load_scene(path: &Path) -> anyhow::Result<LoadedScene> {

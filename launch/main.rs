@@ -131,6 +131,8 @@ const INTERRUPTED: u8 = 130;
 
 fn main() -> ExitCode {
     keep_freed_memory();
+    // Scenes too large for this machine are refused before anything is built.
+    glissade_scene::set_machine_memory(glissade::machine_memory().unwrap_or(0));
     let cli = Cli::parse();
     if let Err(e) = log_if_asked() {
         eprintln!("error: {e:#}");

@@ -299,6 +299,26 @@ const CASES: &[Case] = &[
         edits: &[],
         error: "error: --tls-root-ca {dir}/ca.pem: cannot read it: No such file or directory",
     },
+    // Sizes are checked against the machine's memory before any mesh or time grid is built (a
+    // 3000 × 3000 block used to be killed by the out-of-memory killer, N = 10⁹ to abort).
+    Case {
+        name: "a block of 3000 × 3000 elements",
+        args: &["check", "{scene}"],
+        edits: &[("nx = 16\nny = 8", "nx = 3000\nny = 3000")],
+        error: "(size): the scene needs an estimated ",
+    },
+    Case {
+        name: "N = 10⁹ time steps",
+        args: &["run", "--in-process", "--out", "{out}", "{scene}"],
+        edits: &[("N = 40", "N = 1000000000")],
+        error: " GB of space-time fields for N = 1000000000), more than this machine's memory",
+    },
+    Case {
+        name: "a formula nested 100 deep",
+        args: &["check", "{scene}"],
+        edits: &[("ux = \"0.004*sin(2*pi*t/1)\"", "ux = \"((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((((t))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))))\"")],
+        error: "nested more than 64 levels deep",
+    },
 ];
 
 fn files_in(dir: &Path) -> Vec<PathBuf> {

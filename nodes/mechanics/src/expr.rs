@@ -8,6 +8,13 @@
 
 use std::fmt;
 
+/// Longest formula (bytes): bounds the depth of a chain of operators, which evaluation walks
+/// recursively.
+pub const MAX_FORMULA_LEN: usize = 4096;
+
+/// Deepest nesting of parentheses, function calls, signs and powers the parser follows.
+pub const MAX_NESTING: usize = 64;
+
 /// A parsed formula. Variables are referenced by their index in the list given to [`Expr::parse`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Expr {
@@ -68,7 +75,14 @@ impl Expr {
             bytes: source.as_bytes(),
             pos: 0,
             variables,
+            depth: 0,
         };
+        if source.len() > MAX_FORMULA_LEN {
+            return Err(p.error(&format!(
+                "the formula is {} bytes long, at most {MAX_FORMULA_LEN}",
+                source.len()
+            )));
+        }
         let root = p.expr()?;
         p.skip_ws();
         if p.pos != p.bytes.len() {
@@ -139,6 +153,8 @@ struct Parser<'a> {
     bytes: &'a [u8],
     pos: usize,
     variables: &'a [&'a str],
+    /// Nesting of the `unary` calls in progress (every recursion of the grammar goes through it).
+    depth: usize,
 }
 
 impl Parser<'_> {
@@ -184,6 +200,16 @@ impl Parser<'_> {
     }
 
     fn unary(&mut self) -> Result<Node, ExprError> {
+        if self.depth >= MAX_NESTING {
+            return Err(self.error(&format!("nested more than {MAX_NESTING} levels deep")));
+        }
+        self.depth += 1;
+        let node = self.unary_inner();
+        self.depth -= 1;
+        node
+    }
+
+    fn unary_inner(&mut self) -> Result<Node, ExprError> {
         match self.peek() {
             Some(b'-') => {
                 self.pos += 1;
@@ -345,5 +371,22 @@ mod tests {
             .unwrap_err()
             .problem
             .contains("two arguments"));
+    }
+
+    /// Deep nesting and huge formulas are refused before they can exhaust the stack (a
+    /// 20,000-deep formula used to abort the process).
+    #[test]
+    fn deep_or_huge_formulas_are_refused() {
+        let deep = format!("{}t{}", "(".repeat(20_000), ")".repeat(20_000));
+        assert!(Expr::parse(&deep, &["t"]).unwrap_err().problem.contains("bytes long"));
+        let nested = format!("{}t{}", "(".repeat(100), ")".repeat(100));
+        let e = Expr::parse(&nested, &["t"]).unwrap_err();
+        assert!(e.problem.contains("nested more than 64 levels"), "{e}");
+        let signs = format!("{}1", "-".repeat(1000));
+        assert!(Expr::parse(&signs, &[]).unwrap_err().problem.contains("nested"));
+        let ok = format!("{}t{}", "(".repeat(60), ")".repeat(60));
+        assert_eq!(Expr::parse(&ok, &["t"]).unwrap().eval(&[2.0]), 2.0);
+        let chain = vec!["t"; 2000].join("+");
+        assert_eq!(Expr::parse(&chain, &["t"]).unwrap().eval(&[1.0]), 2000.0);
     }
 }

@@ -188,6 +188,7 @@ pub(crate) struct RawDeployment {
     pub(crate) interface_nodes: Option<usize>,
     pub(crate) interface_groups: Option<Vec<Vec<RawInterfaceRef>>>,
     pub(crate) restarts: Option<usize>,
+    pub(crate) memory_limit_gb: Option<f64>,
 }
 
 /// An interface in `deployment.interface_groups`: its index, or `"A|B"` (every interface between

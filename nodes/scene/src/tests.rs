@@ -1217,3 +1217,36 @@ fn full_fields_every_follows_the_scenes_size_unless_set() {
         (1, false)
     );
 }
+
+/// `deployment.memory_limit_gb` bounds the estimated memory of a scene before anything is
+/// built: two-blocks needs a few MB (so 1 MB refuses it, naming the estimate and the limit) and
+/// a 3000 × 3000 block about 130 GB of operators alone (2 dofs × 27 M nodes × 2.4 kB).
+#[test]
+fn the_memory_limit_refuses_a_scene_that_would_not_fit() {
+    let with_limit = |text: &str, gb: f64| load(&format!("{text}[deployment]\nmemory_limit_gb = {gb}\n"));
+    assert!(with_limit(TWO_BLOCKS, 1.0).is_ok());
+    let e = with_limit(TWO_BLOCKS, 0.001).unwrap_err();
+    assert_eq!(e.key, "(size)");
+    assert!(
+        e.problem.contains("more than deployment.memory_limit_gb (0.0 GB)"),
+        "{e}"
+    );
+    let huge = TWO_BLOCKS
+        .replacen("nx = ", "nx = 3000 #", 1)
+        .replacen("ny = ", "ny = 3000 #", 1);
+    let e = with_limit(&huge, 100.0).unwrap_err();
+    assert!(e.problem.contains("GB of operators for its meshes"), "{e}");
+    let estimate: f64 = e
+        .problem
+        .split("estimated ")
+        .nth(1)
+        .unwrap()
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((100.0..1000.0).contains(&estimate), "{e}");
+    let e = with_limit(TWO_BLOCKS, -1.0).unwrap_err();
+    assert_eq!(e.key, "deployment.memory_limit_gb");
+}

@@ -4,6 +4,7 @@
 
 mod interfaces;
 mod loads;
+pub(crate) mod memory;
 pub(crate) mod options;
 mod rigid;
 
@@ -190,6 +191,7 @@ impl Ctx<'_> {
             }
             None => file_stem_name(self.file),
         };
+        self.check_memory(raw)?;
         let plane = match raw.plane {
             None | Some(RawPlane::Strain) => Plane::Strain,
             Some(RawPlane::Stress) => Plane::Stress,
