@@ -31,6 +31,8 @@ use zenoh::Wait;
 
 /// How long nodes may take to fetch the scene, build their operators and report ready.
 const READY_TIMEOUT: Duration = Duration::from_secs(300);
+/// Longest wait for the answer to "is this run id in use on the router?".
+const RUN_ID_PROBE: Duration = Duration::from_secs(2);
 /// Longest silence on the bus before a run is declared stalled.
 const IDLE_TIMEOUT: Duration = Duration::from_secs(600);
 /// After a peer's token disappears, how long a node still handles messages already on their way
@@ -466,6 +468,18 @@ pub fn run_distributed_observed(
             format!("the Zenoh router at {}", net.connect.join(", ")),
         )
     };
+    // Another launcher (or its nodes) on a shared router with this run id would mix two runs (a
+    // router hosted here is new: nobody else is on it yet).
+    if !net.connect.is_empty() {
+        let taken = transport::tokens_alive(&session, run_id, RUN_ID_PROBE)?;
+        if !taken.is_empty() {
+            bail!(
+                "run id {run_id} is already in use on {bus}: {} alive there; nothing was started: choose \
+                 another --run-id (or leave it out for a new random one)",
+                taken.join(", ")
+            );
+        }
+    }
     let _launcher_token = transport::launcher_token(&session, run_id)?;
     let mut presence = transport::Presence::watch(&session, run_id)?;
     let launcher = NodeId {

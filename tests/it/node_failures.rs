@@ -384,3 +384,46 @@ fn the_launcher_names_a_dead_hand_started_node() {
     );
     assert_no_process_left(&run_id);
 }
+
+/// A second launcher that connects to the router of a running run with the same run id refuses
+/// to start, naming the tokens already alive, and the first run goes on undisturbed (its hand-
+/// started node still there).
+#[test]
+fn a_second_launcher_with_the_same_run_id_refuses_to_start() {
+    let (mut launcher, _node, run_id, dir) = launch_with_hand_started_node("same-run-id");
+    let endpoint = launcher
+        .output()
+        .lines()
+        .find_map(|l| {
+            l.split("--connect ")
+                .nth(1)
+                .map(|r| r.split(' ').next().unwrap_or("").to_string())
+        })
+        .expect("the launcher prints the endpoint for nodes started by hand");
+    let scene = dir.join("endless.toml");
+    let t = Instant::now();
+    let second = Command::new(exe())
+        .arg("run")
+        .arg(&scene)
+        .args(["--quiet", "--run-id", &run_id, "--connect", &endpoint, "--out"])
+        .arg(dir.join("second"))
+        .output()
+        .expect("spawn the second launcher");
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "run id {run_id} is already in use on the Zenoh router at {endpoint}"
+        )) && stderr.contains(&format!("glissade/{run_id}/alive/launcher/0")),
+        "{stderr}"
+    );
+    assert!(t.elapsed() < Duration::from_secs(30), "{:?}", t.elapsed());
+    // The first run is still iterating.
+    assert!(
+        launcher.child.try_wait().expect("try_wait").is_none(),
+        "{}",
+        launcher.output()
+    );
+    launcher.child.kill().expect("SIGKILL the launcher");
+    launcher.wait_exit(Duration::from_secs(60));
+}

@@ -61,7 +61,7 @@ pub use config::{config, free_loopback_port, open, secure_config, set_shared_mem
 pub use error::TransportError;
 pub use handshake::{fetch_scene, publish_done, publish_start, publish_stop, scene_fingerprint_of, serve_scene};
 pub use node_loop::{run_nodes, NodeRun};
-pub use presence::{launcher_token, Presence};
+pub use presence::{launcher_token, tokens_alive, Presence};
 pub use publish::{publish, publish_lent, SHARED_ENCODING_MIN};
 pub use receive::{decode_payload, message_hash, payload_hash};
 pub use recorder_log::{decode_log, encode_log, fetch_log};

@@ -72,3 +72,27 @@ pub fn launcher_token(session: &Session, run_id: &str) -> Result<zenoh::liveline
         .wait()
         .map_err(|e| zerr("liveliness token", e))
 }
+
+/// The liveliness tokens of `run_id` alive on the bus now (asked with a bounded wait): another
+/// launcher or nodes already using this run id.
+pub fn tokens_alive(
+    session: &Session,
+    run_id: &str,
+    timeout: std::time::Duration,
+) -> Result<Vec<String>, TransportError> {
+    let replies = session
+        .liveliness()
+        .get(topic::alive_all(run_id))
+        .timeout(timeout)
+        .wait()
+        .map_err(|e| zerr("liveliness query", e))?;
+    let mut keys = Vec::new();
+    while let Ok(reply) = replies.recv() {
+        if let Ok(sample) = reply.result() {
+            keys.push(sample.key_expr().as_str().to_string());
+        }
+    }
+    keys.sort();
+    keys.dedup();
+    Ok(keys)
+}
