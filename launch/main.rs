@@ -581,6 +581,9 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             args.recording.display()
         );
     }
+    if let Some(why) = recording.damaged() {
+        eprintln!("warning: {}: {why}", args.recording.display());
+    }
     if !args.node.is_empty() {
         use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
         let mut nodes = Vec::new();
@@ -685,6 +688,9 @@ fn export(
                 "warning: {}: {why}; the export holds the messages before it",
                 recording.display()
             );
+        }
+        if let Some(why) = &e.source_damaged {
+            eprintln!("warning: {}: {why}; the export holds the others", recording.display());
         }
         println!(
             "foreign-readable (protobuf): {} ({} messages on {} channels, {:.1} MB)",

@@ -403,3 +403,45 @@ fn spawning_a_viewer_without_a_display_fails_at_once() {
         start.elapsed()
     );
 }
+
+/// A recording with one byte flipped inside a chunk in its middle (the check Python's `mcap`
+/// makes too): `glissade replay` warns with the chunk's position and replays every other message;
+/// re-execution refuses it rather than blame a healthy node.
+#[test]
+fn a_recording_with_a_damaged_chunk_replays_the_rest_and_refuses_reexecution() {
+    let dir = temp_dir("damaged");
+    let path = record(&scene_text("small-three-layer"), &dir, "dmg");
+    let intact = Recording::open(&path).unwrap().messages().count();
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The middle of the file lies inside a chunk of boundary states (they make most of its bytes).
+    let at = bytes.len() / 2;
+    bytes[at] ^= 0x10;
+    std::fs::write(&path, &bytes).unwrap();
+    let r = Recording::open(&path).unwrap();
+    let why = r.damaged().expect("the flipped byte is found");
+    let read = r.messages().count();
+    assert!(read > 0 && read < intact, "{read} of {intact} messages");
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .arg("replay")
+            .arg(&path)
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let o = run(&["--save", &dir.join("damaged.rrd").display().to_string()]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!("warning: {}: {why}", path.display())),
+        "{stderr}"
+    );
+    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("replayed {read} messages")));
+    let o = run(&["--node", "all"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("damaged chunk(s)") && stderr.contains("re-execution needs every input"),
+        "{stderr}"
+    );
+}

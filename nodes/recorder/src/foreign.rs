@@ -51,9 +51,11 @@ pub struct Exported {
     pub channels: usize,
     /// Size of the written file.
     pub bytes: u64,
-    /// Why the source recording's readable part ends early (cut short or a damaged chunk): the
-    /// export holds the messages before that point, and its metadata says so.
+    /// Why the source recording's readable part ends early (cut short): the export holds the
+    /// messages before that point, and its metadata says so.
     pub source_truncated: Option<String>,
+    /// The source's damaged chunks: the export holds every other message, and its metadata says so.
+    pub source_damaged: Option<String>,
 }
 
 /// Writes `<dir>/<file name of source>`, the foreign-readable copy of recording `source`
@@ -117,6 +119,7 @@ pub fn export(source: &Path, dir: &Path, software: &str) -> Result<Exported, Rec
             channels,
             bytes,
             source_truncated: rec.truncated().map(str::to_string),
+            source_damaged: rec.damaged().map(str::to_string),
         }),
         Err(e) => {
             let _ = std::fs::remove_file(&partial);
@@ -151,6 +154,9 @@ fn write(rec: &Recording, name: &str, path: &Path, software: &str) -> Result<(u6
     metadata.insert("exported_by".into(), software.to_string());
     if let Some(why) = rec.truncated() {
         metadata.insert("source_truncated".into(), why.to_string());
+    }
+    if let Some(why) = rec.damaged() {
+        metadata.insert("source_damaged".into(), why.to_string());
     }
     writer
         .write_metadata(&mcap::records::Metadata {

@@ -33,39 +33,56 @@ pub struct RecordedMessage<'a> {
     pub data: Cow<'a, [u8]>,
 }
 
-/// The byte offset of the first uncompressed chunk whose records do not match its CRC, and the
-/// two CRCs; None when every such chunk checks (compressed chunks are checked by the reader as
-/// they are decompressed). Walks the records' framing (opcode, length) from the magic to the data
-/// end or the first incomplete record.
-fn first_damaged_chunk(bytes: &[u8]) -> Option<(usize, String)> {
+/// A chunk whose records do not match its CRC: its byte range in the file and the two CRCs.
+struct DamagedChunk {
+    start: usize,
+    end: usize,
+    why: String,
+}
+
+/// Every uncompressed chunk whose records do not match its CRC (compressed chunks are checked by
+/// the reader as they are decompressed). Walks the records' framing (opcode, length) from the
+/// magic to the data end or the first incomplete record.
+fn damaged_chunks(bytes: &[u8]) -> Vec<DamagedChunk> {
+    let mut out = Vec::new();
+    let mut pos = mcap::MAGIC.len();
+    while let Some((end, damage)) = check_record(bytes, pos) {
+        if let Some(why) = damage {
+            out.push(DamagedChunk { start: pos, end, why });
+        }
+        pos = end;
+    }
+    out
+}
+
+/// The end of the record at `pos` and, for an uncompressed chunk whose CRC does not match, why;
+/// None at the data end or an incomplete record.
+fn check_record(bytes: &[u8], pos: usize) -> Option<(usize, Option<String>)> {
     const CHUNK: u8 = 0x06;
     const DATA_END: u8 = 0x0F;
     let u64_at = |at: usize| -> Option<u64> { Some(u64::from_le_bytes(bytes.get(at..at + 8)?.try_into().ok()?)) };
     let u32_at = |at: usize| -> Option<u32> { Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?)) };
-    let mut pos = mcap::MAGIC.len();
-    while let (Some(&op), Some(len)) = (bytes.get(pos), u64_at(pos + 1)) {
-        let body = pos + 9;
-        let end = body.checked_add(usize::try_from(len).ok()?)?;
-        if end > bytes.len() || op == DATA_END {
-            return None;
-        }
-        if op == CHUNK {
-            // start time, end time, uncompressed size (8 bytes each), CRC, compression, records.
-            let crc = u32_at(body + 24)?;
-            let name_len = u32_at(body + 28)? as usize;
-            let records_len = usize::try_from(u64_at(body + 32 + name_len)?).ok()?;
-            let records_at = body + 40 + name_len;
-            let records = bytes.get(records_at..records_at.checked_add(records_len)?)?;
-            if name_len == 0 && crc != 0 {
-                let computed = crc32fast::hash(records);
-                if computed != crc {
-                    return Some((pos, format!("CRC {computed:08x}, recorded {crc:08x}")));
-                }
+    let (&op, len) = (bytes.get(pos)?, u64_at(pos + 1)?);
+    let body = pos + 9;
+    let end = body.checked_add(usize::try_from(len).ok()?)?;
+    if end > bytes.len() || op == DATA_END {
+        return None;
+    }
+    if op == CHUNK {
+        // start time, end time, uncompressed size (8 bytes each), CRC, compression, records.
+        let crc = u32_at(body + 24)?;
+        let name_len = u32_at(body + 28)? as usize;
+        let records_len = usize::try_from(u64_at(body + 32 + name_len)?).ok()?;
+        let records_at = body + 40 + name_len;
+        let records = bytes.get(records_at..records_at.checked_add(records_len)?)?;
+        if name_len == 0 && crc != 0 {
+            let computed = crc32fast::hash(records);
+            if computed != crc {
+                return Some((end, Some(format!("CRC {computed:08x}, recorded {crc:08x}"))));
             }
         }
-        pos = end;
     }
-    None
+    Some((end, None))
 }
 
 /// A recording loaded in memory and indexed in one pass.
@@ -81,6 +98,8 @@ pub struct Recording {
     finished: bool,
     /// Why reading stopped before the data end (a file cut short, e.g. by a killed recorder).
     truncated: Option<String>,
+    /// The chunks whose CRC did not match, skipped with their records.
+    damaged: Option<String>,
     expected: Expected,
 }
 
@@ -96,13 +115,22 @@ impl Recording {
         Self::from_bytes(path, bytes)
     }
 
-    /// As [`Recording::open`], from bytes already read (`path` names them in errors). An
-    /// uncompressed chunk whose CRC does not match its records ends the readable part before it,
-    /// as a cut would, and [`Recording::truncated`] names it.
+    /// As [`Recording::open`], from bytes already read (`path` names them in errors). Uncompressed
+    /// chunks whose CRC does not match their records are skipped with their messages (and
+    /// messages on channels declared in them), and [`Recording::damaged`] names them; reading
+    /// goes on after them.
     pub fn from_bytes(path: &Path, mut bytes: Vec<u8>) -> Result<Self, RecorderError> {
-        let damaged = first_damaged_chunk(&bytes);
-        if let Some((offset, _)) = &damaged {
-            bytes.truncate(*offset);
+        let bad = damaged_chunks(&bytes);
+        let damaged = (!bad.is_empty()).then(|| {
+            let at: Vec<String> = bad.iter().map(|c| format!("byte {} ({})", c.start, c.why)).collect();
+            format!(
+                "{} damaged chunk(s), their messages skipped: at {}",
+                bad.len(),
+                at.join(", ")
+            )
+        });
+        for c in bad.iter().rev() {
+            bytes.drain(c.start..c.end);
         }
         let format = |detail: String| RecorderError::Format {
             path: path.to_path_buf(),
@@ -148,6 +176,8 @@ impl Recording {
                 }
                 Record::Message { header, .. } => match channels.get_mut(&header.channel_id) {
                     Some(c) => c.messages += 1,
+                    // Its channel was declared in a damaged chunk: skipped with it.
+                    None if damaged.is_some() => {}
                     None => return Err(format(format!("message on unknown channel {}", header.channel_id))),
                 },
                 Record::Metadata(m) if m.name == METADATA_NAME => metadata = m.metadata,
@@ -161,11 +191,6 @@ impl Recording {
                 Record::DataEnd(_) => break,
                 _ => {}
             }
-        }
-        if let Some((offset, why)) = damaged {
-            truncated = Some(format!(
-                "the chunk at byte {offset} is damaged ({why}); reading stopped before it"
-            ));
         }
         if metadata.is_empty() {
             return Err(format(format!(
@@ -195,6 +220,7 @@ impl Recording {
             scene_times,
             finished,
             truncated,
+            damaged,
             expected: Expected {
                 run_id,
                 scene_fingerprint: fingerprint,
@@ -239,14 +265,19 @@ impl Recording {
         self.finished
     }
 
-    /// Why reading stopped early: a file cut short, or a chunk whose CRC does not match its
-    /// content (reading stops before that chunk's messages).
+    /// Why reading stopped early: a file cut short (e.g. by a killed recorder).
     pub fn truncated(&self) -> Option<&str> {
         self.truncated.as_deref()
     }
 
-    /// Every message in file order (up to the point where a cut-short file or a damaged chunk
-    /// stops reading).
+    /// The chunks whose CRC did not match their content, skipped with their messages: where they
+    /// are and both CRCs.
+    pub fn damaged(&self) -> Option<&str> {
+        self.damaged.as_deref()
+    }
+
+    /// Every message in file order (up to the point where a cut-short file stops reading; without
+    /// the messages of damaged chunks, and of channels declared in them).
     pub fn messages(&self) -> impl Iterator<Item = RecordedMessage<'_>> + '_ {
         let topics: BTreeMap<u16, &str> = self.channels.iter().map(|c| (c.id, c.topic.as_str())).collect();
         ChunkFlattener::new_with_options(&self.bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
@@ -256,7 +287,7 @@ impl Recording {
             .take_while(|r| !matches!(r, Record::DataEnd(_)))
             .filter_map(move |r| match r {
                 Record::Message { header, data } => Some(RecordedMessage {
-                    topic: topics.get(&header.channel_id).copied().unwrap_or(""),
+                    topic: topics.get(&header.channel_id).copied()?,
                     channel: header.channel_id,
                     sequence: header.sequence,
                     log_time: header.log_time,

@@ -324,10 +324,11 @@ fn survives_sigkill() {
     assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
 }
 
-/// A chunk whose bytes changed after it was written (its CRC no longer matches) is reported, and
-/// reading stops before its messages: every message read back is one that was recorded.
+/// A chunk whose bytes changed after it was written (its CRC no longer matches) is reported with
+/// its position and skipped: every message read back is one that was recorded, in order, those of
+/// the chunks after it included.
 #[test]
-fn a_damaged_chunk_is_reported_and_not_read() {
+fn a_damaged_chunk_is_reported_and_skipped() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("damaged.mcap");
     let msgs: Vec<Message> = (0..4).flat_map(iteration).collect();
@@ -348,10 +349,28 @@ fn a_damaged_chunk_is_reported_and_not_read() {
         .expect("the message's bytes are in the file");
     bytes[at + wire[k].len() / 2] ^= 0x01;
     let r = Recording::from_bytes(&path, bytes).unwrap();
-    let why = r.truncated().expect("the damaged chunk is reported");
-    assert!(why.contains("CRC"), "{why}");
+    assert!(r.truncated().is_none() && r.is_finished());
+    let why = r.damaged().expect("the damaged chunk is reported");
+    assert!(
+        why.starts_with("1 damaged chunk(s), their messages skipped: at byte ") && why.contains("CRC"),
+        "{why}"
+    );
     let back: Vec<Vec<u8>> = r.messages().map(|m| m.data.into_owned()).collect();
-    assert!(back.len() <= k, "{} messages read, the damaged one is {k}", back.len());
-    assert!(!back.is_empty(), "the chunks before the damaged one are read");
-    assert_eq!(back[..], wire[..back.len()]);
+    // What is read is the recording without one run of consecutive messages (the damaged
+    // chunk's, the k-th among them), the last one included.
+    assert!(
+        !back.is_empty() && back.len() < wire.len(),
+        "{} of {} messages read",
+        back.len(),
+        wire.len()
+    );
+    let first_missing = back.iter().zip(&wire).take_while(|(a, b)| a == b).count();
+    let skipped = wire.len() - back.len();
+    assert!(
+        first_missing <= k && k < first_missing + skipped,
+        "skipped {first_missing}..{} around {k}",
+        first_missing + skipped
+    );
+    assert_eq!(back[first_missing..], wire[first_missing + skipped..]);
+    assert_eq!(back.last(), wire.last());
 }

@@ -150,6 +150,11 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
             recording.truncated().unwrap_or("no summary section")
         )));
     }
+    if let Some(why) = recording.damaged() {
+        return Err(refuse(format!(
+            "{why}: re-execution needs every input of the run, unchanged"
+        )));
+    }
     let text = recording
         .scene_text()
         .ok_or_else(|| refuse("the recording holds no scene".into()))?;
