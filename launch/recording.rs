@@ -416,6 +416,9 @@ pub fn run_recorder_process(
         glissade_messages::topic::stop(run_id),
     );
     let mut seen: u64 = 0;
+    // Messages with the run's envelope that are not the run's (another scene, malformed, on a
+    // key not theirs): counted and left out.
+    let (mut refused, mut first_refused): (u64, Option<String>) = (0, None);
     let mut target: Option<(u64, Instant)> = None;
     let mut last = Instant::now();
     loop {
@@ -484,7 +487,22 @@ pub fn run_recorder_process(
                 // Control messages (start, …) carry no envelope: not part of the run's traffic.
                 if peek_envelope(&bytes, run_id).is_ok() {
                     seen += 1;
-                    recorder.record(&key, t, &bytes)?;
+                    // Only what decodes as a message of this run and scene, on its own key, is
+                    // kept: anything else on the run's keys is not the run's.
+                    let refusal = match decode(&bytes, &expected) {
+                        Ok(m) if m.topic() == key => None,
+                        Ok(m) => Some(format!("its envelope and payload belong on {}", m.topic())),
+                        Err(e) => Some(e.to_string()),
+                    };
+                    match refusal {
+                        None => {
+                            recorder.record(&key, t, &bytes)?;
+                        }
+                        Some(why) => {
+                            refused += 1;
+                            first_refused.get_or_insert_with(|| format!("on {key}: {why}"));
+                        }
+                    }
                 }
             }
             Err(mpsc::RecvTimeoutError::Timeout) if last.elapsed() > IDLE_TIMEOUT => {
@@ -499,6 +517,9 @@ pub fn run_recorder_process(
         }
     }
     let stats = recorder.finish()?;
+    if let Some(first) = &first_refused {
+        eprintln!("warning: {refused} message(s) on the run's keys were not the run's and were not recorded (the first {first})");
+    }
     eprintln!(
         "{}recorded {} messages on {} channels, {} bytes: {}",
         glissade_zenoh::NOTE,

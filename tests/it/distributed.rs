@@ -489,6 +489,13 @@ fn messages_of_another_run_are_ignored() {
         connect: vec![endpoint.clone()],
         ..Network::default()
     };
+    // The victim's run is recorded: what its recorder keeps must be the run's own messages.
+    let dir = crate::common::scratch("foreign-messages");
+    let recording = dir.join("victim.mcap");
+    let net_a = Network {
+        recording: Some(recording.clone()),
+        ..net.clone()
+    };
     let victim = "shared-bus-a";
     let stop = Arc::new(AtomicBool::new(false));
     let publisher = {
@@ -587,7 +594,7 @@ fn messages_of_another_run_are_ignored() {
                     interior: false,
                 },
                 exe(),
-                &net,
+                &net_a,
                 |_| {},
             )
         });
@@ -625,6 +632,16 @@ fn messages_of_another_run_are_ignored() {
     );
     assert_identical(&local, &a);
     assert_identical(&local, &b);
+    // The other scene's decisions reached the recorder too: it left them out, so that every
+    // recorded message decodes as one of the run (as `glissade replay` decodes them).
+    let r = glissade_recorder::Recording::open(&recording).unwrap();
+    let recorded_decisions = r.messages().filter(|m| m.topic.ends_with("/decision")).count();
+    assert_eq!(recorded_decisions, a.iterations.len(), "decisions recorded");
+    for m in r.messages() {
+        if let Err(e) = r.decode(&m) {
+            panic!("a recorded message on {} does not decode: {e}", m.topic);
+        }
+    }
 }
 
 /// `RUST_LOG` shows the log of every process of a run: the node processes inherit it and the
