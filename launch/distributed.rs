@@ -676,6 +676,43 @@ pub fn run_distributed_observed(
                 dead = Some(k);
             }
         }
+        // A node that exited because a peer left is not the culprit when that peer's token went
+        // first while its process still runs (stopped or hung): name the peer.
+        if let Some(k) = dead.filter(|&k| children.0[k].status.is_some()) {
+            let exited_lost = children.0[k].token_lost;
+            let silent = children
+                .0
+                .iter()
+                .enumerate()
+                .filter(|(j, p)| *j != k && p.status.is_none())
+                .filter_map(|(j, p)| Some((j, p.token_lost?)))
+                .filter(|(_, lost)| exited_lost.is_none_or(|e| *lost <= e))
+                .min_by_key(|(_, lost)| *lost);
+            if let Some((j, lost)) = silent {
+                let exited = children.0[k].name;
+                let p = &mut children.0[j];
+                child_failure = Some(match p.child.try_wait()? {
+                    // It died too (before the other, as its token says): the usual report.
+                    Some(status) => {
+                        p.status = Some(status);
+                        p.output.settle();
+                        format!(
+                            "node {} failed ({status}); its last lines:\n    {}",
+                            p.name,
+                            p.last_lines()
+                        )
+                    }
+                    None => format!(
+                        "node {} stopped answering: its liveliness token disappeared {:.1} s ago, before node \
+                         {exited} failed, while its process still runs (stopped or hung?); its last lines:\n    {}",
+                        p.name,
+                        lost.elapsed().as_secs_f64(),
+                        p.last_lines()
+                    ),
+                });
+                dead = Some(j);
+            }
+        }
         // A node process that died mid-run: a replacement resumes from the recorder's log, up to
         // `restarts` times per node.
         if let (Some(k), Some(why), true) = (dead, &child_failure, supervised && got.started.is_some()) {

@@ -427,3 +427,38 @@ fn a_second_launcher_with_the_same_run_id_refuses_to_start() {
     launcher.child.kill().expect("SIGKILL the launcher");
     launcher.wait_exit(Duration::from_secs(60));
 }
+
+/// A node process that stops answering without dying (SIGSTOP) is the one the launcher names,
+/// not the peer that noticed it first and left (a stopped subdomain 1 used to be reported as
+/// "node subdomain:0 failed"). Its token lapses with the Zenoh lease, so the run stops within
+/// the lease plus the usual bound, and leaves no process.
+#[test]
+fn a_stopped_node_is_named_rather_than_the_peer_that_noticed() {
+    let (mut launcher, run_id, _dir) = launch_endless_with("stop-subdomain-1", "restarts = 0\n", "");
+    let pids = processes_with(&run_id, &["node", "subdomain", "--index", "1"]);
+    assert_eq!(pids.len(), 1, "{pids:?}");
+    let t = Instant::now();
+    // SAFETY: a plain kill(2) of a process this test found by its command line.
+    assert_eq!(unsafe { libc::kill(pids[0], libc::SIGSTOP) }, 0);
+    let status = launcher.wait_exit(Duration::from_secs(90));
+    let took = t.elapsed();
+    let out = launcher.output();
+    println!("stopped subdomain:1: the launcher exited with {status} after {took:?}");
+    // SAFETY: as above; the stopped process is resumed so that it can be reaped.
+    unsafe { libc::kill(pids[0], libc::SIGCONT) };
+    assert!(
+        took < glissade_zenoh::LEASE + STOP_BOUND,
+        "the run took {took:?} to stop"
+    );
+    assert_eq!(status.code(), Some(2), "{out}");
+    let error = out
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .unwrap_or_else(|| panic!("no error line in:\n{out}"));
+    assert!(
+        error.contains("node subdomain:1 stopped answering") && error.contains("before node "),
+        "the error names the stopped node: {error}"
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    assert_no_process_left(&run_id);
+}
