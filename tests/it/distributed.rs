@@ -437,7 +437,7 @@ fn with_shared_memory_large_fields_are_sent_without_a_copy() {
         stderr
             .lines()
             .filter_map(|l| l.strip_prefix(&format!("[{node}")))
-            .filter_map(|l| l.split_once("] shared memory: ").map(|(_, rest)| rest))
+            .filter_map(|l| l.split_once("] note: shared memory: ").map(|(_, rest)| rest))
             .map(|rest| {
                 let n: Vec<u64> = rest.split(' ').filter_map(|w| w.parse().ok()).collect();
                 (n[0], n[1])

@@ -202,7 +202,8 @@ fn recording_off_restricted_and_unwritable() {
 /// Runs `glissade run` as processes with recording into `dir`; returns the child.
 fn spawn_run(scene_path: &Path, dir: &Path, run_id: &str) -> std::process::Child {
     Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["run", "--quiet", "--run-id", run_id, "--out"])
+        // --verbose: the recorder's notes (its pid) are shown.
+        .args(["run", "--quiet", "--verbose", "--run-id", run_id, "--out"])
         .arg(dir)
         .arg(scene_path)
         .stdin(Stdio::null())
