@@ -70,9 +70,13 @@ pub fn expected_size(scene: &LoadedScene) -> String {
     } else {
         format!(", only {:?}", r.topics)
     };
+    let each = if full < 1e6 {
+        format!("{:.0} kB", full * 1e-3)
+    } else {
+        format!("{:.1} MB", full * 1e-6)
+    };
     format!(
-        "full fields {every}{topics}, {:.1} MB each; at most about {:.0} MB at the iteration cap ({cap})",
-        full * 1e-6,
+        "full fields {every}{topics}, {each} each; at most about {:.0} MB at the iteration cap ({cap})",
         at_cap * 1e-6
     )
 }

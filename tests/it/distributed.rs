@@ -684,9 +684,9 @@ fn rust_log_shows_every_process_log_lines() {
     );
 }
 
-/// The console of a run as processes says what matters: the verdict, the recording with its
-/// size and the output files (4 lines, the progress line aside, which is hidden when the output
-/// is not a terminal). How it went (shared memory, readiness, bytes on the bus per kind, each
+/// The console of a run as processes says what matters: what it records, the verdict, the
+/// recording with its size and the output files (5 lines, the progress line aside, which is
+/// hidden when the output is not a terminal). How it went (shared memory, readiness, bytes on the bus per kind, each
 /// node's notes) only with `--verbose`, and the bus statistics are in the summary either way.
 #[test]
 fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
@@ -708,17 +708,21 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
     };
     let (out, err) = run("quiet", false);
     let lines: Vec<&str> = out.lines().chain(err.lines()).collect();
-    assert_eq!(lines.len(), 4, "{out}{err}");
+    assert_eq!(lines.len(), 5, "{out}{err}");
     assert!(
-        lines[0].starts_with("scene `small-three-layer`: Converged after "),
+        lines[0].starts_with("recording to ") && lines[0].contains("full fields at every iteration, 52 kB each"),
         "{out}"
     );
     assert!(
-        lines[1].starts_with("recording: ") && lines[1].ends_with(" MB)"),
+        lines[1].starts_with("scene `small-three-layer`: Converged after "),
         "{out}"
     );
     assert!(
-        lines[2].starts_with("summary: ") && lines[3].starts_with("fields: "),
+        lines[2].starts_with("recording: ") && lines[2].ends_with(" MB)"),
+        "{out}"
+    );
+    assert!(
+        lines[3].starts_with("summary: ") && lines[4].starts_with("fields: "),
         "{out}"
     );
     let summary: serde_json::Value =

@@ -193,16 +193,19 @@ fn a_thinned_recording_replays_but_refuses_to_reexecute_nodes_that_need_every_fi
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("local_directions only every 3 iterations") && err.contains("full_fields_every = 1"),
+        err.contains("local_directions and macro_displacements only every 3 iterations")
+            && err.contains("full_fields_every = 1"),
         "{err}"
     );
     let err = reexecute(&recording, parse_node("interface:0").unwrap())
         .unwrap_err()
         .to_string();
     assert!(err.contains("boundary_state only every 3 iterations"), "{err}");
-    // The coarse node reads no thinned field: it re-executes.
-    let r = reexecute(&recording, parse_node("coarse:0").unwrap()).unwrap();
-    assert_eq!(r.mismatch, None);
+    // The coarse node reads the macro forces, thinned too.
+    let err = reexecute(&recording, parse_node("coarse:0").unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("macro_forces only every 3 iterations"), "{err}");
 
     // The Rerun view: meshes only at the iterations that kept the boundary states, and the final
     // state (from the interface solutions) at every time point.

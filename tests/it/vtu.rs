@@ -116,17 +116,22 @@ fn glissade(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
-/// The VTU series, the CSV and the JSON outputs of one run carry the same doubles: VTU stores
-/// them raw, JSON and CSV in shortest round-trip decimal, so they agree to 1e-12 (the bar;
-/// in practice exactly). The scene has interface edges ending at a pair clamped on both sides, so
-/// the clamped-point case is exercised.
+/// The VTU series, the CSV and the JSON outputs of one run of the stratified scene carry the same
+/// doubles: VTU stores them raw, JSON and CSV in shortest round-trip decimal, so they agree to
+/// 1e-12 (the bar; in practice exactly). The layers' interfaces end at x = 0, where both
+/// sides are clamped, so the clamped-point case is exercised.
 #[test]
 fn a_runs_paraview_series_and_csv_equal_its_json_outputs() {
     let Some(python) = python_with(&["meshio", "numpy"]) else {
         return;
     };
     let dir = scratch("vtu-run");
-    let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
+    // The stratified scene (18 subdomains, 27 interfaces) at N = 30 instead of 1000.
+    let text = std::fs::read_to_string(format!("{}/launch/scenes/stratified.toml", env!("CARGO_MANIFEST_DIR")))
+        .unwrap()
+        .replace("N = 1000", "N = 30");
+    let scene = dir.join("stratified.toml").display().to_string();
+    std::fs::write(&scene, text).unwrap();
     let out = dir.display().to_string();
     let printed = glissade(&[
         "run",
@@ -141,7 +146,7 @@ fn a_runs_paraview_series_and_csv_equal_its_json_outputs() {
         "v",
     ]);
     assert!(printed.contains("paraview: "), "{printed}");
-    let stem = dir.join("small-three-layer-v");
+    let stem = dir.join("stratified-v");
     let r = run_check(
         python,
         &stem.with_extension("pvd"),
@@ -150,9 +155,9 @@ fn a_runs_paraview_series_and_csv_equal_its_json_outputs() {
         &stem.with_extension("interfaces.csv"),
     );
     println!("{r}");
-    // N = 10: 11 time points, a solid and an interface dataset each.
-    assert_eq!(r["time_points"], 11);
-    assert_eq!(r["datasets"], 22);
+    // N = 30: 31 time points, a solid and an interface dataset each.
+    assert_eq!(r["time_points"], 31);
+    assert_eq!(r["datasets"], 62);
     assert_eq!(r["times_equal"], true);
     assert_eq!(r["csv_rows"], r["expected_rows"]);
     assert_eq!(r["status_mismatch"], 0);
@@ -173,7 +178,7 @@ fn a_runs_paraview_series_and_csv_equal_its_json_outputs() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("small-three-layer-v.pvd") && err.contains("nothing was overwritten"),
+        err.contains("stratified-v.pvd") && err.contains("nothing was overwritten"),
         "{err}"
     );
 }
