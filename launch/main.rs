@@ -646,15 +646,27 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     };
     let t0 = std::time::Instant::now();
     let s = glissade_replay::replay(&recording, &opts)?;
+    let range = s.color_range.map_or_else(
+        || "no colour range".to_string(),
+        |r| {
+            format!(
+                "colour range {:.4e} – {:.4e}: {}–{} percentile of the final state, extremes {:.4e} – {:.4e}",
+                r.lo,
+                r.hi,
+                glissade_replay::ordinal(glissade_replay::PERCENTILES.0),
+                glissade_replay::ordinal(glissade_replay::PERCENTILES.1),
+                r.min,
+                r.max
+            )
+        },
+    );
     println!(
-        "replayed {} messages: {} iterations, {} meshes (time point {}, displacements × {:.3e}, colour range {:.4e} – {:.4e}) in {:.2} s",
+        "replayed {} messages: {} iterations, {} meshes (time point {}, displacements × {:.3e}, {range}) in {:.2} s",
         s.messages,
         s.iterations,
         s.meshes,
         s.time_point,
         s.amplification,
-        s.color_range.0,
-        s.color_range.1,
         t0.elapsed().as_secs_f64()
     );
     if let (Some(t), Some(&(it, e_f, e_w))) = (s.reference_s, s.errors.last()) {

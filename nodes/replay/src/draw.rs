@@ -1,6 +1,6 @@
 //! What the Rerun logging draws with: a subdomain's deformed mesh coloured by a nodal field,
-//! the colour ramp and the contact status colours, the recording stream of a sink, and the
-//! scales (model diagonal, time point, colour range) a view is drawn at.
+//! the colour ramp and the contact status colours, the recording stream of a sink, and the time
+//! point a view is drawn at.
 
 use crate::{rerr, ColorBy, ReplayError, Sink};
 use glissade_mechanics::model::Model;
@@ -27,8 +27,8 @@ pub(crate) fn nodal_field(model: &Model, s: usize, u: &[f64], by: ColorBy) -> Re
     })
 }
 
-/// Viridis-like colour ramp for v in [lo, hi].
-fn color(v: f64, lo: f64, hi: f64) -> rerun::Color {
+/// Viridis-like colour ramp for v in [lo, hi] (the end colours outside).
+pub(crate) fn color(v: f64, lo: f64, hi: f64) -> rerun::Color {
     const STOPS: [[f32; 3]; 5] = [
         [68.0, 1.0, 84.0],
         [59.0, 82.0, 139.0],
@@ -128,33 +128,10 @@ fn no_display() -> Option<ReplayError> {
     })
 }
 
-/// The diagonal of the model's bounding box (mm).
-pub(crate) fn diagonal(model: &Model) -> f64 {
-    let b = model.subdomains.iter().flat_map(|s| s.mesh.coords.iter()).fold(
-        [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY],
-        |b, x| [b[0].min(x[0]), b[1].max(x[0]), b[2].min(x[1]), b[3].max(x[1])],
-    );
-    (b[1] - b[0]).hypot(b[3] - b[2])
-}
-
 /// The time point with the largest boundary displacement ‖W(:, i)‖.
 pub(crate) fn largest_time_point(w: &Field) -> usize {
     (0..w.cols())
         .map(|i| (i, (0..w.rows()).map(|r| w.get(r, i).powi(2)).sum::<f64>()))
         .fold((0, -1.0), |a, b| if b.1 > a.1 { b } else { a })
         .0
-}
-
-/// (min, max) over fields; (0, 1) when there is nothing.
-pub(crate) fn range_of<'a>(fields: impl Iterator<Item = &'a [f64]>) -> (f64, f64) {
-    let (lo, hi) = fields
-        .flatten()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
-            (lo.min(*v), hi.max(*v))
-        });
-    if lo.is_finite() && hi.is_finite() {
-        (lo, hi)
-    } else {
-        (0.0, 1.0)
-    }
 }

@@ -19,13 +19,17 @@
 //! state, then every message); [`View`] takes messages one at a time, as [`replay`] and a live run
 //! (`glissade run --rerun`) give them.
 
+pub mod blueprint;
 mod draw;
+mod legend;
 mod recovery;
 pub mod reexecute;
+pub mod rrd;
 mod states;
 mod view;
 mod walk;
 
+pub use legend::{ordinal, ColourRange, PERCENTILES};
 pub use states::BoundaryStates;
 use std::path::PathBuf;
 pub use view::View;
@@ -95,8 +99,9 @@ pub struct ReplaySummary {
     pub meshes: usize,
     pub time_point: usize,
     pub amplification: f64,
-    /// Colour range (min, max) of the chosen field.
-    pub color_range: (f64, f64),
+    /// Colour range of the chosen field: the final state's percentiles [`PERCENTILES`] and
+    /// extremes.
+    pub color_range: Option<ColourRange>,
     /// Interior displacements came from the recording's `Displacement` messages.
     pub interior_recorded: bool,
     /// (iteration, traction error, jump error) against the reference, when asked for.

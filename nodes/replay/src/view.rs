@@ -1,9 +1,8 @@
 //! The Rerun view of one run: the scene, then every message (boundary states, decisions,
 //! displacements, interface solutions) logged on the `iteration` and `time` timelines.
 
-use crate::draw::{
-    create_stream, diagonal, largest_time_point, log_mesh, nodal_field, range_of, STATUS_COLORS, STATUS_NAMES,
-};
+use crate::draw::{create_stream, largest_time_point, log_mesh, nodal_field, STATUS_COLORS, STATUS_NAMES};
+use crate::legend::{self, ColourRange, Frame};
 use crate::recovery::{final_displacements, Recovery};
 use crate::{rerr, BoundaryStates, ColorBy, ReplayError, ReplayOptions, ReplaySummary};
 use glissade_bus::convert::view;
@@ -21,10 +20,10 @@ pub struct View {
     color_by: ColorBy,
     recovery: Recovery,
     /// Fixed colour range; None: each iteration's own range (a live run cannot know the last one).
-    range: Option<(f64, f64)>,
+    range: Option<ColourRange>,
     amplification: Option<f64>,
     time_point: Option<usize>,
-    diag: f64,
+    frame: Frame,
     /// Boundary states of the iteration in progress, logged with its decision.
     pending: BTreeMap<u32, (Field, Field)>,
     /// The last boundary state of each subdomain.
@@ -40,15 +39,16 @@ pub struct View {
 }
 
 impl View {
-    /// Opens the sink and logs the scene. `range` and `amplification` fix the colour range and
-    /// the displacement amplification (None: from the first iteration logged, and the colour
-    /// range per iteration).
+    /// Opens the sink, sends the layout (the blueprint) and logs the scene. `range` and
+    /// `amplification` fix the colour range (with its legend) and the displacement amplification
+    /// (None: from the first iteration logged, and the colour range and legend per iteration,
+    /// then the final state's).
     pub fn new(
         scene_text: &str,
         origin: &str,
         run_id: &str,
         opts: &ReplayOptions,
-        range: Option<(f64, f64)>,
+        range: Option<ColourRange>,
     ) -> Result<Self, ReplayError> {
         let scene = load_str(scene_text, origin).map_err(|e| ReplayError::Content {
             path: origin.to_string(),
@@ -62,8 +62,14 @@ impl View {
                 detail: format!("time point {i}: the scene has time points 0..{}", nt - 1),
             });
         }
-        let diag = diagonal(&model);
+        let frame = Frame::new(&model);
         let rec = create_stream(&opts.sink)?;
+        crate::blueprint::send(&rec, &frame)?;
+        rec.log_static("/", &rerun::ViewCoordinates::RIGHT_HAND_Y_UP())
+            .map_err(rerr)?;
+        if let Some(r) = &range {
+            legend::log(&rec, &frame, r, opts.color_by, "final state", true)?;
+        }
         rec.log_static(
             "scene",
             &rerun::TextDocument::new(format!(
@@ -74,8 +80,16 @@ impl View {
                     ColorBy::VonMises => "von Mises stress (MPa)",
                 },
                 match range {
-                    Some((lo, hi)) => format!(", range {lo:.4e} – {hi:.4e}"),
-                    None => ", range of each iteration".to_string(),
+                    Some(r) => format!(
+                        ", colour range {:.4e} – {:.4e} ({}–{} percentile of the final state; extremes {:.4e} – {:.4e})",
+                        r.lo,
+                        r.hi,
+                        legend::ordinal(legend::PERCENTILES.0),
+                        legend::ordinal(legend::PERCENTILES.1),
+                        r.min,
+                        r.max
+                    ),
+                    None => ", colour range of each iteration, then of the final state".to_string(),
                 }
             )),
         )
@@ -116,7 +130,7 @@ impl View {
             range,
             amplification: opts.amplification,
             time_point: opts.time_point,
-            diag,
+            frame,
             pending: BTreeMap::new(),
             last_states: BTreeMap::new(),
             states: BoundaryStates::new(),
@@ -224,18 +238,42 @@ impl View {
                 .flat_map(|(_, u, _)| u.iter())
                 .fold(0.0f64, |m, v| m.max(v.abs()));
             if umax > 0.0 {
-                0.05 * self.diag / umax
+                0.05 * self.frame.diagonal() / umax
             } else {
                 1.0
             }
         });
-        let range = self
-            .range
-            .unwrap_or_else(|| range_of(frames.iter().map(|(_, _, f)| f.as_slice())));
+        let range = match self.range {
+            Some(r) => r,
+            None => {
+                // The legend of this iteration's range, on the iteration timeline only (on the
+                // `time` timeline, the final state's legend holds).
+                let r = ColourRange::of(frames.iter().map(|(_, _, f)| f.as_slice())).unwrap_or(ColourRange::NONE);
+                self.rec.set_time_sequence("iteration", n);
+                self.rec.disable_timeline("time");
+                legend::log(
+                    &self.rec,
+                    &self.frame,
+                    &r,
+                    self.color_by,
+                    &format!("iteration {n}"),
+                    false,
+                )?;
+                r
+            }
+        };
         self.rec.set_time_sequence("iteration", n);
         self.rec.set_duration_secs("time", self.model.time.t(i));
         for (s, u, field) in &frames {
-            log_mesh(&self.rec, &self.model, *s as usize, u, field, amplification, range)?;
+            log_mesh(
+                &self.rec,
+                &self.model,
+                *s as usize,
+                u,
+                field,
+                amplification,
+                (range.lo, range.hi),
+            )?;
             self.summary.meshes += 1;
         }
         self.last_states.extend(pending);
@@ -267,18 +305,28 @@ impl View {
                 .collect::<Result<_, _>>()?;
             final_fields.insert(s, fields);
         }
-        let range = self
-            .range
-            .unwrap_or_else(|| range_of(final_fields.values().flatten().map(Vec::as_slice)));
+        let range = match self.range {
+            Some(r) => r,
+            None => {
+                let r =
+                    ColourRange::of(final_fields.values().flatten().map(Vec::as_slice)).unwrap_or(ColourRange::NONE);
+                // At the first time point, so that it holds at every time point of the `time`
+                // timeline, and after the iterations' legends on the `iteration` timeline.
+                self.rec.set_time_sequence("iteration", n);
+                self.rec.set_duration_secs("time", model.time.t(0));
+                legend::log(&self.rec, &self.frame, &r, self.color_by, "final state", false)?;
+                r
+            }
+        };
         let amplification = self.amplification.unwrap_or_else(|| {
             let umax = final_u.values().flatten().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
             if umax > 0.0 {
-                0.05 * self.diag / umax
+                0.05 * self.frame.diagonal() / umax
             } else {
                 1.0
             }
         });
-        let diag = self.diag;
+        let diag = self.frame.diagonal();
         let rec = &self.rec;
         for i in 0..nt {
             rec.set_time_sequence("iteration", n);
@@ -291,7 +339,7 @@ impl View {
                     &per_time[i],
                     &final_fields[&s][i],
                     amplification,
-                    range,
+                    (range.lo, range.hi),
                 )?;
                 self.summary.meshes += 1;
             }
@@ -364,28 +412,11 @@ impl View {
                         })
                         .collect();
                     rec.log(
-                        format!("interfaces/{}/traction", sol.interface),
+                        format!("tractions/{}", sol.interface),
                         &rerun::Arrows3D::from_vectors(vectors).with_origins(pos),
                     )
                     .map_err(rerr)?;
                 }
-                // Mean normal and tangential traction on side a (MPa) as time series.
-                let mean = |dir: [f64; 2]| {
-                    (0..np)
-                        .map(|p| sol.f_a_hat.get(2 * p, i) * dir[0] + sol.f_a_hat.get(2 * p + 1, i) * dir[1])
-                        .sum::<f64>()
-                        / np.max(1) as f64
-                };
-                rec.log(
-                    format!("interface_tractions/{}/normal", sol.interface),
-                    &rerun::Scalars::single(mean(itf.normal)),
-                )
-                .map_err(rerr)?;
-                rec.log(
-                    format!("interface_tractions/{}/tangential", sol.interface),
-                    &rerun::Scalars::single(mean(itf.tangent)),
-                )
-                .map_err(rerr)?;
             }
             if self
                 .interfaces
@@ -404,7 +435,7 @@ impl View {
         rec.flush_blocking().map_err(rerr)?;
         self.summary.time_point = self.time_point.unwrap_or(0);
         self.summary.amplification = amplification;
-        self.summary.color_range = range;
+        self.summary.color_range = Some(range);
         self.summary.interior_recorded = !self.displacements.is_empty();
         Ok(self.summary)
     }

@@ -1,7 +1,8 @@
-//! The recording walk: two passes over a recording, the final state first (colour range,
-//! amplification, time point), then every message through a [`View`].
+//! The recording walk: two passes over a recording, the final state first (colour range: the
+//! percentiles of its field at every node and time point; amplification, time point), then every message through a [`View`].
 
-use crate::draw::{diagonal, largest_time_point, nodal_field, range_of};
+use crate::draw::{largest_time_point, nodal_field};
+use crate::legend::{ColourRange, Frame};
 use crate::recovery::{final_displacements, Recovery};
 use crate::{BoundaryStates, ReplayError, ReplayOptions, ReplaySummary, View};
 use glissade_messages::{InterfaceSolution, Payload};
@@ -106,13 +107,14 @@ pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySumma
             fields.push(nodal_field(&model, s as usize, u, opts.color_by)?);
         }
     }
-    let range = range_of(fields.iter().map(Vec::as_slice));
+    let range = ColourRange::of(fields.iter().map(Vec::as_slice)).unwrap_or(ColourRange::NONE);
+    drop(fields);
     let mut opts = opts.clone();
     if opts.time_point.is_none() {
         opts.time_point = first_w;
     }
     if opts.amplification.is_none() && umax > 0.0 {
-        opts.amplification = Some(0.05 * diagonal(&model) / umax);
+        opts.amplification = Some(0.05 * Frame::new(&model).diagonal() / umax);
     }
 
     // Pass 2: every message, as a live run would give them.
