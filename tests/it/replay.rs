@@ -4,7 +4,7 @@
 //! refuses to re-execute the nodes that need the thinned fields; `glissade replay` writes an .rrd
 //! the pinned Rerun CLI accepts, and `glissade run --rerun <file.rrd>` streams a live run's view.
 
-use crate::common::{scene, scene_text, scratch, Scratch};
+use crate::common::{python_with, scene, scene_text, scratch, Scratch};
 use glissade::recording::run_in_process_recorded;
 use glissade::runner::RunOptions;
 use glissade_messages::{encode, Payload, Role, Stage};
@@ -158,25 +158,82 @@ fn a_tampered_recording_names_the_first_differing_message_and_field() {
     );
 }
 
-/// `rerun rrd verify` on `rrd`, or None (reason printed) when the Rerun CLI is absent.
+/// `rerun rrd verify` of the pinned Python package (`rerun-sdk`) on `rrd`, or None (reason
+/// printed) when Python or the package is missing (a failure under GLISSADE_REQUIRE_PYTHON).
 fn rerun_verify(rrd: &Path) -> Option<()> {
-    let version = match Command::new("rerun").arg("--version").output() {
-        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).trim().to_string(),
-        _ => {
-            println!("skipped `rerun rrd verify`: no `rerun` CLI on PATH (pip install rerun-sdk==0.36.3)");
-            return None;
-        }
-    };
-    let v = Command::new("rerun").args(["rrd", "verify"]).arg(rrd).output().unwrap();
+    let python = python_with(&["rerun"])?;
+    let v = Command::new(python)
+        .args(["-m", "rerun", "rrd", "verify"])
+        .arg(rrd)
+        .output()
+        .unwrap();
     assert!(
         v.status.success(),
-        "`rerun rrd verify` ({version}) rejected {}: {}{}",
+        "`rerun rrd verify` rejected {}: {}{}",
         rrd.display(),
         String::from_utf8_lossy(&v.stdout),
         String::from_utf8_lossy(&v.stderr)
     );
-    println!("`rerun rrd verify` ({version}) accepted {}", rrd.display());
+    println!("`rerun rrd verify` accepted {}", rrd.display());
     Some(())
+}
+
+/// The 2nd and 98th percentiles (numpy's "linear") and the extremes of the von Mises stress at
+/// every node and time point of the final state `recording` holds, computed by sorting.
+fn von_mises_percentiles(recording: &Path) -> (f64, f64, f64, f64) {
+    use glissade_mechanics::post::{nodal_stresses, von_mises};
+    let state = glissade_replay::final_state(&Recording::open(recording).unwrap()).unwrap();
+    let model = &state.model;
+    let mut v: Vec<f64> = Vec::new();
+    for (&s, per_time) in &state.u {
+        let sub = &model.subdomains[s as usize];
+        for u in per_time {
+            v.extend(nodal_stresses(sub, model.plane, u).unwrap().iter().map(von_mises));
+        }
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |p: f64| {
+        let h = (v.len() - 1) as f64 * p / 100.0;
+        let k = h.floor() as usize;
+        v[k] + (h - k as f64) * (v[(k + 1).min(v.len() - 1)] - v[k])
+    };
+    (at(2.0), at(98.0), v[0], v[v.len() - 1])
+}
+
+/// The .rrd opens ready: one blueprint, activated, with the structure seen from above, the
+/// convergence plot and the counts, no automatic layout; the legend's range is `range` (lower,
+/// upper, min, max) up to the last bits (the same order statistics and interpolation formula).
+fn assert_opens_ready(rrd: &Path, range: (f64, f64, f64, f64)) {
+    use glissade_replay::blueprint::{CONVERGENCE_VIEW, COUNTS_VIEW, STRUCTURE_VIEW};
+    let c = glissade_replay::rrd::RrdContents::read(rrd).unwrap();
+    assert_eq!((c.blueprints, c.activations), (1, 1), "{}", rrd.display());
+    assert_eq!((c.auto_layout, c.auto_views), (Some(false), Some(false)));
+    let classes: Vec<(&str, &str)> = c.views.iter().map(|v| (v.name.as_str(), v.class.as_str())).collect();
+    for view in [
+        (STRUCTURE_VIEW, "3D"),
+        (CONVERGENCE_VIEW, "TimeSeries"),
+        (COUNTS_VIEW, "TimeSeries"),
+    ] {
+        assert!(classes.contains(&view), "{view:?} in {classes:?}");
+    }
+    let (eye, target, _) = c.view(STRUCTURE_VIEW).unwrap().eye.expect("eye");
+    assert!(
+        eye[0] == target[0] && eye[1] == target[1] && eye[2] > 0.0,
+        "{eye:?} {target:?}"
+    );
+    let stated = |k: &str| c.legend_range[k];
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+    let (lo, hi, min, max) = range;
+    assert!(
+        close(stated("lower"), lo) && close(stated("upper"), hi),
+        "legend {:?} against {lo} – {hi}",
+        c.legend_range
+    );
+    assert_eq!((stated("min"), stated("max")), (min, max));
+    assert!(
+        min < lo && hi < max,
+        "the scale is narrower than the extremes: {range:?}"
+    );
 }
 
 #[test]
@@ -222,6 +279,8 @@ fn a_thinned_recording_replays_but_refuses_to_reexecute_nodes_that_need_every_fi
         stdout.contains(&format!("{iterations} iterations, {meshes} meshes")),
         "expected {iterations} iterations and {meshes} meshes: {stdout}"
     );
+    // The final state comes from the interface solutions, which are never thinned.
+    assert_opens_ready(&rrd, von_mises_percentiles(&path));
     rerun_verify(&rrd);
 }
 
@@ -297,6 +356,12 @@ fn replay_and_live_run_write_rrd_files_the_rerun_cli_accepts() {
         assert!(std::fs::metadata(rrd).unwrap().len() > 10_000, "{}", rrd.display());
         rerun_verify(rrd);
     }
+    // The live view, which cannot know the final range up front, ends on the final state's
+    // (its legend's last value); the replay, coloured by |u|, has another range.
+    assert_opens_ready(&live, von_mises_percentiles(&recorded));
+    let c = glissade_replay::rrd::RrdContents::read(&replayed).unwrap();
+    assert_eq!(c.blueprints, 1);
+    assert!(c.legend_range["upper"] < 1.0, "|u| in mm: {:?}", c.legend_range);
 }
 
 /// `replay --reference` logs each iteration's error against the monolithic Newton reference, and
