@@ -7,8 +7,8 @@
 //! - right, top: log10 η, log10 e_c and (with `--reference`) log10 of the traction error;
 //! - right, bottom: the stick / slip / separated counts (per iteration, and per time point of
 //!   the final state);
-//! - the time panel on the `iteration` timeline, following the data; switching it to `time`
-//!   steps through the final state's time points.
+//! - the time panel on the `iteration` timeline, following the data;
+//!   switching it to `time` steps through the final state's time points.
 //!
 //! The Rust SDK's `rerun::blueprint` builders (0.36.3) cannot set a view's properties (its
 //! `add_property` is crate-private), and a 2D view does not draw `Mesh3D`; so this module logs

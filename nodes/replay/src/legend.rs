@@ -134,6 +134,9 @@ pub fn ordinal(p: f64) -> String {
     format!("{n}{suffix}")
 }
 
+/// The colour of the legend's labels (dark, readable on the viewer's light background).
+const LABEL: [u8; 3] = [40, 40, 40];
+
 /// A value with 3 significant digits, for tick labels.
 fn short(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
@@ -211,14 +214,15 @@ pub(crate) fn log(
             .with_labels(ticks.iter().map(|v| short(*v)))
             .with_show_labels(true)
             .with_radii([(0.004 * s) as f32])
-            .with_colors([rerun::Color::from_rgb(230, 230, 230)]),
+            .with_colors([rerun::Color::from_rgb(LABEL[0], LABEL[1], LABEL[2])]),
     )?;
     log(
         "legend/title",
         &rerun::Points3D::new([[(0.5 * (x0 + x1)) as f32, (yt + 0.025 * s) as f32, 0.0]])
             .with_labels([title])
             .with_show_labels(true)
-            .with_radii([0.0f32]),
+            .with_radii([0.0f32])
+            .with_colors([rerun::Color::from_rgb(LABEL[0], LABEL[1], LABEL[2])]),
     )?;
     log(
         "legend/range",

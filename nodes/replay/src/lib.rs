@@ -10,8 +10,9 @@
 //!   which holds for any s the linear stage produced and any k. The final state's s is taken from
 //!   the interface solutions, so a recording thinned by `full_fields_every` shows it too.
 //! - `interfaces/<i>/status`: the contact node pairs coloured separated (grey) / stick (green) /
-//!   slip (orange), and `interfaces/<i>/traction`: the traction F̂ on side a as arrows, at every
-//!   time point of the final state; `interface_tractions/<i>/{normal,tangential}`: their mean.
+//!   slip (orange), and `tractions/<i>`: the traction F̂ on side a as arrows, at every time point
+//!   of the final state; `legend/…`: the colour scale (the final state's 2nd–98th percentiles).
+//! - The layout: a blueprint sent before any data (`blueprint`).
 //! - `indicators/eta`, `indicators/contact_indicator` (and their log10), `contact/{separated,
 //!   stick,slip}` counts per iteration; `contact_over_time/…` status counts per time point.
 //!
