@@ -646,20 +646,9 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     };
     let t0 = std::time::Instant::now();
     let s = glissade_replay::replay(&recording, &opts)?;
-    let range = s.color_range.map_or_else(
-        || "no colour range".to_string(),
-        |r| {
-            format!(
-                "colour range {:.4e} – {:.4e}: {}–{} percentile of the final state, extremes {:.4e} – {:.4e}",
-                r.lo,
-                r.hi,
-                glissade_replay::ordinal(glissade_replay::PERCENTILES.0),
-                glissade_replay::ordinal(glissade_replay::PERCENTILES.1),
-                r.min,
-                r.max
-            )
-        },
-    );
+    let range = s
+        .color_range
+        .map_or_else(|| "no colour range".to_string(), |r| format!("colour range {r}"));
     println!(
         "replayed {} messages: {} iterations, {} meshes (time point {}, displacements × {:.3e}, {range}) in {:.2} s",
         s.messages,

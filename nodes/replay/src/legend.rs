@@ -61,6 +61,22 @@ impl ColourRange {
     }
 }
 
+/// `lo – hi (2nd–98th percentile of the final state; extremes min – max)`.
+impl std::fmt::Display for ColourRange {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:.4e} – {:.4e} ({}–{} percentile of the final state; extremes {:.4e} – {:.4e})",
+            self.lo,
+            self.hi,
+            ordinal(PERCENTILES.0),
+            ordinal(PERCENTILES.1),
+            self.min,
+            self.max
+        )
+    }
+}
+
 /// The model's bounding box and the space around it the structure view shows.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Frame {

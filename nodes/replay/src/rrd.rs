@@ -43,8 +43,9 @@ pub struct RrdContents {
     pub time_panel_timeline: Option<String>,
     /// Entity paths of the recording (not the blueprint), each once.
     pub entities: Vec<String>,
-    /// `legend/range`: the last value of each of its fields (`lower`, `upper`, `min`, `max`,
-    /// `lower_percentile`, `upper_percentile`), static or not.
+    /// `legend/range` of the final state, static or logged on the `time` timeline (not the
+    /// iterations' of a live run): each of its fields (`lower`, `upper`, `min`, `max`,
+    /// `lower_percentile`, `upper_percentile`).
     pub legend_range: BTreeMap<String, f64>,
 }
 
@@ -91,7 +92,13 @@ impl RrdContents {
                 if !out.entities.contains(&entity) {
                     out.entities.push(entity.clone());
                 }
-                if entity == "legend/range" {
+                // The range that holds on the `time` timeline: static (a replay) or the final
+                // state's (a live run: the only one logged with a time).
+                let holds = chunk.is_static()
+                    || chunk
+                        .timelines()
+                        .contains_key(&rerun::TimelineName::from_static_str("time"));
+                if entity == "legend/range" && holds {
                     for d in chunk.component_descriptors() {
                         if let Some(v) =
                             last::<rerun::components::Scalar>(&chunk, d.component).and_then(|v| v.first().copied())

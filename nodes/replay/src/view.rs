@@ -80,15 +80,7 @@ impl View {
                     ColorBy::VonMises => "von Mises stress (MPa)",
                 },
                 match range {
-                    Some(r) => format!(
-                        ", colour range {:.4e} – {:.4e} ({}–{} percentile of the final state; extremes {:.4e} – {:.4e})",
-                        r.lo,
-                        r.hi,
-                        legend::ordinal(legend::PERCENTILES.0),
-                        legend::ordinal(legend::PERCENTILES.1),
-                        r.min,
-                        r.max
-                    ),
+                    Some(r) => format!(", colour range {r}"),
                     None => ", colour range of each iteration, then of the final state".to_string(),
                 }
             )),
