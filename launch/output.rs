@@ -3,6 +3,7 @@
 use crate::runner::RunResult;
 use anyhow::Context;
 use glissade_deploy::Plan;
+use glissade_mechanics::laws::STATUS_NAMES;
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{Interface, InterfaceKind, Model};
@@ -430,9 +431,6 @@ pub fn pair_values(itf: &Interface, sol: &InterfaceSolution, i: usize, p: usize)
         dot(jump, itf.tangent),
     ]
 }
-
-/// Names of the contact statuses, by code (0, 1, 2).
-pub const STATUS_NAMES: [&str; 3] = ["separated", "stick", "slip"];
 
 /// The name of status code `c`, or `invalid status code <c>` (which no node sends).
 pub fn status_name(c: u8) -> String {

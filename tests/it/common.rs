@@ -106,3 +106,20 @@ pub fn python_with(modules: &[&str]) -> Option<&'static str> {
     }
     Some(python)
 }
+
+/// Runs the `glissade` binary with `args`, asserts that it succeeded (printing both streams if
+/// not), and returns its standard output.
+pub fn glissade_ok(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(args.iter().map(|a| a.as_ref()))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "glissade {:?} failed: {stdout}{}",
+        args.iter().map(|a| a.as_ref().to_string_lossy()).collect::<Vec<_>>(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}

@@ -3,7 +3,7 @@
 //! and what that reader sees equals the run's summary and the original recording exactly; bad
 //! inputs are refused with the file and the problem named, and nothing is written.
 
-use crate::common::{python_with, scratch};
+use crate::common::{glissade_ok, python_with, scratch};
 use glissade_messages::Payload;
 use glissade_recorder::Recording;
 use std::collections::BTreeMap;
@@ -15,17 +15,6 @@ fn glissade(args: &[&str]) -> Output {
         .args(args)
         .output()
         .unwrap()
-}
-
-fn succeeds(args: &[&str]) -> String {
-    let o = glissade(args);
-    assert!(
-        o.status.success(),
-        "glissade {args:?} failed: {}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
 /// Exit 2 and the error on stderr.
@@ -68,15 +57,10 @@ fn an_export_decodes_with_a_foreign_protobuf_reader() {
     let dir = scratch("foreign");
     let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
     let out = dir.display().to_string();
-    succeeds(&["run", &scene, "--in-process", "--out", &out, "--run-id", "x"]);
+    glissade_ok(&[&"run", &scene, &"--in-process", &"--out", &out, &"--run-id", &"x"]);
     let original = dir.join("small-three-layer-x.mcap");
     let foreign = dir.join("foreign");
-    let printed = succeeds(&[
-        "export",
-        original.to_str().unwrap(),
-        "--foreign",
-        foreign.to_str().unwrap(),
-    ]);
+    let printed = glissade_ok(&[&"export", &original, &"--foreign", &foreign]);
     let export = foreign.join("small-three-layer-x.mcap");
     assert!(
         printed.contains("foreign-readable (protobuf): ") && export.exists(),
@@ -195,15 +179,7 @@ fn a_corrupt_or_foreign_input_is_refused_and_nothing_is_written() {
     // A recording of another wire schema version: the metadata record's `schema_version` (written
     // before any chunk, so no CRC covers it) changed.
     let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
-    succeeds(&[
-        "run",
-        &scene,
-        "--in-process",
-        "--out",
-        dir.to_str().unwrap(),
-        "--run-id",
-        "v",
-    ]);
+    glissade_ok(&[&"run", &scene, &"--in-process", &"--out", &dir, &"--run-id", &"v"]);
     let mut bytes = std::fs::read(dir.join("small-three-layer-v.mcap")).unwrap();
     let version = format!("schema_version\x01\0\0\0{}", glissade_messages::SCHEMA_VERSION);
     let at = bytes

@@ -4,7 +4,7 @@
 //! refuses to re-execute the nodes that need the thinned fields; `glissade replay` writes an .rrd
 //! the pinned Rerun CLI accepts, and `glissade run --rerun <file.rrd>` streams a live run's view.
 
-use crate::common::{python_with, scene, scene_text, scratch, Scratch};
+use crate::common::{glissade_ok, python_with, scene, scene_text, scratch, Scratch};
 use glissade::recording::run_in_process_recorded;
 use glissade::runner::RunOptions;
 use glissade_messages::{encode, Payload, Role, Stage};
@@ -15,17 +15,6 @@ use std::process::Command;
 
 fn temp_dir(tag: &str) -> Scratch {
     scratch(&format!("replay-{tag}"))
-}
-
-/// Runs `glissade` with `args`, asserts that it succeeded, and returns its standard output.
-fn glissade_ok(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(args.iter().map(|a| a.as_ref()))
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
-    stdout
 }
 
 /// Records an in-process run of `text` into `dir`; returns the file.

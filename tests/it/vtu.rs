@@ -2,7 +2,7 @@
 //! `glissade export`, read back with Python's `meshio` and `csv` and compared with the run's
 //! JSON outputs.
 
-use crate::common::{python_with, scratch};
+use crate::common::{glissade_ok, python_with, scratch};
 use std::path::Path;
 use std::process::Command;
 
@@ -102,20 +102,6 @@ fn run_check(python: &str, pvd: &Path, fields: &Path, displacement: Option<&Path
     serde_json::from_str(text.trim()).unwrap_or_else(|e| panic!("python printed {text}: {e}"))
 }
 
-fn glissade(args: &[&str]) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        o.status.success(),
-        "glissade {args:?} failed: {}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
 /// The VTU series, the CSV and the JSON outputs of one run of the stratified scene carry the same
 /// doubles: VTU stores them raw, JSON and CSV in shortest round-trip decimal, so they agree to
 /// 1e-12 (the bar; in practice exactly). The layers' interfaces end at x = 0, where both
@@ -133,17 +119,17 @@ fn a_runs_paraview_series_and_csv_equal_its_json_outputs() {
     let scene = dir.join("stratified.toml").display().to_string();
     std::fs::write(&scene, text).unwrap();
     let out = dir.display().to_string();
-    let printed = glissade(&[
-        "run",
+    let printed = glissade_ok(&[
+        &"run",
         &scene,
-        "--in-process",
-        "--interior",
-        "--vtu",
-        "--csv",
-        "--out",
+        &"--in-process",
+        &"--interior",
+        &"--vtu",
+        &"--csv",
+        &"--out",
         &out,
-        "--run-id",
-        "v",
+        &"--run-id",
+        &"v",
     ]);
     assert!(printed.contains("paraview: "), "{printed}");
     let stem = dir.join("stratified-v");
@@ -195,21 +181,21 @@ fn export_of_a_recording_equals_the_runs_own_outputs() {
     let dir = scratch("vtu-export");
     let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
     let out = dir.display().to_string();
-    glissade(&[
-        "run",
+    glissade_ok(&[
+        &"run",
         &scene,
-        "--in-process",
-        "--interior",
-        "--out",
+        &"--in-process",
+        &"--interior",
+        &"--out",
         &out,
-        "--run-id",
-        "a",
+        &"--run-id",
+        &"a",
     ]);
-    glissade(&["run", &scene, "--in-process", "--out", &out, "--run-id", "b"]);
+    glissade_ok(&[&"run", &scene, &"--in-process", &"--out", &out, &"--run-id", &"b"]);
     let exported = dir.join("exported");
     let ex = exported.display().to_string();
     let rec = dir.join("small-three-layer-b.mcap").display().to_string();
-    let printed = glissade(&["export", &rec, "--vtu", &ex, "--csv", &ex]);
+    let printed = glissade_ok(&[&"export", &rec, &"--vtu", &ex, &"--csv", &ex]);
     assert!(printed.contains("paraview: ") && printed.contains("csv: "), "{printed}");
     let r = run_check(
         python,
@@ -227,13 +213,13 @@ fn export_of_a_recording_equals_the_runs_own_outputs() {
 
     // Every 4th time point and the last: 0, 4, 8, 10.
     let thinned = dir.join("thinned");
-    glissade(&[
-        "export",
+    glissade_ok(&[
+        &"export",
         &rec,
-        "--vtu",
+        &"--vtu",
         &thinned.display().to_string(),
-        "--vtu-every",
-        "4",
+        &"--vtu-every",
+        &"4",
     ]);
     let pvd = std::fs::read_to_string(thinned.join("small-three-layer-b.pvd")).unwrap();
     let steps: Vec<&str> = pvd

@@ -14,6 +14,9 @@ pub enum Status {
     Slip = 2,
 }
 
+/// Names of the statuses, by code (`Status as usize`): what outputs and views call them.
+pub const STATUS_NAMES: [&str; 3] = ["separated", "stick", "slip"];
+
 /// Input of a pair: traces and forces of both sides at one time point.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PairState {

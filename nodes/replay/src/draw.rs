@@ -49,7 +49,7 @@ pub(crate) fn color(v: f64, lo: f64, hi: f64) -> rerun::Color {
 }
 
 pub(crate) const STATUS_COLORS: [[u8; 3]; 3] = [[150, 150, 150], [40, 170, 60], [240, 130, 20]];
-pub(crate) const STATUS_NAMES: [&str; 3] = ["separated", "stick", "slip"];
+pub(crate) use glissade_mechanics::laws::STATUS_NAMES;
 
 fn entity_name(name: &str) -> String {
     name.chars()
