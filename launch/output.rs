@@ -3,7 +3,7 @@
 use crate::runner::RunResult;
 use anyhow::Context;
 use glissade_deploy::Plan;
-use glissade_mechanics::laws::STATUS_NAMES;
+use glissade_mechanics::laws::{dot, STATUS_NAMES};
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{Interface, InterfaceKind, Model};
@@ -302,19 +302,12 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
             let itf = &model.interfaces[sol.interface as usize];
             let np = itf.n_pairs();
             let nt = n_times;
-            let proj =
-                |f: &glissade_messages::Field, g: Option<&glissade_messages::Field>, dir: [f64; 2]| -> Vec<Vec<f64>> {
-                    (0..nt)
-                        .map(|i| {
-                            (0..np)
-                                .map(|p| {
-                                    let v = |c: usize| f.get(2 * p + c, i) - g.map_or(0.0, |g| g.get(2 * p + c, i));
-                                    v(0) * dir[0] + v(1) * dir[1]
-                                })
-                                .collect()
-                        })
-                        .collect()
-                };
+            // f_n, f_t, jump_n, jump_t: [quantity][time point][pair].
+            let values: [Vec<Vec<f64>>; 4] = std::array::from_fn(|q| {
+                (0..nt)
+                    .map(|i| (0..np).map(|p| pair_values(itf, sol, i, p)[q]).collect())
+                    .collect()
+            });
             let kind = match &itf.kind {
                 InterfaceKind::Perfect => json!("perfect"),
                 InterfaceKind::Contact { friction, .. } => json!({"contact": {"friction": friction}}),
@@ -328,10 +321,10 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
                 "tangent": itf.tangent,
                 "coords": itf.coords,
                 "weights": itf.weights,
-                "f_n": proj(&sol.f_a_hat, None, itf.normal),
-                "f_t": proj(&sol.f_a_hat, None, itf.tangent),
-                "jump_n": proj(&sol.w_b_hat, Some(&sol.w_a_hat), itf.normal),
-                "jump_t": proj(&sol.w_b_hat, Some(&sol.w_a_hat), itf.tangent),
+                "f_n": values[0],
+                "f_t": values[1],
+                "jump_n": values[2],
+                "jump_t": values[3],
                 "status": if itf.is_contact() {
                     (0..nt)
                         .map(|i| sol.status[i * np..(i + 1) * np].iter().map(|&c| status_name(c)).collect())
@@ -418,7 +411,6 @@ pub fn displacements(model: &Model, displacements: &[(u32, glissade_messages::Fi
 /// Pair `p` of interface `itf` at time point `i` in the interface's frame: the traction on side a
 /// (normal, tangential; MPa) and the jump Ŵ_b − Ŵ_a (normal, tangential; mm).
 pub fn pair_values(itf: &Interface, sol: &InterfaceSolution, i: usize, p: usize) -> [f64; 4] {
-    let dot = |v: [f64; 2], d: [f64; 2]| v[0] * d[0] + v[1] * d[1];
     let f = [sol.f_a_hat.get(2 * p, i), sol.f_a_hat.get(2 * p + 1, i)];
     let jump = [
         sol.w_b_hat.get(2 * p, i) - sol.w_a_hat.get(2 * p, i),
