@@ -1,7 +1,8 @@
 """Test fixtures of the scene crate's Gmsh reader (nodes/scene/src/msh.rs).
 
 Writes one small mesh of 8-node quadrangles in the four formats Gmsh writes (MSH 4.1 and 2.2,
-ASCII and binary) into nodes/scene/tests/fixtures/msh/, plus what Gmsh's own API says about it
+ASCII and binary), and in MSH 4.1 with the nodes' parametric coordinates, into
+nodes/scene/tests/fixtures/msh/, plus what Gmsh's own API says about it
 (two-parts.json) and the node count and dimension of every element type Gmsh knows
 (element-types.json). The tests compare the reader against these accounts, so CI needs no Gmsh.
 
@@ -140,6 +141,14 @@ def main():
         gmsh.option.setNumber("Mesh.MshFileVersion", version)
         gmsh.option.setNumber("Mesh.Binary", binary)
         gmsh.write(os.path.join(OUT, name))
+    # MSH 4.1 with the parametric coordinates of the nodes on curves and surfaces (skipped by
+    # the reader), ASCII and binary.
+    gmsh.option.setNumber("Mesh.SaveParametric", 1)
+    gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
+    for binary, name in ((0, "two-parts-4.1-parametric.msh"), (1, "two-parts-4.1-parametric-binary.msh")):
+        gmsh.option.setNumber("Mesh.Binary", binary)
+        gmsh.write(os.path.join(OUT, name))
+    gmsh.option.setNumber("Mesh.SaveParametric", 0)
     write_json(os.path.join(OUT, "two-parts.json"), account())
     write_json(os.path.join(OUT, "element-types.json"), element_types())
     gmsh.finalize()

@@ -1,7 +1,7 @@
 //! The Gmsh reader on files written by Gmsh itself, compared with Gmsh's own account of them.
 //!
 //! `tests/fixtures/msh/` holds one small QUA8 mesh in the four formats Gmsh writes (MSH 4.1 and
-//! 2.2, ASCII and binary) with what Gmsh's API says of it (`two-parts.json`), the node count and
+//! 2.2, ASCII and binary; and MSH 4.1 with parametric coordinates) with what Gmsh's API says of it (`two-parts.json`), the node count and
 //! dimension of every element type Gmsh knows (`element-types.json`), and Gmsh's account of each
 //! shipped mesh of `launch/scenes/meshes/` (`<mesh>.json`). All were written by the scripts of
 //! `launch/scenes/meshes/`: these tests need no Gmsh.
@@ -30,11 +30,14 @@ fn read(bytes: &[u8], what: &str) -> Msh {
     msh::parse(bytes).unwrap_or_else(|e| panic!("{what}: {e}"))
 }
 
-const FORMATS: [&str; 4] = [
+/// The four formats, then MSH 4.1 with the nodes' parametric coordinates (ASCII, binary).
+const FORMATS: [&str; 6] = [
     "two-parts-4.1.msh",
     "two-parts-4.1-binary.msh",
     "two-parts-2.2.msh",
     "two-parts-2.2-binary.msh",
+    "two-parts-4.1-parametric.msh",
+    "two-parts-4.1-parametric-binary.msh",
 ];
 
 /// An element as a comparable value, by node tags: (kind, node tags, dim, entity, physicals sorted).
@@ -166,9 +169,17 @@ fn the_four_formats_read_as_gmsh_accounts_for_them() {
         }
         read_all.push(m);
     }
-    // The two binary files hold the same doubles.
-    assert_eq!(read_all[1].nodes, read_all[3].nodes);
-    assert_eq!(read_all[1].node_tags, read_all[3].node_tags);
+    // The binary files hold the same doubles, the ASCII ones the same digits.
+    for (a, b) in [(1, 3), (1, 5), (0, 2), (0, 4)] {
+        assert_eq!(
+            read_all[a].nodes, read_all[b].nodes,
+            "{} and {}",
+            FORMATS[a], FORMATS[b]
+        );
+        assert_eq!(read_all[a].node_tags, read_all[b].node_tags);
+    }
+    assert_eq!(read_all[0].elements, read_all[4].elements);
+    assert_eq!(read_all[1].elements, read_all[5].elements);
 }
 
 #[test]
