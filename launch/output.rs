@@ -312,13 +312,14 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
                 InterfaceKind::Perfect => json!("perfect"),
                 InterfaceKind::Contact { friction, .. } => json!({"contact": {"friction": friction}}),
             };
-            json!({
+            let (normal, tangent) = itf.mean_frame();
+            let mut entry = json!({
                 "interface": sol.interface,
                 "a": model.subdomains[itf.a].name,
                 "b": model.subdomains[itf.b].name,
                 "kind": kind,
-                "normal": itf.normal,
-                "tangent": itf.tangent,
+                "normal": normal,
+                "tangent": tangent,
                 "coords": itf.coords,
                 "weights": itf.weights,
                 "f_n": values[0],
@@ -332,10 +333,15 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
                 } else {
                     Vec::new()
                 },
-            })
+            });
+            if itf.straight_normal().is_none() {
+                entry["normals"] = json!(itf.normals);
+            }
+            entry
         })
         .collect();
-    json!({
+    let curved = model.interfaces.iter().any(|itf| itf.straight_normal().is_none());
+    let mut doc = json!({
         "scene": model.name,
         "units": {
             "times": "s",
@@ -350,7 +356,15 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
         },
         "times": (0..n_times).map(|i| model.time.t(i)).collect::<Vec<_>>(),
         "interfaces": items,
-    })
+    });
+    if curved {
+        doc["units"]["normal"] = json!(
+            "unit vector out of side a towards side b (on a curved interface: the interface's mean \
+             direction; each pair's own normal is in `normals`, and f_n, f_t, jump_n, jump_t are \
+             measured in each pair's frame); tangent = (−normal_y, normal_x)"
+        );
+    }
+    doc
 }
 
 /// Each subdomain's displacement per time point, as slices of a run's displacement fields (one
@@ -417,10 +431,10 @@ pub fn pair_values(itf: &Interface, sol: &InterfaceSolution, i: usize, p: usize)
         sol.w_b_hat.get(2 * p + 1, i) - sol.w_a_hat.get(2 * p + 1, i),
     ];
     [
-        dot(f, itf.normal),
-        dot(f, itf.tangent),
-        dot(jump, itf.normal),
-        dot(jump, itf.tangent),
+        dot(f, itf.normal(p)),
+        dot(f, itf.tangent(p)),
+        dot(jump, itf.normal(p)),
+        dot(jump, itf.tangent(p)),
     ]
 }
 

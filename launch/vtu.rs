@@ -326,11 +326,14 @@ impl InterfaceGrid {
                     g.contact.extend_from_slice(&(itf.is_contact() as i32).to_le_bytes());
                 }
             }
+            // Clamped extra points take the interface's mean frame (they are no pair).
+            let frame = itf.mean_frame().0;
+            let normals = itf.normals.iter().copied().chain(extra.iter().map(|_| frame));
             let coords = itf.coords.iter().copied().chain(extra.iter().map(|&n| mesh.coords[n]));
-            for x in coords {
+            for (x, n) in coords.zip(normals) {
                 g.geometry.point(x);
-                put_f64(&mut g.normal, &[itf.normal[0], itf.normal[1], 0.0]);
-                put_f64(&mut g.tangent, &[itf.tangent[0], itf.tangent[1], 0.0]);
+                put_f64(&mut g.normal, &[n[0], n[1], 0.0]);
+                put_f64(&mut g.tangent, &[-n[1], n[0], 0.0]);
             }
             g.extra.push(extra.len());
         }

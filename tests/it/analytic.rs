@@ -203,7 +203,7 @@ fn normal_solution(itf: &Interface, sol: &InterfaceSolution, i: usize) -> Normal
     let mut load = 0.0;
     let mut in_contact = Vec::new();
     for p in 0..np {
-        let pressure = -along(&sol.f_a_hat, p, i, itf.normal);
+        let pressure = -along(&sol.f_a_hat, p, i, itf.normal(p));
         load += itf.weights[p] * pressure;
         if sol.status[p + np * i] != 0 {
             in_contact.push((itf.coords[p][0], pressure));
@@ -350,7 +350,7 @@ fn cattaneo_mindlin_stick_zone() {
         let i = 2;
         let m = normal_solution(&itf, &sol, i);
         let q_res: f64 = (0..np)
-            .map(|p| itf.weights[p] * along(&sol.f_a_hat, p, i, itf.tangent))
+            .map(|p| itf.weights[p] * along(&sol.f_a_hat, p, i, itf.tangent(p)))
             .sum::<f64>()
             .abs();
         let ratio = q_res / (f * m.load);
@@ -375,8 +375,8 @@ fn cattaneo_mindlin_stick_zone() {
         // c from the stick-zone deficit f p − |q| = f p0 (c/a) √(1 − x²/c²).
         let (mut x2, mut d2) = (Vec::new(), Vec::new());
         for p in (0..np).filter(|&p| status(p) == 1) {
-            let pressure = -along(&sol.f_a_hat, p, i, itf.normal);
-            let deficit = f * pressure - along(&sol.f_a_hat, p, i, itf.tangent).abs();
+            let pressure = -along(&sol.f_a_hat, p, i, itf.normal(p));
+            let deficit = f * pressure - along(&sol.f_a_hat, p, i, itf.tangent(p)).abs();
             x2.push(itf.coords[p][0].powi(2));
             d2.push(deficit * deficit);
         }
@@ -458,9 +458,9 @@ fn stuck_contact_equals_glued_solution() {
     let mut max_use = 0.0f64;
     for i in 1..n_t {
         for p in 0..np {
-            let pressure = -along(&sol_glued.f_a_hat, p, i, itf.normal);
+            let pressure = -along(&sol_glued.f_a_hat, p, i, itf.normal(p));
             assert!(pressure > 0.0, "glued pair {p} at t_{i} in tension: {pressure}");
-            max_use = max_use.max(along(&sol_glued.f_a_hat, p, i, itf.tangent).abs() / pressure);
+            max_use = max_use.max(along(&sol_glued.f_a_hat, p, i, itf.tangent(p)).abs() / pressure);
         }
     }
     assert!(max_use < 10.0, "glued |q|/p = {max_use}: would slip");
@@ -505,7 +505,7 @@ fn full_slip_is_on_the_cone_and_opposes_slip() {
     let (sc, result, secs) = solve(&text, 1e-10, 1.0);
     let (itf, sol) = contact(&sc, &result);
     let np = itf.n_pairs();
-    let (n, t) = (itf.normal, itf.tangent);
+    let (n, t) = (itf.normal(0), itf.tangent(0));
     let fn_max = (1..=n_steps).fold(0.0f64, |m, i| {
         (0..np).fold(m, |m, p| m.max(along(&sol.f_a_hat, p, i, n).abs()))
     });

@@ -35,7 +35,7 @@ pub fn rel_max(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// A scratch folder, removed when dropped.
-pub struct Scratch(PathBuf);
+pub struct Scratch(pub PathBuf);
 
 impl std::ops::Deref for Scratch {
     type Target = Path;

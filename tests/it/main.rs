@@ -10,6 +10,7 @@ mod common;
 mod distributed;
 mod foreign;
 mod fuzz_nodes;
+mod gmsh;
 mod latin_perfect;
 mod monolithic;
 mod node_failures;

@@ -60,7 +60,7 @@ fn compare_with(
         .expect("contact interface");
     let sol = result.interfaces.iter().find(|s| s.interface as usize == k).unwrap();
     assert_eq!(itf.n_pairs(), x_ref.len(), "pair count");
-    let (n, t) = (itf.normal, itf.tangent);
+    let (n, t) = (itf.normal(0), itf.tangent(0));
     let mut dev = [0.0f64; 4];
     let mut scale = [0.0f64; 4];
     for step in refd["steps"].as_array().unwrap() {

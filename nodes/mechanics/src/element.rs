@@ -170,6 +170,40 @@ pub fn edge_load(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2]) -> [f64; 2]) -> 
     f
 }
 
+/// Position and unit tangent (along the edge's node order) of a 3-node edge at s ∈ [−1, 1], and
+/// |dx/ds|.
+pub fn edge_frame(x: &[[f64; 2]; 3], s: f64) -> ([f64; 2], [f64; 2], f64) {
+    let (n, dn) = edge_shape(s);
+    let mut p = [0.0; 2];
+    let mut tan = [0.0; 2];
+    for k in 0..3 {
+        for c in 0..2 {
+            p[c] += n[k] * x[k][c];
+            tan[c] += dn[k] * x[k][c];
+        }
+    }
+    let jac = (tan[0] * tan[0] + tan[1] * tan[1]).sqrt();
+    (p, [tan[0] / jac, tan[1] / jac], jac)
+}
+
+/// Consistent nodal forces (N) of a traction `traction(position, tangent)` (MPa, global axes) on
+/// a 3-node edge (3-point Gauss), the unit tangent taken along the edge's node order: a caller
+/// whose edge runs with the body on its left has the outward normal (t_y, −t_x).
+pub fn edge_load_along(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2], [f64; 2]) -> [f64; 2]) -> [[f64; 2]; 3] {
+    let mut f = [[0.0; 2]; 3];
+    for &(s, w) in &GAUSS3 {
+        let (n, _) = edge_shape(s);
+        let (p, t, jac) = edge_frame(x, s);
+        let tr = traction(p, t);
+        for k in 0..3 {
+            for c in 0..2 {
+                f[k][c] += n[k] * tr[c] * jac * w;
+            }
+        }
+    }
+    f
+}
+
 /// Lumped edge mass of a 3-node edge: L/6, 4L/6, L/6 with L the edge length (mm); for a curved
 /// edge the row sums of the consistent mass. DESIGN §2.
 pub fn edge_lumped_mass(x: &[[f64; 2]; 3]) -> [f64; 3] {

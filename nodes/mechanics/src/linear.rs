@@ -72,32 +72,54 @@ pub fn default_k0(model: &Model) -> Vec<f64> {
         .collect()
 }
 
-/// Macro basis of an interface (DESIGN §3): translation along t, translation along n, rotation
-/// about the centroid, extension along t (s·t, s the abscissa from the centroid) — on a straight
-/// interface these span the polynomials of degree ≤ 1 in s of both components, since the rotation
-/// is s·n. With `degree` d > 1 the basis also holds (s/ℓ)^j·t and (s/ℓ)^j·n for 2 ≤ j ≤ d (ℓ the
-/// half length): degree 3 holds the traces of a bent slender layer (cubic deflection, quadratic
-/// rotation of its sections), which the coarse problem then resolves in one step. Made
-/// orthonormal for the lumped mass M by modified Gram–Schmidt (twice). Vectors whose norm
-/// collapses (an interface with too few pairs) are dropped, so an interface has 1 to 2(d + 1)
-/// modes. Entry 2p+c is pair p, component c.
+/// Macro basis of an interface (DESIGN §2, §3): the affine fields u(x) = a + B(x − c) restricted
+/// to its pairs (c the weighted centroid), in the order translation along t, translation along n,
+/// rotation about the centroid, extension along t (s·t, s = (x − c)·t), then — on a curved
+/// interface only — extension along n and the symmetric shear, with (t, n) the interface's
+/// [`Interface::mean_frame`]. On a straight interface the last two vanish and the first four span
+/// the polynomials of degree ≤ 1 in s of both components (the rotation is s·n): the paper's four
+/// modes. With `degree` d > 1 the basis also holds (s/ℓ)^j·t and (s/ℓ)^j·n for 2 ≤ j ≤ d (ℓ the
+/// half length; on a curved interface s is the arc length from the weighted mean position along
+/// the pairs' order): degree 3 holds the traces of a bent slender layer (cubic deflection,
+/// quadratic rotation of its sections), which the coarse problem then resolves in one step. Made
+/// orthonormal for the lumped mass M by modified Gram–Schmidt (twice), with rank detection:
+/// a vector whose norm after orthogonalisation falls below 1e-10 of its norm before (or of √L
+/// for the translations, L·√L for the curved-only modes) is dropped, so a straight interface has
+/// 1 to 2(d + 1) modes and a curved one up to 2(d + 1) + 2. Entry 2p+c is pair p, component c.
 pub fn macro_basis(itf: &Interface, degree: usize) -> Vec<Vec<f64>> {
     let np = itf.n_pairs();
-    let (n, t, g) = (itf.normal, itf.tangent, itf.centroid);
+    let g = itf.centroid;
+    let curved = itf.straight_normal().is_none();
+    let (n, t) = itf.mean_frame();
     let half = 0.5 * itf.length.max(f64::MIN_POSITIVE);
-    let n_raw = 4 + 2 * degree.saturating_sub(1);
+    // Abscissa of each pair: along t on a straight interface, the arc length on a curved one.
+    let abscissa: Vec<f64> = if curved {
+        arc_abscissa(itf)
+    } else {
+        itf.coords
+            .iter()
+            .map(|x| (x[0] - g[0]) * t[0] + (x[1] - g[1]) * t[1])
+            .collect()
+    };
+    let n_raw = 4 + 2 * degree.saturating_sub(1) + if curved { 2 } else { 0 };
     let mut raw = vec![vec![0.0; 2 * np]; n_raw];
+    let extra = 4 + 2 * degree.saturating_sub(1);
     for p in 0..np {
         let r = [itf.coords[p][0] - g[0], itf.coords[p][1] - g[1]];
-        let s = r[0] * t[0] + r[1] * t[1];
+        let s = abscissa[p];
+        let (rt, rn) = (r[0] * t[0] + r[1] * t[1], r[0] * n[0] + r[1] * n[1]);
         for c in 0..2 {
             raw[0][2 * p + c] = t[c];
             raw[1][2 * p + c] = n[c];
-            raw[3][2 * p + c] = s * t[c];
+            raw[3][2 * p + c] = if curved { rt * t[c] } else { s * t[c] };
             for j in 2..=degree {
                 let sj = (s / half).powi(j as i32);
                 raw[4 + 2 * (j - 2)][2 * p + c] = sj * n[c];
                 raw[5 + 2 * (j - 2)][2 * p + c] = sj * t[c];
+            }
+            if curved {
+                raw[extra][2 * p + c] = rn * n[c];
+                raw[extra + 1][2 * p + c] = rn * t[c] + rt * n[c];
             }
         }
         raw[2][2 * p] = -r[1];
@@ -115,14 +137,40 @@ pub fn macro_basis(itf: &Interface, degree: usize) -> Vec<Vec<f64>> {
             }
         }
         let norm = dot(&v, &v).sqrt();
-        // Translations have norm √L; the other modes' norms scale differently: compare to the raw norm.
-        let reference = if m < 2 { scale.sqrt() } else { norm0 };
+        // Translations have norm √L; the other modes' norms scale differently: compare to the raw
+        // norm. The curved-only modes vanish on a nearly straight interface, where their raw norm
+        // is round-off too: compare them to the size of an affine field over the interface.
+        let reference = if m < 2 {
+            scale.sqrt()
+        } else if m >= extra {
+            norm0.max(scale * scale.sqrt())
+        } else {
+            norm0
+        };
         if norm > 1e-10 * reference && norm > 0.0 {
             v.iter_mut().for_each(|x| *x /= norm);
             basis.push(v);
         }
     }
     basis
+}
+
+/// Arc length of each pair of a curved interface along the pairs' order (chords between
+/// consecutive pairs), measured from the weighted mean arc length.
+fn arc_abscissa(itf: &Interface) -> Vec<f64> {
+    let mut s = Vec::with_capacity(itf.n_pairs());
+    let mut acc = 0.0;
+    for p in 0..itf.n_pairs() {
+        if p > 0 {
+            let (a, b) = (itf.coords[p - 1], itf.coords[p]);
+            acc += ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+        }
+        s.push(acc);
+    }
+    let total: f64 = itf.weights.iter().sum();
+    let mean: f64 = s.iter().zip(&itf.weights).map(|(s, w)| s * w).sum::<f64>() / total;
+    s.iter_mut().for_each(|v| *v -= mean);
+    s
 }
 
 /// Slenderness from which `macro_degree = "auto"` gives an interface the degree-5 macro basis.
@@ -139,6 +187,11 @@ pub fn macro_degree(model: &Model, itf: &Interface) -> usize {
     if let Some(d) = model.solver.macro_degree {
         return d;
     }
+    // A curved interface gets the affine modes (up to six); the slenderness rule reads the
+    // thickness across a straight interface.
+    let Some(normal) = itf.straight_normal() else {
+        return 1;
+    };
     let thickness = |s: usize| {
         let (lo, hi) =
             model.subdomains[s]
@@ -146,7 +199,7 @@ pub fn macro_degree(model: &Model, itf: &Interface) -> usize {
                 .coords
                 .iter()
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
-                    let h = x[0] * itf.normal[0] + x[1] * itf.normal[1];
+                    let h = x[0] * normal[0] + x[1] * normal[1];
                     (lo.min(h), hi.max(h))
                 });
         hi - lo

@@ -88,8 +88,8 @@ pub fn contact_pair_groups(interfaces: &[Interface]) -> Vec<PairGroup> {
             let key = [
                 q(itf.coords[p][0]),
                 q(itf.coords[p][1]),
-                q(itf.normal[0] * scale),
-                q(itf.normal[1] * scale),
+                q(itf.normals[p][0] * scale),
+                q(itf.normals[p][1] * scale),
             ];
             let g = groups.entry(key).or_default();
             g.0.push((k, p));
@@ -533,8 +533,8 @@ impl InterfaceLocal {
                         let point = ContactPoint {
                             k_n,
                             k_t,
-                            normal: itf.normal,
-                            tangent: itf.tangent,
+                            normal: itf.normal(p),
+                            tangent: itf.tangent(p),
                             gap: gap_p,
                             friction: *friction,
                             slip_prev: if *friction > 0.0 { *slip } else { 0.0 },

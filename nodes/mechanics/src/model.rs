@@ -139,8 +139,9 @@ pub enum InterfaceKind {
     Contact { friction: f64, gap: Vec<f64> },
 }
 
-/// A conforming interface Γ between subdomains `a` and `b`: node pairs coincide. The normal
-/// `normal` points out of `a` towards `b`; `tangent` = (−n_y, n_x).
+/// A conforming interface Γ between subdomains `a` and `b`: node pairs coincide. Each pair has
+/// its own frame (DESIGN §2): the normal `normals[p]` points out of `a` towards `b`, the tangent
+/// is (−n_y, n_x); on a straight interface every pair has the same normal.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Interface {
     pub kind: InterfaceKind,
@@ -152,8 +153,9 @@ pub struct Interface {
     pub coords: Vec<[f64; 2]>,
     /// Lumped edge mass per pair (mm): row sums of the 3-node edge mass L/6, 4L/6, L/6.
     pub weights: Vec<f64>,
-    pub normal: [f64; 2],
-    pub tangent: [f64; 2],
+    /// Unit normal of each pair, out of `a`: the normalised sum of side a's outward normals at
+    /// the node on the isoparametric edges it belongs to.
+    pub normals: Vec<[f64; 2]>,
     /// Length L_Γ (mm).
     pub length: f64,
     /// Centroid of the pairs weighted by `weights` (mm).
@@ -167,6 +169,48 @@ impl Interface {
 
     pub fn is_contact(&self) -> bool {
         matches!(self.kind, InterfaceKind::Contact { .. })
+    }
+
+    /// Unit normal at pair `p`, out of side a.
+    pub fn normal(&self, p: usize) -> [f64; 2] {
+        self.normals[p]
+    }
+
+    /// Unit tangent at pair `p`: (−n_y, n_x).
+    pub fn tangent(&self, p: usize) -> [f64; 2] {
+        let n = self.normals[p];
+        [-n[1], n[0]]
+    }
+
+    /// The normal shared by every pair if the interface is straight (all pair normals equal to
+    /// within 1e-12), else `None`.
+    pub fn straight_normal(&self) -> Option<[f64; 2]> {
+        let n0 = *self.normals.first()?;
+        self.normals
+            .iter()
+            .all(|n| (n[0] - n0[0]).abs() <= 1e-12 && (n[1] - n0[1]).abs() <= 1e-12)
+            .then_some(n0)
+    }
+
+    /// A frame for the interface as a whole: the common normal of a straight interface, else
+    /// the normalised weighted mean of the pair normals, or (0, 1) when they cancel (a closed
+    /// ring). Returns (normal, tangent).
+    pub fn mean_frame(&self) -> ([f64; 2], [f64; 2]) {
+        let n = self.straight_normal().unwrap_or_else(|| {
+            let mut m = [0.0; 2];
+            for (w, n) in self.weights.iter().zip(&self.normals) {
+                m[0] += w * n[0];
+                m[1] += w * n[1];
+            }
+            let norm = (m[0] * m[0] + m[1] * m[1]).sqrt();
+            let total: f64 = self.weights.iter().sum();
+            if norm > 0.5 * total {
+                [m[0] / norm, m[1] / norm]
+            } else {
+                [0.0, 1.0]
+            }
+        });
+        (n, [-n[1], n[0]])
     }
 
     /// Which side of the interface subdomain `s` is (a or b), if any.

@@ -118,7 +118,8 @@ impl<'m> Problem<'m> {
                             pair: p,
                             what,
                         };
-                        if (mp.normal[0] - sign * itf.normal[0]).abs() + (mp.normal[1] - sign * itf.normal[1]).abs()
+                        if (mp.normal[0] - sign * itf.normals[p][0]).abs()
+                            + (mp.normal[1] - sign * itf.normals[p][1]).abs()
                             > 1e-12
                         {
                             return Err(bad("the normal"));
@@ -144,8 +145,8 @@ impl<'m> Problem<'m> {
                         pairs.push(MergedPair {
                             node_a: ga,
                             node_b: gb,
-                            normal: itf.normal,
-                            tangent: itf.tangent,
+                            normal: itf.normal(p),
+                            tangent: itf.tangent(p),
                             friction: *friction,
                             gap: gap[p],
                             weight: w,
@@ -257,7 +258,12 @@ impl<'m> Problem<'m> {
                 r_dof[2 * mp.node_b + c] += lam[c];
             }
         }
-        let us = u.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        // Displacements scale the gaps' violations: an interference (g0 < 0) with no other load
+        // moves the parts by about |g0|.
+        let us = u
+            .iter()
+            .fold(0.0f64, |a, v| a.max(v.abs()))
+            .max(self.pairs.iter().fold(0.0f64, |a, mp| a.max(mp.gap.abs())));
         let fs = fs.max(force_floor(self.k_diag, us));
         let mut r = vec![0.0; self.n_unknowns()];
         let mut worst = 0.0f64;

@@ -183,11 +183,11 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
                 if let Some((friction, gap0)) = contact {
                     let jump = [wb[0] - wa[0], wb[1] - wa[1]];
                     let lam = [w * fa[0], w * fa[1]];
-                    let slip = dot(jump, itf.tangent);
+                    let slip = dot(jump, itf.tangent(p));
                     let v = law_violations(
-                        dot(lam, itf.normal),
-                        dot(lam, itf.tangent),
-                        dot(jump, itf.normal) + gap0[p],
+                        dot(lam, itf.normal(p)),
+                        dot(lam, itf.tangent(p)),
+                        dot(jump, itf.normal(p)) + gap0[p],
                         slip - slip_prev,
                         friction,
                         fs,

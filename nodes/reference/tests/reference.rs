@@ -60,13 +60,13 @@ mod solves {
         assert_eq!(itf.n_pairs(), x_ref.len(), "pair count");
         // The reference's n = (0, 1) from the lower to the upper body, t = (−1, 0); ours must
         // be the same with the lower body as side a.
-        assert_eq!(itf.normal, [0.0, 1.0]);
-        assert_eq!(itf.tangent, [-1.0, 0.0]);
+        assert_eq!(itf.normals, vec![[0.0, 1.0]; itf.n_pairs()]);
+        assert_eq!(itf.tangent(0), [-1.0, 0.0]);
         let g0 = match &itf.kind {
             InterfaceKind::Contact { gap, .. } => gap.clone(),
             InterfaceKind::Perfect => unreachable!(),
         };
-        let (n, t) = (itf.normal, itf.tangent);
+        let (n, t) = (itf.normal(0), itf.tangent(0));
         let np = itf.n_pairs();
         let mut dev = [0.0f64; 4];
         let mut fn_max = 0.0f64;

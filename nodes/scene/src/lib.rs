@@ -85,6 +85,16 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
     let raw = parse_raw(text, file)?;
     let ctx = Ctx { file };
     let built = ctx.build(&raw)?;
+    // A scene with a mesh file travels with its mesh: the text gets the file's bytes.
+    let embedded;
+    let text = match &raw.mesh {
+        Some(mesh) if mesh.data.is_none() => {
+            let bytes = ctx.mesh_bytes(mesh)?;
+            embedded = embed_mesh(text, file, &mesh.file, &bytes)?;
+            embedded.as_str()
+        }
+        _ => text,
+    };
     Ok(LoadedScene {
         model: built.model,
         deployment: built.deployment,
@@ -95,6 +105,30 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
         text: text.to_string(),
         network: ctx.network(&raw.network)?,
     })
+}
+
+/// `text` with `[mesh] data` set to the base64 of the mesh file's `bytes`, so that the scene
+/// text alone rebuilds the model (node processes get the text from the bus, recordings attach it).
+fn embed_mesh(text: &str, file: &str, mesh_file: &str, bytes: &[u8]) -> Result<String, SceneError> {
+    use base64::Engine;
+    let mut table: toml::Table = text.parse().map_err(|e| toml_error(text, file, &e, true))?;
+    let err = |problem: String| SceneError {
+        file: file.to_string(),
+        key: "mesh".to_string(),
+        problem,
+    };
+    let mesh = table
+        .get_mut("mesh")
+        .and_then(toml::Value::as_table_mut)
+        .ok_or_else(|| err("is not a table".into()))?;
+    mesh.insert(
+        "data".into(),
+        toml::Value::String(base64::engine::general_purpose::STANDARD.encode(bytes)),
+    );
+    let body = toml::to_string(&table).map_err(|e| err(format!("cannot write the scene back: {e}")))?;
+    Ok(format!(
+        "# {file} with its mesh file `{mesh_file}` embedded ([mesh] data, base64)\n{body}"
+    ))
 }
 
 /// Scene settings given on the command line, applied by [`LoadedScene::with_overrides`].

@@ -14,6 +14,7 @@ pub(crate) struct RawScene {
     pub(crate) materials: BTreeMap<String, RawMaterial>,
     #[serde(default)]
     pub(crate) block: Vec<RawBlock>,
+    pub(crate) mesh: Option<RawMesh>,
     #[serde(default)]
     pub(crate) interface: Vec<RawInterface>,
     #[serde(default)]
@@ -64,6 +65,21 @@ pub(crate) struct RawBlock {
     pub(crate) split: Option<[usize; 2]>,
 }
 
+/// `[mesh]`: the parts come from a Gmsh file instead of blocks.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMesh {
+    /// The mesh file, relative to the scene's folder.
+    pub(crate) file: String,
+    /// The file's bytes in base64, written by the loader so that the scene text travels with its
+    /// mesh (to node processes, into recordings).
+    pub(crate) data: Option<String>,
+    /// Material of the parts: a part's name or a name prefix shared by parts (`sheath` for
+    /// `sheath.1`, `sheath.2`, …) → material.
+    #[serde(default)]
+    pub(crate) materials: BTreeMap<String, String>,
+}
+
 #[derive(Deserialize, Clone, Copy, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub(crate) enum RawKind {
@@ -74,7 +90,9 @@ pub(crate) enum RawKind {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawInterface {
-    pub(crate) between: [String; 2],
+    pub(crate) between: Option<[String; 2]>,
+    /// A named curve of the mesh: the interfaces whose edges lie on it.
+    pub(crate) curve: Option<String>,
     pub(crate) kind: RawKind,
     pub(crate) friction: Option<f64>,
     pub(crate) gap: Option<toml::Value>,
@@ -104,6 +122,8 @@ impl RawSide {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawBoundary {
     pub(crate) blocks: Option<Vec<String>>,
+    /// A named curve of the mesh.
+    pub(crate) curve: Option<String>,
     pub(crate) side: Option<RawSide>,
     pub(crate) x: Option<f64>,
     pub(crate) y: Option<f64>,
@@ -112,6 +132,8 @@ pub(crate) struct RawBoundary {
     pub(crate) tx: Option<toml::Value>,
     pub(crate) ty: Option<toml::Value>,
     pub(crate) p: Option<toml::Value>,
+    /// Tangential traction along the boundary (counter-clockwise around the part).
+    pub(crate) shear: Option<toml::Value>,
 }
 
 /// `solver.macro_degree` and `solver.time_coarsening`: a number or a name ("auto", "off").

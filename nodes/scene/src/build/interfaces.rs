@@ -109,14 +109,16 @@ impl Ctx<'_> {
                 }
                 length += ((x[2][0] - x[0][0]).powi(2) + (x[2][1] - x[0][1]).powi(2)).sqrt();
             }
+            let normal = if horizontal { [0.0, 1.0] } else { [1.0, 0.0] };
             return Ok(Some(GeoInterface {
                 a,
                 b,
-                horizontal,
+                normals: vec![normal; na.len()],
                 pairs: na.iter().zip(&nb).map(|(&(n, _, _), &(m, _, _))| (n, m)).collect(),
                 coords: na.iter().map(|&(n, _, _)| sa.mesh.coords[n]).collect(),
                 weights,
                 length,
+                curves: Vec::new(),
             }));
         }
         Ok(None)
@@ -129,12 +131,44 @@ impl Ctx<'_> {
         names: &BTreeMap<String, NameRef>,
         subs: &[Sub],
         geo: &[GeoInterface],
+        curve_names: &[String],
     ) -> Result<Vec<KindRule>, SceneError> {
         let mut kinds = vec![KindRule::Perfect; geo.len()];
         for (r, rule) in raw.interface.iter().enumerate() {
             let key = format!("interface[{r}]");
-            let (s0, _) = self.resolve(names, subs, &rule.between[0], &format!("{key}.between"))?;
-            let (s1, _) = self.resolve(names, subs, &rule.between[1], &format!("{key}.between"))?;
+            // Which interfaces the rule selects: between two names, or along a named curve.
+            let selects: Box<dyn Fn(&GeoInterface) -> bool> = match (&rule.between, &rule.curve) {
+                (Some(between), None) => {
+                    let (s0, _) = self.resolve(names, subs, &between[0], &format!("{key}.between"))?;
+                    let (s1, _) = self.resolve(names, subs, &between[1], &format!("{key}.between"))?;
+                    Box::new(move |itf: &GeoInterface| {
+                        (s0.contains(&itf.a) && s1.contains(&itf.b)) || (s0.contains(&itf.b) && s1.contains(&itf.a))
+                    })
+                }
+                (None, Some(curve)) => {
+                    let Some(c) = curve_names.iter().position(|n| n == curve) else {
+                        return Err(self.err(
+                            format!("{key}.curve"),
+                            if curve_names.is_empty() {
+                                format!("`{curve}`: only a scene with a [mesh] has named curves")
+                            } else {
+                                format!("unknown curve `{curve}` (the mesh names: {})", curve_names.join(", "))
+                            },
+                        ));
+                    };
+                    Box::new(move |itf: &GeoInterface| itf.curves.contains(&c))
+                }
+                (Some(_), Some(_)) => {
+                    return Err(self.err(key, "give either `between` or `curve`, not both"));
+                }
+                (None, None) => {
+                    return Err(self.err(
+                        key,
+                        "selects no interface: give `between = [name, name]` (blocks, parts or name prefixes) or \
+                         `curve = name` (a named curve of the mesh)",
+                    ));
+                }
+            };
             let kind = match rule.kind {
                 RawKind::Perfect => {
                     if rule.friction.is_some() {
@@ -163,17 +197,22 @@ impl Ctx<'_> {
             };
             let mut matched = false;
             for (g, itf) in geo.iter().enumerate() {
-                let hit = (s0.contains(&itf.a) && s1.contains(&itf.b)) || (s0.contains(&itf.b) && s1.contains(&itf.a));
-                if hit {
+                if selects(itf) {
                     kinds[g] = kind;
                     matched = true;
                 }
             }
             if !matched {
-                return Err(self.err(
-                    format!("{key}.between"),
-                    format!("`{}` and `{}` share no edge", rule.between[0], rule.between[1]),
-                ));
+                return Err(match (&rule.between, &rule.curve) {
+                    (Some(between), _) => self.err(
+                        format!("{key}.between"),
+                        format!("`{}` and `{}` share no edge", between[0], between[1]),
+                    ),
+                    (_, curve) => self.err(
+                        format!("{key}.curve"),
+                        format!("no interface lies on curve `{}`", curve.as_deref().unwrap_or_default()),
+                    ),
+                });
             }
         }
         Ok(kinds)
@@ -234,6 +273,7 @@ impl Ctx<'_> {
             let pairs: Vec<(usize, usize)> = keep.iter().map(|&p| g.pairs[p]).collect();
             let coords: Vec<[f64; 2]> = keep.iter().map(|&p| g.coords[p]).collect();
             let weights: Vec<f64> = keep.iter().map(|&p| g.weights[p]).collect();
+            let normals: Vec<[f64; 2]> = keep.iter().map(|&p| g.normals[p]).collect();
             let kind = match *kind {
                 KindRule::Perfect => InterfaceKind::Perfect,
                 KindRule::Contact(r) => {
@@ -255,7 +295,6 @@ impl Ctx<'_> {
                 centroid[0] += w * c[0] / total;
                 centroid[1] += w * c[1] / total;
             }
-            let normal = if g.horizontal { [0.0, 1.0] } else { [1.0, 0.0] };
             out.push(Interface {
                 kind,
                 a: g.a,
@@ -263,8 +302,7 @@ impl Ctx<'_> {
                 pairs,
                 coords,
                 weights,
-                normal,
-                tangent: [-normal[1], normal[0]],
+                normals,
                 length: g.length,
                 centroid,
             });

@@ -1,6 +1,7 @@
 //! Tables, time functions and the `[[boundary]]` rules: prescribed displacements and loads.
 
 use super::*;
+use glissade_mechanics::element::edge_load_along;
 
 impl Ctx<'_> {
     /// A piecewise-linear table `{ <abscissa> = [..], <ordinate> = [..] }` with one abscissa name
@@ -101,6 +102,114 @@ impl Ctx<'_> {
         Ok(tf)
     }
 
+    /// A boundary value as written: uniform along the boundary (a number, a formula in t or a
+    /// table in t), or a formula in x, y (and t).
+    pub(crate) fn boundary_value(
+        &self,
+        value: &toml::Value,
+        key: &str,
+        time: TimeGrid,
+    ) -> Result<BoundaryValue, SceneError> {
+        if let toml::Value::String(s) = value {
+            if Expr::parse(s, &["t"]).is_err() {
+                if let Ok(e) = Expr::parse(s, &["x", "y"]) {
+                    return Ok(BoundaryValue::Field { expr: e, timed: false });
+                }
+                let e = Expr::parse(s, &["x", "y", "t"]).map_err(|e| self.err(key, e.to_string()))?;
+                return Ok(BoundaryValue::Field { expr: e, timed: true });
+            }
+        }
+        Ok(BoundaryValue::Uniform(self.time_function(value, key, time)?))
+    }
+
+    /// Load cases (pattern, time function) of a field value: `sample(t)` is the full-length
+    /// pattern at time t. A field without t is one case; one with t is sampled at every time
+    /// point and compressed to its rank (greedy Gram–Schmidt on the time columns down to 1e-13 of
+    /// the largest column), each case's time function the table of its coefficients on the grid,
+    /// so the loads are exact at the time points to round-off.
+    pub(crate) fn field_cases(
+        &self,
+        time: TimeGrid,
+        timed: bool,
+        sample: impl Fn(f64) -> Result<Vec<f64>, SceneError>,
+    ) -> Result<Vec<(Vec<f64>, TimeFunction)>, SceneError> {
+        if !timed {
+            return Ok(vec![(sample(0.0)?, TimeFunction::Constant(1.0))]);
+        }
+        let times: Vec<f64> = (0..time.n_points()).map(|i| time.t(i)).collect();
+        let columns = times.iter().map(|&t| sample(t)).collect::<Result<Vec<_>, _>>()?;
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let largest = columns.iter().map(|c| dot(c, c).sqrt()).fold(0.0, f64::max);
+        let mut residual = columns.clone();
+        let mut basis: Vec<Vec<f64>> = Vec::new();
+        loop {
+            let (j, norm) = residual
+                .iter()
+                .enumerate()
+                .map(|(j, r)| (j, dot(r, r).sqrt()))
+                .fold((0, 0.0), |best, c| if c.1 > best.1 { c } else { best });
+            if norm <= 1e-13 * largest || norm == 0.0 || basis.len() == columns.len() {
+                break;
+            }
+            let mut q: Vec<f64> = residual[j].iter().map(|v| v / norm).collect();
+            for b in &basis {
+                let c = dot(&q, b);
+                q.iter_mut().zip(b).for_each(|(x, y)| *x -= c * y);
+            }
+            let n = dot(&q, &q).sqrt();
+            q.iter_mut().for_each(|x| *x /= n);
+            for r in &mut residual {
+                let c = dot(r, &q);
+                r.iter_mut().zip(&q).for_each(|(x, y)| *x -= c * y);
+            }
+            basis.push(q);
+        }
+        Ok(basis
+            .into_iter()
+            .map(|q| {
+                let v = columns.iter().map(|c| dot(c, &q)).collect();
+                (q, TimeFunction::Table { t: times.clone(), v })
+            })
+            .collect())
+    }
+
+    /// Evaluates a field formula at `x` and time `t`, refusing a value that is not finite.
+    fn field_at(&self, expr: &Expr, timed: bool, x: [f64; 2], t: f64, key: &str) -> Result<f64, SceneError> {
+        let v = if timed {
+            expr.eval(&[x[0], x[1], t])
+        } else {
+            expr.eval(&x)
+        };
+        self.check(v.is_finite(), key, || {
+            format!("value {v} at (x, y) = ({}, {}), t = {t} is not finite", x[0], x[1])
+        })?;
+        Ok(v)
+    }
+
+    /// Prescribes `cases` (full-length patterns and their time functions) at `dofs` of one
+    /// subdomain: a later rule takes the dofs over from an earlier one.
+    fn prescribe(sl: &mut SubLoads, dofs: &[usize], cases: Vec<(Vec<f64>, TimeFunction)>) {
+        let first = sl.loads.len();
+        let last = first + cases.len();
+        for &dof in dofs {
+            sl.constrained[dof] = true;
+            let (p0, p1) = sl.owner[dof];
+            for prev in p0..p1 {
+                if prev < first {
+                    sl.loads[prev].displacement[dof] = 0.0;
+                }
+            }
+            sl.owner[dof] = (first, last);
+        }
+        for (pattern, time) in cases {
+            sl.loads.push(LoadCase {
+                force: vec![0.0; pattern.len()],
+                displacement: pattern,
+                time,
+            });
+        }
+    }
+
     /// Constraints and load cases of every subdomain from the `[[boundary]]` rules.
     pub(crate) fn boundaries(
         &self,
@@ -109,92 +218,263 @@ impl Ctx<'_> {
         subs: &[Sub],
         time: TimeGrid,
     ) -> Result<Vec<SubLoads>, SceneError> {
-        let mut out: Vec<SubLoads> = subs
-            .iter()
-            .map(|s| {
-                let n = 2 * s.mesh.n_nodes();
-                SubLoads {
-                    constrained: vec![false; n],
-                    loads: Vec::new(),
-                    owner: vec![usize::MAX; n],
-                }
-            })
-            .collect();
+        let mut out = empty_loads(subs);
         for (r, rule) in raw.boundary.iter().enumerate() {
             let key = format!("boundary[{r}]");
-            let disp = [("ux", &rule.ux), ("uy", &rule.uy)];
-            let trac = [("tx", &rule.tx), ("ty", &rule.ty), ("p", &rule.p)];
-            let has_disp = disp.iter().any(|(_, v)| v.is_some());
-            let has_trac = trac.iter().any(|(_, v)| v.is_some());
-            if has_disp && has_trac {
+            self.check_boundary_rule(rule, &key)?;
+            if let Some(curve) = &rule.curve {
                 return Err(self.err(
-                    key,
-                    "a rule prescribes either displacements (ux, uy) or tractions (tx, ty, p), not both",
+                    format!("{key}.curve"),
+                    format!("`{curve}`: only a scene with a [mesh] has named curves (blocks use side, x, y)"),
                 ));
-            }
-            if !has_disp && !has_trac {
-                return Err(self.err(key, "prescribes nothing: give ux/uy or tx/ty/p"));
             }
             if rule.side.is_none() && rule.x.is_none() && rule.y.is_none() {
                 return Err(self.err(key, "selects no side: give `side`, `x` or `y`"));
             }
             let selected = self.select_sides(rule, names, subs, &key)?;
 
-            for (c, (comp, value)) in disp.iter().enumerate() {
+            for (c, (comp, value)) in [("ux", &rule.ux), ("uy", &rule.uy)].iter().enumerate() {
                 let Some(value) = value else { continue };
-                let tf = self.time_function(value, &format!("{key}.{comp}"), time)?;
-                for (&s, sides) in &selected {
-                    let sl = &mut out[s];
-                    let case = sl.loads.len();
-                    let mut pattern = vec![0.0; sl.constrained.len()];
-                    for &side in sides {
-                        for node in subs[s].mesh.side_nodes(side) {
-                            let dof = 2 * node + c;
-                            pattern[dof] = 1.0;
-                            sl.constrained[dof] = true;
-                            let prev = sl.owner[dof];
-                            if prev != usize::MAX && prev != case {
-                                sl.loads[prev].displacement[dof] = 0.0;
-                            }
-                            sl.owner[dof] = case;
-                        }
-                    }
-                    sl.loads.push(LoadCase {
-                        force: vec![0.0; pattern.len()],
-                        displacement: pattern,
-                        time: tf.clone(),
-                    });
-                }
-            }
-            for (comp, value) in trac {
-                let Some(value) = value else { continue };
-                let tf = self.time_function(value, &format!("{key}.{comp}"), time)?;
+                let ckey = format!("{key}.{comp}");
+                let bv = self.boundary_value(value, &ckey, time)?;
                 for (&s, sides) in &selected {
                     let mesh = &subs[s].mesh;
-                    let mut force = vec![0.0; 2 * mesh.n_nodes()];
-                    for &side in sides {
-                        let unit = match comp {
-                            "tx" => [1.0, 0.0],
-                            "ty" => [0.0, 1.0],
-                            _ => {
-                                let n = outward_normal(side);
-                                [-n[0], -n[1]]
-                            }
-                        };
-                        for e in &mesh.sides[side as usize] {
-                            let x = [mesh.coords[e[0]], mesh.coords[e[1]], mesh.coords[e[2]]];
-                            let f = edge_load(&x, |_| unit);
-                            for k in 0..3 {
-                                force[2 * e[k]] += f[k][0];
-                                force[2 * e[k] + 1] += f[k][1];
-                            }
-                        }
+                    let dofs: Vec<usize> = sides
+                        .iter()
+                        .flat_map(|&side| mesh.side_nodes(side))
+                        .map(|node| 2 * node + c)
+                        .collect();
+                    let cases = self.displacement_cases(&bv, &ckey, time, mesh, &dofs)?;
+                    Self::prescribe(&mut out[s], &dofs, cases);
+                }
+            }
+            for (comp, value) in [
+                ("tx", &rule.tx),
+                ("ty", &rule.ty),
+                ("p", &rule.p),
+                ("shear", &rule.shear),
+            ] {
+                let Some(value) = value else { continue };
+                let ckey = format!("{key}.{comp}");
+                let bv = self.boundary_value(value, &ckey, time)?;
+                for (&s, sides) in &selected {
+                    let mesh = &subs[s].mesh;
+                    // Block sides run in increasing x or y: their outward normal is the side's.
+                    let edges: Vec<([usize; 3], [f64; 2])> = sides
+                        .iter()
+                        .flat_map(|&side| {
+                            mesh.sides[side as usize]
+                                .iter()
+                                .map(move |e| (*e, outward_normal(side)))
+                        })
+                        .collect();
+                    let cases = self.traction_cases(&bv, comp, &ckey, time, mesh, &edges)?;
+                    for (force, time) in cases {
+                        out[s].loads.push(LoadCase {
+                            displacement: vec![0.0; force.len()],
+                            force,
+                            time,
+                        });
                     }
-                    out[s].loads.push(LoadCase {
-                        displacement: vec![0.0; force.len()],
-                        force,
-                        time: tf.clone(),
-                    });
+                }
+            }
+        }
+        for sl in &mut out {
+            sl.loads
+                .retain(|c| c.force.iter().chain(&c.displacement).any(|&v| v != 0.0));
+        }
+        Ok(out)
+    }
+
+    /// What every boundary rule must say, whatever selects its edges.
+    fn check_boundary_rule(&self, rule: &RawBoundary, key: &str) -> Result<(), SceneError> {
+        let has_disp = rule.ux.is_some() || rule.uy.is_some();
+        let has_trac = rule.tx.is_some() || rule.ty.is_some() || rule.p.is_some() || rule.shear.is_some();
+        if has_disp && has_trac {
+            return Err(self.err(
+                key,
+                "a rule prescribes either displacements (ux, uy) or tractions (tx, ty, p, shear), not both",
+            ));
+        }
+        if !has_disp && !has_trac {
+            return Err(self.err(key, "prescribes nothing: give ux/uy or tx/ty/p/shear"));
+        }
+        Ok(())
+    }
+
+    /// Cases of a prescribed displacement component at `dofs` of `mesh`.
+    fn displacement_cases(
+        &self,
+        bv: &BoundaryValue,
+        key: &str,
+        time: TimeGrid,
+        mesh: &Mesh,
+        dofs: &[usize],
+    ) -> Result<Vec<(Vec<f64>, TimeFunction)>, SceneError> {
+        let n = 2 * mesh.n_nodes();
+        match bv {
+            BoundaryValue::Uniform(tf) => {
+                let mut pattern = vec![0.0; n];
+                for &d in dofs {
+                    pattern[d] = 1.0;
+                }
+                Ok(vec![(pattern, tf.clone())])
+            }
+            BoundaryValue::Field { expr, timed } => self.field_cases(time, *timed, |t| {
+                let mut pattern = vec![0.0; n];
+                for &d in dofs {
+                    pattern[d] = self.field_at(expr, *timed, mesh.coords[d / 2], t, key)?;
+                }
+                Ok(pattern)
+            }),
+        }
+    }
+
+    /// Cases of a traction component on `edges` of `mesh`, each edge with its outward normal
+    /// (`None`: the normal of the isoparametric edge, which then runs with the part on its left).
+    /// `comp`: tx, ty, p (along −n) or shear (along t = (−n_y, n_x)).
+    fn traction_cases(
+        &self,
+        bv: &BoundaryValue,
+        comp: &str,
+        key: &str,
+        time: TimeGrid,
+        mesh: &Mesh,
+        edges: &[([usize; 3], [f64; 2])],
+    ) -> Result<Vec<(Vec<f64>, TimeFunction)>, SceneError> {
+        let n = 2 * mesh.n_nodes();
+        let force = |value: &dyn Fn([f64; 2]) -> f64| -> Vec<f64> {
+            let mut force = vec![0.0; n];
+            for (e, side_normal) in edges {
+                let x = [mesh.coords[e[0]], mesh.coords[e[1]], mesh.coords[e[2]]];
+                let f = edge_load_along(&x, |p, t| {
+                    // A block side's normal is given; a mesh edge runs with its part on the left.
+                    let normal = if side_normal[0].is_nan() {
+                        [t[1], -t[0]]
+                    } else {
+                        *side_normal
+                    };
+                    let unit = match comp {
+                        "tx" => [1.0, 0.0],
+                        "ty" => [0.0, 1.0],
+                        "p" => [-normal[0], -normal[1]],
+                        _ => [-normal[1], normal[0]],
+                    };
+                    let v = value(p);
+                    [unit[0] * v, unit[1] * v]
+                });
+                for k in 0..3 {
+                    force[2 * e[k]] += f[k][0];
+                    force[2 * e[k] + 1] += f[k][1];
+                }
+            }
+            force
+        };
+        match bv {
+            BoundaryValue::Uniform(tf) => Ok(vec![(force(&|_| 1.0), tf.clone())]),
+            BoundaryValue::Field { expr, timed } => self.field_cases(time, *timed, |t| {
+                // Evaluate once at every Gauss point first, so a non-finite value is an error.
+                for (e, _) in edges {
+                    let x = [mesh.coords[e[0]], mesh.coords[e[1]], mesh.coords[e[2]]];
+                    for &(s, _) in &glissade_mechanics::element::GAUSS3 {
+                        let p = glissade_mechanics::element::edge_frame(&x, s).0;
+                        self.field_at(expr, *timed, p, t, key)?;
+                    }
+                }
+                let v = |p: [f64; 2]| {
+                    if *timed {
+                        expr.eval(&[p[0], p[1], t])
+                    } else {
+                        expr.eval(&p)
+                    }
+                };
+                Ok(force(&v))
+            }),
+        }
+    }
+
+    /// Constraints and load cases of every part of a mesh scene from the `[[boundary]]` rules,
+    /// which select named curves.
+    pub(crate) fn mesh_boundaries(
+        &self,
+        raw: &RawScene,
+        geometry: &parts::PartGeometry,
+        curve_names: &[String],
+        subs: &[Sub],
+        time: TimeGrid,
+    ) -> Result<Vec<SubLoads>, SceneError> {
+        let mut out = empty_loads(subs);
+        for (r, rule) in raw.boundary.iter().enumerate() {
+            let key = format!("boundary[{r}]");
+            self.check_boundary_rule(rule, &key)?;
+            for (what, given) in [
+                ("blocks", rule.blocks.is_some()),
+                ("side", rule.side.is_some()),
+                ("x", rule.x.is_some()),
+                ("y", rule.y.is_some()),
+            ] {
+                if given {
+                    return Err(self.err(
+                        format!("{key}.{what}"),
+                        "selects block sides: a scene with a [mesh] selects its boundaries by `curve`",
+                    ));
+                }
+            }
+            let Some(curve) = &rule.curve else {
+                return Err(self.err(key, "selects no boundary: give `curve` (a named curve of the mesh)"));
+            };
+            let Some(c) = curve_names.iter().position(|n| n == curve) else {
+                return Err(self.err(
+                    format!("{key}.curve"),
+                    format!("unknown curve `{curve}` (the mesh names: {})", curve_names.join(", ")),
+                ));
+            };
+            // Edges of each part on the curve.
+            let mut selected: BTreeMap<usize, Vec<[usize; 3]>> = BTreeMap::new();
+            for (s, edges) in geometry.boundary.iter().enumerate() {
+                for (k, e) in edges.iter().enumerate() {
+                    if geometry.edge_curves[s][k].contains(&c) {
+                        selected.entry(s).or_default().push(e.nodes);
+                    }
+                }
+            }
+            if selected.is_empty() {
+                return Err(self.err(
+                    format!("{key}.curve"),
+                    format!("curve `{curve}` is on no part's boundary"),
+                ));
+            }
+            for (cmp, (comp, value)) in [("ux", &rule.ux), ("uy", &rule.uy)].iter().enumerate() {
+                let Some(value) = value else { continue };
+                let ckey = format!("{key}.{comp}");
+                let bv = self.boundary_value(value, &ckey, time)?;
+                for (&s, edges) in &selected {
+                    let mut dofs: Vec<usize> = edges.iter().flatten().map(|&node| 2 * node + cmp).collect();
+                    dofs.sort_unstable();
+                    dofs.dedup();
+                    let cases = self.displacement_cases(&bv, &ckey, time, &subs[s].mesh, &dofs)?;
+                    Self::prescribe(&mut out[s], &dofs, cases);
+                }
+            }
+            for (comp, value) in [
+                ("tx", &rule.tx),
+                ("ty", &rule.ty),
+                ("p", &rule.p),
+                ("shear", &rule.shear),
+            ] {
+                let Some(value) = value else { continue };
+                let ckey = format!("{key}.{comp}");
+                let bv = self.boundary_value(value, &ckey, time)?;
+                for (&s, edges) in &selected {
+                    let edges: Vec<([usize; 3], [f64; 2])> = edges.iter().map(|e| (*e, [f64::NAN; 2])).collect();
+                    let cases = self.traction_cases(&bv, comp, &ckey, time, &subs[s].mesh, &edges)?;
+                    for (force, time) in cases {
+                        out[s].loads.push(LoadCase {
+                            displacement: vec![0.0; force.len()],
+                            force,
+                            time,
+                        });
+                    }
                 }
             }
         }
@@ -280,4 +560,24 @@ impl Ctx<'_> {
         }
         Ok(selected)
     }
+}
+
+/// Empty constraints and loads for every subdomain.
+fn empty_loads(subs: &[Sub]) -> Vec<SubLoads> {
+    subs.iter()
+        .map(|s| {
+            let n = 2 * s.mesh.n_nodes();
+            SubLoads {
+                constrained: vec![false; n],
+                loads: Vec::new(),
+                owner: vec![(0, 0); n],
+            }
+        })
+        .collect()
+}
+
+/// A boundary value: uniform along the boundary, or a formula in x, y (and t if `timed`).
+pub(crate) enum BoundaryValue {
+    Uniform(TimeFunction),
+    Field { expr: Expr, timed: bool },
 }
