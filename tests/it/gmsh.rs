@@ -146,8 +146,8 @@ fn latin_vs_reference(name: &str) -> (f64, f64) {
 fn curved_latin_equals_the_monolithic_reference() {
     // Converged LATIN (η ≤ 1e-10) solves the reference's discrete problem: 1e-6 relative on the
     // contact tractions and jumps (measured: shrink fit 3.7e-7 per pair at accuracy 1e-4 already;
-    // sheath 3.5e-10 at η 1.4e-10).
-    for name in ["shrink-fit", "sheath"] {
+    // sheath 3.5e-10 at η 1.4e-10, wedge 2.5e-10 at η 1.1e-11).
+    for name in ["shrink-fit", "sheath", "wedge"] {
         let (e_f, e_w) = latin_vs_reference(name);
         assert!(
             e_f < 1e-6 && e_w < 1e-6,
@@ -307,4 +307,42 @@ fn rigid_mode_check_names_the_free_part() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("inner") && err.contains("outer"), "{err}");
+}
+
+#[test]
+fn wedge_flanks_carry_the_leaning_pressure() {
+    // Equilibrium of the wedge: the contact forces on its two inclined flanks balance the
+    // pressure p = 50 t (1 + x/40) on its top (x from −w to w, w = 17.7735 mm): resultant
+    // −∫ p dx = −100 t w vertically (the x-term integrates to zero), zero horizontally, and a
+    // moment about the top's centre of −∫ p x dx = −(50 t/40)(2w³/3). The consistent edge loads
+    // integrate the linear pressure exactly, so converged fields balance it to the accuracy.
+    let mut sc = mesh_scene(&shipped("wedge"));
+    (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(1e-10));
+    sc.model.solver.stagnation_window = 0;
+    let result = run(&sc);
+    assert_eq!(result.verdict, Verdict::Converged);
+    let itf = &sc.model.interfaces[0];
+    assert_eq!(sc.model.subdomains[itf.b].name, "wedge");
+    assert!(itf.straight_normal().is_none(), "two flanks of different normals");
+    let w = 12.0 + 10.0 / 3f64.sqrt();
+    let sol = &result.interfaces[0];
+    let n = sc.model.time.n_steps;
+    let t = sc.model.time.t(n);
+    // Force on the wedge (side b) = −(force on side a).
+    let (mut fx, mut fy, mut m) = (0.0, 0.0, 0.0);
+    for p in 0..itf.n_pairs() {
+        let f = [
+            -sol.f_a_hat.get(2 * p, n) * itf.weights[p],
+            -sol.f_a_hat.get(2 * p + 1, n) * itf.weights[p],
+        ];
+        let x = itf.coords[p];
+        fx += f[0];
+        fy += f[1];
+        m += (x[0] - 0.0) * f[1] - (x[1] - 10.0) * f[0];
+    }
+    let load = 100.0 * t * w;
+    let moment = 50.0 * t / 40.0 * 2.0 * w.powi(3) / 3.0;
+    assert!((fy - load).abs() < 1e-6 * load, "vertical {fy} against {load}");
+    assert!(fx.abs() < 1e-6 * load, "horizontal {fx}");
+    assert!((m - moment).abs() < 1e-6 * load * w, "moment {m} against {moment}");
 }
