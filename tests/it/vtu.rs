@@ -29,6 +29,8 @@ d_u = d_f = d_vm = 0.0
 u_scale = f_scale = 0.0
 status_mismatch = 0
 clamped = 0
+d_normal = 0.0
+curved = False
 codes = {"separated": 0, "stick": 1, "slip": 2}
 for i, t in enumerate(times):
     parts = by_time[t]
@@ -58,6 +60,9 @@ for i, t in enumerate(times):
         for key, name in [("f_n", "traction_n"), ("f_t", "traction_t"), ("jump_n", "jump_n"), ("jump_t", "jump_t")]:
             d_f = max(d_f, float(np.max(np.abs(pd[name][k:k + np_] - np.array(f[key][i])))))
         f_scale = max(f_scale, max(abs(v) for v in f["f_n"][i]))
+        normals = np.array(f.get("normals", [f["normal"]] * np_))
+        d_normal = max(d_normal, float(np.max(np.abs(pd["normal"][k:k + np_, :2] - normals))))
+        curved = curved or "normals" in f
         st = pd["status"][k:k + np_]
         expected = [codes[w] for w in f["status"][i]] if f["status"] else [-1] * np_
         status_mismatch += int(np.sum(st != np.array(expected)))
@@ -80,7 +85,8 @@ for i, t in enumerate(times):
             w = f["status"][i][p] if f["status"] else "perfect"
             status_mismatch += int(r["status"] != w)
 out.update(csv_rows=len(rows), expected_rows=k, d_u=d_u, u_scale=u_scale, d_f=d_f, d_csv=d_csv,
-           f_scale=f_scale, d_vm=d_vm, status_mismatch=status_mismatch, clamped_points=clamped)
+           f_scale=f_scale, d_vm=d_vm, status_mismatch=status_mismatch, clamped_points=clamped,
+           d_normal=d_normal, curved=curved)
 print(json.dumps(out))
 "#;
 
@@ -167,6 +173,52 @@ fn a_runs_paraview_series_and_csv_equal_its_json_outputs() {
         err.contains("stratified-v.pvd") && err.contains("nothing was overwritten"),
         "{err}"
     );
+}
+
+/// A curved scene's series (the shrink fit: a closed circular contact interface, per-pair
+/// normals) reads in meshio like a block scene's, with the same doubles as its JSON outputs and
+/// each pair's own normal.
+#[test]
+fn a_curved_scenes_paraview_series_reads_in_meshio() {
+    let Some(python) = python_with(&["meshio", "numpy"]) else {
+        return;
+    };
+    let dir = scratch("vtu-curved");
+    let scene = format!("{}/launch/scenes/shrink-fit.toml", env!("CARGO_MANIFEST_DIR"));
+    let out = dir.display().to_string();
+    glissade_ok(&[
+        &"run",
+        &scene,
+        &"--in-process",
+        &"--interior",
+        &"--vtu",
+        &"--csv",
+        &"--no-record",
+        &"--out",
+        &out,
+        &"--run-id",
+        &"c",
+    ]);
+    let stem = dir.join("shrink-fit-c");
+    let r = run_check(
+        python,
+        &stem.with_extension("pvd"),
+        &stem.with_extension("fields.json"),
+        Some(&stem.with_extension("displacement.json")),
+        &stem.with_extension("interfaces.csv"),
+    );
+    println!("{r}");
+    assert_eq!(r["time_points"], 11);
+    assert_eq!(r["times_equal"], true);
+    assert_eq!(r["curved"], true);
+    assert_eq!(r["csv_rows"], r["expected_rows"]);
+    assert_eq!(r["status_mismatch"], 0);
+    let f = |k: &str| r[k].as_f64().unwrap();
+    assert!(f("u_scale") > 0.0 && f("f_scale") > 0.0);
+    assert!(f("d_u") <= 1e-12 * f("u_scale"), "{r}");
+    assert!(f("d_f") <= 1e-12 * f("f_scale"), "{r}");
+    assert!(f("d_normal") <= 1e-15, "{r}");
+    assert!(f("d_vm") <= 1e-12, "{r}");
 }
 
 /// `glissade export` of a recording made without `--interior` recovers the displacements from
