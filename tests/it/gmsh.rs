@@ -246,6 +246,12 @@ fn bad_meshes_are_refused_naming_what_is_wrong() {
             "curved interfaces".to_string(),
         ),
         (
+            "memory",
+            mesh.clone(),
+            format!("{scene}\n[deployment]\nmemory_limit_gb = 0.001\n"),
+            "the scene needs an estimated".to_string(),
+        ),
+        (
             "truncated",
             mesh[..mesh.len() / 2].to_string(),
             scene.clone(),

@@ -60,11 +60,30 @@ pub(crate) fn estimate(raw: &RawScene) -> MemoryEstimate {
     e
 }
 
+/// The estimate of a mesh scene's parts: (nodes, boundary nodes) per part, as for blocks.
+pub(crate) fn estimate_parts(parts: &[(usize, usize)], n_steps: usize) -> MemoryEstimate {
+    let time_points = n_steps as f64 + 1.0;
+    let mut e = MemoryEstimate {
+        operators: 0.0,
+        fields: 0.0,
+    };
+    for &(nodes, boundary) in parts {
+        let boundary_values = 2.0 * boundary as f64;
+        e.operators += 2.0 * nodes as f64 * OPERATOR_BYTES_PER_DOF + 8.0 * boundary_values * boundary_values;
+        e.fields += boundary_values * time_points * FIELD_BYTES_PER_VALUE;
+    }
+    e
+}
+
 impl Ctx<'_> {
     /// Refuses a scene whose estimate exceeds `deployment.memory_limit_gb`, or else the machine's
     /// memory (when known).
     pub(crate) fn check_memory(&self, raw: &RawScene) -> Result<(), SceneError> {
-        let e = estimate(raw);
+        self.check_memory_estimate(raw, estimate(raw))
+    }
+
+    /// [`Self::check_memory`] with a given estimate (a mesh scene's, once its parts are known).
+    pub(crate) fn check_memory_estimate(&self, raw: &RawScene, e: MemoryEstimate) -> Result<(), SceneError> {
         let (limit, what) = match raw.deployment.memory_limit_gb {
             Some(gb) => {
                 self.check(gb > 0.0 && gb.is_finite(), "deployment.memory_limit_gb", || {

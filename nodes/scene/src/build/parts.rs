@@ -603,6 +603,13 @@ impl Ctx<'_> {
         SceneError,
     > {
         let geometry = self.part_geometry(&pm)?;
+        let sizes: Vec<(usize, usize)> = geometry
+            .meshes
+            .iter()
+            .zip(&geometry.boundary)
+            .map(|(m, edges)| (m.n_nodes(), 2 * edges.len()))
+            .collect();
+        self.check_memory_estimate(raw, memory::estimate_parts(&sizes, time.n_steps))?;
         let mut names: BTreeMap<String, NameRef> = BTreeMap::new();
         for (s, part) in pm.parts.iter().enumerate() {
             if names.insert(part.name.clone(), NameRef::Sub(s)).is_some() {
