@@ -857,43 +857,50 @@ fn stratified_mesh_is_the_block_mesher_s() {
     );
 
     // The block mesher's subdomains of launch/scenes/stratified.toml: same elements, same node
-    // positions (to 1e-9 mm), same node order in each element (Gmsh starts each at its bottom-left
-    // corner, as the block mesher does).
+    // positions to the bit (stratified.py computes them as the block mesher does and Gmsh writes
+    // them as binary doubles), same node order in each element (corners from the bottom-left).
     let path = root().join("launch/scenes/stratified.toml");
     let text = std::fs::read_to_string(&path).expect("the scene");
     let scene = glissade_scene::load_str(&text, "stratified.toml").unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(scene.model.subdomains.len(), 18);
-    let key = |x: [f64; 2]| [(x[0] * 1e6).round() as i64, (x[1] * 1e6).round() as i64];
+    let bits = |x: [f64; 2]| [x[0].to_bits(), x[1].to_bits()];
     for sub in &scene.model.subdomains {
-        let ours = group(&m, 2, &sub.name);
-        assert_eq!(ours.len(), sub.mesh.elements.len(), "{}", sub.name);
-        let theirs: BTreeSet<Vec<[i64; 2]>> = sub
+        let ours: BTreeSet<Vec<[u64; 2]>> = group(&m, 2, &sub.name)
+            .iter()
+            .map(|e| e.nodes.iter().map(|&n| bits(m.nodes[n])).collect())
+            .collect();
+        let theirs: BTreeSet<Vec<[u64; 2]>> = sub
             .mesh
             .elements
             .iter()
-            .map(|e| e.iter().map(|&n| key(sub.mesh.coords[n])).collect())
+            .map(|e| e.iter().map(|&n| bits(sub.mesh.coords[n])).collect())
             .collect();
-        let exact: HashMap<[i64; 2], [f64; 2]> = sub.mesh.coords.iter().map(|&x| (key(x), x)).collect();
-        let mut close = 0.0f64;
-        for e in ours {
-            let pos: Vec<[i64; 2]> = e.nodes.iter().map(|&n| key(m.nodes[n])).collect();
-            assert!(
-                theirs.contains(&pos),
-                "{}: element {} is a block element, nodes in the same order",
-                sub.name,
-                e.tag
+        assert_eq!(group(&m, 2, &sub.name).len(), sub.mesh.elements.len(), "{}", sub.name);
+        assert_eq!(ours.len(), sub.mesh.elements.len(), "{}: elements distinct", sub.name);
+        if let Some(e) = ours.difference(&theirs).next() {
+            let at: Vec<[f64; 2]> = e.iter().map(|b| b.map(f64::from_bits)).collect();
+            let near = theirs
+                .iter()
+                .map(|t| {
+                    t.iter()
+                        .zip(e)
+                        .map(|(p, q)| {
+                            let (p, q) = (p.map(f64::from_bits), q.map(f64::from_bits));
+                            (p[0] - q[0]).abs().max((p[1] - q[1]).abs())
+                        })
+                        .fold(0.0, f64::max)
+                })
+                .fold(f64::INFINITY, f64::min);
+            panic!(
+                "{}: the element with nodes at {at:?} is not a block element bit for bit (nearest one \
+                 {near:e} mm off)",
+                sub.name
             );
-            for &n in &e.nodes {
-                let (x, y) = (m.nodes[n], exact[&key(m.nodes[n])]);
-                close = close.max((x[0] - y[0]).abs()).max((x[1] - y[1]).abs());
-            }
         }
-        assert!(
-            close < 1e-9,
-            "{}: within {close} mm of the block mesher's nodes",
-            sub.name
-        );
-        let nodes: BTreeSet<[i64; 2]> = sub.mesh.coords.iter().map(|&x| key(x)).collect();
+        let nodes: BTreeSet<[u64; 2]> = sub.mesh.coords.iter().map(|&x| bits(x)).collect();
         assert_eq!(nodes.len(), sub.mesh.coords.len());
     }
+    // Neighbouring squares share their nodes: one node per position.
+    let positions: BTreeSet<[u64; 2]> = m.nodes.iter().map(|&x| bits(x)).collect();
+    assert_eq!(positions.len(), m.nodes.len(), "one node per position");
 }
