@@ -1,0 +1,181 @@
+//! Meshes glissade refuses, written by Gmsh (`launch/scenes/meshes/bad-meshes.py` into the
+//! repository's `tests/fixtures/msh-bad/`), loaded through the scene loader: each refusal names
+//! the problem and where (element type and count with the Gmsh options for QUA8, the parts that
+//! do not conform, the element of another piece, the duplicate nodes, the element in two physical
+//! surfaces). The expected tags are read from the mesh files themselves.
+
+use glissade_scene::msh::{self, Msh, MshElement};
+use glissade_scene::SceneError;
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+fn dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/fixtures/msh-bad")
+}
+
+fn mesh(name: &str) -> Msh {
+    let path = dir().join(format!("{name}.msh"));
+    let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    msh::parse(&bytes).unwrap_or_else(|e| panic!("{name}.msh: {e}"))
+}
+
+/// Loads the scene of the brief on `<name>.msh` (materials for `a`, and `b` if `two`); the error.
+fn refusal(name: &str, two: bool) -> SceneError {
+    let materials = if two {
+        r#"{ a = "m", b = "m" }"#
+    } else {
+        r#"{ a = "m" }"#
+    };
+    let text = format!(
+        r#"[time]
+T = 1.0
+N = 1
+
+[materials.m]
+E = 1000.0
+nu = 0.3
+
+[mesh]
+file = "{name}.msh"
+materials = {materials}
+
+[[boundary]]
+curve = "left"
+ux = 0.0
+uy = 0.0
+
+[[boundary]]
+curve = "right"
+tx = 1.0
+"#
+    );
+    let scene = dir().join("scene.toml");
+    let scene = scene.to_str().expect("a UTF-8 path");
+    match glissade_scene::load_str(&text, scene) {
+        Ok(_) => panic!("{name}.msh: loaded"),
+        Err(e) => {
+            assert_eq!(e.key, "mesh.file", "{name}: {e}");
+            assert!(e.problem.starts_with(&format!("{name}.msh: ")), "{name}: {e}");
+            e
+        }
+    }
+}
+
+/// The numbers written after `word` in `text`, in order.
+fn numbers_after(text: &str, word: &str) -> Vec<u64> {
+    text.match_indices(word)
+        .filter_map(|(i, _)| {
+            let digits: String = text[i + word.len()..]
+                .chars()
+                .take_while(char::is_ascii_digit)
+                .collect();
+            digits.parse().ok()
+        })
+        .collect()
+}
+
+fn element(m: &Msh, tag: u64) -> &MshElement {
+    m.elements
+        .iter()
+        .find(|e| e.tag == tag)
+        .unwrap_or_else(|| panic!("no element {tag}"))
+}
+
+#[test]
+fn other_element_types_are_refused_with_their_count_and_the_gmsh_options() {
+    for (name, kind) in [("triangles", 9), ("mixed", 9), ("quad9", 10), ("linear", 3)] {
+        let m = mesh(name);
+        let bad: Vec<&MshElement> = m.elements.iter().filter(|e| e.kind == kind).collect();
+        assert!(!bad.is_empty(), "{name}: the fixture has type {kind}");
+        let e = refusal(name, false);
+        let p = &e.problem;
+        for want in [
+            "8-node quadrilaterals (Gmsh type 16) only".to_string(),
+            format!(
+                "{} × {} (Gmsh type {kind}, e.g. element {})",
+                bad.len(),
+                msh::type_name(kind),
+                bad[0].tag
+            ),
+            "Mesh.ElementOrder = 2".to_string(),
+            "Mesh.SecondOrderIncomplete = 1".to_string(),
+            "Mesh.RecombineAll = 1".to_string(),
+        ] {
+            assert!(p.contains(&want), "{name}: `{want}` in: {e}");
+        }
+    }
+    assert_eq!(msh::type_name(9), "6-node triangle");
+    assert_eq!(msh::type_name(10), "9-node quadrangle");
+    assert_eq!(msh::type_name(3), "4-node quadrangle");
+    // mixed.msh: QUA8 and triangles in one physical surface.
+    let m = mesh("mixed");
+    let kinds: BTreeSet<u32> = m.elements.iter().filter(|e| e.dim == 2).map(|e| e.kind).collect();
+    assert_eq!(kinds, BTreeSet::from([9, 16]));
+    assert!(m.elements.iter().filter(|e| e.dim == 2).all(|e| e.physicals == [1]));
+}
+
+#[test]
+fn nonconforming_parts_are_refused_with_both_names_and_the_node() {
+    let m = mesh("nonconforming");
+    let e = refusal("nonconforming", true);
+    let p = &e.problem;
+    assert!(
+        p.contains("parts `a` and `b`") || p.contains("parts `b` and `a`"),
+        "{e}"
+    );
+    assert!(p.contains("do not conform"), "{e}");
+    // The node named lies on x = 1 and is a node of one part only.
+    let node = numbers_after(p, "node ")[0];
+    let i = m.node_tags.iter().position(|&t| t == node).expect("the node");
+    assert!((m.nodes[i][0] - 1.0).abs() < 1e-12, "{e}");
+    let parts: BTreeSet<i32> = m
+        .elements
+        .iter()
+        .filter(|el| el.dim == 2 && el.nodes.contains(&i))
+        .flat_map(|el| el.physicals.clone())
+        .collect();
+    assert_eq!(parts.len(), 1, "{e}");
+}
+
+#[test]
+fn a_part_in_pieces_is_refused_with_an_element_of_each() {
+    let m = mesh("pieces");
+    let e = refusal("pieces", false);
+    assert!(e.problem.contains("part `a` is in several pieces"), "{e}");
+    let tags = numbers_after(&e.problem, "element ");
+    assert_eq!(tags.len(), 2, "{e}");
+    let (x, y) = (element(&m, tags[0]), element(&m, tags[1]));
+    assert!(x.kind == 16 && y.kind == 16, "{e}");
+    assert_ne!(x.entity, y.entity, "{e}: elements of the two rectangles");
+}
+
+#[test]
+fn duplicate_nodes_are_refused_with_their_tags() {
+    let m = mesh("duplicates");
+    let e = refusal("duplicates", false);
+    assert!(e.problem.contains("are duplicates"), "{e}");
+    let a = numbers_after(&e.problem, "nodes ")[0];
+    let b = numbers_after(&e.problem, " and ")[0];
+    assert_ne!(a, b, "{e}");
+    let at = |t: u64| m.nodes[m.node_tags.iter().position(|&n| n == t).expect("the node")];
+    assert_eq!(at(a), at(b), "{e}");
+    assert!((at(a)[0] - 1.0).abs() < 1e-12, "{e}: on the side the rectangles share");
+}
+
+#[test]
+fn an_element_in_two_physical_surfaces_is_refused_with_its_tag() {
+    let m = mesh("two-physicals");
+    let twice = m
+        .elements
+        .iter()
+        .find(|e| e.dim == 2 && e.physicals.len() == 2)
+        .expect("the fixture's element in a and b");
+    let e = refusal("two-physicals", true);
+    assert!(
+        e.problem.contains(&format!(
+            "element {} belongs to several physical surfaces (`a`, `b`)",
+            twice.tag
+        )),
+        "{e}"
+    );
+}
