@@ -3,7 +3,8 @@ writing of a mesh with Gmsh's own account of it.
 
 Each script builds its geometry with the geo kernel (shared curve entities between neighbouring
 surfaces, so the nodes of a shared curve are the same nodes in both), meshes it transfinite and
-recombined, and calls `write` for each mesh file.
+recombined, and calls `write` for each mesh file. stratified.py instead gives Gmsh the block
+mesher's nodes and elements and writes binary.
 """
 
 import json
