@@ -81,20 +81,18 @@ fn shrink_fit_pressure_is_lame_and_slip_traction_closed_form() {
         let total: f64 = itf.weights.iter().sum();
         let p = -f_n.iter().zip(&itf.weights).map(|(f, w)| f * w).sum::<f64>() / total;
         errors.push((p - p_exact).abs() / p_exact);
-        if k <= 2 {
+        {
             // Equilibrium of the outer ring's moment: the mean shear on r = 30 is τ c²/b² at the
-            // last time point (τ = 1.9 MPa), to 1e-4 on meshes 1 and 2 (5.27776 and 5.27777
-            // against 5.27778). Mesh 3 gives 5.4495 (3.3 % more): an open defect, not asserted.
+            // last time point (τ = 1.5 MPa), to 1e-4.
             let (_, f_t) = tractions(&sc, sol, sc.model.time.n_steps);
             let shear = f_t.iter().zip(&itf.weights).map(|(f, w)| f * w).sum::<f64>() / total;
-            let exact = 1.9 * 50.0f64.powi(2) / 30.0f64.powi(2);
+            let exact = 1.5 * 50.0f64.powi(2) / 30.0f64.powi(2);
             assert!((shear.abs() - exact).abs() < 1e-4 * exact, "mesh {k}: shear {shear}");
         }
-        if k == 2 {
-            // (On the shipped mesh, 2: mesh 3's applied moment is 3.3 % high, see above.)
+        if k == 3 {
             // The slip traction: the interface's shear is τ c²/b² (σ_rθ ∝ 1/r²), so the whole
             // interface slips at τ* = f p b²/c². Measured from the computed p and shear at the
-            // last time point (τ = 1.9 MPa), against the closed form from p_exact.
+            // last time point, against the closed form from p_exact.
             let n = sc.model.time.n_steps;
             let (f_n, _) = tractions(&sc, sol, n);
             let pressure = -f_n.iter().zip(&itf.weights).map(|(f, w)| f * w).sum::<f64>() / total;
@@ -104,7 +102,7 @@ fn shrink_fit_pressure_is_lame_and_slip_traction_closed_form() {
                 (slip_measured - slip_exact).abs() < 0.01 * slip_exact,
                 "slip traction {slip_measured} vs {slip_exact}"
             );
-            // Below the slip traction (τ = 0.97 τ*) every pair sticks, at every time point.
+            // Below the slip traction (τ = 0.76 τ*) every pair sticks, at every time point.
             let np = itf.n_pairs();
             for i in 0..=n {
                 let st = &sol.status[i * np..(i + 1) * np];
@@ -158,9 +156,9 @@ fn curved_latin_equals_the_monolithic_reference() {
 
 #[test]
 fn gmsh_stratified_equals_the_block_scene() {
-    // Same mesh, loads and settings, N = 20 for speed: interface fields equal to 1e-9 relative.
-    // Not to round-off: Gmsh's transfinite nodes differ from the block mesher's by up to
-    // 2.7e-10 mm (measured by the scene crate's mesh test), which moves the fields by ~1e-10.
+    // Same mesh (node positions bit for bit: the scene crate's mesh test), loads and settings,
+    // N = 20 for speed: interface fields equal to round-off, 1e-12 relative (the parts number
+    // their nodes differently, so the sums are taken in other orders). As processes too.
     let small = |t: String| {
         t.replace("N = 1000", "N = 20")
             .replace("[solver]\n", "[solver]\ntime_coarsening = \"off\"\n")
@@ -168,6 +166,17 @@ fn gmsh_stratified_equals_the_block_scene() {
     let block = mesh_scene(&small(shipped("stratified")));
     let gmsh = mesh_scene(&small(shipped("stratified-gmsh")));
     let (rb, rg) = (run(&block), run(&gmsh));
+    let remote = glissade::distributed::run_multi_process(
+        &gmsh,
+        &glissade::runner::RunOptions {
+            run_id: "gmsh-stratified".into(),
+            interior: false,
+        },
+        std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
+        |_| {},
+    )
+    .unwrap();
+    crate::distributed::assert_identical(&rg, &remote);
     assert_eq!(rb.iterations.len(), rg.iterations.len());
     let (mut worst, mut scale) = (0.0f64, 0.0f64);
     for ib in &rb.interfaces {
@@ -198,7 +207,8 @@ fn gmsh_stratified_equals_the_block_scene() {
             }
         }
     }
-    assert!(worst <= 1e-9 * scale, "worst difference {worst:e} of {scale:e}");
+    println!("Gmsh against blocks: worst difference {worst:e} of {scale:e}");
+    assert!(worst <= 1e-12 * scale, "worst difference {worst:e} of {scale:e}");
 }
 
 #[test]

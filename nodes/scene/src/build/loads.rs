@@ -260,12 +260,12 @@ impl Ctx<'_> {
                 for (&s, sides) in &selected {
                     let mesh = &subs[s].mesh;
                     // Block sides run in increasing x or y: their outward normal is the side's.
-                    let edges: Vec<([usize; 3], [f64; 2])> = sides
+                    let edges: Vec<([usize; 3], EdgeNormal)> = sides
                         .iter()
                         .flat_map(|&side| {
                             mesh.sides[side as usize]
                                 .iter()
-                                .map(move |e| (*e, outward_normal(side)))
+                                .map(move |e| (*e, EdgeNormal::Fixed(outward_normal(side))))
                         })
                         .collect();
                     let cases = self.traction_cases(&bv, comp, &ckey, time, mesh, &edges)?;
@@ -330,8 +330,7 @@ impl Ctx<'_> {
         }
     }
 
-    /// Cases of a traction component on `edges` of `mesh`, each edge with its outward normal
-    /// (`None`: the normal of the isoparametric edge, which then runs with the part on its left).
+    /// Cases of a traction component on `edges` of `mesh`, each edge with its outward normal.
     /// `comp`: tx, ty, p (along −n) or shear (along t = (−n_y, n_x)).
     fn traction_cases(
         &self,
@@ -340,7 +339,7 @@ impl Ctx<'_> {
         key: &str,
         time: TimeGrid,
         mesh: &Mesh,
-        edges: &[([usize; 3], [f64; 2])],
+        edges: &[([usize; 3], EdgeNormal)],
     ) -> Result<Vec<(Vec<f64>, TimeFunction)>, SceneError> {
         let n = 2 * mesh.n_nodes();
         let force = |value: &dyn Fn([f64; 2]) -> f64| -> Vec<f64> {
@@ -348,11 +347,10 @@ impl Ctx<'_> {
             for (e, side_normal) in edges {
                 let x = [mesh.coords[e[0]], mesh.coords[e[1]], mesh.coords[e[2]]];
                 let f = edge_load_along(&x, |p, t| {
-                    // A block side's normal is given; a mesh edge runs with its part on the left.
-                    let normal = if side_normal[0].is_nan() {
-                        [t[1], -t[0]]
-                    } else {
-                        *side_normal
+                    let normal = match side_normal {
+                        EdgeNormal::Fixed(n) => *n,
+                        EdgeNormal::Left => [t[1], -t[0]],
+                        EdgeNormal::Right => [-t[1], t[0]],
                     };
                     let unit = match comp {
                         "tx" => [1.0, 0.0],
@@ -466,7 +464,26 @@ impl Ctx<'_> {
                 let ckey = format!("{key}.{comp}");
                 let bv = self.boundary_value(value, &ckey, time)?;
                 for (&s, edges) in &selected {
-                    let edges: Vec<([usize; 3], [f64; 2])> = edges.iter().map(|e| (*e, [f64::NAN; 2])).collect();
+                    // Each edge from its end of smaller x (smaller y on a vertical edge), as the
+                    // block mesher's sides run: the same loads to the bit on the same mesh.
+                    let coords = &subs[s].mesh.coords;
+                    let edges: Vec<([usize; 3], EdgeNormal)> = edges
+                        .iter()
+                        .map(|e| {
+                            let (p, q) = (coords[e[0]], coords[e[2]]);
+                            let tol = 1e-9 * (p[0] - q[0]).abs().max((p[1] - q[1]).abs());
+                            let backwards = if (p[0] - q[0]).abs() > tol {
+                                q[0] < p[0]
+                            } else {
+                                q[1] < p[1]
+                            };
+                            if backwards {
+                                ([e[2], e[1], e[0]], EdgeNormal::Right)
+                            } else {
+                                (*e, EdgeNormal::Left)
+                            }
+                        })
+                        .collect();
                     let cases = self.traction_cases(&bv, comp, &ckey, time, &subs[s].mesh, &edges)?;
                     for (force, time) in cases {
                         out[s].loads.push(LoadCase {
@@ -580,4 +597,12 @@ fn empty_loads(subs: &[Sub]) -> Vec<SubLoads> {
 pub(crate) enum BoundaryValue {
     Uniform(TimeFunction),
     Field { expr: Expr, timed: bool },
+}
+
+/// The outward normal of a loaded edge: a block side's, or the isoparametric edge's with the part
+/// on the left (or the right) of the edge's node order.
+pub(crate) enum EdgeNormal {
+    Fixed([f64; 2]),
+    Left,
+    Right,
 }

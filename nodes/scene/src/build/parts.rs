@@ -222,20 +222,15 @@ impl Ctx<'_> {
                 }
                 elements.push(if negative { reversed(*el) } else { *el });
             }
-            // Local numbering in order of first use.
-            let mut local = HashMap::new();
-            let mut global = Vec::new();
-            let local_elements: Vec<[usize; 8]> = elements
-                .iter()
-                .map(|el| {
-                    el.map(|n| {
-                        *local.entry(n).or_insert_with(|| {
-                            global.push(n);
-                            global.len() - 1
-                        })
-                    })
-                })
-                .collect();
+            // Local numbering row by row: by y (on a grid of 1e-6 of the mesh's size), then x; a
+            // rectangle meshed by Gmsh is then numbered as the block mesher numbers it.
+            let mut global: Vec<usize> = elements.iter().flatten().copied().collect();
+            global.sort_unstable();
+            global.dedup();
+            let row = |n: usize| (m.nodes[n][1] / (1e-6 * size)).round() as i64;
+            global.sort_by(|&p, &q| row(p).cmp(&row(q)).then(m.nodes[p][0].total_cmp(&m.nodes[q][0])));
+            let local: HashMap<usize, usize> = global.iter().enumerate().map(|(i, &n)| (n, i)).collect();
+            let local_elements: Vec<[usize; 8]> = elements.iter().map(|el| el.map(|n| local[&n])).collect();
             let coords: Vec<[f64; 2]> = global.iter().map(|&n| m.nodes[n]).collect();
             // Duplicate nodes: two nodes of the part at one position.
             let mut grid = Grid::new(10.0 * tol);
@@ -511,6 +506,7 @@ fn part_interface(
             continue;
         }
         let closed = ends.contains(&ea[first].nodes[0]);
+        let chain_start = order.len();
         let mut i = first;
         order.push(ea[i].nodes[0]);
         loop {
@@ -530,6 +526,23 @@ fn part_interface(
                 }
             }
         }
+        // An open chain runs from its end of smaller x (of smaller y where both ends share x):
+        // along +x or +y on a straight interface, as the block scenes order their pairs.
+        if !closed {
+            let (p, q) = (
+                meshes[a].coords[order[chain_start]],
+                meshes[a].coords[order[order.len() - 1]],
+            );
+            let tol = 1e-9 * (p[0] - q[0]).abs().max((p[1] - q[1]).abs());
+            let backwards = if (p[0] - q[0]).abs() > tol {
+                q[0] < p[0]
+            } else {
+                q[1] < p[1]
+            };
+            if backwards {
+                order[chain_start..].reverse();
+            }
+        }
     }
     let mut pair_of: HashMap<usize, usize> = HashMap::new();
     for (p, &n) in order.iter().enumerate() {
@@ -544,23 +557,50 @@ fn part_interface(
     let mut normal_sum = vec![[0.0; 2]; np];
     let mut length = 0.0;
     let mut curves: Vec<usize> = Vec::new();
+    // Edges in the pairs' order, each along it (the block scenes sum their weights and length so,
+    // and the same sums give the same bits).
+    let mut ordered: Vec<(usize, [usize; 3], f64)> = edges
+        .iter()
+        .map(|&(k, _)| {
+            let n = boundary[a][k].nodes;
+            let (p0, p2) = (pair_of[&n[0]], pair_of[&n[2]]);
+            // The edge closing a loop runs from the last pair to the first: keep its way.
+            let along = if p0.abs_diff(p2) == 2 && p2 < p0 {
+                [n[2], n[1], n[0]]
+            } else {
+                n
+            };
+            (pair_of[&n[1]], along, 0.0)
+        })
+        .collect();
+    ordered.sort_by_key(|e| e.0);
     for &(k, _) in edges {
-        let e = boundary[a][k];
         for &c in &edge_curves[a][k] {
             if !curves.contains(&c) {
                 curves.push(c);
             }
         }
-        let x = e.nodes.map(|n| meshes[a].coords[n]);
+    }
+    for (_, e, _) in &mut ordered {
+        let x = e.map(|n| meshes[a].coords[n]);
         let m = edge_lumped_mass(&x);
-        for (j, &n) in e.nodes.iter().enumerate() {
+        // The edge's outward normal out of a: (t_y, −t_x) for a's own way round, reversed if the
+        // edge runs the other way here.
+        let own = boundary[a].iter().any(|b| b.nodes == *e);
+        let sign = if own { 1.0 } else { -1.0 };
+        for (j, &n) in e.iter().enumerate() {
             let p = pair_of[&n];
             weights[p] += m[j];
             let (_, t, _) = edge_frame(&x, -1.0 + j as f64);
-            normal_sum[p][0] += t[1];
-            normal_sum[p][1] -= t[0];
+            normal_sum[p][0] += sign * t[1];
+            normal_sum[p][1] -= sign * t[0];
         }
-        length += m.iter().sum::<f64>();
+        // A straight edge (middle node at the chord's middle) measures its chord, as the block
+        // mesher's edges do; a curved one its arc (Gauss).
+        let chord = ((x[2][0] - x[0][0]).powi(2) + (x[2][1] - x[0][1]).powi(2)).sqrt();
+        let middle = [0.5 * (x[0][0] + x[2][0]) - x[1][0], 0.5 * (x[0][1] + x[2][1]) - x[1][1]];
+        let straight = middle[0].abs().max(middle[1].abs()) <= 1e-12 * chord;
+        length += if straight { chord } else { m.iter().sum::<f64>() };
     }
     let normals = normal_sum
         .iter()
