@@ -362,3 +362,69 @@ fn wedge_flanks_carry_the_leaning_pressure() {
     assert!(fx.abs() < 1e-6 * load, "horizontal {fx}");
     assert!((m - moment).abs() < 1e-6 * load * w, "moment {m} against {moment}");
 }
+
+#[test]
+fn twisted_shrink_fit_sticks_then_slips_at_the_closed_form_rotation() {
+    // The outside turned by θ = 4.4e-4·t (u = θ(−y, x) on r = c, so u_r(c) = 0 too). Lamé with
+    // the outer ring held radially: u = A r + B/r, A c + B/c = 0, σ_r(b) = λ*(A − (1 − 2ν)B/b²)
+    // = −p → B = p/(λ*(1/c² + (1 − 2ν)/b²)), u_o(b) = B (1/b − b/c²); the inner ring as in
+    // lame_pressure; u_o(b) − u_i(b) = δ. In stick the rings turn as one annulus a..c with
+    // u_θ(a) = 0, u_θ(c) = θc: u_θ = Cr + D/r, D = θ c² a²/(a² − c²), σ_rθ = −2G D/r², so the
+    // shear on the fit is 2G θ c² a²/((c² − a²) b²) until it reaches f p at θ* = f p b²(c² − a²)
+    // /(2G c² a²); beyond, every pair slips and the shear stays f p.
+    let (e, nu, a, b, c, delta, f) = (210000.0f64, 0.3f64, 20.0f64, 30.0f64, 50.0f64, 0.01f64, 0.2f64);
+    let ls = e / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    let ui = -(b - a * a / b) / (ls * (1.0 + (1.0 - 2.0 * nu) * a * a / (b * b)));
+    let uo = (1.0 / b - b / (c * c)) / (ls * (1.0 / (c * c) + (1.0 - 2.0 * nu) / (b * b)));
+    let p_exact = delta / (uo - ui);
+    let g = e / (2.0 * (1.0 + nu));
+    let theta_star = f * p_exact * b * b * (c * c - a * a) / (2.0 * g * c * c * a * a);
+
+    let mut sc = mesh_scene(&shipped("shrink-fit-twist"));
+    sc.model.solver.accuracy = Some(1e-7);
+    sc.model.solver.stagnation_window = 0;
+    let result = run(&sc);
+    assert_eq!(result.verdict, Verdict::Converged);
+    let itf = &sc.model.interfaces[0];
+    let sol = &result.interfaces[0];
+    let np = itf.n_pairs();
+    let total: f64 = itf.weights.iter().sum();
+    let mean = |v: &[f64]| v.iter().zip(&itf.weights).map(|(x, w)| x * w).sum::<f64>() / total;
+    let (mut last_stick, mut first_slip) = (0.0f64, f64::INFINITY);
+    for i in 0..sc.model.time.n_points() {
+        let theta = 4.4e-4 * sc.model.time.t(i);
+        let (f_n, f_t) = tractions(&sc, sol, i);
+        let (p, shear) = (-mean(&f_n), mean(&f_t).abs());
+        // The pressure to 0.1 % on the medium mesh (mesh 3 reaches 6e-7 in the untwisted test).
+        assert!(
+            (p - p_exact).abs() < 1e-3 * p_exact,
+            "t point {i}: p {p} against {p_exact}"
+        );
+        let st = &sol.status[i * np..(i + 1) * np];
+        if theta < theta_star {
+            assert!(
+                st.iter().all(|&s| s == 1),
+                "θ = {theta:e} < θ* = {theta_star:e}: {st:?}"
+            );
+            let stick = 2.0 * g * theta * c * c * a * a / ((c * c - a * a) * b * b);
+            assert!(
+                (shear - stick).abs() <= 5e-3 * stick.max(1.0),
+                "θ = {theta:e}: shear {shear} against {stick}"
+            );
+            last_stick = theta;
+        } else {
+            assert!(
+                st.iter().all(|&s| s == 2),
+                "θ = {theta:e} > θ* = {theta_star:e}: {st:?}"
+            );
+            // The slip traction within 1 % of the closed form f p.
+            assert!(
+                (shear - f * p_exact).abs() < 1e-2 * f * p_exact,
+                "shear {shear} against {}",
+                f * p_exact
+            );
+            first_slip = first_slip.min(theta);
+        }
+    }
+    assert!(last_stick > 0.0 && first_slip.is_finite(), "both regimes are reached");
+}
