@@ -428,3 +428,60 @@ fn twisted_shrink_fit_sticks_then_slips_at_the_closed_form_rotation() {
     }
     assert!(last_stick > 0.0 && first_slip.is_finite(), "both regimes are reached");
 }
+
+#[test]
+fn every_bad_mesh_is_exit_2_naming_the_file_and_writes_nothing() {
+    // The meshes Gmsh wrote for the scene crate's refusal tests (tests/fixtures/msh-bad/), through
+    // the command line: exit 2 (bad input), the scene and mesh file named with what is wrong, no
+    // output folder content.
+    let fixtures = format!("{}/tests/fixtures/msh-bad", env!("CARGO_MANIFEST_DIR"));
+    let dir = scratch("bad-mesh-cli");
+    let cases = [
+        ("triangles", "6-node triangle"),
+        ("mixed", "6-node triangle"),
+        ("quad9", "9-node quadrangle"),
+        ("linear", "4-node quadrangle"),
+        ("nonconforming", "do not conform"),
+        ("pieces", "several pieces"),
+        ("duplicates", "are duplicates"),
+        ("two-physicals", "several physical surfaces"),
+    ];
+    for (name, expect) in cases {
+        let materials = if matches!(name, "nonconforming" | "two-physicals") {
+            r#"{ a = "m", b = "m" }"#
+        } else {
+            r#"{ a = "m" }"#
+        };
+        let case = dir.0.join(name);
+        std::fs::create_dir_all(&case).unwrap();
+        std::fs::copy(format!("{fixtures}/{name}.msh"), case.join(format!("{name}.msh"))).unwrap();
+        let scene = case.join("scene.toml");
+        std::fs::write(
+            &scene,
+            format!(
+                "[time]\nT = 1.0\nN = 1\n[materials.m]\nE = 1000.0\nnu = 0.3\n[mesh]\nfile = \"{name}.msh\"\n\
+                 materials = {materials}\n[[boundary]]\ncurve = \"left\"\nux = 0.0\nuy = 0.0\n\
+                 [[boundary]]\ncurve = \"right\"\ntx = 1.0\n"
+            ),
+        )
+        .unwrap();
+        let out = case.join("out");
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .args(["run", "--in-process", "--quiet", "--out"])
+            .arg(&out)
+            .arg(&scene)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{name}: {stderr}");
+        assert!(stderr.contains(expect), "{name}: {stderr}");
+        assert!(
+            stderr.contains("scene.toml") && stderr.contains(&format!("{name}.msh")),
+            "{name} names the scene and the mesh: {stderr}"
+        );
+        assert!(
+            !out.exists() || std::fs::read_dir(&out).unwrap().next().is_none(),
+            "{name} wrote outputs"
+        );
+    }
+}
