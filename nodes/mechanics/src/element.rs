@@ -82,8 +82,9 @@ pub struct BadElement {
     pub eta: f64,
 }
 
-/// Strain–displacement matrix B (3 × 16) and det J at (ξ, η).
-pub fn strain_displacement(x: &[[f64; 2]; 8], xi: f64, eta: f64) -> Result<(SMatrix<f64, 3, 16>, f64), BadElement> {
+/// The Jacobian J = ∂x/∂ξ of an element at (ξ, η) (rows ξ, η; columns x, y), its determinant,
+/// and the shape derivatives there.
+pub fn jacobian(x: &[[f64; 2]; 8], xi: f64, eta: f64) -> ([[f64; 2]; 2], f64, [[f64; 2]; 8]) {
     let (_, d) = shape(xi, eta);
     let mut j = [[0.0; 2]; 2];
     for k in 0..8 {
@@ -93,7 +94,12 @@ pub fn strain_displacement(x: &[[f64; 2]; 8], xi: f64, eta: f64) -> Result<(SMat
             }
         }
     }
-    let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+    (j, j[0][0] * j[1][1] - j[0][1] * j[1][0], d)
+}
+
+/// Strain–displacement matrix B (3 × 16) and det J at (ξ, η).
+pub fn strain_displacement(x: &[[f64; 2]; 8], xi: f64, eta: f64) -> Result<(SMatrix<f64, 3, 16>, f64), BadElement> {
+    let (j, det, d) = jacobian(x, xi, eta);
     if det <= 0.0 || !det.is_finite() {
         return Err(BadElement { det, xi, eta });
     }
@@ -141,33 +147,6 @@ pub fn edge_shape(s: f64) -> ([f64; 3], [f64; 3]) {
         [0.5 * s * (s - 1.0), 1.0 - s * s, 0.5 * s * (s + 1.0)],
         [s - 0.5, -2.0 * s, s + 0.5],
     )
-}
-
-/// Consistent nodal forces (N) of a traction `traction(position)` (MPa, global axes) on a 3-node
-/// edge (3-point Gauss). Returned per edge node as (f_x, f_y). The edge's node order says nothing
-/// about which side the body is on, so a pressure must be turned into a traction by the caller,
-/// who knows the outward normal.
-pub fn edge_load(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2]) -> [f64; 2]) -> [[f64; 2]; 3] {
-    let mut f = [[0.0; 2]; 3];
-    for &(s, w) in &GAUSS3 {
-        let (n, dn) = edge_shape(s);
-        let mut p = [0.0; 2];
-        let mut tan = [0.0; 2];
-        for k in 0..3 {
-            for c in 0..2 {
-                p[c] += n[k] * x[k][c];
-                tan[c] += dn[k] * x[k][c];
-            }
-        }
-        let jac = (tan[0] * tan[0] + tan[1] * tan[1]).sqrt();
-        let t = traction(p);
-        for k in 0..3 {
-            for c in 0..2 {
-                f[k][c] += n[k] * t[c] * jac * w;
-            }
-        }
-    }
-    f
 }
 
 /// Position and unit tangent (along the edge's node order) of a 3-node edge at s ∈ [−1, 1], and

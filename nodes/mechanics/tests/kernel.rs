@@ -96,7 +96,7 @@ fn boundary_nodes(mesh: &Mesh) -> Vec<bool> {
 fn add_side_load(mesh: &Mesh, side: BlockSide, f: &mut [f64], traction: impl Fn([f64; 2]) -> [f64; 2]) {
     for edge in &mesh.sides[side as usize] {
         let x: [[f64; 2]; 3] = std::array::from_fn(|k| mesh.coords[edge[k]]);
-        let fe = element::edge_load(&x, &traction);
+        let fe = element::edge_load_along(&x, |p, _| traction(p));
         for k in 0..3 {
             f[2 * edge[k]] += fe[k][0];
             f[2 * edge[k] + 1] += fe[k][1];

@@ -232,35 +232,13 @@ impl Ctx<'_> {
                 return Err(self.err(key, "selects no side: give `side`, `x` or `y`"));
             }
             let selected = self.select_sides(rule, names, subs, &key)?;
-
-            for (c, (comp, value)) in [("ux", &rule.ux), ("uy", &rule.uy)].iter().enumerate() {
-                let Some(value) = value else { continue };
-                let ckey = format!("{key}.{comp}");
-                let bv = self.boundary_value(value, &ckey, time)?;
-                for (&s, sides) in &selected {
+            // Block sides run in increasing x or y: their outward normal is the side's.
+            let targets: BTreeMap<usize, Target> = selected
+                .iter()
+                .map(|(&s, sides)| {
                     let mesh = &subs[s].mesh;
-                    let dofs: Vec<usize> = sides
-                        .iter()
-                        .flat_map(|&side| mesh.side_nodes(side))
-                        .map(|node| 2 * node + c)
-                        .collect();
-                    let cases = self.displacement_cases(&bv, &ckey, time, mesh, &dofs)?;
-                    Self::prescribe(&mut out[s], &dofs, cases);
-                }
-            }
-            for (comp, value) in [
-                ("tx", &rule.tx),
-                ("ty", &rule.ty),
-                ("p", &rule.p),
-                ("shear", &rule.shear),
-            ] {
-                let Some(value) = value else { continue };
-                let ckey = format!("{key}.{comp}");
-                let bv = self.boundary_value(value, &ckey, time)?;
-                for (&s, sides) in &selected {
-                    let mesh = &subs[s].mesh;
-                    // Block sides run in increasing x or y: their outward normal is the side's.
-                    let edges: Vec<([usize; 3], EdgeNormal)> = sides
+                    let nodes = sides.iter().flat_map(|&side| mesh.side_nodes(side)).collect();
+                    let edges = sides
                         .iter()
                         .flat_map(|&side| {
                             mesh.sides[side as usize]
@@ -268,22 +246,60 @@ impl Ctx<'_> {
                                 .map(move |e| (*e, EdgeNormal::Fixed(outward_normal(side))))
                         })
                         .collect();
-                    let cases = self.traction_cases(&bv, comp, &ckey, time, mesh, &edges)?;
-                    for (force, time) in cases {
-                        out[s].loads.push(LoadCase {
-                            displacement: vec![0.0; force.len()],
-                            force,
-                            time,
-                        });
-                    }
-                }
-            }
+                    (s, Target { nodes, edges })
+                })
+                .collect();
+            self.apply_rule(rule, &key, time, subs, &targets, &mut out)?;
         }
         for sl in &mut out {
             sl.loads
                 .retain(|c| c.force.iter().chain(&c.displacement).any(|&v| v != 0.0));
         }
         Ok(out)
+    }
+
+    /// The displacements and tractions of one boundary rule on the nodes and edges it selected
+    /// in each subdomain.
+    fn apply_rule(
+        &self,
+        rule: &RawBoundary,
+        key: &str,
+        time: TimeGrid,
+        subs: &[Sub],
+        targets: &BTreeMap<usize, Target>,
+        out: &mut [SubLoads],
+    ) -> Result<(), SceneError> {
+        for (c, (comp, value)) in [("ux", &rule.ux), ("uy", &rule.uy)].iter().enumerate() {
+            let Some(value) = value else { continue };
+            let ckey = format!("{key}.{comp}");
+            let bv = self.boundary_value(value, &ckey, time)?;
+            for (&s, target) in targets {
+                let dofs: Vec<usize> = target.nodes.iter().map(|&node| 2 * node + c).collect();
+                let cases = self.displacement_cases(&bv, &ckey, time, &subs[s].mesh, &dofs)?;
+                Self::prescribe(&mut out[s], &dofs, cases);
+            }
+        }
+        for (comp, value) in [
+            ("tx", &rule.tx),
+            ("ty", &rule.ty),
+            ("p", &rule.p),
+            ("shear", &rule.shear),
+        ] {
+            let Some(value) = value else { continue };
+            let ckey = format!("{key}.{comp}");
+            let bv = self.boundary_value(value, &ckey, time)?;
+            for (&s, target) in targets {
+                let cases = self.traction_cases(&bv, comp, &ckey, time, &subs[s].mesh, &target.edges)?;
+                for (force, time) in cases {
+                    out[s].loads.push(LoadCase {
+                        displacement: vec![0.0; force.len()],
+                        force,
+                        time,
+                    });
+                }
+            }
+        }
+        Ok(())
     }
 
     /// What every boundary rule must say, whatever selects its edges.
@@ -442,58 +458,29 @@ impl Ctx<'_> {
                     format!("curve `{curve}` is on no part's boundary"),
                 ));
             }
-            for (cmp, (comp, value)) in [("ux", &rule.ux), ("uy", &rule.uy)].iter().enumerate() {
-                let Some(value) = value else { continue };
-                let ckey = format!("{key}.{comp}");
-                let bv = self.boundary_value(value, &ckey, time)?;
-                for (&s, edges) in &selected {
-                    let mut dofs: Vec<usize> = edges.iter().flatten().map(|&node| 2 * node + cmp).collect();
-                    dofs.sort_unstable();
-                    dofs.dedup();
-                    let cases = self.displacement_cases(&bv, &ckey, time, &subs[s].mesh, &dofs)?;
-                    Self::prescribe(&mut out[s], &dofs, cases);
-                }
-            }
-            for (comp, value) in [
-                ("tx", &rule.tx),
-                ("ty", &rule.ty),
-                ("p", &rule.p),
-                ("shear", &rule.shear),
-            ] {
-                let Some(value) = value else { continue };
-                let ckey = format!("{key}.{comp}");
-                let bv = self.boundary_value(value, &ckey, time)?;
-                for (&s, edges) in &selected {
-                    // Each edge from its end of smaller x (smaller y on a vertical edge), as the
-                    // block mesher's sides run: the same loads to the bit on the same mesh.
+            // Each edge from its end of smaller x (smaller y on a vertical edge), as the block
+            // mesher's sides run: the same loads to the bit on the same mesh.
+            let targets: BTreeMap<usize, Target> = selected
+                .iter()
+                .map(|(&s, edges)| {
                     let coords = &subs[s].mesh.coords;
-                    let edges: Vec<([usize; 3], EdgeNormal)> = edges
+                    let mut nodes: Vec<usize> = edges.iter().flatten().copied().collect();
+                    nodes.sort_unstable();
+                    nodes.dedup();
+                    let edges = edges
                         .iter()
                         .map(|e| {
-                            let (p, q) = (coords[e[0]], coords[e[2]]);
-                            let tol = 1e-9 * (p[0] - q[0]).abs().max((p[1] - q[1]).abs());
-                            let backwards = if (p[0] - q[0]).abs() > tol {
-                                q[0] < p[0]
-                            } else {
-                                q[1] < p[1]
-                            };
-                            if backwards {
+                            if parts::runs_backwards(coords[e[0]], coords[e[2]]) {
                                 ([e[2], e[1], e[0]], EdgeNormal::Right)
                             } else {
                                 (*e, EdgeNormal::Left)
                             }
                         })
                         .collect();
-                    let cases = self.traction_cases(&bv, comp, &ckey, time, &subs[s].mesh, &edges)?;
-                    for (force, time) in cases {
-                        out[s].loads.push(LoadCase {
-                            displacement: vec![0.0; force.len()],
-                            force,
-                            time,
-                        });
-                    }
-                }
-            }
+                    (s, Target { nodes, edges })
+                })
+                .collect();
+            self.apply_rule(rule, &key, time, subs, &targets, &mut out)?;
         }
         for sl in &mut out {
             sl.loads
@@ -605,4 +592,11 @@ pub(crate) enum EdgeNormal {
     Fixed([f64; 2]),
     Left,
     Right,
+}
+
+/// What a boundary rule selected in one subdomain: the nodes (displacements) and the edges with
+/// their outward normals (tractions).
+pub(crate) struct Target {
+    nodes: Vec<usize>,
+    edges: Vec<([usize; 3], EdgeNormal)>,
 }

@@ -4,7 +4,7 @@
 //! a shared curve refused (DESIGN §2, "Curved and inclined interfaces").
 
 use super::*;
-use glissade_mechanics::element::{edge_frame, shape, GAUSS3};
+use glissade_mechanics::element::{edge_frame, jacobian, GAUSS3};
 use std::collections::HashMap;
 
 /// A mesh cut into parts, as read from a mesh file: global nodes, the parts' QUA8 elements and
@@ -91,24 +91,23 @@ fn reversed(e: [usize; 8]) -> [usize; 8] {
     [e[0], e[3], e[2], e[1], e[7], e[6], e[5], e[4]]
 }
 
-/// det J of an element at the 3 × 3 Gauss points.
+/// det J of an element at the 3 × 3 Gauss points, with the points.
 fn jacobians(x: &[[f64; 2]; 8]) -> [(f64, f64, f64); 9] {
-    let mut out = [(0.0, 0.0, 0.0); 9];
-    for (a, &(xi, _)) in GAUSS3.iter().enumerate() {
-        for (b, &(eta, _)) in GAUSS3.iter().enumerate() {
-            let (_, d) = shape(xi, eta);
-            let mut j = [[0.0; 2]; 2];
-            for k in 0..8 {
-                for r in 0..2 {
-                    for c in 0..2 {
-                        j[r][c] += d[k][r] * x[k][c];
-                    }
-                }
-            }
-            out[3 * a + b] = (j[0][0] * j[1][1] - j[0][1] * j[1][0], xi, eta);
-        }
+    std::array::from_fn(|g| {
+        let (xi, eta) = (GAUSS3[g / 3].0, GAUSS3[g % 3].0);
+        (jacobian(x, xi, eta).1, xi, eta)
+    })
+}
+
+/// Whether the edge from `p` to `q` runs backwards: towards smaller x, or along x = const towards
+/// smaller y. Interface chains and loaded edges run forwards, as the block mesher's sides do.
+pub(crate) fn runs_backwards(p: [f64; 2], q: [f64; 2]) -> bool {
+    let tol = 1e-9 * (p[0] - q[0]).abs().max((p[1] - q[1]).abs());
+    if (p[0] - q[0]).abs() > tol {
+        q[0] < p[0]
+    } else {
+        q[1] < p[1]
     }
-    out
 }
 
 /// The point of the quadratic edge `x` nearest to `p` and its distance (sampled, then Newton).
@@ -533,13 +532,7 @@ fn part_interface(
                 meshes[a].coords[order[chain_start]],
                 meshes[a].coords[order[order.len() - 1]],
             );
-            let tol = 1e-9 * (p[0] - q[0]).abs().max((p[1] - q[1]).abs());
-            let backwards = if (p[0] - q[0]).abs() > tol {
-                q[0] < p[0]
-            } else {
-                q[1] < p[1]
-            };
-            if backwards {
+            if runs_backwards(p, q) {
                 order[chain_start..].reverse();
             }
         }
