@@ -168,6 +168,8 @@ pub(crate) enum RawCriterion {
     Increment,
     Accumulated,
     IncrementSvd,
+    Forcing,
+    ForcingSvd,
 }
 
 #[derive(Deserialize)]
