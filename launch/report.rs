@@ -757,8 +757,8 @@ const COLOURS: [&str; 10] = [
 /// those the scene does not have are skipped) of every PGD report, one dash pattern per
 /// subdomain. Panel (b) is left out when no report is PGD.
 pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
-    let (w, ha, hb) = (960.0, 520.0, 420.0);
-    let (left, right, top, bottom) = (80.0, 330.0, 40.0, 60.0);
+    let (w, ha, hb) = (1100.0, 520.0, 420.0);
+    let (left, right, top, bottom) = (80.0, 440.0, 40.0, 60.0);
     let it_max = reports
         .iter()
         .flat_map(|r| r.points.iter().map(|p| p.iteration))
@@ -857,7 +857,7 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
             w - right + 28.0,
             w - right + 32.0,
             ly + 4.0,
-            escape(&variant_name(r))
+            escape(&short_name(r))
         );
     }
     // (b): basis sizes.
@@ -928,13 +928,18 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
                     w - right + 28.0,
                     w - right + 32.0,
                     ly + 4.0,
-                    escape(&variant_name(r))
+                    escape(&short_name(r))
                 );
             }
         }
     }
     svg += "</svg>\n";
     svg
+}
+
+/// [`variant_name`] without the defaults a legend need not repeat (frozen macro modes off).
+fn short_name(report: &Report) -> String {
+    variant_name(report).replace(", macro modes off", "")
 }
 
 /// Text for an SVG element (`&`, `<`, `>` escaped).
