@@ -64,9 +64,16 @@ pub(crate) enum Command {
         /// time point) or `+zero` (from ŝ = 0), e.g.
         /// `condensed+plain,condensed+anderson,condensed+anderson+start10,pgd+anderson` or
         /// `condensed,sparse,pgd` (writes `<scene>-<variant>-report.json` / `.svg` each, and
-        /// prints a comparison table).
+        /// prints a comparison table). The PGD stage also takes the `[solver.pgd]` settings
+        /// `+xi1=<ξ₀,₁>`, `+xi2=<ξ₀,₂>`, `+criterion=<increment|accumulated|increment-svd|forcing|forcing-svd>`
+        /// and `+max_new_modes=<m>`, e.g. `pgd+anderson+criterion=forcing+xi1=0.3`.
         #[arg(long, alias = "linear-stages", value_delimiter = ',')]
         variants: Vec<String>,
+        /// Subdomains (numbered from 1) whose PGD basis sizes `<scene>-iterations.svg` plots
+        /// against the iterations, under η and the traction error of every variant (the paper's
+        /// Figure 4).
+        #[arg(long, value_delimiter = ',', default_values_t = [7, 12], value_parser = clap::value_parser!(u32).range(1..))]
+        basis_subdomains: Vec<u32>,
         /// Stop each run at the first iteration whose contact-traction error against the
         /// reference is at most this (e.g. 1e-3), instead of at the tolerance or iteration cap.
         #[arg(long)]

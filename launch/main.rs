@@ -217,6 +217,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             stop_at_error,
             newton_iterations,
             log_time,
+            basis_subdomains,
         } => {
             let overrides = Overrides {
                 accuracy,
@@ -230,11 +231,14 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     anyhow::bail!("--stop-at-error {e}: must be a positive number");
                 }
             }
-            let axis = if log_time { TimeAxis::Log } else { TimeAxis::Linear };
+            let plots = Plots {
+                time_axis: if log_time { TimeAxis::Log } else { TimeAxis::Linear },
+                basis_subdomains: basis_subdomains.iter().map(|&s| s as usize).collect(),
+            };
             if variants.is_empty() {
-                report(&scene, &out, &overrides, stop_at_error, &ropts, axis)
+                report(&scene, &out, &overrides, stop_at_error, &ropts, &plots)
             } else {
-                report_variants(&scene, &out, &overrides, &variants, stop_at_error, &ropts, axis)
+                report_variants(&scene, &out, &overrides, &variants, stop_at_error, &ropts, &plots)
             }
         }
         Command::Stability {
@@ -846,14 +850,38 @@ fn bench(
     Ok(ExitCode::SUCCESS)
 }
 
+/// The plots of `glissade report`.
+struct Plots {
+    time_axis: TimeAxis,
+    /// Subdomains (from 1) whose basis sizes the iterations plot shows.
+    basis_subdomains: Vec<usize>,
+}
+
+/// Writes `<scene>-iterations.svg` (η, traction error and basis sizes against the iterations).
+fn write_iterations_plot(
+    out: &std::path::Path,
+    name: &str,
+    reports: &[glissade::report::Report],
+    plots: &Plots,
+) -> anyhow::Result<std::path::PathBuf> {
+    let path = out.join(format!("{name}-iterations.svg"));
+    std::fs::write(
+        &path,
+        glissade::report::plot_iterations_svg(reports, &plots.basis_subdomains),
+    )
+    .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
+}
+
 fn report(
     scene: &std::path::Path,
     out: &std::path::Path,
     overrides: &Overrides,
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,
-    time_axis: TimeAxis,
+    plots: &Plots,
 ) -> anyhow::Result<ExitCode> {
+    let time_axis = plots.time_axis;
     let sc = load_with_overrides(scene, out, overrides)?;
     let run_id = default_run_id()?;
     let (report, reference, _) = build_report_with(&sc, &run_id, stop_at, reference_options)?;
@@ -885,7 +913,13 @@ fn report(
         }
     }
     print!("{}", linear_stage_table(&report));
-    println!("report: {}\nplot: {}", j.display(), svg_path.display());
+    let it_path = write_iterations_plot(out, name, std::slice::from_ref(&report), plots)?;
+    println!(
+        "report: {}\nplot: {}\nplot against the iterations: {}",
+        j.display(),
+        svg_path.display(),
+        it_path.display()
+    );
     match &reference.failure {
         Some(e) => {
             println!("NO ERRORS AGAINST THE REFERENCE: it failed (see below); the LATIN run above is complete");
@@ -903,8 +937,9 @@ fn report_variants(
     names: &[String],
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,
-    time_axis: TimeAxis,
+    plots: &Plots,
 ) -> anyhow::Result<ExitCode> {
+    let time_axis = plots.time_axis;
     let variants = names
         .iter()
         .map(|n| {
@@ -932,6 +967,8 @@ fn report_variants(
             .with_context(|| format!("cannot write {}", svg_path.display()))?;
         println!("report: {}\nplot: {}", j.display(), svg_path.display());
     }
+    let it_path = write_iterations_plot(out, name, &reports, plots)?;
+    println!("plot against the iterations: {}", it_path.display());
     match &reference.failure {
         Some(e) => {
             println!("NO ERRORS AGAINST THE REFERENCE: it failed (see below); the LATIN runs above are complete");

@@ -139,6 +139,70 @@ pub struct Variant {
     pub stage: LinearStage,
     pub acceleration: Option<Acceleration>,
     pub start: StartChoice,
+    /// PGD settings that replace the scene's (only with the PGD stage).
+    pub pgd: PgdOverrides,
+}
+
+/// PGD settings a report variant sets (`+xi1=…`, `+xi2=…`, `+criterion=…`, `+max_new_modes=…`);
+/// None keeps the scene's.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PgdOverrides {
+    pub xi1: Option<f64>,
+    pub xi2: Option<f64>,
+    pub criterion: Option<PgdCriterion>,
+    pub max_new_modes: Option<usize>,
+}
+
+impl PgdOverrides {
+    fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Reads one `key=value` part of a variant name into these settings.
+    fn set(&mut self, part: &str, key: &str, value: &str) -> Result<(), String> {
+        let twice = || format!("`+{part}`: {key} is given twice");
+        match key {
+            "xi1" | "xi2" => {
+                let x = value
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|x| *x > 0.0 && x.is_finite())
+                    .ok_or_else(|| format!("`+{part}`: ξ₀ must be a number > 0 (e.g. +{key}=0.1)"))?;
+                let slot = if key == "xi1" { &mut self.xi1 } else { &mut self.xi2 };
+                if slot.replace(x).is_some() {
+                    return Err(twice());
+                }
+            }
+            "criterion" => {
+                let c = PgdCriterion::ALL
+                    .into_iter()
+                    .find(|c| c.key() == value)
+                    .ok_or_else(|| {
+                        let names: Vec<&str> = PgdCriterion::ALL.iter().map(|c| c.key()).collect();
+                        format!("`+{part}`: the criterion is one of {}", names.join(", "))
+                    })?;
+                if self.criterion.replace(c).is_some() {
+                    return Err(twice());
+                }
+            }
+            "max_new_modes" => {
+                let m = value
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|m| *m >= 1)
+                    .ok_or_else(|| format!("`+{part}`: max_new_modes must be an integer ≥ 1"))?;
+                if self.max_new_modes.replace(m).is_some() {
+                    return Err(twice());
+                }
+            }
+            _ => {
+                return Err(format!(
+                    "`+{part}`: `{key}` is not a PGD setting of a variant (xi1, xi2, criterion, max_new_modes)"
+                ))
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Where a report variant's iteration starts.
@@ -159,6 +223,7 @@ impl From<LinearStage> for Variant {
             stage,
             acceleration: None,
             start: StartChoice::Scene,
+            pgd: PgdOverrides::default(),
         }
     }
 }
@@ -168,7 +233,9 @@ impl std::str::FromStr for Variant {
 
     /// `<stage>` followed by any of `+anderson` / `+plain` and `+start<c>` / `+zero` (stage:
     /// condensed, sparse, pgd, auto); `+anderson` uses the scene's window if it has one, else
-    /// the default window.
+    /// the default window. The PGD stage also takes `+xi1=<ξ₀,₁>`, `+xi2=<ξ₀,₂>`,
+    /// `+criterion=<name>` and `+max_new_modes=<m>` (`[solver.pgd]`'s keys), e.g.
+    /// `pgd+anderson+criterion=forcing+xi1=0.3`.
     fn from_str(name: &str) -> Result<Self, String> {
         let mut parts = name.split('+');
         let stage = parts.next().unwrap_or_default();
@@ -192,6 +259,10 @@ impl std::str::FromStr for Variant {
                     return Err(format!("`{name}` names two starts"))
                 }
                 "zero" => v.start = StartChoice::Zero,
+                p if p.contains('=') => {
+                    let (key, value) = p.split_once('=').expect("contains =");
+                    v.pgd.set(p, key, value)?
+                }
                 p if p.starts_with("start") => match p["start".len()..].parse::<usize>() {
                     Ok(c) if c >= 2 => v.start = StartChoice::Coarse(c),
                     _ => {
@@ -207,6 +278,11 @@ impl std::str::FromStr for Variant {
                 }
             }
         }
+        if !v.pgd.is_empty() && v.stage != LinearStage::Pgd {
+            return Err(format!(
+                "`{name}`: xi1, xi2, criterion and max_new_modes are PGD settings, for the pgd stage only"
+            ));
+        }
         Ok(v)
     }
 }
@@ -220,6 +296,12 @@ pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> anyhow::Result<LoadedS
         (Some(Acceleration::Anderson { .. }), Acceleration::Anderson { .. }) | (None, _) => {}
         (Some(a), _) => sc.model.solver.acceleration = a,
     }
+    let o = &v.pgd;
+    let pgd = &mut sc.pgd;
+    pgd.xi1 = o.xi1.unwrap_or(pgd.xi1);
+    pgd.xi2 = o.xi2.unwrap_or(pgd.xi2);
+    pgd.criterion = o.criterion.unwrap_or(pgd.criterion);
+    pgd.max_new_modes = o.max_new_modes.unwrap_or(pgd.max_new_modes);
     let solver = &mut sc.model.solver;
     match v.start {
         StartChoice::Scene => {}
@@ -463,16 +545,17 @@ pub fn linear_stage_name(scene: &LoadedScene) -> String {
         s @ (LinearStage::Condensed | LinearStage::Sparse | LinearStage::Auto) => s.key().into(),
         LinearStage::Pgd => {
             let p = &scene.pgd;
-            let criterion = match p.criterion {
-                PgdCriterion::Increment => "increment",
-                PgdCriterion::Accumulated => "accumulated",
-                PgdCriterion::IncrementSvd => "increment-svd",
-            };
             format!(
-                "pgd({criterion}, ξ₀ = {}/{}, macro modes {})",
+                "pgd({}, ξ₀ = {}/{}, macro modes {}{})",
+                p.criterion.key(),
                 p.xi1,
                 p.xi2,
-                if p.macro_modes { "on" } else { "off" }
+                if p.macro_modes { "on" } else { "off" },
+                if p.max_new_modes == 1 {
+                    String::new()
+                } else {
+                    format!(", ≤ {} new modes", p.max_new_modes)
+                }
             )
         }
     }
@@ -632,9 +715,6 @@ pub fn plot_basis_svg(report: &Report) -> Option<String> {
         (left + w - right) / 2.0,
         h - 15.0
     );
-    const COLOURS: [&str; 10] = [
-        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf",
-    ];
     for s in 0..n_sub {
         let colour = COLOURS[s % COLOURS.len()];
         let pts: Vec<String> = report
@@ -664,6 +744,207 @@ pub fn plot_basis_svg(report: &Report) -> Option<String> {
     }
     svg += "</svg>\n";
     Some(svg)
+}
+
+/// Colours of the curves of several reports or subdomains.
+const COLOURS: [&str; 10] = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf",
+];
+
+/// The paper's Figure 4 from one or several reports of a scene, against the LATIN iterations:
+/// (a) η (solid) and the contact-traction error against the reference (dashed) of every report;
+/// (b) the PGD basis size of the chosen `subdomains` (1-based, as the scene files number them;
+/// those the scene does not have are skipped) of every PGD report, one dash pattern per
+/// subdomain. Panel (b) is left out when no report is PGD.
+pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
+    let (w, ha, hb) = (1100.0, 520.0, 420.0);
+    let (left, right, top, bottom) = (80.0, 440.0, 40.0, 60.0);
+    let it_max = reports
+        .iter()
+        .flat_map(|r| r.points.iter().map(|p| p.iteration))
+        .max()
+        .unwrap_or(1)
+        .max(1) as f64;
+    let x = |i: f64| left + (w - left - right) * i / it_max;
+    let title = reports.first().map_or("", |r| r.scene.as_str());
+    // (a): log axis over every plotted value.
+    let values: Vec<f64> = reports
+        .iter()
+        .flat_map(|r| r.points.iter().flat_map(|p| [p.eta, p.traction_error]))
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .collect();
+    let lo = values
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-16)
+        .log10()
+        .floor();
+    let hi = values
+        .iter()
+        .cloned()
+        .fold(0.0f64, f64::max)
+        .max(10f64.powf(lo + 1.0))
+        .log10()
+        .ceil();
+    let ya = |v: f64| top + (ha - top - bottom) * (hi - v.max(1e-300).log10()) / (hi - lo).max(1.0);
+    let pgd: Vec<(usize, &Report)> = reports
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.points.iter().any(|p| !p.basis_sizes.is_empty()))
+        .collect();
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n",
+        if pgd.is_empty() { ha } else { ha + hb }
+    );
+    svg += &format!(
+        "<text x=\"{}\" y=\"22\" font-size=\"15\" text-anchor=\"middle\">{title}: (a) η (solid) and contact-traction error against the reference (dashed)</text>\n<rect x=\"{left}\" y=\"{top}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"black\"/>\n",
+        (left + w - right) / 2.0,
+        w - left - right,
+        ha - top - bottom
+    );
+    let mut e = lo;
+    while e <= hi + 0.5 {
+        let yy = ya(10f64.powf(e));
+        svg += &format!(
+            "<line x1=\"{left}\" y1=\"{yy}\" x2=\"{}\" y2=\"{yy}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{}</text>\n",
+            w - right,
+            left - 6.0,
+            yy + 4.0,
+            e as i32
+        );
+        e += 1.0;
+    }
+    let iteration_ticks = |svg: &mut String, y0: f64| {
+        for (i, label) in linear_ticks(it_max) {
+            svg.push_str(&format!(
+                "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{label}</text>\n",
+                x(i),
+                y0 + 18.0
+            ));
+        }
+        svg.push_str(&format!(
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">LATIN iteration</text>\n",
+            (left + w - right) / 2.0,
+            y0 + 40.0
+        ));
+    };
+    iteration_ticks(&mut svg, ha - bottom);
+    let polyline = |pts: Vec<String>, colour: &str, dash: &str| {
+        format!(
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.6\" stroke-dasharray=\"{dash}\" points=\"{}\"/>\n",
+            pts.join(" ")
+        )
+    };
+    for (k, r) in reports.iter().enumerate() {
+        let colour = COLOURS[k % COLOURS.len()];
+        for (dash, f) in [
+            ("", (|p: &ReportPoint| p.eta) as fn(&ReportPoint) -> f64),
+            ("6,3", |p| p.traction_error),
+        ] {
+            let pts = r
+                .points
+                .iter()
+                .filter(|p| f(p) > 0.0 && f(p).is_finite())
+                .map(|p| format!("{:.2},{:.2}", x(p.iteration as f64), ya(f(p))))
+                .collect();
+            svg += &polyline(pts, colour, dash);
+        }
+        let ly = top + 10.0 + 30.0 * k as f64;
+        svg += &format!(
+            "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{colour}\" stroke-width=\"2\"/><text x=\"{}\" y=\"{}\" font-size=\"10\">{}</text>\n",
+            w - right + 8.0,
+            w - right + 28.0,
+            w - right + 32.0,
+            ly + 4.0,
+            escape(&short_name(r))
+        );
+    }
+    // (b): basis sizes.
+    if pgd.is_empty() {
+        return svg + "</svg>\n";
+    }
+    let chosen = |r: &Report| -> Vec<usize> {
+        let n = r.points.iter().map(|p| p.basis_sizes.len()).max().unwrap_or(0);
+        subdomains.iter().copied().filter(|s| (1..=n).contains(s)).collect()
+    };
+    let m_max = pgd
+        .iter()
+        .flat_map(|(_, r)| {
+            let c = chosen(r);
+            r.points.iter().flat_map(move |p| {
+                c.iter()
+                    .filter_map(|s| p.basis_sizes.get(s - 1).copied())
+                    .collect::<Vec<_>>()
+            })
+        })
+        .max()
+        .unwrap_or(1)
+        .max(1) as f64;
+    let y0 = ha;
+    let yb = |m: f64| y0 + top + (hb - top - bottom) * (1.0 - m / m_max);
+    let names: Vec<String> = subdomains.iter().map(|s| s.to_string()).collect();
+    svg += &format!(
+        "<text x=\"{}\" y=\"{}\" font-size=\"15\" text-anchor=\"middle\">(b) PGD basis size of subdomains {} (dash pattern per subdomain)</text>\n<rect x=\"{left}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"black\"/>\n",
+        (left + w - right) / 2.0,
+        y0 + 22.0,
+        names.join(" and "),
+        y0 + top,
+        w - left - right,
+        hb - top - bottom
+    );
+    for (m, label) in linear_ticks(m_max) {
+        svg += &format!(
+            "<line x1=\"{left}\" y1=\"{0}\" x2=\"{1}\" y2=\"{0}\" stroke=\"#eee\"/><text x=\"{2}\" y=\"{3}\" text-anchor=\"end\">{label}</text>\n",
+            yb(m),
+            w - right,
+            left - 6.0,
+            yb(m) + 4.0
+        );
+    }
+    iteration_ticks(&mut svg, y0 + hb - bottom);
+    const DASHES: [&str; 4] = ["", "6,3", "2,3", "10,3,2,3"];
+    let mut row = 0;
+    for (k, r) in pgd {
+        let colour = COLOURS[k % COLOURS.len()];
+        for (j, s) in chosen(r).into_iter().enumerate() {
+            let dash = DASHES[j % DASHES.len()];
+            let pts = r
+                .points
+                .iter()
+                .filter_map(|p| {
+                    p.basis_sizes
+                        .get(s - 1)
+                        .map(|&m| format!("{:.2},{:.2}", x(p.iteration as f64), yb(m as f64)))
+                })
+                .collect();
+            svg += &polyline(pts, colour, dash);
+            let ly = y0 + top + 10.0 + 16.0 * row as f64;
+            row += 1;
+            if ly < y0 + hb - bottom {
+                svg += &format!(
+                    "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{colour}\" stroke-width=\"2\" stroke-dasharray=\"{dash}\"/><text x=\"{}\" y=\"{}\" font-size=\"10\">subdomain {s}: {}</text>\n",
+                    w - right + 8.0,
+                    w - right + 28.0,
+                    w - right + 32.0,
+                    ly + 4.0,
+                    escape(&short_name(r))
+                );
+            }
+        }
+    }
+    svg += "</svg>\n";
+    svg
+}
+
+/// [`variant_name`] without the defaults a legend need not repeat (frozen macro modes off).
+fn short_name(report: &Report) -> String {
+    variant_name(report).replace(", macro modes off", "")
+}
+
+/// Text for an SVG element (`&`, `<`, `>` escaped).
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
 /// The wall-time axis of the report's plot.
@@ -858,7 +1139,47 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{linear_ticks, log_ticks};
+    use super::{linear_ticks, log_ticks, PgdOverrides, Variant};
+    use glissade_mechanics::linear::LinearStage;
+    use glissade_mechanics::pgd::PgdCriterion;
+
+    /// PGD settings as variants: parsed, and bad values or misplaced keys rejected with the part
+    /// and what it must be.
+    #[test]
+    fn pgd_variants_parse_and_reject_bad_values() {
+        let v: Variant = "pgd+anderson+criterion=forcing+xi1=0.3+xi2=0.02+max_new_modes=3"
+            .parse()
+            .unwrap();
+        assert_eq!(v.stage, LinearStage::Pgd);
+        assert!(v.acceleration.is_some());
+        assert_eq!(
+            v.pgd,
+            PgdOverrides {
+                xi1: Some(0.3),
+                xi2: Some(0.02),
+                criterion: Some(PgdCriterion::Forcing),
+                max_new_modes: Some(3),
+            }
+        );
+        let err = |name: &str| name.parse::<Variant>().unwrap_err();
+        for (name, part) in [
+            ("pgd+xi1=0", "ξ₀ must be a number > 0"),
+            ("pgd+xi2=-1", "ξ₀ must be a number > 0"),
+            ("pgd+xi1=abc", "`+xi1=abc`"),
+            ("pgd+xi1=inf", "ξ₀ must be a number > 0"),
+            (
+                "pgd+criterion=forced",
+                "increment, accumulated, increment-svd, forcing, forcing-svd",
+            ),
+            ("pgd+max_new_modes=0", "an integer ≥ 1"),
+            ("pgd+xi1=0.1+xi1=0.2", "given twice"),
+            ("pgd+xi3=0.1", "`xi3` is not a PGD setting"),
+            ("condensed+xi1=0.1", "for the pgd stage only"),
+        ] {
+            let e = err(name);
+            assert!(e.contains(part), "{name}: `{part}` not in: {e}");
+        }
+    }
 
     /// Tick labels are distinct and cover the axis: 0.0137 s used to give 0.00, 0.00, 0.01, ….
     #[test]

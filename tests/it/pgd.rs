@@ -180,6 +180,25 @@ fn pgd_with_anderson_keeps_the_limit() {
     }
 }
 
+/// The forcing criterion (residual against the target's own step), at a loose ξ₀,₁ = 1 and with
+/// Anderson: a stationary target's residual is enriched to round-off, so its fixed point is the
+/// exact one too (`glissade_mechanics::pgd` module docs); same tolerance as above.
+#[test]
+fn pgd_forcing_keeps_the_limit() {
+    let forcing = PgdParams {
+        criterion: PgdCriterion::Forcing,
+        xi1: 1.0,
+        ..default_pgd()
+    };
+    let anderson = Acceleration::Anderson { window: 5 };
+    for name in ["two-blocks", "hertz-slip"] {
+        let (e_f, e_w) = same_limit_with(scene_file(name), forcing.clone(), 1e-10, anderson);
+        assert!(e_f <= 1e-7 && e_w <= 1e-7, "{name}: tractions {e_f:e}, jumps {e_w:e}");
+    }
+    let (e_f, e_w) = same_limit(scene_file("hertz-slip"), forcing, 1e-10);
+    assert!(e_f <= 1e-7 && e_w <= 1e-7, "plain: tractions {e_f:e}, jumps {e_w:e}");
+}
+
 /// Stratified (18 subdomains, N = 100). Measured (release): contact tractions differ by 9.4e-5
 /// at η ≤ 1e-7, 2.1e-6 at η ≤ 1e-9, 2.1e-7 at η ≤ 1e-10 and 2.3e-8 at η ≤ 1e-11 (PGD 857, 1095
 /// and 1408 iterations, plain 1176, 1685 and 2206): the same limit, approached more slowly in η

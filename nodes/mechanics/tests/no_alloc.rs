@@ -138,3 +138,48 @@ fn sparse_linear_stage_iterations_do_not_allocate() {
         "allocator calls during 10 iterations of the sparse linear stage"
     );
 }
+
+#[test]
+fn pgd_linear_stage_with_the_forcing_criterion_does_not_allocate() {
+    // The forcing criterion keeps the previous targets in buffers allocated with the stage: an
+    // update on a fixed basis (micro 1 and micro 2, the relaxation in coordinates and the
+    // expansion) calls no allocator. Enrichment is off after the warm-up (ξ₀ = ∞).
+    use glissade_mechanics::pgd::{PgdCriterion, PgdSettings, PgdStage};
+    let json = include_str!("fixtures/small-three-layer.model.json");
+    let model: glissade_mechanics::model::Model = serde_json::from_str(json).expect("a model fixture");
+    let tw = model.time.trapezoid_weights();
+    let mut run = latin::Latin::new(model);
+    let solver = &mut run.solvers[0];
+    let (n_b, nt, n_m) = (solver.n_boundary(), solver.w_d.ncols(), solver.n_macro());
+    let settings = PgdSettings {
+        criterion: PgdCriterion::Forcing,
+        xi1: 0.1,
+        xi2: 0.01,
+        macro_modes: false,
+        max_new_modes: 2,
+    };
+    let mut stage = PgdStage::new(solver, &tw, settings);
+    let target = |s: f64| faer::Mat::from_fn(n_b, nt, |r, i| ((r * 7 + i * 3) as f64 * 0.37 + s).sin());
+    let w_tilde = faer::Mat::from_fn(n_m, nt, |r, i| ((r + i) as f64 * 0.11).cos());
+    let (targets, mut w, mut f) = (
+        [target(0.0), target(0.5), target(1.0)],
+        faer::Mat::<f64>::zeros(n_b, nt),
+        faer::Mat::<f64>::zeros(n_b, nt),
+    );
+    for q in &targets {
+        stage.micro1(solver, q.as_ref());
+        stage.micro2(solver, w_tilde.as_ref());
+    }
+    assert!(stage.n_modes() > 0);
+    stage.settings.xi1 = f64::INFINITY;
+    stage.settings.xi2 = f64::INFINITY;
+    let w_d = solver.w_d.clone();
+    let before = calls();
+    for q in &targets {
+        stage.micro1(solver, q.as_ref());
+        stage.micro2(solver, w_tilde.as_ref());
+        stage.relax_state(0.8);
+        stage.expand_into(w_d.as_ref(), w.as_mut(), f.as_mut(), true);
+    }
+    assert_eq!(calls() - before, 0, "allocator calls during PGD linear stages");
+}

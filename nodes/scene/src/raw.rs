@@ -190,6 +190,8 @@ pub(crate) enum RawCriterion {
     Increment,
     Accumulated,
     IncrementSvd,
+    Forcing,
+    ForcingSvd,
 }
 
 #[derive(Deserialize)]

@@ -883,6 +883,14 @@ fn linear_stage_keys() {
         "must be ≥ 1",
     );
     assert!(load(&with("linear_stage = \"dense\"")).is_err());
+    let s = load(&with("[solver.pgd]\nenabled = true\ncriterion = \"forcing\"\nxi1 = 3")).unwrap();
+    assert!(s.pgd.criterion == PgdCriterion::Forcing && s.pgd.xi1 == 3.0);
+    expect_err(
+        &with("[solver.pgd]\ncriterion = \"forced\""),
+        "solver.pgd.criterion",
+        "forcing",
+    );
+    expect_err(&with("[solver.pgd]\nxi1 = 0"), "solver.pgd.xi1", "must be > 0");
 }
 
 #[test]

@@ -26,7 +26,6 @@ use glissade_mechanics::anderson::{AndersonHistory, AndersonStep, GramPartials};
 use glissade_mechanics::linear::{relax_into, sum_into, sum_relax_into, SubdomainSolver};
 use glissade_mechanics::model::{Acceleration, Model};
 use glissade_mechanics::modes::ModeForm;
-use glissade_mechanics::pgd::PgdCriterion;
 use glissade_mechanics::pgd::{PgdSettings, PgdStage};
 use glissade_messages::{role_field_topic, Field, Message, NodeId, ParticularModes, Payload, Role, Stage};
 use std::sync::{Arc, Mutex};
@@ -233,7 +232,7 @@ impl SubdomainNode {
         let compress = self
             .pgd
             .as_ref()
-            .is_some_and(|p| self.iteration >= 1 && p.settings.criterion == PgdCriterion::IncrementSvd);
+            .is_some_and(|p| self.iteration >= 1 && p.settings.criterion.compresses());
         if compress {
             // The compression works on the state's fields.
             self.expand_state();
@@ -248,7 +247,7 @@ impl SubdomainNode {
                 }
             }
             Some(pgd) => {
-                if self.iteration >= 1 && pgd.settings.criterion == PgdCriterion::IncrementSvd {
+                if self.iteration >= 1 && pgd.settings.criterion.compresses() {
                     self.record.dropped_modes = pgd.compress(self.w.as_mut(), self.f.as_mut(), self.anderson.as_mut());
                 }
                 let report = pgd.micro1(&mut self.solver, self.q_hat.as_ref());

@@ -29,8 +29,15 @@ impl PgdStage {
     }
 
     /// The criterion and the enrichment loop on the residual in `resid`, for the time functions
-    /// of micro 1 (`first`) or micro 2, with their previous values in `prev`.
-    pub(super) fn enrich(&mut self, solver: &mut SubdomainSolver, first: bool, xi0: f64) -> PgdReport {
+    /// of micro 1 (`first`) or micro 2, with their previous values in `prev`; `step` is
+    /// ‖targetₙ − targetₙ₋₁‖² with the forcing criterion.
+    pub(super) fn enrich(
+        &mut self,
+        solver: &mut SubdomainSolver,
+        first: bool,
+        xi0: f64,
+        step: Option<f64>,
+    ) -> PgdReport {
         let (n_b, nt) = (self.resid.nrows(), self.resid.ncols());
         // Two coordinate norms and the residual's norm.
         self.count(2 * (3 * self.p * nt + 2 * nt) + 3 * n_b * nt + 2 * nt);
@@ -42,9 +49,16 @@ impl PgdStage {
         let reference2 = match self.settings.criterion {
             PgdCriterion::Accumulated => target2,
             PgdCriterion::Increment | PgdCriterion::IncrementSvd => r2 + moved,
+            PgdCriterion::Forcing | PgdCriterion::ForcingSvd => step.unwrap_or(r2 + moved),
         };
         let reference = reference2.sqrt();
-        let xi_of = |r2: f64| if reference > 0.0 { r2.sqrt() / reference } else { 0.0 };
+        // A residual against a zero reference (a stationary target under the forcing criterion)
+        // is infinitely too large; the round-off guard below stops the enrichment.
+        let xi_of = |r2: f64| match (reference > 0.0, r2 > 0.0) {
+            (true, _) => r2.sqrt() / reference,
+            (false, true) => f64::INFINITY,
+            (false, false) => 0.0,
+        };
         let mut report = PgdReport {
             xi_update: xi_of(r2),
             xi: xi_of(r2),
@@ -205,8 +219,8 @@ impl PgdStage {
         }
     }
 
-    /// Compression of the free modes (module docs) with the tolerance ξ₀,₁·‖δ₁‖ of the last
-    /// micro 1: the state (w, f), which must lie in the span (W = W_d + Z λ, F = −k⁻W_d + G λ),
+    /// Compression of the free modes (module docs) with the tolerance ξ₀,₁ times the criterion's
+    /// reference of the last micro 1 (‖δ₁‖, or the step with the forcing criterion): the state (w, f), which must lie in the span (W = W_d + Z λ, F = −k⁻W_d + G λ),
     /// loses exactly the truncated admissible part. Returns the number of modes dropped.
     ///
     /// The state's coordinates λˢ and, when given, the coordinates an Anderson history mixes

@@ -22,9 +22,17 @@
 //!
 //! Criterion (space-time norm ‖x‖² = Σ_i w_i x_iᵀ M x_i, trapezoid w_i):
 //! ξ = ‖target − Σ L_k λ_k‖ / ‖reference‖, where the reference is the increment δ
-//! ([`PgdCriterion::Increment`], [`PgdCriterion::IncrementSvd`]) or the accumulated correction
-//! target − q₀ ([`PgdCriterion::Accumulated`]). Because the residual r is M-orthogonal to the
-//! basis, ‖δ‖² = ‖r‖² + Σ_i w_i |λ_i − λ_i(previous)|² exactly.
+//! ([`PgdCriterion::Increment`], [`PgdCriterion::IncrementSvd`]), the accumulated correction
+//! target − q₀ ([`PgdCriterion::Accumulated`]) or the target's own step since the previous linear
+//! stage, targetₙ − targetₙ₋₁ ([`PgdCriterion::Forcing`], [`PgdCriterion::ForcingSvd`]). Because the residual r is
+//! M-orthogonal to the basis, ‖δ‖² = ‖r‖² + Σ_i w_i |λ_i − λ_i(previous)|² exactly.
+//!
+//! The increment δ = targetₙ − L λ(previous) holds the previous residual: ‖δ‖ ≥ ‖rₙ₋₁‖ roughly,
+//! so ξ ≤ ξ₀ asks the residual to fall ten times (ξ₀ = 0.1) at every linear stage, which no
+//! bounded basis does: the increment criteria add modes at every iteration. The forcing
+//! criterion asks only ‖rₙ‖ ≤ ξ₀ ‖targetₙ − targetₙ₋₁‖: the residual may stay while the LATIN
+//! step is larger, and must fall with it. At a fixed point of the iteration the step is zero, so
+//! the basis is enriched until the residual is round-off: the limit is the exact one.
 //!
 //! Enrichment when ξ > ξ₀: the rank-one fit r ≈ L λ(t) by alternating fixed point (λ from L,
 //! L from λ), L made M-orthogonal to the basis (Gram–Schmidt twice) and M-normalised, then
@@ -54,6 +62,44 @@ pub enum PgdCriterion {
     Accumulated,
     /// Relative to the increment, plus SVD compression of the basis.
     IncrementSvd,
+    /// Relative to the step of the micro problem's own target since the previous linear stage,
+    /// ‖q̂ₙ − q̂ₙ₋₁‖ (micro 1) or ‖k⁻𝔼(w̃ₙ − w̃ₙ₋₁)‖ (micro 2): a forcing term. The linear stage
+    /// is solved to a tolerance that follows the LATIN step, as in an inexact fixed point.
+    Forcing,
+    /// The forcing criterion, plus SVD compression of the basis (tolerance ξ₀,₁ times the step).
+    ForcingSvd,
+}
+
+impl PgdCriterion {
+    /// Every criterion, in the order of [`PgdCriterion::key`].
+    pub const ALL: [PgdCriterion; 5] = [
+        PgdCriterion::Increment,
+        PgdCriterion::Accumulated,
+        PgdCriterion::IncrementSvd,
+        PgdCriterion::Forcing,
+        PgdCriterion::ForcingSvd,
+    ];
+
+    /// The basis is compressed before every micro problem 1 but the first.
+    pub fn compresses(self) -> bool {
+        matches!(self, PgdCriterion::IncrementSvd | PgdCriterion::ForcingSvd)
+    }
+
+    /// ξ is relative to the target's own step ([`PgdCriterion::Forcing`]).
+    pub fn forcing(self) -> bool {
+        matches!(self, PgdCriterion::Forcing | PgdCriterion::ForcingSvd)
+    }
+
+    /// The criterion's name in a scene (`solver.pgd.criterion`) and in a report variant.
+    pub fn key(self) -> &'static str {
+        match self {
+            PgdCriterion::Increment => "increment",
+            PgdCriterion::Accumulated => "accumulated",
+            PgdCriterion::IncrementSvd => "increment-svd",
+            PgdCriterion::Forcing => "forcing",
+            PgdCriterion::ForcingSvd => "forcing-svd",
+        }
+    }
 }
 
 /// PGD settings of the linear stage.
@@ -119,7 +165,7 @@ pub struct PgdReport {
     /// ξ at the end of the micro problem.
     pub xi: f64,
     pub new_modes: usize,
-    /// The criterion's reference norm (‖δ‖ or ‖target − q₀‖).
+    /// The criterion's reference norm (‖δ‖, ‖target − q₀‖ or ‖targetₙ − targetₙ₋₁‖).
     pub reference_norm: f64,
 }
 
@@ -162,10 +208,23 @@ pub struct PgdStage {
     fit_lam: Vec<f64>,
     /// ‖δ‖ of the last micro 1 (scale of the compression tolerance).
     last_delta1: f64,
+    /// The targets of the last micro 1 and micro 2 (n_b × (N+1); empty unless the criterion is
+    /// [`PgdCriterion::Forcing`]).
+    target1: Mat<f64>,
+    target2: Mat<f64>,
     /// U_k of the last compression (free modes before × kept), for the Anderson coordinates.
     rotation: Option<Mat<f64>>,
     /// Floating-point operations of this stage's own kernels ([`PgdStage::flops`]).
     flops: u64,
+}
+
+/// The buffer of a previous target: n_b × (N+1) with the forcing criterion, else empty.
+fn forcing_buffer(n_b: usize, nt: usize, criterion: PgdCriterion) -> Mat<f64> {
+    if criterion.forcing() {
+        Mat::zeros(n_b, nt)
+    } else {
+        Mat::zeros(0, 0)
+    }
 }
 
 impl PgdStage {
@@ -216,6 +275,8 @@ impl PgdStage {
             fit_l: vec![0.0; n_b],
             fit_lam: vec![0.0; nt],
             last_delta1: 0.0,
+            target1: forcing_buffer(n_b, nt, settings.criterion),
+            target2: forcing_buffer(n_b, nt, settings.criterion),
             rotation: None,
             flops: 0,
         };
@@ -404,8 +465,9 @@ impl PgdStage {
             Par::Seq,
         );
         self.resid.copy_from(q_hat);
+        let step = self.target_step(true);
         self.residual_minus_projection(true);
-        let report = self.enrich(solver, true, self.settings.xi1);
+        let report = self.enrich(solver, true, self.settings.xi1, step);
         self.last_delta1 = report.reference_norm;
         report
     }
@@ -442,8 +504,31 @@ impl PgdStage {
             1.0,
             Par::Seq,
         );
+        let step = self.target_step(false);
         self.residual_minus_projection(false);
-        self.enrich(solver, false, self.settings.xi2)
+        self.enrich(solver, false, self.settings.xi2, step)
+    }
+
+    /// With the forcing criterion: ‖target − previous target‖² (the target in `resid`), and the
+    /// target kept for the next linear stage; None otherwise.
+    fn target_step(&mut self, first: bool) -> Option<f64> {
+        if !self.settings.criterion.forcing() {
+            return None;
+        }
+        let (n_b, nt) = (self.resid.nrows(), self.resid.ncols());
+        self.count(4 * n_b * nt + 2 * nt);
+        let prev = if first { &mut self.target1 } else { &mut self.target2 };
+        let mut s = 0.0;
+        for i in 0..nt {
+            let mut c = 0.0;
+            for r in 0..n_b {
+                let d = self.resid[(r, i)] - prev[(r, i)];
+                c += self.mass[r] * d * d;
+                prev[(r, i)] = self.resid[(r, i)];
+            }
+            s += self.tw[i] * c;
+        }
+        Some(s)
     }
 
     /// The fields of the last micro problems: W = W_d + Z λ, F = −k⁻W_d + G λ with

@@ -303,3 +303,72 @@ fn compression_removes_exactly_the_truncated_part() {
     solver.boundary_response_into(l.as_ref(), z.as_mut());
     assert!(max_abs((&z - stage.z()).as_ref()) <= 1e-12 * max_abs(z.as_ref()));
 }
+
+/// The forcing criterion measures the residual against the target's own step: a target that
+/// moves by much more than its part outside the basis adds no mode, and a target that stops
+/// moving is enriched until its residual is round-off (so a fixed point of the PGD iteration is
+/// one of the exact iteration), after which the basis stays as it is.
+#[test]
+fn forcing_criterion_follows_the_step_and_resolves_a_stationary_target() {
+    let (_, mut solver, mut stage) = setup(false, true);
+    stage.settings.criterion = PgdCriterion::Forcing;
+    stage.settings.xi1 = 0.1;
+    stage.settings.max_new_modes = 8;
+    // The stage was built for the increment criterion: rebuild it with the forcing buffers.
+    let tw = stage.tw.clone();
+    let mut stage = PgdStage::new(&mut solver, &tw, stage.settings);
+    let (n_b, nt) = (solver.n_boundary(), solver.w_d.ncols());
+    let q = low_rank(n_b, nt, &[1.0, 0.5, 0.25], 5);
+    // First stage: the step is the target itself; modes until the residual is a tenth of it.
+    let r = stage.micro1(&mut solver, q.as_ref());
+    assert!(r.new_modes >= 1 && r.xi <= 0.1, "{r:?}");
+    // The same target again: zero step, every residual is too large, the rank-3 target is
+    // resolved to round-off and no more.
+    let r = stage.micro1(&mut solver, q.as_ref());
+    assert_eq!(r.reference_norm, 0.0);
+    assert_eq!(stage.n_modes(), 3, "{r:?}");
+    let r = stage.micro1(&mut solver, q.as_ref());
+    assert_eq!((r.new_modes, stage.n_modes()), (0, 3), "{r:?}");
+    // A large step along the basis with a small part outside it: ξ ≈ 1e-3 ≤ ξ₀, no new mode.
+    let noise = random(n_b, nt, 77);
+    let moved = Mat::from_fn(n_b, nt, |r, i| 3.0 * q[(r, i)] + 1e-3 * noise[(r, i)]);
+    let r = stage.micro1(&mut solver, moved.as_ref());
+    assert_eq!(r.new_modes, 0, "{r:?}");
+    assert!(r.xi_update > 0.0 && r.xi_update < 0.1, "{r:?}");
+    // It stops moving: its residual, however small, is now above ξ₀ times a zero step.
+    let r = stage.micro1(&mut solver, moved.as_ref());
+    assert!(r.xi_update.is_infinite() && r.new_modes >= 1, "{r:?}");
+}
+
+/// ξ₀ above 1 is meaningful with the forcing criterion (a residual up to ξ₀ times the step):
+/// a residual half the step adds a mode at ξ₀ = 0.1 and none at ξ₀ = 1.
+#[test]
+fn forcing_threshold_may_exceed_one() {
+    for (xi1, expected) in [(0.1, 1), (1.0, 0)] {
+        let (_, mut solver, stage) = setup(false, true);
+        let settings = PgdSettings {
+            criterion: PgdCriterion::Forcing,
+            xi1,
+            max_new_modes: 1,
+            ..stage.settings
+        };
+        let tw = stage.tw.clone();
+        let mut stage = PgdStage::new(&mut solver, &tw, settings);
+        let (n_b, nt) = (solver.n_boundary(), solver.w_d.ncols());
+        let q = low_rank(n_b, nt, &[1.0], 3);
+        stage.settings.xi1 = 1e-14;
+        stage.micro1(&mut solver, q.as_ref());
+        assert_eq!(stage.n_modes(), 1);
+        stage.settings.xi1 = xi1;
+        // Step: 2q (in the basis, norm 2‖q‖) plus a part outside of norm ‖q‖ → ξ = 1/√5.
+        let out = low_rank(n_b, nt, &[1.0], 9);
+        let mut outside = out.clone();
+        let lam = stage.l().transpose() * Mat::from_fn(n_b, nt, |r, i| stage.mass[r] * out[(r, i)]);
+        outside -= stage.l() * &lam;
+        let scale = (stage.norm2(q.as_ref()) / stage.norm2(outside.as_ref())).sqrt();
+        let next = Mat::from_fn(n_b, nt, |r, i| 3.0 * q[(r, i)] + scale * outside[(r, i)]);
+        let r = stage.micro1(&mut solver, next.as_ref());
+        assert!((r.xi_update - 1.0 / 5f64.sqrt()).abs() < 1e-9, "{r:?}");
+        assert_eq!(r.new_modes, expected, "ξ₀ = {xi1}: {r:?}");
+    }
+}

@@ -214,6 +214,8 @@ impl Ctx<'_> {
                 Some(RawCriterion::Increment) => PgdCriterion::Increment,
                 Some(RawCriterion::Accumulated) => PgdCriterion::Accumulated,
                 Some(RawCriterion::IncrementSvd) => PgdCriterion::IncrementSvd,
+                Some(RawCriterion::Forcing) => PgdCriterion::Forcing,
+                Some(RawCriterion::ForcingSvd) => PgdCriterion::ForcingSvd,
             },
             macro_modes: r.macro_modes.unwrap_or(d.macro_modes),
             max_new_modes: r.max_new_modes.unwrap_or(d.max_new_modes),
