@@ -68,7 +68,7 @@ fn shrink_fit(k: usize) -> (LoadedScene, glissade::runner::RunResult) {
 }
 
 #[test]
-fn shrink_fit_pressure_is_lame_and_slip_traction_closed_form() {
+fn shrink_fit_pressure_is_lame_and_sticks_below_the_slip_traction() {
     let p_exact = lame_pressure(210000.0, 0.3, 20.0, 30.0, 50.0, 0.01);
     let mut errors = Vec::new();
     for k in 1..=3 {
@@ -87,22 +87,22 @@ fn shrink_fit_pressure_is_lame_and_slip_traction_closed_form() {
             let (_, f_t) = tractions(&sc, sol, sc.model.time.n_steps);
             let shear = f_t.iter().zip(&itf.weights).map(|(f, w)| f * w).sum::<f64>() / total;
             let exact = 1.5 * 50.0f64.powi(2) / 30.0f64.powi(2);
-            assert!((shear.abs() - exact).abs() < 1e-4 * exact, "mesh {k}: shear {shear}");
+            // Positive: the outer ring turns the inner one counter-clockwise, along t.
+            assert!((shear - exact).abs() < 1e-4 * exact, "mesh {k}: shear {shear}");
         }
         if k == 3 {
-            // The slip traction: the interface's shear is τ c²/b² (σ_rθ ∝ 1/r²), so the whole
-            // interface slips at τ* = f p b²/c². Measured from the computed p and shear at the
-            // last time point, against the closed form from p_exact.
+            // The finest mesh at the last time point (the twist does not change the pressure).
             let n = sc.model.time.n_steps;
             let (f_n, _) = tractions(&sc, sol, n);
             let pressure = -f_n.iter().zip(&itf.weights).map(|(f, w)| f * w).sum::<f64>() / total;
-            let slip_measured = 0.2 * pressure * 30.0f64.powi(2) / 50.0f64.powi(2);
-            let slip_exact = 0.2 * p_exact * 30.0f64.powi(2) / 50.0f64.powi(2);
+            // Every pair, not only the mean: the pressure is uniform in the closed form.
+            let worst = f_n.iter().map(|f| (-f - p_exact).abs()).fold(0.0, f64::max);
             assert!(
-                (slip_measured - slip_exact).abs() < 0.01 * slip_exact,
-                "slip traction {slip_measured} vs {slip_exact}"
+                worst < 5e-3 * p_exact,
+                "worst pair pressure off by {worst} (mean {pressure})"
             );
-            // Below the slip traction (τ = 0.76 τ*) every pair sticks, at every time point.
+            // Below the slip traction τ* = f p b²/c² (τ = 0.76 τ*) every pair sticks, at every
+            // time point (slip past it: the twisted scene's test).
             let np = itf.n_pairs();
             for i in 0..=n {
                 let st = &sol.status[i * np..(i + 1) * np];
@@ -254,6 +254,12 @@ fn bad_meshes_are_refused_naming_what_is_wrong() {
             mesh.clone(),
             scene.replace("[solver]\n", "[solver]\ncoarse = true\n"),
             "curved interfaces".to_string(),
+        ),
+        (
+            "interface-curve",
+            mesh.clone(),
+            scene.replace("curve = \"bore\"\nux = 0.0", "curve = \"fit\"\nux = 0.0"),
+            "runs between two parts".to_string(),
         ),
         (
             "memory",
@@ -445,9 +451,11 @@ fn every_bad_mesh_is_exit_2_naming_the_file_and_writes_nothing() {
         ("pieces", "several pieces"),
         ("duplicates", "are duplicates"),
         ("two-physicals", "several physical surfaces"),
+        ("hinge", "several pieces"),
+        ("offset", "do not conform"),
     ];
     for (name, expect) in cases {
-        let materials = if matches!(name, "nonconforming" | "two-physicals") {
+        let materials = if matches!(name, "nonconforming" | "two-physicals" | "offset") {
             r#"{ a = "m", b = "m" }"#
         } else {
             r#"{ a = "m" }"#

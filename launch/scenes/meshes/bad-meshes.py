@@ -19,6 +19,10 @@ tests/fixtures/msh-bad/README.md says what each one is.
 - duplicates.msh: one physical surface `a` of two rectangles touching along x = 1, each with its
   own points and curve there (3 elements along both): the nodes of x = 1 are there twice; QUA8.
 - two-physicals.msh: one rectangle in the physical surfaces `a` and `b`; QUA8.
+- hinge.msh: one physical surface `a` of two squares touching at one corner point only; QUA8.
+- offset.msh: squares `a` and `b` side by side along x = 1, b shifted up by half an element, so
+  that every node of the shared line falls on a node of the other part, corners on middle nodes;
+  QUA8.
 """
 
 import os
@@ -129,6 +133,24 @@ def duplicates():
     finish("duplicates.msh", {"a": [s1, s2]}, [c1[3]], [c2[1]])
 
 
+def hinge():
+    start("hinge")
+    s1, c1, p1 = rectangle(0, 1, 0, 1, 2, 2)
+    # The second square shares only the first one's top-right corner point.
+    s2, c2, _ = rectangle(1, 2, 1, 2, 2, 2, points=[p1[2], None, None, None])
+    recombined([s1, s2])
+    finish("hinge.msh", {"a": [s1, s2]}, [c1[3]], [c2[1]])
+
+
+def offset():
+    start("offset")
+    sa, ca, _ = rectangle(0, 1, 0, 1, 2, 2)
+    # b's side on x = 1 is shifted by half an element: its corners fall on a's middle nodes.
+    sb, cb, _ = rectangle(1, 2, 0.25, 1.25, 2, 2)
+    recombined([sa, sb])
+    finish("offset.msh", {"a": [sa], "b": [sb]}, [ca[3]], [cb[1]])
+
+
 def two_physicals():
     start("two-physicals")
     s, c, _ = rectangle(0, 2, 0, 1, 2, 1)
@@ -145,7 +167,7 @@ def main():
     gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
     gmsh.option.setNumber("Mesh.Binary", 0)
     gmsh.option.setNumber("Mesh.SaveAll", 0)
-    for make in (triangles, mixed, quad9, linear, nonconforming, pieces, duplicates, two_physicals):
+    for make in (triangles, mixed, quad9, linear, nonconforming, pieces, duplicates, two_physicals, hinge, offset):
         make()
     gmsh.finalize()
 

@@ -36,6 +36,8 @@ impl Ctx<'_> {
         let key = "mesh.file";
         let origin = mesh.file.clone();
         let bytes = self.mesh_bytes(mesh)?;
+        // A mesh from the scene's embedded data is reported under that key.
+        let key = if mesh.data.is_some() { "mesh.data" } else { key };
         let m = msh::parse(&bytes).map_err(|e| self.err(key, format!("{origin}: {e}")))?;
         // Element types of dimension 2: only 8-node quadrangles.
         let mut other: BTreeMap<u32, (usize, u64)> = BTreeMap::new();
@@ -148,6 +150,20 @@ impl Ctx<'_> {
                     .or_insert_with(|| (name_of(1, p), Vec::new()))
                     .1
                     .push([e.nodes[0], e.nodes[2], e.nodes[1]]);
+            }
+        }
+        // Physical curves without elements are kept (a rule naming one is told it selects
+        // nothing); two physical curves of one name are refused.
+        for (&(dim, tag), _) in m.physical_names.iter().filter(|(k, _)| k.0 == 1) {
+            curves.entry(tag).or_insert_with(|| (name_of(dim, tag), Vec::new()));
+        }
+        let mut seen: BTreeMap<&str, i32> = BTreeMap::new();
+        for (&tag, (name, _)) in &curves {
+            if let Some(other) = seen.insert(name.as_str(), tag) {
+                return Err(self.err(
+                    key,
+                    format!("{origin}: two physical curves are named `{name}` (tags {other} and {tag})"),
+                ));
             }
         }
         Ok(PartMesh {

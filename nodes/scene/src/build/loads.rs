@@ -448,6 +448,20 @@ impl Ctx<'_> {
             for (s, edges) in geometry.boundary.iter().enumerate() {
                 for (k, e) in edges.iter().enumerate() {
                     if geometry.edge_curves[s][k].contains(&c) {
+                        if geometry.on_interface[s][k] {
+                            let x = subs[s].mesh.coords[e.nodes[1]];
+                            return Err(self.err(
+                                format!("{key}.curve"),
+                                format!(
+                                    "curve `{curve}` runs between two parts (`{}` and a neighbour, e.g. at ({}, {})): \
+                                     boundary conditions go on free boundaries; an interface takes an \
+                                     [[interface]] rule",
+                                    subs[s].name,
+                                    fmt_num(x[0]),
+                                    fmt_num(x[1])
+                                ),
+                            ));
+                        }
                         selected.entry(s).or_default().push(e.nodes);
                     }
                 }

@@ -41,6 +41,8 @@ pub(crate) struct PartGeometry {
     pub(crate) boundary: Vec<Vec<Edge>>,
     /// Per subdomain and boundary edge: the named curves the edge lies on.
     pub(crate) edge_curves: Vec<Vec<Vec<usize>>>,
+    /// Per subdomain and boundary edge: the edge is shared with another part (an interface).
+    pub(crate) on_interface: Vec<Vec<bool>>,
     pub(crate) interfaces: Vec<GeoInterface>,
     /// Coincidence tolerance: 1e-9 × the mesh's size.
     pub(crate) tol: f64,
@@ -248,7 +250,8 @@ impl Ctx<'_> {
                 }
                 grid.insert(x, i);
             }
-            // One piece: elements connected through shared nodes.
+            // One piece: elements connected through shared edges (parts touching at a node only
+            // are hinges, not one body).
             let mut parent: Vec<usize> = (0..local_elements.len()).collect();
             fn root(parent: &mut [usize], mut i: usize) -> usize {
                 while parent[i] != i {
@@ -257,15 +260,19 @@ impl Ctx<'_> {
                 }
                 i
             }
-            let mut owner = vec![usize::MAX; coords.len()];
+            let mut owner: HashMap<(usize, usize), usize> = HashMap::new();
             for (e, el) in local_elements.iter().enumerate() {
-                for &n in el {
-                    if owner[n] == usize::MAX {
-                        owner[n] = e;
-                    } else {
-                        let (ra, rb) = (root(&mut parent, owner[n]), root(&mut parent, e));
-                        if ra != rb {
-                            parent[ra.max(rb)] = ra.min(rb);
+                for side in SIDES {
+                    let (a, b) = (el[side[0]], el[side[2]]);
+                    match owner.get(&(a.min(b), a.max(b))) {
+                        None => {
+                            owner.insert((a.min(b), a.max(b)), e);
+                        }
+                        Some(&o) => {
+                            let (ra, rb) = (root(&mut parent, o), root(&mut parent, e));
+                            if ra != rb {
+                                parent[ra.max(rb)] = ra.min(rb);
+                            }
                         }
                     }
                 }
@@ -298,6 +305,22 @@ impl Ctx<'_> {
                         });
                     }
                 }
+            }
+            // A boundary that passes twice through a node: the part touches itself there.
+            let mut starts: HashMap<usize, usize> = HashMap::new();
+            for e in &edges {
+                *starts.entry(e.nodes[0]).or_default() += 1;
+            }
+            if let Some((&n, _)) = starts.iter().filter(|(_, &c)| c > 1).min_by_key(|(&n, _)| n) {
+                return Err(self.err(
+                    key,
+                    format!(
+                        "{who} touches itself at node {} {}: its boundary passes twice through that node \
+                         (a hinge); mesh it so that the part is joined along edges there, or make two parts",
+                        node_tag(global[n]),
+                        at(coords[n])
+                    ),
+                ));
             }
             let (mut blo, mut bhi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
             for x in &coords {
@@ -394,7 +417,7 @@ impl Ctx<'_> {
         }
         let near_tol = 1e-7 * size;
         for &(s, k, _, _) in &loose {
-            for &n in &boundary[s][k].nodes {
+            for (own, &n) in boundary[s][k].nodes.iter().enumerate() {
                 let p = x_of(s, n);
                 for other in loose_grid.near(p) {
                     let (t, j, lo, hi) = loose[other];
@@ -407,8 +430,9 @@ impl Ctx<'_> {
                         continue;
                     }
                     let y = edge_x(t, &boundary[t][j]);
-                    // A node of the other edge there is conforming (edges meeting at a corner).
-                    if y.iter().any(|&q| dist(q, p) <= tol) {
+                    // Edges meeting end to end (at a corner of both) conform; an end on the other's
+                    // middle node, or a middle node on its end, is half an element off.
+                    if own != 1 && (dist(y[0], p) <= tol || dist(y[2], p) <= tol) {
                         continue;
                     }
                     if distance_to_edge(&y, p) <= near_tol {
@@ -452,14 +476,30 @@ impl Ctx<'_> {
             }
         }
 
-        let interfaces = matched
-            .into_iter()
-            .map(|((a, b), edges)| part_interface(&meshes, &boundary, &edge_curves, a, b, &edges))
-            .collect();
+        let mut interfaces = Vec::with_capacity(matched.len());
+        for ((a, b), edges) in matched {
+            let itf = part_interface(&meshes, &boundary, &edge_curves, a, b, &edges).map_err(|n| {
+                self.err(
+                    key,
+                    format!(
+                        "{}: part `{}`: the edges of its interface with `{}` give no normal at node {} {}: an \
+                         edge's middle node is too far from the middle of its ends (its tangent vanishes or turns \
+                         back at the node)",
+                        m.origin,
+                        m.parts[a].name,
+                        m.parts[b].name,
+                        node_tag(globals[a][n]),
+                        at(meshes[a].coords[n])
+                    ),
+                )
+            })?;
+            interfaces.push(itf);
+        }
         Ok(PartGeometry {
             meshes,
             boundary,
             edge_curves,
+            on_interface: is_matched,
             interfaces,
             tol,
             boxes,
@@ -476,7 +516,7 @@ fn part_interface(
     a: usize,
     b: usize,
     edges: &[(usize, usize)],
-) -> GeoInterface {
+) -> Result<GeoInterface, usize> {
     let ea: Vec<Edge> = edges.iter().map(|&(k, _)| boundary[a][k]).collect();
     // Node of b facing each node of a's matched edges.
     let mut partner: HashMap<usize, usize> = HashMap::new();
@@ -595,14 +635,17 @@ fn part_interface(
         let straight = middle[0].abs().max(middle[1].abs()) <= 1e-12 * chord;
         length += if straight { chord } else { m.iter().sum::<f64>() };
     }
-    let normals = normal_sum
-        .iter()
-        .map(|n| {
-            let l = (n[0] * n[0] + n[1] * n[1]).sqrt();
-            [n[0] / l, n[1] / l]
-        })
-        .collect();
-    GeoInterface {
+    // Each edge adds a unit normal at its node: a sum far below one means edges that turn back
+    // (or a tangent that vanishes, a NaN).
+    let mut normals = Vec::with_capacity(np);
+    for (p, n) in normal_sum.iter().enumerate() {
+        let l = (n[0] * n[0] + n[1] * n[1]).sqrt();
+        if l.is_nan() || l <= 1e-6 {
+            return Err(nodes[p]);
+        }
+        normals.push([n[0] / l, n[1] / l]);
+    }
+    Ok(GeoInterface {
         a,
         b,
         normals,
@@ -611,7 +654,7 @@ fn part_interface(
         weights,
         length,
         curves,
-    }
+    })
 }
 
 impl Ctx<'_> {
