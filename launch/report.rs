@@ -773,20 +773,7 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
         .flat_map(|r| r.points.iter().flat_map(|p| [p.eta, p.traction_error]))
         .filter(|v| *v > 0.0 && v.is_finite())
         .collect();
-    let lo = values
-        .iter()
-        .cloned()
-        .fold(f64::INFINITY, f64::min)
-        .max(1e-16)
-        .log10()
-        .floor();
-    let hi = values
-        .iter()
-        .cloned()
-        .fold(0.0f64, f64::max)
-        .max(10f64.powf(lo + 1.0))
-        .log10()
-        .ceil();
+    let (lo, hi) = log_decades(&values);
     let ya = |v: f64| top + (ha - top - bottom) * (hi - v.max(1e-300).log10()) / (hi - lo).max(1.0);
     let pgd: Vec<(usize, &Report)> = reports
         .iter()
@@ -977,6 +964,26 @@ pub fn linear_ticks(max: f64) -> Vec<(f64, String)> {
         .collect()
 }
 
+/// The whole decades (log10, floor and ceiling) a log axis spans to hold `values` (positive and
+/// finite), at least one decade and never below 1e-16.
+fn log_decades(values: &[f64]) -> (f64, f64) {
+    let lo = values
+        .iter()
+        .cloned()
+        .fold(f64::INFINITY, f64::min)
+        .max(1e-16)
+        .log10()
+        .floor();
+    let hi = values
+        .iter()
+        .cloned()
+        .fold(0.0f64, f64::max)
+        .max(10f64.powf(lo + 1.0))
+        .log10()
+        .ceil();
+    (lo, hi)
+}
+
 /// Ticks of a logarithmic axis over [lo, hi]: the powers of ten within, labelled `1e<k>`.
 pub fn log_ticks(lo: f64, hi: f64) -> Vec<(f64, String)> {
     let (a, b) = (lo.log10().ceil() as i32, hi.log10().floor() as i32);
@@ -1023,20 +1030,7 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
         .flat_map(|p| series.iter().map(move |s| (s.3)(p)))
         .filter(|v| *v > 0.0 && v.is_finite())
         .collect();
-    let lo = values
-        .iter()
-        .cloned()
-        .fold(f64::INFINITY, f64::min)
-        .max(1e-16)
-        .log10()
-        .floor();
-    let hi = values
-        .iter()
-        .cloned()
-        .fold(0.0f64, f64::max)
-        .max(10f64.powf(lo + 1.0))
-        .log10()
-        .ceil();
+    let (lo, hi) = log_decades(&values);
     let t_min = report
         .points
         .iter()

@@ -85,12 +85,12 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
     let raw = parse_raw(text, file)?;
     let ctx = Ctx { file };
     let built = ctx.build(&raw)?;
-    // A scene with a mesh file travels with its mesh: the text gets the file's bytes.
+    // A scene with a mesh file travels with its mesh: the text gets the bytes the model was
+    // built from.
     let embedded;
-    let text = match &raw.mesh {
-        Some(mesh) if mesh.data.is_none() => {
-            let bytes = ctx.mesh_bytes(mesh)?;
-            embedded = embed_mesh(text, file, &mesh.file, &bytes)?;
+    let text = match (&raw.mesh, &built.mesh_file) {
+        (Some(mesh), Some(bytes)) => {
+            embedded = embed_mesh(text, file, &mesh.file, bytes)?;
             embedded.as_str()
         }
         _ => text,

@@ -31,14 +31,14 @@ impl Ctx<'_> {
         }
     }
 
-    /// Reads the scene's Gmsh mesh into parts and named curves.
-    pub(crate) fn read_part_mesh(&self, mesh: &RawMesh) -> Result<PartMesh, SceneError> {
+    /// Reads the scene's Gmsh mesh (`bytes`, from [`Self::mesh_bytes`]) into parts and named
+    /// curves.
+    pub(crate) fn read_part_mesh(&self, mesh: &RawMesh, bytes: &[u8]) -> Result<PartMesh, SceneError> {
         let key = "mesh.file";
         let origin = mesh.file.clone();
-        let bytes = self.mesh_bytes(mesh)?;
         // A mesh from the scene's embedded data is reported under that key.
         let key = if mesh.data.is_some() { "mesh.data" } else { key };
-        let m = msh::parse(&bytes).map_err(|e| self.err(key, format!("{origin}: {e}")))?;
+        let m = msh::parse(bytes).map_err(|e| self.err(key, format!("{origin}: {e}")))?;
         // Element types of dimension 2: only 8-node quadrangles.
         let mut other: BTreeMap<u32, (usize, u64)> = BTreeMap::new();
         for e in &m.elements {
@@ -64,8 +64,7 @@ impl Ctx<'_> {
             _ => format!("{}-{tag}", if dim == 2 { "surface" } else { "curve" }),
         };
         // Parts: physical surfaces in order of their tags.
-        let surfaces: Vec<i32> = m.physical_names.keys().filter(|k| k.0 == 2).map(|k| k.1).collect();
-        let mut surfaces: Vec<i32> = surfaces;
+        let mut surfaces: Vec<i32> = m.physical_names.keys().filter(|k| k.0 == 2).map(|k| k.1).collect();
         for e in m.elements.iter().filter(|e| e.dim == 2) {
             for &p in &e.physicals {
                 if !surfaces.contains(&p) {

@@ -251,11 +251,7 @@ impl Ctx<'_> {
                 .collect();
             self.apply_rule(rule, &key, time, subs, &targets, &mut out)?;
         }
-        for sl in &mut out {
-            sl.loads
-                .retain(|c| c.force.iter().chain(&c.displacement).any(|&v| v != 0.0));
-        }
-        Ok(out)
+        Ok(drop_empty_cases(out))
     }
 
     /// The displacements and tractions of one boundary rule on the nodes and edges it selected
@@ -496,11 +492,7 @@ impl Ctx<'_> {
                 .collect();
             self.apply_rule(rule, &key, time, subs, &targets, &mut out)?;
         }
-        for sl in &mut out {
-            sl.loads
-                .retain(|c| c.force.iter().chain(&c.displacement).any(|&v| v != 0.0));
-        }
-        Ok(out)
+        Ok(drop_empty_cases(out))
     }
 
     /// Sides selected by a boundary rule, per subdomain (global order).
@@ -578,6 +570,16 @@ impl Ctx<'_> {
         }
         Ok(selected)
     }
+}
+
+/// The loads without the cases that are zero everywhere (e.g. a prescribed 0): after every rule
+/// has been applied, since rules refer to the cases of earlier ones by position.
+fn drop_empty_cases(mut out: Vec<SubLoads>) -> Vec<SubLoads> {
+    for sl in &mut out {
+        sl.loads
+            .retain(|c| c.force.iter().chain(&c.displacement).any(|&v| v != 0.0));
+    }
+    out
 }
 
 /// Empty constraints and loads for every subdomain.

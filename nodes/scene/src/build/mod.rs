@@ -36,6 +36,9 @@ pub(crate) struct Built {
     pub(crate) recording: Recording,
     pub(crate) pgd: PgdParams,
     pub(crate) linear_stage: LinearStage,
+    /// The bytes of the mesh file the model was built from, when they came from the file (not
+    /// from embedded `data`): the loader embeds these very bytes in the scene text.
+    pub(crate) mesh_file: Option<Vec<u8>>,
 }
 
 /// A subdomain during construction.
@@ -208,6 +211,7 @@ impl Ctx<'_> {
         solver.time_start = self.resolve_time_start(coarsening, time.n_steps, linear_stage)?;
         let recording = self.recording(&raw.recording)?;
         let materials = self.materials(&raw.materials)?;
+        let mut mesh_file = None;
         let parts = match &raw.mesh {
             Some(mesh) => {
                 if !raw.block.is_empty() {
@@ -216,7 +220,12 @@ impl Ctx<'_> {
                         "a scene takes its parts either from [[block]] or from a [mesh], not both",
                     ));
                 }
-                Some(self.read_part_mesh(mesh)?)
+                let bytes = self.mesh_bytes(mesh)?;
+                let parts = self.read_part_mesh(mesh, &bytes)?;
+                if mesh.data.is_none() {
+                    mesh_file = Some(bytes);
+                }
+                Some(parts)
             }
             None => None,
         };
@@ -292,6 +301,7 @@ impl Ctx<'_> {
             recording,
             pgd,
             linear_stage,
+            mesh_file,
         })
     }
 

@@ -592,18 +592,16 @@ fn part_interface(
     let mut curves: Vec<usize> = Vec::new();
     // Edges in the pairs' order, each along it (the block scenes sum their weights and length so,
     // and the same sums give the same bits).
-    let mut ordered: Vec<(usize, [usize; 3], f64)> = edges
+    // (middle pair, nodes along the pairs' order, reversed from a's own way round).
+    let mut ordered: Vec<(usize, [usize; 3], bool)> = edges
         .iter()
         .map(|&(k, _)| {
             let n = boundary[a][k].nodes;
             let (p0, p2) = (pair_of[&n[0]], pair_of[&n[2]]);
             // The edge closing a loop runs from the last pair to the first: keep its way.
-            let along = if p0.abs_diff(p2) == 2 && p2 < p0 {
-                [n[2], n[1], n[0]]
-            } else {
-                n
-            };
-            (pair_of[&n[1]], along, 0.0)
+            let reversed = p0.abs_diff(p2) == 2 && p2 < p0;
+            let along = if reversed { [n[2], n[1], n[0]] } else { n };
+            (pair_of[&n[1]], along, reversed)
         })
         .collect();
     ordered.sort_by_key(|e| e.0);
@@ -614,13 +612,12 @@ fn part_interface(
             }
         }
     }
-    for (_, e, _) in &mut ordered {
+    for &(_, e, reversed) in &ordered {
         let x = e.map(|n| meshes[a].coords[n]);
         let m = edge_lumped_mass(&x);
         // The edge's outward normal out of a: (t_y, −t_x) for a's own way round, reversed if the
         // edge runs the other way here.
-        let own = boundary[a].iter().any(|b| b.nodes == *e);
-        let sign = if own { 1.0 } else { -1.0 };
+        let sign = if reversed { -1.0 } else { 1.0 };
         for (j, &n) in e.iter().enumerate() {
             let p = pair_of[&n];
             weights[p] += m[j];
