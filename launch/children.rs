@@ -73,6 +73,8 @@ pub(crate) struct NodeProcess {
     pub(crate) child: Child,
     /// Its `glissade node` arguments (a replacement gets them too, with `--resume`).
     pub(crate) args: Vec<String>,
+    /// Its credentials on the run's bus, written to its standard input (`--credentials -`).
+    pub(crate) credentials: Option<glissade_zenoh::Credentials>,
     pub(crate) output: ChildOutput,
     /// Exit status once it exited.
     pub(crate) status: Option<ExitStatus>,
@@ -168,8 +170,14 @@ impl ChildOutput {
     }
 }
 
-/// Starts node process `name` with `args`: its own process group, killed with the launcher.
-pub(crate) fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow::Result<NodeProcess> {
+/// Starts node process `name` with `args`: its own process group, killed with the launcher;
+/// `credentials`, when given, are written to its standard input.
+pub(crate) fn spawn_node(
+    exe: &Path,
+    name: NodeName,
+    args: &[String],
+    credentials: Option<glissade_zenoh::Credentials>,
+) -> anyhow::Result<NodeProcess> {
     let mut cmd = Command::new(exe);
     cmd.args(args);
     {
@@ -178,12 +186,13 @@ pub(crate) fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow:
         // stops every node through the bus.
         cmd.process_group(0);
     }
-    let (child, output) = spawn_child(cmd, &name.to_string(), libc::SIGKILL)
+    let (child, output) = spawn_child(cmd, &name.to_string(), libc::SIGKILL, credentials.as_ref())
         .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
     Ok(NodeProcess {
         name,
         child,
         args: args.to_vec(),
+        credentials,
         output,
         status: None,
         token_seen: false,
@@ -193,13 +202,21 @@ pub(crate) fn spawn_node(exe: &Path, name: NodeName, args: &[String]) -> anyhow:
 
 /// Spawns `cmd` with its standard output and error forwarded under `[prefix]` ([`forward`]) and
 /// `death_signal` sent to it when the launcher dies (Linux's parent-death signal: no orphans even
-/// if the launcher is killed). Returns the child and what is kept of its output.
+/// if the launcher is killed). `credentials`, when given, are its standard input's one line: no
+/// other process sees them (a command line or an environment can be read by other users).
+/// Returns the child and what is kept of its output.
 pub(crate) fn spawn_child(
     mut cmd: Command,
     prefix: &str,
     death_signal: libc::c_int,
+    credentials: Option<&glissade_zenoh::Credentials>,
 ) -> std::io::Result<(Child, ChildOutput)> {
-    cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    let stdin = if credentials.is_some() {
+        Stdio::piped()
+    } else {
+        Stdio::null()
+    };
+    cmd.stdin(stdin).stdout(Stdio::piped()).stderr(Stdio::piped());
     #[cfg(target_os = "linux")]
     // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
     unsafe {
@@ -210,6 +227,17 @@ pub(crate) fn spawn_child(
         });
     }
     let mut child = cmd.spawn()?;
+    if let (Some(c), Some(mut stdin)) = (credentials, child.stdin.take()) {
+        use std::io::Write;
+        // One short line: it fits in the pipe's buffer, so this does not wait for the child.
+        let written = stdin.write_all(c.line().as_bytes());
+        drop(stdin);
+        if let Err(e) = written {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(e);
+        }
+    }
     let last = Arc::new(Mutex::new(Vec::new()));
     let mut readers = Vec::new();
     if let Some(out) = child.stdout.take() {

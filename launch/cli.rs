@@ -221,6 +221,11 @@ pub(crate) struct NodeArgs {
     /// Mutual TLS: the private key of `--tls-cert` (PEM).
     #[arg(long, value_name = "PEM", requires = "tls_cert")]
     pub(crate) tls_key: Option<PathBuf>,
+    /// This node's credentials on the run's bus: the file the launcher wrote for it (readable by
+    /// its owner only), or `-` to read the line from standard input. Needed to join a run whose
+    /// launcher hosts the router (docs/operations.md).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) credentials: Option<PathBuf>,
     /// Exchange fields with processes on this machine through shared memory (the launcher passes
     /// it when the scene says `network.shared_memory = true`, or leaves it unset and node
     /// restarts are off anyway).

@@ -23,7 +23,7 @@ use glissade_messages::{
 use glissade_scene::{fingerprint, load_str, LoadedScene};
 use glissade_zenoh as transport;
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
@@ -95,6 +95,9 @@ pub struct Network {
     pub remote_timeout: Option<Duration>,
     /// MCAP file a recorder process writes every message of the run to; None: no recorder.
     pub recording: Option<std::path::PathBuf>,
+    /// Folder where the credentials of the nodes started by hand (`remote`) are written, one
+    /// file each, readable by this user only, removed when the run ends (the run's `--out`).
+    pub credentials: Option<std::path::PathBuf>,
 }
 
 /// Messages and bytes of one kind seen on the bus.
@@ -207,7 +210,7 @@ pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, St
 }
 
 /// The `glissade node` arguments of node `name` (after the executable); `tls`: its `--tls-*`
-/// arguments ([`tls_args`]).
+/// arguments ([`tls_args`]) and the `--credentials` argument.
 fn node_args(name: NodeName, run_id: &str, connect: &[String], interior: bool, tls: &[String]) -> Vec<String> {
     let mut args = vec![
         "node".to_string(),
@@ -287,6 +290,92 @@ pub fn node_tls(
         identity,
         mutual: false,
     }))
+}
+
+/// The message identity of node process `name`.
+fn node_id(name: NodeName) -> NodeId {
+    NodeId {
+        role: name.role.role(),
+        index: name.index,
+    }
+}
+
+/// The identity of the recorder process on the bus.
+pub const RECORDER: NodeId = NodeId {
+    role: Role::Recorder,
+    index: 0,
+};
+
+/// The credentials of a node process from its `--credentials` argument: a file the launcher
+/// wrote (readable by its owner only, as an SSH key must be), or `-` for the line the launcher
+/// writes to a process it starts. The user must be the node's own ([`transport::user_of`]).
+pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> anyhow::Result<Option<transport::Credentials>> {
+    let Some(path) = arg else {
+        return Ok(None);
+    };
+    let text = if path == Path::new("-") {
+        let mut line = String::new();
+        std::io::stdin()
+            .read_line(&mut line)
+            .context("--credentials -: cannot read standard input")?;
+        line
+    } else {
+        use std::os::unix::fs::PermissionsExt;
+        let meta =
+            std::fs::metadata(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?;
+        let mode = meta.permissions().mode() & 0o777;
+        if mode & 0o077 != 0 {
+            bail!(
+                "--credentials {}: readable by others (mode {mode:03o}); whoever reads it can speak for this node \
+                 in the run: `chmod 600` it",
+                path.display()
+            );
+        }
+        std::fs::read_to_string(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?
+    };
+    let credentials =
+        transport::Credentials::parse(&text).map_err(|e| anyhow::anyhow!("--credentials {}: {e}", path.display()))?;
+    let own = transport::user_of(id);
+    if credentials.user != own {
+        bail!(
+            "--credentials {}: they are {}'s, not this node's ({own}); each node has its own",
+            path.display(),
+            credentials.user
+        );
+    }
+    Ok(Some(credentials))
+}
+
+/// The credentials files of the nodes started by hand, removed when the run ends.
+struct CredentialFiles(Vec<PathBuf>);
+
+impl Drop for CredentialFiles {
+    fn drop(&mut self) {
+        for f in &self.0 {
+            let _ = std::fs::remove_file(f);
+        }
+    }
+}
+
+/// Writes `credentials` for node `name` into a new file of `dir`, readable by this user only.
+fn write_credentials(
+    dir: &Path,
+    run_id: &str,
+    name: NodeName,
+    credentials: &transport::Credentials,
+) -> anyhow::Result<PathBuf> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = dir.join(format!("{run_id}-{}-{}.credentials", name.role.key(), name.index));
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(&path)
+        .with_context(|| format!("cannot create {} (the credentials of node {name})", path.display()))?;
+    f.write_all(credentials.line().as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
 }
 
 /// The node processes a run needs: one per subdomain group, one per interface group, the coarse
@@ -392,8 +481,52 @@ pub fn run_distributed_observed(
         identity: Some((t.cert.clone(), t.key.clone())),
         mutual: t.mutual,
     });
-    let access = scene.network.allow.as_ref().map(|a| transport::Access::run(run_id, a));
-    if access.is_some() && !net.connect.is_empty() {
+    // Who may connect (DESIGN §4): to a router hosted here, only the run's own processes, each
+    // under its own user with a random password, speaking only on its own keys.
+    let hosting = net.connect.is_empty();
+    let mut members: Vec<NodeId> = all_nodes.iter().map(|&n| node_id(n)).collect();
+    if net.recording.is_some() {
+        members.push(RECORDER);
+    }
+    let credentials: BTreeMap<NodeId, transport::Credentials> = if hosting {
+        members
+            .iter()
+            .map(|&id| Ok((id, transport::Credentials::random(&transport::user_of(id))?)))
+            .collect::<Result<_, transport::TransportError>>()?
+    } else {
+        BTreeMap::new()
+    };
+    let access = if hosting {
+        Some(transport::Access {
+            run_id: run_id.clone(),
+            common_names: scene.network.allow.clone(),
+            members: Some(
+                members
+                    .iter()
+                    .map(|&id| {
+                        let mut m = transport::Member::node(run_id, id);
+                        if id.role == Role::Subdomain {
+                            // A subdomain process speaks for the subdomains it hosts.
+                            m.keys = vec![glissade_messages::topic::alive(run_id, id.role.key(), id.index)];
+                            m.keys.extend(groups[id.index as usize].iter().map(|&s| {
+                                glissade_messages::topic::sent_by(
+                                    run_id,
+                                    NodeId {
+                                        role: Role::Subdomain,
+                                        index: s,
+                                    },
+                                )
+                            }));
+                        }
+                        m
+                    })
+                    .collect(),
+            ),
+        })
+    } else {
+        None
+    };
+    if scene.network.allow.is_some() && !hosting {
         bail!(
             "network.allow: access control is enforced by the router this launcher hosts; with --connect {}, \
              configure it on that router",
@@ -428,8 +561,9 @@ pub fn run_distributed_observed(
             auto.is_ok()
         }
     };
-    let bus_config = |mode: &str, listen: &[String], connect: &[String]| {
-        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), access.as_ref())
+    let bus_config = |mode: &str, listen: &[String], connect: &[String], auth: Option<&transport::Auth>| {
+        let access = if mode == "router" { access.as_ref() } else { None };
+        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access)
             .context("the bus (the scene's [network] section, --listen, --connect)")?;
         transport::set_shared_memory(&mut c, shared_memory)?;
         anyhow::Ok(c)
@@ -451,8 +585,15 @@ pub fn run_distributed_observed(
         } else {
             net.listen.clone()
         };
-        let session = transport::open(bus_config("router", &listen, &[])?)
+        // The router reads its users when it opens; their file goes right after.
+        let users: Vec<transport::Credentials> = credentials.values().cloned().collect();
+        let dictionary = transport::Dictionary::write(&std::env::temp_dir(), &users)?;
+        let auth = transport::Auth::Router {
+            dictionary: dictionary.path().to_path_buf(),
+        };
+        let session = transport::open(bus_config("router", &listen, &[], Some(&auth))?)
             .with_context(|| format!("cannot host the Zenoh router on {}", listen.join(", ")))?;
+        drop(dictionary);
         let connect = vec![local_endpoint(&listen[0])];
         (
             session,
@@ -460,7 +601,7 @@ pub fn run_distributed_observed(
             format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
         )
     } else {
-        let session = transport::open(bus_config("client", &[], &net.connect)?)
+        let session = transport::open(bus_config("client", &[], &net.connect, None)?)
             .with_context(|| format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")))?;
         (
             session,
@@ -540,9 +681,14 @@ pub fn run_distributed_observed(
     let mut restarted: BTreeMap<NodeName, usize> = BTreeMap::new();
     // Spawn the local node processes; tell how to start the others.
     let mut children = Children(Vec::new());
+    if hosting {
+        node_tls.extend(["--credentials".to_string(), "-".to_string()]);
+    }
     for &name in all_nodes.iter().filter(|n| !net.remote.contains(n)) {
         let args = with_supervision(node_args(name, run_id, &node_connect, opts.interior, &node_tls));
-        children.0.push(spawn_node(exe, name, &args)?);
+        children
+            .0
+            .push(spawn_node(exe, name, &args, credentials.get(&node_id(name)).cloned())?);
     }
     let mut recorder = match &net.recording {
         Some(path) => Some(crate::recording::spawn_recorder_process(
@@ -551,11 +697,13 @@ pub fn run_distributed_observed(
             run_id,
             &node_connect[0],
             &node_tls,
+            credentials.get(&RECORDER),
             path,
         )?),
         None => None,
     };
     let remote_timeout = net.remote_timeout.unwrap_or(READY_TIMEOUT);
+    let mut hand_credentials = CredentialFiles(Vec::new());
     if !net.remote.is_empty() {
         let connect: Vec<String> = if net.connect.is_empty() {
             net.listen
@@ -588,10 +736,28 @@ pub fn run_distributed_observed(
             None => Vec::new(),
         };
         remote_tls.extend(shared_memory_arg);
+        let dir = match (&net.credentials, hosting) {
+            (Some(d), true) => Some(d),
+            (None, true) => bail!("nodes started by hand need their credentials written to a folder (none given)"),
+            (_, false) => None,
+        };
         for &r in &net.remote {
+            let mut args = remote_tls.clone();
+            if let Some(dir) = dir {
+                let cr = &credentials[&node_id(r)];
+                let file = write_credentials(dir, run_id, r, cr)?;
+                eprintln!(
+                    "(node {r}: copy {} to its machine, readable by its user only; it lets a process speak as {r} in \
+                     this run and nothing else)",
+                    file.display()
+                );
+                hand_credentials.0.push(file.clone());
+                let name = file.file_name().map(PathBuf::from).unwrap_or(file);
+                args.extend(["--credentials".to_string(), name.display().to_string()]);
+            }
             eprintln!(
                 "  glissade {}",
-                with_supervision(node_args(r, run_id, &connect, opts.interior, &remote_tls)).join(" ")
+                with_supervision(node_args(r, run_id, &connect, opts.interior, &args)).join(" ")
             );
         }
     }
@@ -731,7 +897,8 @@ pub fn run_distributed_observed(
                 let base = p.args.clone();
                 let mut args = base.clone();
                 args.push("--resume".into());
-                *p = spawn_node(exe, name, &args)?;
+                let credentials = p.credentials.clone();
+                *p = spawn_node(exe, name, &args, credentials)?;
                 p.args = base;
                 child_failure = None;
             } else {
@@ -1049,35 +1216,61 @@ fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a zenoh::bytes::
     a.bytes.as_ref()
 }
 
-/// Runs one node process: connects to `connect`, fetches the scene of run `run_id` over the bus,
-/// builds its nodes and runs them until the run ends. A subdomain node hosts the subdomains of
-/// group `index` of the scene's deployment; `subdomains`, when given, must name the same ones.
+/// How a node or recorder process joins a run's bus: the router's endpoints, TLS, and its
+/// credentials (`glissade node --connect --tls-* --credentials`).
+pub struct Joining<'a> {
+    pub connect: &'a [String],
+    pub tls: Option<&'a transport::Tls>,
+    pub credentials: Option<&'a transport::Credentials>,
+}
+
+impl Joining<'_> {
+    /// A client session on the bus (shared memory on or off), or an error saying what to check.
+    pub fn open(&self, shared_memory: bool) -> anyhow::Result<zenoh::Session> {
+        let auth = self.credentials.cloned().map(transport::Auth::Client);
+        let mut config = transport::secure_config("client", &[], self.connect, false, self.tls, auth.as_ref(), None)
+            .context("--connect, --tls-*")?;
+        transport::set_shared_memory(&mut config, shared_memory)?;
+        transport::open(config).with_context(|| {
+            let mut hints = Vec::new();
+            if self.tls.is_some() {
+                hints.push(
+                    "TLS: --tls-root-ca must be the run's certificate authority, and with mutual TLS --tls-cert a \
+                     certificate it signed",
+                );
+            }
+            hints.push(if self.credentials.is_some() {
+                "credentials: --credentials must be the file the launcher wrote for this node, for this run"
+            } else {
+                "a router hosted by `glissade run` admits only the run's processes: give --credentials, the file \
+                 the launcher wrote for this node"
+            });
+            format!(
+                "cannot join the run's bus at {} ({})",
+                self.connect.join(", "),
+                hints.join("; ")
+            )
+        })
+    }
+}
+
+/// Runs one node process: joins the bus, fetches the scene of run `run_id` over it, builds its
+/// nodes and runs them until the run ends. A subdomain node hosts the subdomains of group `index`
+/// of the scene's deployment; `subdomains`, when given, must name the same ones.
 pub fn run_node_process(
     role: NodeRole,
     run_id: &str,
-    connect: &[String],
+    bus: &Joining,
     subdomains: &[u32],
     index: u32,
     supervision: Supervision,
-    tls: Option<&transport::Tls>,
 ) -> anyhow::Result<()> {
     let interior = supervision.interior;
     let name = NodeName { role, index };
     if role == NodeRole::Coarse && index != 0 {
         bail!("node {name}: a run has one coarse node, index 0");
     }
-    let mut config =
-        transport::secure_config("client", &[], connect, false, tls, None).context("--connect, --tls-*")?;
-    transport::set_shared_memory(&mut config, supervision.shared_memory)?;
-    let session = transport::open(config).with_context(|| {
-        let hint = if tls.is_some() {
-            " (TLS: --tls-root-ca must be the run's certificate authority, and with mutual TLS --tls-cert a \
-             certificate it signed)"
-        } else {
-            ""
-        };
-        format!("cannot join the run's bus at {}{hint}", connect.join(", "))
-    })?;
+    let session = bus.open(supervision.shared_memory)?;
     let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
     let fp = transport::scene_fingerprint_of(&bytes, run_id)?;
     let expected = Expected {

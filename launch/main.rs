@@ -8,7 +8,7 @@ use clap::Parser;
 use cli::{Cli, ColorByArg, Command, KernelsArg, ReplayArgs, RoleArg, RunArgs};
 use glissade::children::NodeRole;
 use glissade::distributed::{
-    install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Network, Supervision,
+    install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Joining, Network, Supervision,
 };
 use glissade::load_scene;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json, RunFile};
@@ -283,6 +283,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 args.tls_cert.as_deref(),
                 args.tls_key.as_deref(),
             )?;
+            let credentials = |id| glissade::distributed::node_credentials(args.credentials.as_deref(), id);
             let role = match args.role {
                 RoleArg::Subdomain => NodeRole::Subdomain,
                 RoleArg::Interface => NodeRole::Interface,
@@ -291,20 +292,29 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     let Some(file) = &args.file else {
                         anyhow::bail!("a recorder node needs --file <recording.mcap>");
                     };
-                    glissade::recording::run_recorder_process(
-                        &args.run,
-                        &args.connect,
-                        tls.as_ref(),
-                        args.shared_memory,
-                        file,
-                    )?;
+                    let credentials = credentials(glissade::distributed::RECORDER)?;
+                    let bus = Joining {
+                        connect: &args.connect,
+                        tls: tls.as_ref(),
+                        credentials: credentials.as_ref(),
+                    };
+                    glissade::recording::run_recorder_process(&args.run, &bus, args.shared_memory, file)?;
                     return Ok(ExitCode::SUCCESS);
                 }
+            };
+            let credentials = credentials(glissade_messages::NodeId {
+                role: role.role(),
+                index: args.index,
+            })?;
+            let bus = Joining {
+                connect: &args.connect,
+                tls: tls.as_ref(),
+                credentials: credentials.as_ref(),
             };
             run_node_process(
                 role,
                 &args.run,
-                &args.connect,
+                &bus,
                 &args.subdomains,
                 args.index,
                 Supervision {
@@ -313,7 +323,6 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     resume: args.resume,
                     shared_memory: args.shared_memory,
                 },
-                tls.as_ref(),
             )?;
             Ok(ExitCode::SUCCESS)
         }
@@ -451,6 +460,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             remote: args.remote.clone(),
             remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
             recording: recording.clone(),
+            credentials: Some(args.out.clone()),
         };
         let observe = live
             .view

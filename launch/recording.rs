@@ -221,6 +221,7 @@ pub fn spawn_recorder_process(
     run_id: &str,
     endpoint: &str,
     tls: &[String],
+    credentials: Option<&glissade_zenoh::Credentials>,
     path: &Path,
 ) -> anyhow::Result<RecorderProcess> {
     let ready = Arc::new(AtomicBool::new(false));
@@ -238,7 +239,7 @@ pub fn spawn_recorder_process(
         .arg("--file")
         .arg(path);
     // The recorder finalises its file if the launcher dies (SIGTERM, not SIGKILL).
-    let (child, output) = crate::children::spawn_child(cmd, "recorder:0", libc::SIGTERM)
+    let (child, output) = crate::children::spawn_child(cmd, "recorder:0", libc::SIGTERM, credentials)
         .with_context(|| format!("cannot start the recorder process ({})", exe.display()))?;
     Ok(RecorderProcess {
         child,
@@ -352,8 +353,7 @@ fn log_of(path: &Path, patterns: &str) -> Result<Vec<u8>, String> {
 /// which finalise the file too).
 pub fn run_recorder_process(
     run_id: &str,
-    connect: &[String],
-    tls: Option<&glissade_zenoh::Tls>,
+    bus: &crate::distributed::Joining,
     shared_memory: bool,
     path: &Path,
 ) -> anyhow::Result<()> {
@@ -362,10 +362,7 @@ pub fn run_recorder_process(
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
     }
-    let mut config =
-        glissade_zenoh::secure_config("client", &[], connect, false, tls, None).context("--connect, --tls-*")?;
-    glissade_zenoh::set_shared_memory(&mut config, shared_memory)?;
-    let session = glissade_zenoh::open(config)?;
+    let session = bus.open(shared_memory)?;
     let bytes = glissade_zenoh::fetch_scene(&session, run_id, Duration::from_secs(60))?;
     let fp = glissade_zenoh::scene_fingerprint_of(&bytes, run_id)?;
     let expected = Expected {
@@ -494,8 +491,13 @@ pub fn run_recorder_process(
                     // Only what decodes as a message of this run and scene, on its own key, is
                     // kept: anything else on the run's keys is not the run's.
                     let refusal = match decode(&bytes, &expected) {
-                        Ok(m) if m.topic() == key => None,
-                        Ok(m) => Some(format!("its envelope and payload belong on {}", m.topic())),
+                        Ok(m) if m.topic() != key => Some(format!("its envelope and payload belong on {}", m.topic())),
+                        Ok(m) if !m.payload.senders().contains(&m.envelope.sender.role) => Some(format!(
+                            "a {} node does not send {}",
+                            m.envelope.sender.role.key(),
+                            m.payload.field_key()
+                        )),
+                        Ok(_) => None,
                         Err(e) => Some(e.to_string()),
                     };
                     match refusal {

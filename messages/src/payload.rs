@@ -2,7 +2,7 @@
 //! [`Verdict`], [`InterfaceIndicators`], [`ParticularModes`], [`InterfaceSolution`]), the checks
 //! of their sizes after decoding, and the [`Message`] (envelope + payload).
 
-use crate::{DecodeBuffers, DecodeError, Envelope, Field};
+use crate::{DecodeBuffers, DecodeError, Envelope, Field, Role};
 use serde::{Deserialize, Serialize};
 
 /// How a run ended, or that it goes on.
@@ -258,6 +258,26 @@ impl Payload {
             Payload::InterfaceSolution(_) => "interface_solution",
             Payload::Displacement { .. } => "displacement",
             Payload::IndicatorPartials { .. } => "indicator_partials",
+        }
+    }
+
+    /// The roles that send this kind of payload: a message of another sender is not the run's
+    /// (the launcher sends the scene and, after a time-coarse start, the first local directions).
+    pub fn senders(&self) -> &'static [Role] {
+        match self {
+            Payload::Scene { .. } => &[Role::Launcher],
+            Payload::HomogenizedOperator { .. }
+            | Payload::MacroForces { .. }
+            | Payload::BoundaryState { .. }
+            | Payload::BoundaryModes { .. }
+            | Payload::AndersonGram { .. }
+            | Payload::Displacement { .. } => &[Role::Subdomain],
+            Payload::MacroDisplacements { .. } => &[Role::Coarse],
+            Payload::LocalDirections { .. } => &[Role::Interface, Role::Launcher],
+            Payload::AndersonStep { .. }
+            | Payload::Decision(_)
+            | Payload::InterfaceSolution(_)
+            | Payload::IndicatorPartials { .. } => &[Role::Interface],
         }
     }
 

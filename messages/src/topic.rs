@@ -57,6 +57,17 @@ pub fn sent_by(run_id: &str, id: NodeId) -> String {
     within_run(run_id, format_args!("{}/{}/**", id.role.key(), id.index))
 }
 
+/// The keys node `id` may speak on in run `run_id` (publish, reply, declare a queryable or a
+/// liveliness token): everything it publishes ([`sent_by`]) and its liveliness token ([`alive`],
+/// [`recorder_alive`] for the recorder).
+pub fn own_keys(run_id: &str, id: NodeId) -> Vec<String> {
+    let token = match id.role {
+        Role::Recorder => recorder_alive(run_id),
+        role => alive(run_id, role.key(), id.index),
+    };
+    vec![sent_by(run_id, id), token]
+}
+
 /// `glissade/<run>/launcher/0/<what>`.
 fn launcher(run_id: &str, what: &str) -> String {
     within_run(run_id, format_args!("{}/0/{what}", Role::Launcher.key()))
@@ -211,5 +222,19 @@ mod tests {
         assert_eq!(node_of_alive("x"), "x");
         assert_eq!(recorder_alive("r"), "glissade/r/recording/alive");
         assert_eq!(log("r"), "glissade/r/recorder/0/log");
+        let recorder = NodeId {
+            role: Role::Recorder,
+            index: 0,
+        };
+        assert!(own_keys("r", recorder).iter().any(|k| key_matches(k, &log("r"))));
+        assert!(own_keys("r", recorder).contains(&recorder_alive("r")));
+        let sub = NodeId {
+            role: Role::Subdomain,
+            index: 2,
+        };
+        assert_eq!(
+            own_keys("r", sub),
+            ["glissade/r/subdomain/2/**", "glissade/r/alive/subdomain/2"]
+        );
     }
 }

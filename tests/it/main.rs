@@ -6,6 +6,7 @@ mod allocations;
 mod analytic;
 mod bad_input;
 mod bench;
+mod bus_auth;
 mod common;
 mod distributed;
 mod foreign;

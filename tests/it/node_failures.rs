@@ -302,6 +302,24 @@ fn killing_the_launcher_leaves_no_node() {
     assert_no_process_left(&run_id);
 }
 
+/// `cmd` (the glissade executable) started as subdomain node 1 of run `run_id` by hand: it
+/// connects to `endpoint` with the credentials the launcher wrote into `out`.
+pub fn start_hand_node(mut cmd: Command, run_id: &str, endpoint: &str, out: &Path) -> Launcher {
+    cmd.args([
+        "node",
+        "subdomain",
+        "--run",
+        run_id,
+        "--connect",
+        endpoint,
+        "--index",
+        "1",
+    ])
+    .arg("--credentials")
+    .arg(out.join(format!("{run_id}-subdomain-1.credentials")));
+    Launcher::spawn(&mut cmd)
+}
+
 /// A launcher on a given loopback port that leaves subdomain node 1 to be started by hand, and
 /// that node, started here as a separate process (not a child of the launcher).
 fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String, Scratch) {
@@ -327,16 +345,7 @@ fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String, Scr
         .arg(&*dir);
     let mut launcher = Launcher::spawn(&mut cmd);
     launcher.wait_for_line("on the other machine", Duration::from_secs(120));
-    let node = Launcher::spawn(Command::new(exe()).args([
-        "node",
-        "subdomain",
-        "--run",
-        &run_id,
-        "--connect",
-        &endpoint,
-        "--index",
-        "1",
-    ]));
+    let node = start_hand_node(Command::new(exe()), &run_id, &endpoint, &dir);
     launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
     std::thread::sleep(Duration::from_millis(1500));
     (launcher, node, run_id, dir)
@@ -385,22 +394,33 @@ fn the_launcher_names_a_dead_hand_started_node() {
     assert_no_process_left(&run_id);
 }
 
-/// A second launcher that connects to the router of a running run with the same run id refuses
-/// to start, naming the tokens already alive, and the first run goes on undisturbed (its hand-
-/// started node still there).
+/// On a shared router (a stand-in for `zenohd`, which the launchers connect to), a second
+/// launcher with the run id of a running run refuses to start, naming the tokens already alive,
+/// and the first run goes on undisturbed.
 #[test]
 fn a_second_launcher_with_the_same_run_id_refuses_to_start() {
-    let (mut launcher, _node, run_id, dir) = launch_with_hand_started_node("same-run-id");
-    let endpoint = launcher
-        .output()
-        .lines()
-        .find_map(|l| {
-            l.split("--connect ")
-                .nth(1)
-                .map(|r| r.split(' ').next().unwrap_or("").to_string())
-        })
-        .expect("the launcher prints the endpoint for nodes started by hand");
-    let scene = dir.join("endless.toml");
+    let dir = scratch("same-run-id");
+    let scene = endless_scene(&dir);
+    let run_id = format!("same-run-id-{}", std::process::id());
+    let endpoint = format!("tcp/127.0.0.1:{}", glissade_zenoh::free_loopback_port().unwrap());
+    let _router =
+        glissade_zenoh::open(glissade_zenoh::config("router", std::slice::from_ref(&endpoint), &[], false).unwrap())
+            .unwrap();
+    let mut cmd = Command::new(exe());
+    cmd.arg("run")
+        .arg(&scene)
+        .args([
+            "--quiet",
+            "--verbose",
+            "--run-id",
+            &run_id,
+            "--connect",
+            &endpoint,
+            "--out",
+        ])
+        .arg(&*dir);
+    let mut launcher = Launcher::spawn(&mut cmd);
+    launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
     let t = Instant::now();
     let second = Command::new(exe())
         .arg("run")

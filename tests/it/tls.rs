@@ -52,6 +52,7 @@ fn router(endpoint: &str, allow: Option<(&str, &[String])>) -> zenoh::Session {
         &[],
         false,
         Some(&tls("ca", Some("node"), true)),
+        None,
         access.as_ref(),
     )
     .unwrap();
@@ -65,6 +66,7 @@ fn client(endpoint: &str, tls: &transport::Tls) -> Result<zenoh::Session, transp
         &[endpoint.to_string()],
         false,
         Some(tls),
+        None,
         None,
     )?)
 }

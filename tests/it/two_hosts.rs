@@ -4,7 +4,7 @@
 //! it the test prints why it skipped.
 
 use crate::common::scratch;
-use crate::node_failures::Launcher;
+use crate::node_failures::{start_hand_node, Launcher};
 use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
@@ -169,21 +169,15 @@ fn run_across_two_network_namespaces() {
             .arg(&dir_a),
     );
     launcher.wait_for_line("on the other machine", Duration::from_secs(120));
-    // The node of the other host gets the scene over the bus: no file there.
-    let mut node = Launcher::spawn(TwoHosts::exec(&hosts.b, exe).args([
-        "node",
-        "subdomain",
-        "--run",
-        &run_id,
-        "--connect",
-        &endpoint,
-        "--index",
-        "1",
-    ]));
+    // The node of the other host gets the scene over the bus: no file there, but its credentials,
+    // which the launcher wrote into its --out (here the two hosts share the file system).
+    let mut node = start_hand_node(TwoHosts::exec(&hosts.b, exe), &run_id, &endpoint, &dir_a);
     let status = launcher.wait_exit(Duration::from_secs(600));
     let node_status = node.wait_exit(Duration::from_secs(60));
     assert!(status.success(), "launcher: {status}\n{}", launcher.output());
     assert!(node_status.success(), "node: {node_status}\n{}", node.output());
+    let credentials = dir_a.join(format!("{run_id}-subdomain-1.credentials"));
+    assert!(!credentials.exists(), "the credentials outlive the run");
 
     let local = Command::new(exe)
         .arg("run")

@@ -57,7 +57,10 @@ mod test_support;
 /// other lines (warnings, errors, `RUST_LOG` logs) are always shown.
 pub const NOTE: &str = "note: ";
 
-pub use config::{config, free_loopback_port, open, secure_config, set_shared_memory, Access, Tls, LEASE};
+pub use config::{
+    config, free_loopback_port, open, secure_config, set_shared_memory, user_of, Access, Auth, Credentials, Dictionary,
+    Member, Tls, LEASE,
+};
 pub use error::TransportError;
 pub use handshake::{fetch_scene, publish_done, publish_start, publish_stop, scene_fingerprint_of, serve_scene};
 pub use node_loop::{run_nodes, NodeRun};

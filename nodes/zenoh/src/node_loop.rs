@@ -475,6 +475,15 @@ impl Handler<'_> {
                 self.recycle(msg);
                 continue;
             }
+            if !msg.payload.senders().contains(&msg.envelope.sender.role) {
+                log(&format!(
+                    "ignored a message on {key}: a {} node does not send {}",
+                    msg.envelope.sender.role.key(),
+                    msg.payload.field_key()
+                ));
+                self.recycle(msg);
+                continue;
+            }
             if self.seen.contains(&hash) {
                 log(&format!(
                     "ignored a repeat of the message on {key} (iteration {}, {:?}): already handled",
