@@ -400,73 +400,34 @@ fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
     names
 }
 
-/// Runs `scene` with one process per node group, all on this machine over loopback.
-pub fn run_multi_process(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    exe: &Path,
-    on_iteration: impl FnMut(&IterationRecord),
-) -> anyhow::Result<RunResult> {
-    run_distributed(scene, opts, exe, &Network::default(), on_iteration).map(|(result, _)| result)
+/// The run's bus as the launcher joins it ([`join_bus`]).
+struct Bus {
+    session: zenoh::Session,
+    /// The endpoints node processes connect to.
+    node_connect: Vec<String>,
+    /// What the bus is, for messages ("this launcher hosting the Zenoh router on …").
+    description: String,
+    /// The launcher hosts the router (and says who may connect to it).
+    hosting: bool,
+    /// Fields between processes go through shared memory.
+    shared_memory: bool,
+    /// The `--tls-*`, `--shared-memory` and `--credentials -` arguments of the node processes
+    /// the launcher starts.
+    node_args: Vec<String>,
+    /// Each process's credentials, when the launcher hosts the router.
+    credentials: BTreeMap<NodeId, transport::Credentials>,
 }
 
-/// Runs `scene` with one process per node group on the bus `net` describes; nodes listed in
-/// `net.remote` are left to be started by hand. Returns the result and the bus traffic.
-pub fn run_distributed(
+/// Opens the run's bus: a router hosted here (TLS and access control as the scene's `[network]`
+/// says, only the run's processes admitted, DESIGN §4) or a client of the router of
+/// `--connect`, refusing a run id already in use there.
+fn join_bus(
     scene: &LoadedScene,
-    opts: &RunOptions,
-    exe: &Path,
+    run_id: &str,
     net: &Network,
-    on_iteration: impl FnMut(&IterationRecord),
-) -> anyhow::Result<(RunResult, Traffic)> {
-    run_distributed_observed(scene, opts, exe, net, on_iteration, None::<fn(&Message)>)
-}
-
-/// As [`run_distributed`]; `observe`, when given, sees every message of the run the launcher
-/// receives, in arrival order (the live Rerun view of a multi-process run). Without it, the
-/// launcher copies and decodes only the messages it keeps (decisions, interface solutions,
-/// displacements) and just counts the others, most of the bus's bytes.
-pub fn run_distributed_observed(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    exe: &Path,
-    net: &Network,
-    mut on_iteration: impl FnMut(&IterationRecord),
-    mut observe: Option<impl FnMut(&Message)>,
-) -> anyhow::Result<(RunResult, Traffic)> {
-    let model = &scene.model;
-    if model.interfaces.is_empty() {
-        // Nothing to distribute: the in-process direct solve.
-        let result = crate::runner::run_in_process(scene, opts, on_iteration)?;
-        return Ok((result, Traffic::default()));
-    }
-    let t0 = Instant::now();
-    let run_id = &opts.run_id;
-    let plan = Plan::new(model).with_scene(scene);
-    // A time-coarse start's coarse solve runs here, in-process, before the nodes start; its
-    // initial local directions follow `start` on the bus.
-    let time_start = crate::runner::time_start(
-        scene,
-        &RunContext {
-            run_id: run_id.clone(),
-            scene_fingerprint: scene.fingerprint,
-        },
-        &plan,
-        None,
-    )?;
-    if let Some(t) = &time_start {
-        crate::console::note(&format!("run {run_id}: {}", t.describe()));
-    }
-    let groups = plan.groups(scene.deployment.subdomain_nodes);
-    let all_nodes = run_nodes_of(&plan, groups.len());
-    for r in &net.remote {
-        if !all_nodes.contains(r) {
-            bail!(
-                "--remote {r}: this run has no such node (its nodes: {})",
-                all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
-            );
-        }
-    }
+    all_nodes: &[NodeName],
+    groups: &[Vec<u32>],
+) -> anyhow::Result<Bus> {
     for l in &net.listen {
         if l.ends_with(":0") {
             bail!("--listen {l}: give an explicit port (nodes started elsewhere must know it)");
@@ -498,7 +459,7 @@ pub fn run_distributed_observed(
     };
     let access = if hosting {
         Some(transport::Access {
-            run_id: run_id.clone(),
+            run_id: run_id.to_string(),
             common_names: scene.network.allow.clone(),
             members: Some(
                 members
@@ -571,14 +532,16 @@ pub fn run_distributed_observed(
     // How every process joins the bus: TLS, and shared memory when the scene asks for it or the
     // launcher chose it (only between processes on one machine; across machines Zenoh uses the
     // link).
-    let shared_memory_arg = shared_memory.then(|| "--shared-memory".to_string());
-    let mut node_tls = match &scene.network.tls {
+    let mut node_args = match &scene.network.tls {
         Some(t) => tls_args(&t.root_ca, t.mutual.then_some((&*t.cert, &*t.key))),
         None => Vec::new(),
     };
-    node_tls.extend(shared_memory_arg.clone());
+    node_args.extend(shared_memory.then(|| "--shared-memory".to_string()));
+    if hosting {
+        node_args.extend(["--credentials".to_string(), "-".to_string()]);
+    }
     // The bus: a router hosted here, or a client of the given router.
-    let (session, node_connect, bus) = if net.connect.is_empty() {
+    let (session, node_connect, description) = if hosting {
         let listen = if net.listen.is_empty() {
             let scheme = if tls.is_some() { "tls" } else { "tcp" };
             vec![format!("{scheme}/127.0.0.1:{}", free_port()?)]
@@ -615,12 +578,99 @@ pub fn run_distributed_observed(
         let taken = transport::tokens_alive(&session, run_id, RUN_ID_PROBE)?;
         if !taken.is_empty() {
             bail!(
-                "run id {run_id} is already in use on {bus}: {} alive there; nothing was started: choose \
+                "run id {run_id} is already in use on {description}: {} alive there; nothing was started: choose \
                  another --run-id (or leave it out for a new random one)",
                 taken.join(", ")
             );
         }
     }
+    Ok(Bus {
+        session,
+        node_connect,
+        description,
+        hosting,
+        shared_memory,
+        node_args,
+        credentials,
+    })
+}
+
+/// Runs `scene` with one process per node group, all on this machine over loopback.
+pub fn run_multi_process(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    exe: &Path,
+    on_iteration: impl FnMut(&IterationRecord),
+) -> anyhow::Result<RunResult> {
+    run_distributed(scene, opts, exe, &Network::default(), on_iteration).map(|(result, _)| result)
+}
+
+/// Runs `scene` with one process per node group on the bus `net` describes; nodes listed in
+/// `net.remote` are left to be started by hand. Returns the result and the bus traffic.
+pub fn run_distributed(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    exe: &Path,
+    net: &Network,
+    on_iteration: impl FnMut(&IterationRecord),
+) -> anyhow::Result<(RunResult, Traffic)> {
+    run_distributed_observed(scene, opts, exe, net, on_iteration, None::<fn(&Message)>)
+}
+
+/// As [`run_distributed`]; `observe`, when given, sees every message of the run the launcher
+/// receives, in arrival order (the live Rerun view of a multi-process run). Without it, the
+/// launcher copies and decodes only the messages it keeps (decisions, interface solutions,
+/// displacements) and just counts the others, most of the bus's bytes.
+pub fn run_distributed_observed(
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    exe: &Path,
+    net: &Network,
+    mut on_iteration: impl FnMut(&IterationRecord),
+    mut observe: Option<impl FnMut(&Message)>,
+) -> anyhow::Result<(RunResult, Traffic)> {
+    let model = &scene.model;
+    if model.interfaces.is_empty() {
+        // Nothing to distribute: the in-process direct solve.
+        let result = crate::runner::run_in_process(scene, opts, on_iteration)?;
+        return Ok((result, Traffic::default()));
+    }
+    let t0 = Instant::now();
+    let run_id = &opts.run_id;
+    let plan = Plan::new(model).with_scene(scene);
+    // A time-coarse start's coarse solve runs here, in-process, before the nodes start; its
+    // initial local directions follow `start` on the bus.
+    let time_start = crate::runner::time_start(
+        scene,
+        &RunContext {
+            run_id: run_id.clone(),
+            scene_fingerprint: scene.fingerprint,
+        },
+        &plan,
+        None,
+    )?;
+    if let Some(t) = &time_start {
+        crate::console::note(&format!("run {run_id}: {}", t.describe()));
+    }
+    let groups = plan.groups(scene.deployment.subdomain_nodes);
+    let all_nodes = run_nodes_of(&plan, groups.len());
+    for r in &net.remote {
+        if !all_nodes.contains(r) {
+            bail!(
+                "--remote {r}: this run has no such node (its nodes: {})",
+                all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
+            );
+        }
+    }
+    let Bus {
+        session,
+        node_connect,
+        description: bus,
+        hosting,
+        shared_memory,
+        node_args: node_tls,
+        credentials,
+    } = join_bus(scene, run_id, net, &all_nodes, &groups)?;
     let _launcher_token = transport::launcher_token(&session, run_id)?;
     let mut presence = transport::Presence::watch(&session, run_id)?;
     let launcher = NodeId {
@@ -681,9 +731,6 @@ pub fn run_distributed_observed(
     let mut restarted: BTreeMap<NodeName, usize> = BTreeMap::new();
     // Spawn the local node processes; tell how to start the others.
     let mut children = Children(Vec::new());
-    if hosting {
-        node_tls.extend(["--credentials".to_string(), "-".to_string()]);
-    }
     for &name in all_nodes.iter().filter(|n| !net.remote.contains(n)) {
         let args = with_supervision(node_args(name, run_id, &node_connect, opts.interior, &node_tls));
         children
@@ -735,7 +782,7 @@ pub fn run_distributed_observed(
             }
             None => Vec::new(),
         };
-        remote_tls.extend(shared_memory_arg);
+        remote_tls.extend(shared_memory.then(|| "--shared-memory".to_string()));
         let dir = match (&net.credentials, hosting) {
             (Some(d), true) => Some(d),
             (None, true) => bail!("nodes started by hand need their credentials written to a folder (none given)"),
