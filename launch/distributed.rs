@@ -12,32 +12,29 @@
 //! what is left. Every node also watches the others' tokens and the launcher's, so a run stops
 //! even if the launcher itself is killed (local children also die with it: parent-death signal).
 
+use crate::bus::{join_bus, node_id, tls_args, write_credentials, Bus, CredentialFiles, RECORDER};
 use crate::children::{spawn_node, Children, NodeName, NodeRole};
 use crate::runner::{IterationRecord, RunOptions, RunResult};
-use anyhow::{bail, Context};
+use anyhow::bail;
 use glissade_bus::RunContext;
-use glissade_deploy::{build_interface_node, build_nodes, Plan, Selection};
-use glissade_messages::{
-    decode, encode, Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict,
-};
-use glissade_scene::{fingerprint, load_str, LoadedScene};
+use glissade_deploy::Plan;
+use glissade_messages::{encode, Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict};
+use glissade_scene::LoadedScene;
 use glissade_zenoh as transport;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{mpsc, Arc};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
 
 /// How long nodes may take to fetch the scene, build their operators and report ready.
-const READY_TIMEOUT: Duration = Duration::from_secs(300);
-/// Longest wait for the answer to "is this run id in use on the router?".
-const RUN_ID_PROBE: Duration = Duration::from_secs(2);
+pub(crate) const READY_TIMEOUT: Duration = Duration::from_secs(300);
 /// Longest silence on the bus before a run is declared stalled.
-const IDLE_TIMEOUT: Duration = Duration::from_secs(600);
+pub(crate) const IDLE_TIMEOUT: Duration = Duration::from_secs(600);
 /// After a peer's token disappears, how long a node still handles messages already on their way
 /// before it gives up (a peer that finished leaves right after its last messages).
-const DEPARTURE_GRACE: Duration = Duration::from_secs(2);
+pub(crate) const DEPARTURE_GRACE: Duration = Duration::from_secs(2);
 /// How long a child whose token disappeared may take to exit before it counts as failed.
 const EXIT_GRACE: Duration = Duration::from_secs(3);
 /// How long nodes get to leave after `stop` before they are killed.
@@ -46,7 +43,7 @@ const STOP_TIMEOUT: Duration = Duration::from_secs(5);
 const FINISH_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long a node process whose nodes are finished waits for the launcher's word that it holds
 /// the run's results before it leaves anyway.
-const DONE_TIMEOUT: Duration = Duration::from_secs(30);
+pub(crate) const DONE_TIMEOUT: Duration = Duration::from_secs(30);
 /// Longest wait, once every node process has exited, for its last messages still on their way
 /// through the router.
 const STRAGGLER_TIMEOUT: Duration = Duration::from_secs(5);
@@ -137,75 +134,13 @@ pub struct Supervision {
     pub shared_memory: bool,
 }
 
-/// A free TCP port on the loopback interface.
-fn free_port() -> anyhow::Result<u16> {
-    transport::free_loopback_port().context("cannot bind a loopback port")
-}
-
-/// The endpoint a node on this machine connects to for a router listening on `listen`.
-fn local_endpoint(listen: &str) -> String {
-    listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
-}
-
-/// Least room in `/dev/shm` for the launcher to choose shared memory: the processes' 16 MiB
-/// pools and the lenders' pools of a run of the stratified scene at N = 1000, with room to spare.
-pub const SHARED_MEMORY_ROOM: u64 = 512 << 20;
-
 /// Why a dead node process could not resume from the recording of a run (`recorded` or not) of
 /// `scene`, whatever the transport: no recording, or an incomplete one.
-fn unresumable(scene: &LoadedScene, recorded: bool) -> Option<String> {
+pub(crate) fn unresumable(scene: &LoadedScene, recorded: bool) -> Option<String> {
     if recorded {
         scene.recording.incomplete()
     } else {
         Some("the run is not recorded".to_string())
-    }
-}
-
-/// What [`auto_shared_memory`] looks at besides the scene.
-#[derive(Debug, Clone)]
-pub struct Host {
-    /// The run is recorded.
-    pub recorded: bool,
-    /// Some nodes run on other machines (started by hand).
-    pub remote_nodes: bool,
-    /// Bytes free in `/dev/shm`; None if it cannot be read.
-    pub room: Option<u64>,
-    /// Whether processes here may lock shared memory ([`transport::shared_memory_lockable`]).
-    pub lockable: Result<(), String>,
-}
-
-/// Whether a run whose scene leaves `network.shared_memory` unset passes its fields through
-/// shared memory: Ok(why) when node restarts are off for it anyway (they need fields that do not
-/// go through shared memory: see [`run_distributed`]), every node runs on this machine, the bus
-/// is not encrypted (with TLS, fields stay on the encrypted link), processes may lock shared
-/// memory and `/dev/shm` has [`SHARED_MEMORY_ROOM`] free; Err(why not) otherwise.
-pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, String> {
-    let restarts_off = if scene.deployment.restarts == 0 {
-        Some("deployment.restarts = 0".to_string())
-    } else {
-        unresumable(scene, host.recorded)
-    };
-    let Some(restarts_off) = restarts_off else {
-        return Err("node restarts are on: they need fields that do not go through shared memory".into());
-    };
-    if host.remote_nodes {
-        return Err("nodes on other machines".into());
-    }
-    if scene.network.tls.is_some() {
-        return Err("network.tls: fields stay on the encrypted link".into());
-    }
-    host.lockable.clone()?;
-    match host.room {
-        Some(room) if room >= SHARED_MEMORY_ROOM => Ok(format!(
-            "network.shared_memory unset: node restarts are off ({restarts_off}) and /dev/shm has {} MiB free",
-            room >> 20
-        )),
-        Some(room) => Err(format!(
-            "/dev/shm has {} MiB free, less than {} MiB",
-            room >> 20,
-            SHARED_MEMORY_ROOM >> 20
-        )),
-        None => Err("no /dev/shm".into()),
     }
 }
 
@@ -231,153 +166,6 @@ fn node_args(name: NodeName, run_id: &str, connect: &[String], interior: bool, t
     args
 }
 
-/// The `--tls-*` arguments of a node process that trusts the certificate authority `root_ca` and,
-/// with mutual TLS, presents `identity` (certificate, private key).
-fn tls_args(root_ca: &Path, identity: Option<(&Path, &Path)>) -> Vec<String> {
-    let mut args = vec!["--tls-root-ca".to_string(), root_ca.display().to_string()];
-    if let Some((cert, key)) = identity {
-        args.extend([
-            "--tls-cert".to_string(),
-            cert.display().to_string(),
-            "--tls-key".to_string(),
-            key.display().to_string(),
-        ]);
-    }
-    args
-}
-
-/// The common name of the (first) certificate in PEM file `path`, if it has one.
-fn cert_common_name(path: &Path) -> anyhow::Result<Option<String>> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
-        .map_err(|e| anyhow::anyhow!("{}: not a PEM certificate: {e}", path.display()))?;
-    let cert = pem
-        .parse_x509()
-        .map_err(|e| anyhow::anyhow!("{}: not an X.509 certificate: {e}", path.display()))?;
-    let cn = cert.subject().iter_common_name().next().and_then(|cn| cn.as_str().ok());
-    Ok(cn.map(str::to_string))
-}
-
-/// The TLS of a node process from its `--tls-root-ca`, `--tls-cert` and `--tls-key` arguments
-/// (None without them); each file must be readable.
-pub fn node_tls(
-    root_ca: Option<&Path>,
-    cert: Option<&Path>,
-    key: Option<&Path>,
-) -> anyhow::Result<Option<transport::Tls>> {
-    let identity = match (cert, key) {
-        (Some(c), Some(k)) => Some((c.to_path_buf(), k.to_path_buf())),
-        (None, None) => None,
-        _ => bail!("--tls-cert and --tls-key go together (a certificate and its private key)"),
-    };
-    let Some(root_ca) = root_ca else {
-        if identity.is_some() {
-            bail!("--tls-cert needs --tls-root-ca (the certificate authority of the run)");
-        }
-        return Ok(None);
-    };
-    for (flag, path) in [
-        ("--tls-root-ca", Some(root_ca)),
-        ("--tls-cert", cert),
-        ("--tls-key", key),
-    ] {
-        if let Some(p) = path {
-            std::fs::File::open(p).with_context(|| format!("{flag} {}: cannot read it", p.display()))?;
-        }
-    }
-    Ok(Some(transport::Tls {
-        root_ca: root_ca.to_path_buf(),
-        identity,
-        mutual: false,
-    }))
-}
-
-/// The message identity of node process `name`.
-fn node_id(name: NodeName) -> NodeId {
-    NodeId {
-        role: name.role.role(),
-        index: name.index,
-    }
-}
-
-/// The identity of the recorder process on the bus.
-pub const RECORDER: NodeId = NodeId {
-    role: Role::Recorder,
-    index: 0,
-};
-
-/// The credentials of a node process from its `--credentials` argument: a file the launcher
-/// wrote (readable by its owner only, as an SSH key must be), or `-` for the line the launcher
-/// writes to a process it starts. The user must be the node's own ([`transport::user_of`]).
-pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> anyhow::Result<Option<transport::Credentials>> {
-    let Some(path) = arg else {
-        return Ok(None);
-    };
-    let text = if path == Path::new("-") {
-        let mut line = String::new();
-        std::io::stdin()
-            .read_line(&mut line)
-            .context("--credentials -: cannot read standard input")?;
-        line
-    } else {
-        use std::os::unix::fs::PermissionsExt;
-        let meta =
-            std::fs::metadata(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?;
-        let mode = meta.permissions().mode() & 0o777;
-        if mode & 0o077 != 0 {
-            bail!(
-                "--credentials {}: readable by others (mode {mode:03o}); whoever reads it can speak for this node \
-                 in the run: `chmod 600` it",
-                path.display()
-            );
-        }
-        std::fs::read_to_string(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?
-    };
-    let credentials =
-        transport::Credentials::parse(&text).map_err(|e| anyhow::anyhow!("--credentials {}: {e}", path.display()))?;
-    let own = transport::user_of(id);
-    if credentials.user != own {
-        bail!(
-            "--credentials {}: they are {}'s, not this node's ({own}); each node has its own",
-            path.display(),
-            credentials.user
-        );
-    }
-    Ok(Some(credentials))
-}
-
-/// The credentials files of the nodes started by hand, removed when the run ends.
-struct CredentialFiles(Vec<PathBuf>);
-
-impl Drop for CredentialFiles {
-    fn drop(&mut self) {
-        for f in &self.0 {
-            let _ = std::fs::remove_file(f);
-        }
-    }
-}
-
-/// Writes `credentials` for node `name` into a new file of `dir`, readable by this user only.
-fn write_credentials(
-    dir: &Path,
-    run_id: &str,
-    name: NodeName,
-    credentials: &transport::Credentials,
-) -> anyhow::Result<PathBuf> {
-    use std::io::Write;
-    use std::os::unix::fs::OpenOptionsExt;
-    let path = dir.join(format!("{run_id}-{}-{}.credentials", name.role.key(), name.index));
-    let mut f = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(0o600)
-        .open(&path)
-        .with_context(|| format!("cannot create {} (the credentials of node {name})", path.display()))?;
-    f.write_all(credentials.line().as_bytes())
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(path)
-}
-
 /// The node processes a run needs: one per subdomain group, one per interface group, the coarse
 /// node.
 fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
@@ -398,201 +186,6 @@ fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
         });
     }
     names
-}
-
-/// The run's bus as the launcher joins it ([`join_bus`]).
-struct Bus {
-    session: zenoh::Session,
-    /// The endpoints node processes connect to.
-    node_connect: Vec<String>,
-    /// What the bus is, for messages ("this launcher hosting the Zenoh router on …").
-    description: String,
-    /// The launcher hosts the router (and says who may connect to it).
-    hosting: bool,
-    /// Fields between processes go through shared memory.
-    shared_memory: bool,
-    /// The `--tls-*`, `--shared-memory` and `--credentials -` arguments of the node processes
-    /// the launcher starts.
-    node_args: Vec<String>,
-    /// Each process's credentials, when the launcher hosts the router.
-    credentials: BTreeMap<NodeId, transport::Credentials>,
-}
-
-/// Opens the run's bus: a router hosted here (TLS and access control as the scene's `[network]`
-/// says, only the run's processes admitted, DESIGN §4) or a client of the router of
-/// `--connect`, refusing a run id already in use there.
-fn join_bus(
-    scene: &LoadedScene,
-    run_id: &str,
-    net: &Network,
-    all_nodes: &[NodeName],
-    groups: &[Vec<u32>],
-) -> anyhow::Result<Bus> {
-    for l in &net.listen {
-        if l.ends_with(":0") {
-            bail!("--listen {l}: give an explicit port (nodes started elsewhere must know it)");
-        }
-    }
-    if !net.connect.is_empty() && !net.listen.is_empty() {
-        bail!("--listen and --connect exclude each other: the launcher either hosts the router or connects to one");
-    }
-    // TLS and access control as the scene's [network] says.
-    let tls = scene.network.tls.as_ref().map(|t| transport::Tls {
-        root_ca: t.root_ca.clone(),
-        identity: Some((t.cert.clone(), t.key.clone())),
-        mutual: t.mutual,
-    });
-    // Who may connect (DESIGN §4): to a router hosted here, only the run's own processes, each
-    // under its own user with a random password, speaking only on its own keys.
-    let hosting = net.connect.is_empty();
-    let mut members: Vec<NodeId> = all_nodes.iter().map(|&n| node_id(n)).collect();
-    if net.recording.is_some() {
-        members.push(RECORDER);
-    }
-    let credentials: BTreeMap<NodeId, transport::Credentials> = if hosting {
-        members
-            .iter()
-            .map(|&id| Ok((id, transport::Credentials::random(&transport::user_of(id))?)))
-            .collect::<Result<_, transport::TransportError>>()?
-    } else {
-        BTreeMap::new()
-    };
-    let access = if hosting {
-        Some(transport::Access {
-            run_id: run_id.to_string(),
-            common_names: scene.network.allow.clone(),
-            members: Some(
-                members
-                    .iter()
-                    .map(|&id| {
-                        let mut m = transport::Member::node(run_id, id);
-                        if id.role == Role::Subdomain {
-                            // A subdomain process speaks for the subdomains it hosts.
-                            m.keys = vec![glissade_messages::topic::alive(run_id, id.role.key(), id.index)];
-                            m.keys.extend(groups[id.index as usize].iter().map(|&s| {
-                                glissade_messages::topic::sent_by(
-                                    run_id,
-                                    NodeId {
-                                        role: Role::Subdomain,
-                                        index: s,
-                                    },
-                                )
-                            }));
-                        }
-                        m
-                    })
-                    .collect(),
-            ),
-        })
-    } else {
-        None
-    };
-    if scene.network.allow.is_some() && !hosting {
-        bail!(
-            "network.allow: access control is enforced by the router this launcher hosts; with --connect {}, \
-             configure it on that router",
-            net.connect.join(", ")
-        );
-    }
-    if let (Some(allow), Some(t)) = (&scene.network.allow, &scene.network.tls) {
-        // The nodes this launcher starts present its certificate.
-        let cn = cert_common_name(&t.cert)?;
-        if all_nodes.iter().any(|n| !net.remote.contains(n)) && !cn.as_ref().is_some_and(|cn| allow.contains(cn)) {
-            bail!(
-                "network.allow: the launcher's certificate {} has common name {}, which the list does not allow; \
-                 the nodes it starts present that certificate (list it, or start every node by hand)",
-                t.cert.display(),
-                cn.map_or("(none)".to_string(), |cn| format!("`{cn}`"))
-            );
-        }
-    }
-    let shared_memory = match scene.network.shared_memory {
-        Some(on) => on,
-        None => {
-            let host = Host {
-                recorded: net.recording.is_some(),
-                remote_nodes: !net.remote.is_empty(),
-                room: transport::shared_memory_room(),
-                lockable: transport::shared_memory_lockable(),
-            };
-            let auto = auto_shared_memory(scene, &host);
-            if let Ok(why) = &auto {
-                crate::console::note(&format!("fields through shared memory ({why})"));
-            }
-            auto.is_ok()
-        }
-    };
-    let bus_config = |mode: &str, listen: &[String], connect: &[String], auth: Option<&transport::Auth>| {
-        let access = if mode == "router" { access.as_ref() } else { None };
-        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access)
-            .context("the bus (the scene's [network] section, --listen, --connect)")?;
-        transport::set_shared_memory(&mut c, shared_memory)?;
-        anyhow::Ok(c)
-    };
-    // How every process joins the bus: TLS, and shared memory when the scene asks for it or the
-    // launcher chose it (only between processes on one machine; across machines Zenoh uses the
-    // link).
-    let mut node_args = match &scene.network.tls {
-        Some(t) => tls_args(&t.root_ca, t.mutual.then_some((&*t.cert, &*t.key))),
-        None => Vec::new(),
-    };
-    node_args.extend(shared_memory.then(|| "--shared-memory".to_string()));
-    if hosting {
-        node_args.extend(["--credentials".to_string(), "-".to_string()]);
-    }
-    // The bus: a router hosted here, or a client of the given router.
-    let (session, node_connect, description) = if hosting {
-        let listen = if net.listen.is_empty() {
-            let scheme = if tls.is_some() { "tls" } else { "tcp" };
-            vec![format!("{scheme}/127.0.0.1:{}", free_port()?)]
-        } else {
-            net.listen.clone()
-        };
-        // The router reads its users when it opens; their file goes right after.
-        let users: Vec<transport::Credentials> = credentials.values().cloned().collect();
-        let dictionary = transport::Dictionary::write(&std::env::temp_dir(), &users)?;
-        let auth = transport::Auth::Router {
-            dictionary: dictionary.path().to_path_buf(),
-        };
-        let session = transport::open(bus_config("router", &listen, &[], Some(&auth))?)
-            .with_context(|| format!("cannot host the Zenoh router on {}", listen.join(", ")))?;
-        drop(dictionary);
-        let connect = vec![local_endpoint(&listen[0])];
-        (
-            session,
-            connect,
-            format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
-        )
-    } else {
-        let session = transport::open(bus_config("client", &[], &net.connect, None)?)
-            .with_context(|| format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")))?;
-        (
-            session,
-            net.connect.clone(),
-            format!("the Zenoh router at {}", net.connect.join(", ")),
-        )
-    };
-    // Another launcher (or its nodes) on a shared router with this run id would mix two runs (a
-    // router hosted here is new: nobody else is on it yet).
-    if !net.connect.is_empty() {
-        let taken = transport::tokens_alive(&session, run_id, RUN_ID_PROBE)?;
-        if !taken.is_empty() {
-            bail!(
-                "run id {run_id} is already in use on {description}: {} alive there; nothing was started: choose \
-                 another --run-id (or leave it out for a new random one)",
-                taken.join(", ")
-            );
-        }
-    }
-    Ok(Bus {
-        session,
-        node_connect,
-        description,
-        hosting,
-        shared_memory,
-        node_args,
-        credentials,
-    })
 }
 
 /// Runs `scene` with one process per node group, all on this machine over loopback.
@@ -1261,139 +854,4 @@ fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a zenoh::bytes::
     t.messages += 1;
     t.bytes += a.size as u64;
     a.bytes.as_ref()
-}
-
-/// How a node or recorder process joins a run's bus: the router's endpoints, TLS, and its
-/// credentials (`glissade node --connect --tls-* --credentials`).
-pub struct Joining<'a> {
-    pub connect: &'a [String],
-    pub tls: Option<&'a transport::Tls>,
-    pub credentials: Option<&'a transport::Credentials>,
-}
-
-impl Joining<'_> {
-    /// A client session on the bus (shared memory on or off), or an error saying what to check.
-    pub fn open(&self, shared_memory: bool) -> anyhow::Result<zenoh::Session> {
-        let auth = self.credentials.cloned().map(transport::Auth::Client);
-        let mut config = transport::secure_config("client", &[], self.connect, false, self.tls, auth.as_ref(), None)
-            .context("--connect, --tls-*")?;
-        transport::set_shared_memory(&mut config, shared_memory)?;
-        transport::open(config).with_context(|| {
-            let mut hints = Vec::new();
-            if self.tls.is_some() {
-                hints.push(
-                    "TLS: --tls-root-ca must be the run's certificate authority, and with mutual TLS --tls-cert a \
-                     certificate it signed",
-                );
-            }
-            hints.push(if self.credentials.is_some() {
-                "credentials: --credentials must be the file the launcher wrote for this node, for this run"
-            } else {
-                "a router hosted by `glissade run` admits only the run's processes: give --credentials, the file \
-                 the launcher wrote for this node"
-            });
-            format!(
-                "cannot join the run's bus at {} ({})",
-                self.connect.join(", "),
-                hints.join("; ")
-            )
-        })
-    }
-}
-
-/// Runs one node process: joins the bus, fetches the scene of run `run_id` over it, builds its
-/// nodes and runs them until the run ends. A subdomain node hosts the subdomains of group `index`
-/// of the scene's deployment; `subdomains`, when given, must name the same ones.
-pub fn run_node_process(
-    role: NodeRole,
-    run_id: &str,
-    bus: &Joining,
-    subdomains: &[u32],
-    index: u32,
-    supervision: Supervision,
-) -> anyhow::Result<()> {
-    let interior = supervision.interior;
-    let name = NodeName { role, index };
-    if role == NodeRole::Coarse && index != 0 {
-        bail!("node {name}: a run has one coarse node, index 0");
-    }
-    let session = bus.open(supervision.shared_memory)?;
-    let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
-    let fp = transport::scene_fingerprint_of(&bytes, run_id)?;
-    let expected = Expected {
-        run_id: run_id.to_string(),
-        scene_fingerprint: fp,
-    };
-    let msg = decode(&bytes, &expected)?;
-    let Payload::Scene { text } = msg.payload else {
-        bail!(
-            "the launcher's scene query returned a {} message",
-            msg.payload.field_key()
-        )
-    };
-    if fingerprint(&text) != fp {
-        bail!("the scene received from the bus does not match its fingerprint {fp:016x}");
-    }
-    let scene = load_str(&text, "<scene from the bus>")?;
-    let model = Arc::new(scene.model.clone());
-    let plan = Plan::new(&model).with_scene(&scene);
-    let selection = match role {
-        NodeRole::Subdomain => {
-            let groups = plan.groups(scene.deployment.subdomain_nodes);
-            let Some(group) = groups.get(index as usize) else {
-                bail!(
-                    "node {name}: the scene's deployment has {} subdomain node(s), indices 0 to {}",
-                    groups.len(),
-                    groups.len().saturating_sub(1)
-                );
-            };
-            if !subdomains.is_empty() && subdomains != group.as_slice() {
-                bail!("node {name}: --subdomains {subdomains:?} differ from the deployment's group {index}, {group:?}");
-            }
-            Selection {
-                subdomains: group.clone(),
-                interface: false,
-                coarse: false,
-            }
-        }
-        NodeRole::Interface => Selection {
-            subdomains: Vec::new(),
-            interface: false,
-            coarse: false,
-        },
-        NodeRole::Coarse => Selection {
-            subdomains: Vec::new(),
-            interface: false,
-            coarse: true,
-        },
-    };
-    if role == NodeRole::Coarse && !plan.coarse {
-        bail!("node {name}: the scene needs no coarse node (its coarse problem is off)");
-    }
-    let ctx = RunContext {
-        run_id: run_id.to_string(),
-        scene_fingerprint: fp,
-    };
-    let mut nodes = build_nodes(&model, &ctx, interior, &plan, &selection)?;
-    if role == NodeRole::Interface {
-        nodes.push(
-            build_interface_node(&model, &ctx, &plan, index as usize)
-                .map_err(|e| anyhow::anyhow!("node {name}: {e}"))?,
-        );
-    }
-    let run = transport::NodeRun {
-        run_id: run_id.to_string(),
-        expected,
-        token_role: role.key().to_string(),
-        token_index: index,
-        start_timeout: READY_TIMEOUT,
-        idle_timeout: IDLE_TIMEOUT,
-        departure_grace: DEPARTURE_GRACE,
-        supervised: supervision.supervised,
-        resume: supervision.resume,
-        done_timeout: DONE_TIMEOUT,
-    };
-    let outcome = transport::run_nodes(&session, &run, nodes, |l| eprintln!("{l}"));
-    let _ = session.close().wait();
-    Ok(outcome?)
 }

@@ -3,9 +3,11 @@
 
 pub mod accuracy;
 pub mod bench;
+pub mod bus;
 pub mod children;
 pub mod console;
 pub mod distributed;
+pub mod node_process;
 pub mod output;
 pub mod recording;
 pub mod report;

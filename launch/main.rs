@@ -6,11 +6,11 @@ mod cli;
 use anyhow::Context;
 use clap::Parser;
 use cli::{Cli, ColorByArg, Command, KernelsArg, ReplayArgs, RoleArg, RunArgs};
+use glissade::bus::Joining;
 use glissade::children::NodeRole;
-use glissade::distributed::{
-    install_interrupt_handler, run_distributed_observed, run_node_process, Interrupted, Joining, Network, Supervision,
-};
+use glissade::distributed::{install_interrupt_handler, run_distributed_observed, Interrupted, Network, Supervision};
 use glissade::load_scene;
+use glissade::node_process::run_node_process;
 use glissade::output::{interface_fields, reference_interfaces, summary, write_json, RunFile};
 use glissade::report::{build_report_with, linear_stage_table, plot_svg, TimeAxis};
 use glissade::runner::{IterationRecord, RunOptions};
@@ -278,12 +278,12 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
         ),
         Command::Node(args) => {
             check_run_id("--run", &args.run)?;
-            let tls = glissade::distributed::node_tls(
+            let tls = glissade::bus::node_tls(
                 args.tls_root_ca.as_deref(),
                 args.tls_cert.as_deref(),
                 args.tls_key.as_deref(),
             )?;
-            let credentials = |id| glissade::distributed::node_credentials(args.credentials.as_deref(), id);
+            let credentials = |id| glissade::bus::node_credentials(args.credentials.as_deref(), id);
             let role = match args.role {
                 RoleArg::Subdomain => NodeRole::Subdomain,
                 RoleArg::Interface => NodeRole::Interface,
@@ -292,7 +292,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     let Some(file) = &args.file else {
                         anyhow::bail!("a recorder node needs --file <recording.mcap>");
                     };
-                    let credentials = credentials(glissade::distributed::RECORDER)?;
+                    let credentials = credentials(glissade::bus::RECORDER)?;
                     let bus = Joining {
                         connect: &args.connect,
                         tls: tls.as_ref(),

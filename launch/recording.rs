@@ -353,7 +353,7 @@ fn log_of(path: &Path, patterns: &str) -> Result<Vec<u8>, String> {
 /// which finalise the file too).
 pub fn run_recorder_process(
     run_id: &str,
-    bus: &crate::distributed::Joining,
+    bus: &crate::bus::Joining,
     shared_memory: bool,
     path: &Path,
 ) -> anyhow::Result<()> {

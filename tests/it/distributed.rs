@@ -342,7 +342,7 @@ fn shared_memory_processes_match_in_process_bit_for_bit() {
 /// encrypted, processes may lock shared memory and `/dev/shm` has room.
 #[test]
 fn shared_memory_is_chosen_when_restarts_are_off_anyway() {
-    use glissade::distributed::{auto_shared_memory, Host, SHARED_MEMORY_ROOM};
+    use glissade::bus::{auto_shared_memory, Host, SHARED_MEMORY_ROOM};
     let host = |recorded: bool| Host {
         recorded,
         remote_nodes: false,

@@ -1,0 +1,460 @@
+//! The run's bus (DESIGN §4): how the launcher opens it (hosting the Zenoh router, or as a client
+//! of the router of `--connect`), who may connect to it (TLS and certificate names as the scene's
+//! `[network]` says; each process of the run under its own user with a random password, speaking
+//! only on its own keys), whether fields go through shared memory, and how a node or recorder
+//! process joins it (`glissade node --connect --tls-* --credentials`).
+
+use crate::children::NodeName;
+use crate::distributed::Network;
+use anyhow::{bail, Context};
+use glissade_messages::{NodeId, Role};
+use glissade_scene::LoadedScene;
+use glissade_zenoh as transport;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Longest wait for the answer to "is this run id in use on the router?".
+const RUN_ID_PROBE: Duration = Duration::from_secs(2);
+
+/// A free TCP port on the loopback interface.
+pub(crate) fn free_port() -> anyhow::Result<u16> {
+    transport::free_loopback_port().context("cannot bind a loopback port")
+}
+
+/// The endpoint a node on this machine connects to for a router listening on `listen`.
+pub(crate) fn local_endpoint(listen: &str) -> String {
+    listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
+}
+
+/// Least room in `/dev/shm` for the launcher to choose shared memory: the processes' 16 MiB
+/// pools and the lenders' pools of a run of the stratified scene at N = 1000, with room to spare.
+pub const SHARED_MEMORY_ROOM: u64 = 512 << 20;
+
+/// What [`auto_shared_memory`] looks at besides the scene.
+#[derive(Debug, Clone)]
+pub struct Host {
+    /// The run is recorded.
+    pub recorded: bool,
+    /// Some nodes run on other machines (started by hand).
+    pub remote_nodes: bool,
+    /// Bytes free in `/dev/shm`; None if it cannot be read.
+    pub room: Option<u64>,
+    /// Whether processes here may lock shared memory ([`transport::shared_memory_lockable`]).
+    pub lockable: Result<(), String>,
+}
+
+/// Whether a run whose scene leaves `network.shared_memory` unset passes its fields through
+/// shared memory: Ok(why) when node restarts are off for it anyway (they need fields that do not
+/// go through shared memory: see [`run_distributed`]), every node runs on this machine, the bus
+/// is not encrypted (with TLS, fields stay on the encrypted link), processes may lock shared
+/// memory and `/dev/shm` has [`SHARED_MEMORY_ROOM`] free; Err(why not) otherwise.
+pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, String> {
+    let restarts_off = if scene.deployment.restarts == 0 {
+        Some("deployment.restarts = 0".to_string())
+    } else {
+        crate::distributed::unresumable(scene, host.recorded)
+    };
+    let Some(restarts_off) = restarts_off else {
+        return Err("node restarts are on: they need fields that do not go through shared memory".into());
+    };
+    if host.remote_nodes {
+        return Err("nodes on other machines".into());
+    }
+    if scene.network.tls.is_some() {
+        return Err("network.tls: fields stay on the encrypted link".into());
+    }
+    host.lockable.clone()?;
+    match host.room {
+        Some(room) if room >= SHARED_MEMORY_ROOM => Ok(format!(
+            "network.shared_memory unset: node restarts are off ({restarts_off}) and /dev/shm has {} MiB free",
+            room >> 20
+        )),
+        Some(room) => Err(format!(
+            "/dev/shm has {} MiB free, less than {} MiB",
+            room >> 20,
+            SHARED_MEMORY_ROOM >> 20
+        )),
+        None => Err("no /dev/shm".into()),
+    }
+}
+
+/// The `--tls-*` arguments of a node process that trusts the certificate authority `root_ca` and,
+/// with mutual TLS, presents `identity` (certificate, private key).
+pub(crate) fn tls_args(root_ca: &Path, identity: Option<(&Path, &Path)>) -> Vec<String> {
+    let mut args = vec!["--tls-root-ca".to_string(), root_ca.display().to_string()];
+    if let Some((cert, key)) = identity {
+        args.extend([
+            "--tls-cert".to_string(),
+            cert.display().to_string(),
+            "--tls-key".to_string(),
+            key.display().to_string(),
+        ]);
+    }
+    args
+}
+
+/// The common name of the (first) certificate in PEM file `path`, if it has one.
+pub(crate) fn cert_common_name(path: &Path) -> anyhow::Result<Option<String>> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: not a PEM certificate: {e}", path.display()))?;
+    let cert = pem
+        .parse_x509()
+        .map_err(|e| anyhow::anyhow!("{}: not an X.509 certificate: {e}", path.display()))?;
+    let cn = cert.subject().iter_common_name().next().and_then(|cn| cn.as_str().ok());
+    Ok(cn.map(str::to_string))
+}
+
+/// The TLS of a node process from its `--tls-root-ca`, `--tls-cert` and `--tls-key` arguments
+/// (None without them); each file must be readable.
+pub fn node_tls(
+    root_ca: Option<&Path>,
+    cert: Option<&Path>,
+    key: Option<&Path>,
+) -> anyhow::Result<Option<transport::Tls>> {
+    let identity = match (cert, key) {
+        (Some(c), Some(k)) => Some((c.to_path_buf(), k.to_path_buf())),
+        (None, None) => None,
+        _ => bail!("--tls-cert and --tls-key go together (a certificate and its private key)"),
+    };
+    let Some(root_ca) = root_ca else {
+        if identity.is_some() {
+            bail!("--tls-cert needs --tls-root-ca (the certificate authority of the run)");
+        }
+        return Ok(None);
+    };
+    for (flag, path) in [
+        ("--tls-root-ca", Some(root_ca)),
+        ("--tls-cert", cert),
+        ("--tls-key", key),
+    ] {
+        if let Some(p) = path {
+            std::fs::File::open(p).with_context(|| format!("{flag} {}: cannot read it", p.display()))?;
+        }
+    }
+    Ok(Some(transport::Tls {
+        root_ca: root_ca.to_path_buf(),
+        identity,
+        mutual: false,
+    }))
+}
+
+/// The message identity of node process `name`.
+pub(crate) fn node_id(name: NodeName) -> NodeId {
+    NodeId {
+        role: name.role.role(),
+        index: name.index,
+    }
+}
+
+/// The identity of the recorder process on the bus.
+pub const RECORDER: NodeId = NodeId {
+    role: Role::Recorder,
+    index: 0,
+};
+
+/// The credentials of a node process from its `--credentials` argument: a file the launcher
+/// wrote (readable by its owner only, as an SSH key must be), or `-` for the line the launcher
+/// writes to a process it starts. The user must be the node's own ([`transport::user_of`]).
+pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> anyhow::Result<Option<transport::Credentials>> {
+    let Some(path) = arg else {
+        return Ok(None);
+    };
+    let text = if path == Path::new("-") {
+        let mut line = String::new();
+        std::io::stdin()
+            .read_line(&mut line)
+            .context("--credentials -: cannot read standard input")?;
+        line
+    } else {
+        use std::os::unix::fs::PermissionsExt;
+        let meta =
+            std::fs::metadata(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?;
+        let mode = meta.permissions().mode() & 0o777;
+        if mode & 0o077 != 0 {
+            bail!(
+                "--credentials {}: readable by others (mode {mode:03o}); whoever reads it can speak for this node \
+                 in the run: `chmod 600` it",
+                path.display()
+            );
+        }
+        std::fs::read_to_string(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?
+    };
+    let credentials =
+        transport::Credentials::parse(&text).map_err(|e| anyhow::anyhow!("--credentials {}: {e}", path.display()))?;
+    let own = transport::user_of(id);
+    if credentials.user != own {
+        bail!(
+            "--credentials {}: they are {}'s, not this node's ({own}); each node has its own",
+            path.display(),
+            credentials.user
+        );
+    }
+    Ok(Some(credentials))
+}
+
+/// The credentials files of the nodes started by hand, removed when the run ends.
+pub(crate) struct CredentialFiles(pub(crate) Vec<PathBuf>);
+
+impl Drop for CredentialFiles {
+    fn drop(&mut self) {
+        for f in &self.0 {
+            let _ = std::fs::remove_file(f);
+        }
+    }
+}
+
+/// Writes `credentials` for node `name` into a new file of `dir`, readable by this user only.
+pub(crate) fn write_credentials(
+    dir: &Path,
+    run_id: &str,
+    name: NodeName,
+    credentials: &transport::Credentials,
+) -> anyhow::Result<PathBuf> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let path = dir.join(format!("{run_id}-{}-{}.credentials", name.role.key(), name.index));
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(0o600)
+        .open(&path)
+        .with_context(|| format!("cannot create {} (the credentials of node {name})", path.display()))?;
+    f.write_all(credentials.line().as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(path)
+}
+
+/// The run's bus as the launcher joins it ([`join_bus`]).
+pub(crate) struct Bus {
+    pub(crate) session: zenoh::Session,
+    /// The endpoints node processes connect to.
+    pub(crate) node_connect: Vec<String>,
+    /// What the bus is, for messages ("this launcher hosting the Zenoh router on …").
+    pub(crate) description: String,
+    /// The launcher hosts the router (and says who may connect to it).
+    pub(crate) hosting: bool,
+    /// Fields between processes go through shared memory.
+    pub(crate) shared_memory: bool,
+    /// The `--tls-*`, `--shared-memory` and `--credentials -` arguments of the node processes
+    /// the launcher starts.
+    pub(crate) node_args: Vec<String>,
+    /// Each process's credentials, when the launcher hosts the router.
+    pub(crate) credentials: BTreeMap<NodeId, transport::Credentials>,
+}
+
+/// Opens the run's bus: a router hosted here (TLS and access control as the scene's `[network]`
+/// says, only the run's processes admitted, DESIGN §4) or a client of the router of
+/// `--connect`, refusing a run id already in use there.
+pub(crate) fn join_bus(
+    scene: &LoadedScene,
+    run_id: &str,
+    net: &Network,
+    all_nodes: &[NodeName],
+    groups: &[Vec<u32>],
+) -> anyhow::Result<Bus> {
+    for l in &net.listen {
+        if l.ends_with(":0") {
+            bail!("--listen {l}: give an explicit port (nodes started elsewhere must know it)");
+        }
+    }
+    if !net.connect.is_empty() && !net.listen.is_empty() {
+        bail!("--listen and --connect exclude each other: the launcher either hosts the router or connects to one");
+    }
+    // TLS and access control as the scene's [network] says.
+    let tls = scene.network.tls.as_ref().map(|t| transport::Tls {
+        root_ca: t.root_ca.clone(),
+        identity: Some((t.cert.clone(), t.key.clone())),
+        mutual: t.mutual,
+    });
+    // Who may connect (DESIGN §4): to a router hosted here, only the run's own processes, each
+    // under its own user with a random password, speaking only on its own keys.
+    let hosting = net.connect.is_empty();
+    let mut members: Vec<NodeId> = all_nodes.iter().map(|&n| node_id(n)).collect();
+    if net.recording.is_some() {
+        members.push(RECORDER);
+    }
+    let credentials: BTreeMap<NodeId, transport::Credentials> = if hosting {
+        members
+            .iter()
+            .map(|&id| Ok((id, transport::Credentials::random(&transport::user_of(id))?)))
+            .collect::<Result<_, transport::TransportError>>()?
+    } else {
+        BTreeMap::new()
+    };
+    let access = if hosting {
+        Some(transport::Access {
+            run_id: run_id.to_string(),
+            common_names: scene.network.allow.clone(),
+            members: Some(
+                members
+                    .iter()
+                    .map(|&id| {
+                        let mut m = transport::Member::node(run_id, id);
+                        if id.role == Role::Subdomain {
+                            // A subdomain process speaks for the subdomains it hosts.
+                            m.keys = vec![glissade_messages::topic::alive(run_id, id.role.key(), id.index)];
+                            m.keys.extend(groups[id.index as usize].iter().map(|&s| {
+                                glissade_messages::topic::sent_by(
+                                    run_id,
+                                    NodeId {
+                                        role: Role::Subdomain,
+                                        index: s,
+                                    },
+                                )
+                            }));
+                        }
+                        m
+                    })
+                    .collect(),
+            ),
+        })
+    } else {
+        None
+    };
+    if scene.network.allow.is_some() && !hosting {
+        bail!(
+            "network.allow: access control is enforced by the router this launcher hosts; with --connect {}, \
+             configure it on that router",
+            net.connect.join(", ")
+        );
+    }
+    if let (Some(allow), Some(t)) = (&scene.network.allow, &scene.network.tls) {
+        // The nodes this launcher starts present its certificate.
+        let cn = cert_common_name(&t.cert)?;
+        if all_nodes.iter().any(|n| !net.remote.contains(n)) && !cn.as_ref().is_some_and(|cn| allow.contains(cn)) {
+            bail!(
+                "network.allow: the launcher's certificate {} has common name {}, which the list does not allow; \
+                 the nodes it starts present that certificate (list it, or start every node by hand)",
+                t.cert.display(),
+                cn.map_or("(none)".to_string(), |cn| format!("`{cn}`"))
+            );
+        }
+    }
+    let shared_memory = match scene.network.shared_memory {
+        Some(on) => on,
+        None => {
+            let host = Host {
+                recorded: net.recording.is_some(),
+                remote_nodes: !net.remote.is_empty(),
+                room: transport::shared_memory_room(),
+                lockable: transport::shared_memory_lockable(),
+            };
+            let auto = auto_shared_memory(scene, &host);
+            if let Ok(why) = &auto {
+                crate::console::note(&format!("fields through shared memory ({why})"));
+            }
+            auto.is_ok()
+        }
+    };
+    let bus_config = |mode: &str, listen: &[String], connect: &[String], auth: Option<&transport::Auth>| {
+        let access = if mode == "router" { access.as_ref() } else { None };
+        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access)
+            .context("the bus (the scene's [network] section, --listen, --connect)")?;
+        transport::set_shared_memory(&mut c, shared_memory)?;
+        anyhow::Ok(c)
+    };
+    // How every process joins the bus: TLS, and shared memory when the scene asks for it or the
+    // launcher chose it (only between processes on one machine; across machines Zenoh uses the
+    // link).
+    let mut node_args = match &scene.network.tls {
+        Some(t) => tls_args(&t.root_ca, t.mutual.then_some((&*t.cert, &*t.key))),
+        None => Vec::new(),
+    };
+    node_args.extend(shared_memory.then(|| "--shared-memory".to_string()));
+    if hosting {
+        node_args.extend(["--credentials".to_string(), "-".to_string()]);
+    }
+    // The bus: a router hosted here, or a client of the given router.
+    let (session, node_connect, description) = if hosting {
+        let listen = if net.listen.is_empty() {
+            let scheme = if tls.is_some() { "tls" } else { "tcp" };
+            vec![format!("{scheme}/127.0.0.1:{}", free_port()?)]
+        } else {
+            net.listen.clone()
+        };
+        // The router reads its users when it opens; their file goes right after.
+        let users: Vec<transport::Credentials> = credentials.values().cloned().collect();
+        let dictionary = transport::Dictionary::write(&std::env::temp_dir(), &users)?;
+        let auth = transport::Auth::Router {
+            dictionary: dictionary.path().to_path_buf(),
+        };
+        let session = transport::open(bus_config("router", &listen, &[], Some(&auth))?)
+            .with_context(|| format!("cannot host the Zenoh router on {}", listen.join(", ")))?;
+        drop(dictionary);
+        let connect = vec![local_endpoint(&listen[0])];
+        (
+            session,
+            connect,
+            format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
+        )
+    } else {
+        let session = transport::open(bus_config("client", &[], &net.connect, None)?)
+            .with_context(|| format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")))?;
+        (
+            session,
+            net.connect.clone(),
+            format!("the Zenoh router at {}", net.connect.join(", ")),
+        )
+    };
+    // Another launcher (or its nodes) on a shared router with this run id would mix two runs (a
+    // router hosted here is new: nobody else is on it yet).
+    if !net.connect.is_empty() {
+        let taken = transport::tokens_alive(&session, run_id, RUN_ID_PROBE)?;
+        if !taken.is_empty() {
+            bail!(
+                "run id {run_id} is already in use on {description}: {} alive there; nothing was started: choose \
+                 another --run-id (or leave it out for a new random one)",
+                taken.join(", ")
+            );
+        }
+    }
+    Ok(Bus {
+        session,
+        node_connect,
+        description,
+        hosting,
+        shared_memory,
+        node_args,
+        credentials,
+    })
+}
+
+/// How a node or recorder process joins a run's bus: the router's endpoints, TLS, and its
+/// credentials (`glissade node --connect --tls-* --credentials`).
+pub struct Joining<'a> {
+    pub connect: &'a [String],
+    pub tls: Option<&'a transport::Tls>,
+    pub credentials: Option<&'a transport::Credentials>,
+}
+
+impl Joining<'_> {
+    /// A client session on the bus (shared memory on or off), or an error saying what to check.
+    pub fn open(&self, shared_memory: bool) -> anyhow::Result<zenoh::Session> {
+        let auth = self.credentials.cloned().map(transport::Auth::Client);
+        let mut config = transport::secure_config("client", &[], self.connect, false, self.tls, auth.as_ref(), None)
+            .context("--connect, --tls-*")?;
+        transport::set_shared_memory(&mut config, shared_memory)?;
+        transport::open(config).with_context(|| {
+            let mut hints = Vec::new();
+            if self.tls.is_some() {
+                hints.push(
+                    "TLS: --tls-root-ca must be the run's certificate authority, and with mutual TLS --tls-cert a \
+                     certificate it signed",
+                );
+            }
+            hints.push(if self.credentials.is_some() {
+                "credentials: --credentials must be the file the launcher wrote for this node, for this run"
+            } else {
+                "a router hosted by `glissade run` admits only the run's processes: give --credentials, the file \
+                 the launcher wrote for this node"
+            });
+            format!(
+                "cannot join the run's bus at {} ({})",
+                self.connect.join(", "),
+                hints.join("; ")
+            )
+        })
+    }
+}

@@ -1,0 +1,114 @@
+//! A node process (`glissade node subdomain|interface|coarse`): joins the run's bus, fetches the
+//! scene over it, builds its nodes as the scene's deployment says and runs them until the run
+//! ends.
+
+use crate::bus::Joining;
+use crate::children::{NodeName, NodeRole};
+use crate::distributed::Supervision;
+use crate::distributed::{DEPARTURE_GRACE, DONE_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT};
+use anyhow::bail;
+use glissade_bus::RunContext;
+use glissade_deploy::{build_interface_node, build_nodes, Plan, Selection};
+use glissade_messages::{decode, Expected, Payload};
+use glissade_scene::{fingerprint, load_str};
+use glissade_zenoh as transport;
+use std::sync::Arc;
+use std::time::Duration;
+use zenoh::Wait;
+
+/// Runs one node process: joins the bus, fetches the scene of run `run_id` over it, builds its
+/// nodes and runs them until the run ends. A subdomain node hosts the subdomains of group `index`
+/// of the scene's deployment; `subdomains`, when given, must name the same ones.
+pub fn run_node_process(
+    role: NodeRole,
+    run_id: &str,
+    bus: &Joining,
+    subdomains: &[u32],
+    index: u32,
+    supervision: Supervision,
+) -> anyhow::Result<()> {
+    let interior = supervision.interior;
+    let name = NodeName { role, index };
+    if role == NodeRole::Coarse && index != 0 {
+        bail!("node {name}: a run has one coarse node, index 0");
+    }
+    let session = bus.open(supervision.shared_memory)?;
+    let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
+    let fp = transport::scene_fingerprint_of(&bytes, run_id)?;
+    let expected = Expected {
+        run_id: run_id.to_string(),
+        scene_fingerprint: fp,
+    };
+    let msg = decode(&bytes, &expected)?;
+    let Payload::Scene { text } = msg.payload else {
+        bail!(
+            "the launcher's scene query returned a {} message",
+            msg.payload.field_key()
+        )
+    };
+    if fingerprint(&text) != fp {
+        bail!("the scene received from the bus does not match its fingerprint {fp:016x}");
+    }
+    let scene = load_str(&text, "<scene from the bus>")?;
+    let model = Arc::new(scene.model.clone());
+    let plan = Plan::new(&model).with_scene(&scene);
+    let selection = match role {
+        NodeRole::Subdomain => {
+            let groups = plan.groups(scene.deployment.subdomain_nodes);
+            let Some(group) = groups.get(index as usize) else {
+                bail!(
+                    "node {name}: the scene's deployment has {} subdomain node(s), indices 0 to {}",
+                    groups.len(),
+                    groups.len().saturating_sub(1)
+                );
+            };
+            if !subdomains.is_empty() && subdomains != group.as_slice() {
+                bail!("node {name}: --subdomains {subdomains:?} differ from the deployment's group {index}, {group:?}");
+            }
+            Selection {
+                subdomains: group.clone(),
+                interface: false,
+                coarse: false,
+            }
+        }
+        NodeRole::Interface => Selection {
+            subdomains: Vec::new(),
+            interface: false,
+            coarse: false,
+        },
+        NodeRole::Coarse => Selection {
+            subdomains: Vec::new(),
+            interface: false,
+            coarse: true,
+        },
+    };
+    if role == NodeRole::Coarse && !plan.coarse {
+        bail!("node {name}: the scene needs no coarse node (its coarse problem is off)");
+    }
+    let ctx = RunContext {
+        run_id: run_id.to_string(),
+        scene_fingerprint: fp,
+    };
+    let mut nodes = build_nodes(&model, &ctx, interior, &plan, &selection)?;
+    if role == NodeRole::Interface {
+        nodes.push(
+            build_interface_node(&model, &ctx, &plan, index as usize)
+                .map_err(|e| anyhow::anyhow!("node {name}: {e}"))?,
+        );
+    }
+    let run = transport::NodeRun {
+        run_id: run_id.to_string(),
+        expected,
+        token_role: role.key().to_string(),
+        token_index: index,
+        start_timeout: READY_TIMEOUT,
+        idle_timeout: IDLE_TIMEOUT,
+        departure_grace: DEPARTURE_GRACE,
+        supervised: supervision.supervised,
+        resume: supervision.resume,
+        done_timeout: DONE_TIMEOUT,
+    };
+    let outcome = transport::run_nodes(&session, &run, nodes, |l| eprintln!("{l}"));
+    let _ = session.close().wait();
+    Ok(outcome?)
+}
