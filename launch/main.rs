@@ -609,8 +609,11 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             }
         }
         let mut differing = 0;
-        for id in nodes {
+        for (k, id) in nodes.into_iter().enumerate() {
             let r = reexecute(&recording, id)?;
+            if let (0, Some(why)) = (k, r.skipped.describe()) {
+                eprintln!("warning: {}: {why}", args.recording.display());
+            }
             match &r.mismatch {
                 None => println!(
                     "node {id}: {} outputs bit-identical to the recording ({} bytes; {} recorded inputs)",
@@ -660,6 +663,9 @@ fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     };
     let t0 = std::time::Instant::now();
     let s = glissade_replay::replay(&recording, &opts)?;
+    if let Some(why) = s.skipped.describe() {
+        eprintln!("warning: {}: {why}", args.recording.display());
+    }
     let range = s
         .color_range
         .map_or_else(|| "no colour range".to_string(), |r| format!("colour range {r}"));
@@ -720,6 +726,9 @@ fn export(
     }
     let rec = glissade_recorder::Recording::open(recording)?;
     let state = glissade_replay::final_state(&rec)?;
+    if let Some(why) = state.skipped.describe() {
+        eprintln!("warning: {}: {why}", recording.display());
+    }
     let model = &state.model;
     let stem = format!("{}-{}", model.name, rec.run_id());
     if let Some((dir, every)) = vtu {

@@ -488,16 +488,11 @@ pub fn run_recorder_process(
                 // Control messages (start, …) carry no envelope: not part of the run's traffic.
                 if peek_envelope(&bytes, run_id).is_ok() {
                     seen += 1;
-                    // Only what decodes as a message of this run and scene, on its own key, is
-                    // kept: anything else on the run's keys is not the run's.
+                    // Only what decodes as a message of this run and scene, on its own key, of a
+                    // kind its sender sends, is kept: anything else on the run's keys is not the
+                    // run's.
                     let refusal = match decode(&bytes, &expected) {
-                        Ok(m) if m.topic() != key => Some(format!("its envelope and payload belong on {}", m.topic())),
-                        Ok(m) if !m.payload.senders().contains(&m.envelope.sender.role) => Some(format!(
-                            "a {} node does not send {}",
-                            m.envelope.sender.role.key(),
-                            m.payload.field_key()
-                        )),
-                        Ok(_) => None,
+                        Ok(m) => m.not_from_its_sender(&key),
                         Err(e) => Some(e.to_string()),
                     };
                     match refusal {

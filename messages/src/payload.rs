@@ -425,6 +425,19 @@ impl Message {
     pub fn topic(&self) -> String {
         crate::topic(&self.envelope.run_id, self.envelope.sender, &self.payload)
     }
+
+    /// Why this message, received or recorded on `key`, cannot be its sender's (None when it
+    /// can): it belongs on another key, or its sender's role never sends its kind. Nodes, the
+    /// recorder and replay leave such a message out.
+    pub fn not_from_its_sender(&self, key: &str) -> Option<String> {
+        let topic = self.topic();
+        if topic != key {
+            return Some(format!("its envelope and payload belong on {topic}"));
+        }
+        let role = self.envelope.sender.role;
+        (!self.payload.senders().contains(&role))
+            .then(|| format!("a {} node does not send {}", role.key(), self.payload.field_key()))
+    }
 }
 
 #[cfg(test)]
@@ -432,6 +445,21 @@ mod tests {
     use super::*;
     use crate::fixtures::{expected, msg};
     use crate::{decode, encode};
+
+    /// A message is its sender's on its own key only, and only of a kind its role sends.
+    #[test]
+    fn a_message_is_its_senders_on_its_key_only() {
+        let m = msg();
+        assert_eq!(m.not_from_its_sender(&m.topic()), None, "{:?}", m.envelope.sender);
+        assert!(m
+            .not_from_its_sender("glissade/r1/subdomain/3/boundary_state")
+            .unwrap()
+            .contains("belong on glissade/r1/subdomain/2/boundary_state"));
+        let mut forged = m.clone();
+        forged.envelope.sender.role = Role::Coarse;
+        let why = forged.not_from_its_sender(&forged.topic()).unwrap();
+        assert_eq!(why, "a coarse node does not send boundary_state");
+    }
 
     #[test]
     fn into_buffers_hands_back_every_field() {

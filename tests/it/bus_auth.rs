@@ -410,3 +410,80 @@ fn node_credentials_are_checked_before_joining() {
         );
     }
 }
+
+/// A recording that holds messages which are not the run's (as a recorder kept them before the
+/// bus was authenticated: bytes that do not decode, a node's message re-sent by a role that never
+/// sends it, a message on another node's key) still replays and re-executes: those messages are
+/// skipped and reported, every node is bit-identical.
+#[test]
+fn replay_skips_and_reports_what_is_not_the_runs() {
+    use crate::common::{glissade_ok, scratch};
+    use glissade_messages::{encode, Payload};
+    let dir = scratch("bus-auth-forged-recording");
+    let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
+    glissade_ok(&[
+        &"run",
+        &scene,
+        &"--in-process",
+        &"--quiet",
+        &"--run-id",
+        &"fr",
+        &"--out",
+        &dir.to_path_buf(),
+    ]);
+    let original = glissade_recorder::Recording::open(&dir.join("small-three-layer-fr.mcap")).unwrap();
+    let loaded = glissade_scene::load_str(original.scene_text().unwrap(), "scene.toml").unwrap();
+    let forged_path = dir.join("forged.mcap");
+    let mut out = glissade::recording::create_recorder(&loaded, "fr", &forged_path).unwrap();
+    let mut forged = 0;
+    for (i, m) in original.messages().enumerate() {
+        out.record(m.topic, m.log_time, &m.data).unwrap();
+        if forged > 0 || !m.topic.ends_with("/boundary_state") {
+            continue;
+        }
+        let at = i + 1;
+        let msg = original.decode(&m).unwrap();
+        // Bytes that do not decode, on a node's key.
+        out.record(m.topic, m.log_time, &m.data[..m.data.len() / 2]).unwrap();
+        // The same message re-sent by the coarse node, which never sends this kind.
+        let mut by_coarse = msg.clone();
+        by_coarse.envelope.sender = id(Role::Coarse, 0);
+        assert!(
+            !by_coarse.payload.senders().contains(&Role::Coarse),
+            "{}",
+            msg.payload.field_key()
+        );
+        out.record(&by_coarse.topic(), m.log_time, &encode(&by_coarse)).unwrap();
+        // The same message on another node's key.
+        let elsewhere = topic::within_run("fr", "interface/0/decision");
+        assert!(!matches!(msg.payload, Payload::Decision(_)));
+        out.record(&elsewhere, m.log_time, &m.data).unwrap();
+        forged = at;
+    }
+    out.finish().unwrap();
+    assert!(forged > 0, "the recording has no boundary state");
+    let expected = format!("3 recorded message(s) are not the run's and were skipped (the first, message #{forged} on");
+
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["replay", "--node", "all"])
+        .arg(&forged_path)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains(&expected), "{stderr}");
+    let nodes = stdout.matches("bit-identical").count();
+    assert_eq!(nodes, stdout.lines().count(), "{stdout}");
+    assert!(nodes >= 4, "{stdout}");
+
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .arg("replay")
+        .arg("--save")
+        .arg(dir.join("forged.rrd"))
+        .arg(&forged_path)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains(&expected), "{stderr}");
+}

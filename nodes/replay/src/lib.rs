@@ -34,7 +34,7 @@ pub use legend::{ordinal, ColourRange, PERCENTILES};
 pub use states::BoundaryStates;
 use std::path::PathBuf;
 pub use view::View;
-pub use walk::{final_state, replay, FinalState};
+pub use walk::{final_state, replay, run_messages, FinalState, Skipped};
 
 /// Where the Rerun data goes.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,6 +95,8 @@ pub struct ReplayOptions {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ReplaySummary {
     pub messages: u64,
+    /// Recorded messages that are not the run's, skipped.
+    pub skipped: Skipped,
     pub iterations: usize,
     /// Meshes logged (subdomain × frame).
     pub meshes: usize,

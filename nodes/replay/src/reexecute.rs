@@ -4,6 +4,7 @@
 //! it, topic by topic. A mismatch names the first differing recorded message (key, iteration,
 //! stage) and the first differing field in it.
 
+use crate::{run_messages, Skipped};
 use glissade_bus::{Node, NodeError, RunContext};
 use glissade_deploy::{build_nodes, BuildError, Plan, Selection};
 use glissade_messages::{encode, key_matches, DecodeError, Message, NodeId, Role};
@@ -97,6 +98,8 @@ pub struct Reexecution {
     pub mismatch: Option<Mismatch>,
     /// A subdomain node's linear stages, iteration by iteration (PGD basis sizes among them).
     pub linear_stages: Vec<LinearStageRecord>,
+    /// Recorded messages that are not the run's, not fed to the node.
+    pub skipped: Skipped,
 }
 
 /// Parses `role:id` (`subdomain:3`, `interface:0`, `coarse:0`).
@@ -123,10 +126,8 @@ pub fn parse_node(text: &str) -> Result<NodeId, ReexecuteError> {
 /// The nodes whose outputs a recording holds (sender of at least one message), in order.
 pub fn recorded_nodes(recording: &Recording) -> Result<Vec<NodeId>, ReexecuteError> {
     let mut nodes = std::collections::BTreeSet::new();
-    for m in recording.messages() {
-        let msg = recording
-            .decode(&m)
-            .map_err(|source| decode_error(recording, m.topic, source))?;
+    let mut skipped = Skipped::default();
+    for (_, _, msg) in run_messages(recording, &mut skipped) {
         if matches!(
             msg.envelope.sender.role,
             Role::Subdomain | Role::Interface | Role::Coarse
@@ -230,12 +231,8 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
     let mut inputs: Vec<(usize, Message)> = Vec::new();
     let mut recorded: BTreeMap<String, Vec<(usize, Vec<u8>, Message)>> = BTreeMap::new();
     let mut recorded_outputs = 0;
-    for (i, m) in recording.messages().enumerate() {
-        let msg = recording.decode(&m).map_err(|source| ReexecuteError::Decode {
-            path: path.clone(),
-            what: format!("recorded message #{i} on `{}`", m.topic),
-            source,
-        })?;
+    let mut skipped = Skipped::default();
+    for (i, m, msg) in run_messages(recording, &mut skipped) {
         if msg.envelope.sender == id {
             recorded_outputs += 1;
             recorded
@@ -338,6 +335,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
         bytes,
         mismatch: first,
         linear_stages: log.lock().map(|v| v.clone()).unwrap_or_default(),
+        skipped,
     })
 }
 

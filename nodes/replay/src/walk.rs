@@ -5,8 +5,8 @@ use crate::draw::{largest_time_point, nodal_field};
 use crate::legend::{ColourRange, Frame};
 use crate::recovery::{final_displacements, Recovery};
 use crate::{BoundaryStates, ReplayError, ReplayOptions, ReplaySummary, View};
-use glissade_messages::{InterfaceSolution, Payload};
-use glissade_recorder::Recording;
+use glissade_messages::{InterfaceSolution, Message, Payload};
+use glissade_recorder::{RecordedMessage, Recording};
 use glissade_scene::load_str;
 use std::collections::BTreeMap;
 
@@ -20,6 +20,56 @@ pub struct FinalState {
     pub interfaces: Vec<InterfaceSolution>,
     /// The time point with the largest displacement of the first boundary state, if any.
     first_w: Option<usize>,
+    /// Recorded messages that are not the run's.
+    pub skipped: Skipped,
+}
+
+/// The messages of a recording that are not the run's, which replay and re-execution skip: a
+/// recorder before the bus was authenticated kept well-formed messages any process published on
+/// the run's keys.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Skipped {
+    pub count: u64,
+    /// The first one: its position, topic and why it is not the run's.
+    pub first: Option<String>,
+}
+
+impl Skipped {
+    fn add(&mut self, index: usize, topic: &str, why: String) {
+        self.count += 1;
+        self.first
+            .get_or_insert_with(|| format!("message #{index} on `{topic}`: {why}"));
+    }
+
+    /// "N message(s) … skipped (the first …)", or None when none was.
+    pub fn describe(&self) -> Option<String> {
+        self.first.as_ref().map(|first| {
+            format!(
+                "{} recorded message(s) are not the run's and were skipped (the first, {first})",
+                self.count
+            )
+        })
+    }
+}
+
+/// The run's messages of `recording`, decoded, with their position in file order: those that
+/// decode as the run's, sit on their sender's key and are of a kind their sender sends
+/// ([`Message::not_from_its_sender`]); the others are counted in `skipped`.
+pub fn run_messages<'r>(
+    recording: &'r Recording,
+    skipped: &'r mut Skipped,
+) -> impl Iterator<Item = (usize, RecordedMessage<'r>, Message)> + 'r {
+    recording.messages().enumerate().filter_map(move |(i, m)| {
+        let why = match recording.decode(&m) {
+            Ok(msg) => match msg.not_from_its_sender(m.topic) {
+                None => return Some((i, m, msg)),
+                Some(why) => why,
+            },
+            Err(e) => e.to_string(),
+        };
+        skipped.add(i, m.topic, why);
+        None
+    })
 }
 
 /// An error about the content of `recording`.
@@ -48,10 +98,8 @@ pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
     let mut last_states = BTreeMap::new();
     let mut first_w = None;
     let mut states = BoundaryStates::new();
-    for m in recording.messages() {
-        let msg = recording
-            .decode(&m)
-            .map_err(|e| content(format!("message on `{}`: {e}", m.topic)))?;
+    let mut skipped = Skipped::default();
+    for (_, m, msg) in run_messages(recording, &mut skipped) {
         if let Some(state) = states.fields(&msg.payload) {
             let (subdomain, w, f) = state.map_err(|e| content(format!("message on `{}`: {e}", m.topic)))?;
             if first_w.is_none() {
@@ -78,25 +126,21 @@ pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
         u,
         interfaces,
         first_w,
+        skipped,
     })
 }
 
 /// Replays `recording` into the sink of `opts`: the colour range and amplification come from the
 /// final state, then every message goes through a [`View`].
 pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
-    let content = |detail: String| content(recording, detail);
     let (text, origin) = recorded_scene(recording)?;
-    let decode = |m: &glissade_recorder::RecordedMessage<'_>| {
-        recording
-            .decode(m)
-            .map_err(|e| content(format!("message on `{}`: {e}", m.topic)))
-    };
 
     // Pass 1: the final state, and the time point of the per-iteration meshes.
     let FinalState {
         model,
         u: final_u,
         first_w,
+        skipped,
         ..
     } = final_state(recording)?;
     let mut fields = Vec::new();
@@ -119,8 +163,11 @@ pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySumma
 
     // Pass 2: every message, as a live run would give them.
     let mut view = View::new(text, &origin, recording.run_id(), &opts, Some(range))?;
-    for m in recording.messages() {
-        view.message(&decode(&m)?)?;
+    let mut again = Skipped::default();
+    for (_, _, msg) in run_messages(recording, &mut again) {
+        view.message(&msg)?;
     }
-    view.finish()
+    let mut summary = view.finish()?;
+    summary.skipped = skipped;
+    Ok(summary)
 }

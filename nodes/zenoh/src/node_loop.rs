@@ -467,20 +467,8 @@ impl Handler<'_> {
                     continue;
                 }
             };
-            if msg.topic() != key {
-                log(&format!(
-                    "ignored a message on {key}: its envelope and payload belong on {}",
-                    msg.topic()
-                ));
-                self.recycle(msg);
-                continue;
-            }
-            if !msg.payload.senders().contains(&msg.envelope.sender.role) {
-                log(&format!(
-                    "ignored a message on {key}: a {} node does not send {}",
-                    msg.envelope.sender.role.key(),
-                    msg.payload.field_key()
-                ));
+            if let Some(why) = msg.not_from_its_sender(&key) {
+                log(&format!("ignored a message on {key}: {why}"));
                 self.recycle(msg);
                 continue;
             }
