@@ -1,6 +1,8 @@
 //! The macro (coarse) problem on curved interfaces, against the monolithic reference: the
 //! reference is a fixed point of LATIN with the macro problem, plain relaxation with it converges
-//! to the reference on the shrink fit, and Anderson mixing with it stalls there.
+//! to the reference on the shrink fit, and Anderson mixing with it stalls there, which is why the
+//! scene builder turns it off on scenes with a part held only by contact along which it can slip
+//! rigidly (and only there: the sheath and the wedge keep it).
 //!
 //! The iteration is the runner's, from the mechanics kernels in one thread (the calls of the
 //! subdomain, coarse and interface nodes, in their order), so that the state can be started from
@@ -313,12 +315,13 @@ fn plain_relaxation_with_the_macro_problem_converges_to_the_reference_on_the_shr
 
 #[test]
 fn anderson_with_the_macro_problem_stalls_where_a_part_slips_rigidly() {
-    // The outer ring of the shrink fit is held only by the fit, and its rotation about the centre
-    // is a pure slip there.
+    // Why the builder turns the macro problem off on the shrink fit (nodes/scene, rigid.rs): the
+    // outer ring is held only by the fit, and its rotation about the centre is a pure slip there.
     // With Anderson mixing (window 5) and the macro problem, iterates where the whole fit slips
     // at a time point turn the outer ring (the jump along t is the same at every pair) and the
     // run stays at a traction error above 1e-3 after 400 iterations (measured 1e-2 to 1e-1 on
     // mesh 2), while without the macro problem it reaches 1e-8 within 200 (measured 86).
+    // If this test fails because the stall went away, the builder's rule can go.
     let model = shrink_fit(2);
     let reference = solve_reference(&model, &Default::default()).expect("reference");
     let mut plain = Latin::new(&model, false, true);
@@ -353,4 +356,27 @@ fn anderson_with_the_macro_problem_stalls_where_a_part_slips_rigidly() {
     println!("Anderson: without the macro problem e_F ≤ 1e-8 after {reached:?}; with it, best e_F {best:e} over iterations 200–400");
     assert!(best > 1e-3, "Anderson with the macro problem reached {best:e}");
     assert!(whole_ring_slips > 0, "no time point where the whole fit slips");
+}
+
+#[test]
+fn the_macro_problem_is_on_for_curved_scenes_except_a_part_slipping_rigidly() {
+    for (name, coarse) in [
+        ("sheath", true),
+        ("wedge", true),
+        ("shrink-fit", false),
+        ("shrink-fit-twist", true),
+    ] {
+        let model = scene(name, |t| t).expect(name);
+        assert_eq!(model.solver.coarse, coarse, "{name}");
+    }
+    // Asked for with Anderson mixing on the shrink fit: refused, naming the part.
+    let asked = |t: String| t.replace("[solver]\n", "[solver]\ncoarse = true\n");
+    let e = scene("shrink-fit", asked).expect_err("refused");
+    assert!(
+        e.contains("solver.coarse") && e.contains("`outer`") && e.contains("slip rigidly"),
+        "{e}"
+    );
+    // With plain relaxation it converges (above): allowed, and on by default.
+    let plain = |t: String| t.replace("[solver]\n", "[solver]\nacceleration = \"none\"\n");
+    assert!(scene("shrink-fit", plain).expect("plain").solver.coarse);
 }
