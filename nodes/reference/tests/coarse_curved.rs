@@ -5,211 +5,29 @@
 //! rigidly (and only there: the sheath and the wedge keep it).
 //!
 //! The iteration is the runner's, from the mechanics kernels in one thread (the calls of the
-//! subdomain, coarse and interface nodes, in their order), so that the state can be started from
-//! the reference and the statuses read.
+//! subdomain, coarse and interface nodes, in their order: the mechanics crate's test harness), so
+//! that the state can be started from the reference and the statuses read.
 
-use faer::Mat;
-use glissade_mechanics::anderson::{AndersonCoordinator, AndersonHistory, GramPartials, MAX_CONDITION};
-use glissade_mechanics::coarse::{Contribution, MacroProblem};
+#[path = "../../mechanics/tests/support/latin.rs"]
+mod latin;
+
 use glissade_mechanics::laws::Status;
-use glissade_mechanics::linear::{default_k0, macro_bases, relax_into, sum_into, SubdomainSolver};
-use glissade_mechanics::local::{error_against_reference, IndicatorSums, InterfaceFields, InterfaceLocal};
-use glissade_mechanics::model::{Model, Side};
+use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+use glissade_mechanics::model::Model;
 use glissade_reference::solve_reference;
+use latin::Latin;
 
-struct Fields {
-    q_hat: Mat<f64>,
-    w1: Mat<f64>,
-    f1: Mat<f64>,
-    w2: Mat<f64>,
-    f2: Mat<f64>,
-    w: Mat<f64>,
-    f: Mat<f64>,
-    w_tilde: Mat<f64>,
-    macro_forces: Mat<f64>,
-    /// Global macro unknown of each of the subdomain's macro columns.
-    columns: Vec<usize>,
+/// LATIN with the macro problem or without, Anderson mixing (window 5, the scenes' default) or
+/// plain relaxation.
+fn latin(model: &Model, coarse: bool, anderson: bool) -> Latin {
+    Latin::with_options(model.clone(), true, coarse, anderson.then_some(5))
 }
 
-/// LATIN with the macro problem (or without: w̃ = 0), plain relaxation or Anderson mixing
-/// (window 5, as the scenes' default).
-struct Latin {
-    model: Model,
-    solvers: Vec<SubdomainSolver>,
-    fields: Vec<Fields>,
-    coarse: Option<MacroProblem>,
-    rhs: Mat<f64>,
-    locals: Vec<InterfaceLocal>,
-    interface_fields: Vec<InterfaceFields>,
-    time_weights: Vec<f64>,
-    iteration: usize,
-    anderson: Option<(Vec<AndersonHistory>, AndersonCoordinator)>,
-}
-
-impl Latin {
-    fn new(model: &Model, coarse: bool, anderson: bool) -> Self {
-        let k0 = default_k0(model);
-        let bases = macro_bases(model);
-        let nt = model.time.n_points();
-        let solvers: Vec<SubdomainSolver> = (0..model.subdomains.len())
-            .map(|s| SubdomainSolver::new(model, s, &k0, &bases).expect("subdomain operator"))
-            .collect();
-        let n_modes: Vec<usize> = bases.iter().map(|b| b.len()).collect();
-        let slots: Vec<Vec<(usize, usize)>> = solvers
-            .iter()
-            .map(|s| s.macro_slots.iter().map(|m| (m.interface, m.n_modes)).collect())
-            .collect();
-        let parts: Vec<Contribution<'_>> = solvers
-            .iter()
-            .zip(&slots)
-            .map(|(s, sl)| Contribution {
-                subdomain: s.subdomain,
-                interfaces: sl,
-                l_e: s.l_e.as_ref(),
-            })
-            .collect();
-        let problem = MacroProblem::new(&n_modes, &parts).expect("macro problem");
-        let fields = solvers
-            .iter()
-            .zip(&slots)
-            .map(|(s, sl)| {
-                let z = |r: usize| Mat::<f64>::zeros(r, nt);
-                Fields {
-                    q_hat: z(s.n_boundary()),
-                    w1: z(s.n_boundary()),
-                    f1: z(s.n_boundary()),
-                    w2: z(s.n_boundary()),
-                    f2: z(s.n_boundary()),
-                    w: z(s.n_boundary()),
-                    f: z(s.n_boundary()),
-                    w_tilde: z(s.n_macro()),
-                    macro_forces: z(s.n_macro()),
-                    columns: problem.columns_of(sl),
-                }
-            })
-            .collect();
-        let mu = model.solver.relaxation;
-        let anderson = anderson.then(|| {
-            let histories = solvers
-                .iter()
-                .map(|s| AndersonHistory::new(5, mu, s.n_boundary(), nt))
-                .collect();
-            (histories, AndersonCoordinator::new(MAX_CONDITION))
-        });
-        Self {
-            rhs: Mat::zeros(problem.n(), nt),
-            time_weights: model.time.trapezoid_weights(),
-            locals: model
-                .interfaces
-                .iter()
-                .enumerate()
-                .map(|(i, itf)| InterfaceLocal::new(i, itf, k0[i], nt))
-                .collect(),
-            interface_fields: model
-                .interfaces
-                .iter()
-                .map(|itf| InterfaceFields::zeros(itf.n_pairs(), nt))
-                .collect(),
-            model: model.clone(),
-            solvers,
-            fields,
-            coarse: coarse.then_some(problem),
-            iteration: 0,
-            anderson,
-        }
-    }
-
-    /// ŝ := `hat` (the directions of the next linear stage), as if a local stage had made it.
-    fn start_from(&mut self, hat: &[InterfaceFields]) {
-        for (local, h) in self.locals.iter_mut().zip(hat) {
-            local.hat = h.clone();
-        }
-        self.scatter_directions();
-        self.iteration = 1;
-    }
-
-    fn scatter_directions(&mut self) {
-        for (solver, x) in self.solvers.iter().zip(&mut self.fields) {
-            for slot in &solver.op.layout.slots {
-                self.locals[slot.interface].q_hat_into(slot.side == Side::A, x.q_hat.as_mut(), slot.offset);
-            }
-        }
-    }
-
-    /// Linear stage (micro 1, macro problem, micro 2), relaxation or mixing, local stage.
-    fn iterate(&mut self) -> IndicatorSums {
-        let n = self.iteration;
-        let mu = if n <= 1 { 1.0 } else { self.model.solver.relaxation };
-        for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
-            solver.micro1_into(x.q_hat.as_ref(), x.w1.as_mut(), x.f1.as_mut());
-            solver.macro_forces_into(x.f1.as_ref(), x.macro_forces.as_mut());
-        }
-        self.rhs.fill(0.0);
-        if let Some(problem) = &self.coarse {
-            for x in &self.fields {
-                for j in 0..self.rhs.ncols() {
-                    for (r, &g) in x.columns.iter().enumerate() {
-                        self.rhs[(g, j)] -= x.macro_forces[(r, j)];
-                    }
-                }
-            }
-            problem.solve_in_place(&mut self.rhs);
-        }
-        for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
-            for j in 0..self.rhs.ncols() {
-                for (r, &g) in x.columns.iter().enumerate() {
-                    x.w_tilde[(r, j)] = self.rhs[(g, j)];
-                }
-            }
-            solver.micro2_into(x.w_tilde.as_ref(), x.w2.as_mut(), x.f2.as_mut());
-            sum_into(x.w1.as_mut(), x.f1.as_mut(), x.w2.as_ref(), x.f2.as_ref());
-        }
-        // As the subdomain node: Anderson records from iteration 1 and mixes from iteration 2.
-        match self.anderson.as_mut() {
-            Some((histories, coordinator)) if n >= 2 => {
-                let mut sum: Option<GramPartials> = None;
-                for (h, x) in histories.iter_mut().zip(&self.fields) {
-                    h.record(&x.w, &x.f, &x.w1, &x.f1);
-                    let p = h.partials();
-                    match sum.as_mut() {
-                        None => sum = Some(p),
-                        Some(s) => s.add(&p),
-                    }
-                }
-                let step = coordinator.decide(&sum.expect("a subdomain"), false);
-                for (h, x) in histories.iter_mut().zip(&mut self.fields) {
-                    h.apply(&step, &mut x.w, &mut x.f);
-                }
-            }
-            anderson => {
-                let mut histories = anderson.filter(|_| n >= 1).map(|(h, _)| h);
-                for (s, x) in self.fields.iter_mut().enumerate() {
-                    if let Some(h) = histories.as_mut() {
-                        h[s].record(&x.w, &x.f, &x.w1, &x.f1);
-                    }
-                    relax_into(mu, x.w1.as_ref(), x.f1.as_ref(), x.w.as_mut(), x.f.as_mut());
-                }
-            }
-        }
-        for (solver, x) in self.solvers.iter().zip(&self.fields) {
-            for slot in &solver.op.layout.slots {
-                self.interface_fields[slot.interface].set_side(slot.side, slot.offset, x.w.as_ref(), x.f.as_ref());
-            }
-        }
-        let mut sums = IndicatorSums::default();
-        for (i, (local, s)) in self.locals.iter_mut().zip(&self.interface_fields).enumerate() {
-            sums.add(&local.local_stage_with_sums(&self.model.interfaces[i], &self.time_weights, s, n == 0));
-        }
-        self.scatter_directions();
-        self.iteration += 1;
-        sums
-    }
-
-    /// (e_F, e_W) of ŝ against the reference.
-    fn errors(&self, reference: &[InterfaceFields]) -> (f64, f64) {
-        let hat: Vec<InterfaceFields> = self.locals.iter().map(|l| l.hat.clone()).collect();
-        error_against_reference(&self.model.interfaces, &hat, reference, &self.time_weights)
-    }
+/// (e_F, e_W) of ŝ against the reference.
+fn errors(latin: &Latin, reference: &[InterfaceFields]) -> (f64, f64) {
+    let hat: Vec<InterfaceFields> = latin.locals.iter().map(|l| l.hat.clone()).collect();
+    let w = latin.model.time.trapezoid_weights();
+    error_against_reference(&latin.model.interfaces, &hat, reference, &w)
 }
 
 fn scenes_dir() -> String {
@@ -245,28 +63,14 @@ fn the_reference_is_a_fixed_point_of_latin_with_the_macro_problem() {
         ("wedge", scene("wedge", |t| t).expect("wedge")),
     ] {
         let reference = solve_reference(&model, &Default::default()).expect("reference");
-        let mut latin = Latin::new(&model, true, false);
+        let mut latin = latin(&model, true, false);
         assert!(
-            latin.coarse.as_ref().is_some_and(|c| c.n() >= 6),
+            latin.coarse.n() >= 6,
             "{name}: six affine modes on the curved interface"
         );
         // The constraint itself, on the reference: Σ_sides 𝔼ᵀ M F per macro unknown and time point,
         // against the size of one side's macro forces.
-        let (mut sum, mut size) = (Mat::<f64>::zeros(latin.rhs.nrows(), latin.rhs.ncols()), 0.0f64);
-        for (solver, x) in latin.solvers.iter_mut().zip(&mut latin.fields) {
-            for slot in &solver.op.layout.slots {
-                let r = &reference.interfaces[slot.interface];
-                let f = if slot.side == Side::A { &r.f_a } else { &r.f_b };
-                x.f.as_mut().subrows_mut(slot.offset, f.nrows()).copy_from(f);
-            }
-            solver.macro_forces_into(x.f.as_ref(), x.macro_forces.as_mut());
-            size = size.max(x.macro_forces.norm_max());
-            for j in 0..sum.ncols() {
-                for (r, &g) in x.columns.iter().enumerate() {
-                    sum[(g, j)] += x.macro_forces[(r, j)];
-                }
-            }
-        }
+        let (sum, size) = latin.macro_balance(&reference.interfaces);
         assert!(
             size > 0.0 && sum.norm_max() < 1e-12 * size,
             "{name}: Σ 𝔼ᵀMF {:e} of {size:e}",
@@ -275,7 +79,7 @@ fn the_reference_is_a_fixed_point_of_latin_with_the_macro_problem() {
         latin.start_from(&reference.interfaces);
         for _ in 0..3 {
             let sums = latin.iterate();
-            let (e_f, e_w) = latin.errors(&reference.interfaces);
+            let (e_f, e_w) = errors(&latin, &reference.interfaces);
             assert!(
                 sums.eta() < 1e-12 && e_f < 1e-12 && e_w < 1e-12,
                 "{name}: η {:e}, e_F {e_f:e}, e_W {e_w:e}",
@@ -294,11 +98,11 @@ fn plain_relaxation_with_the_macro_problem_converges_to_the_reference_on_the_shr
     // the same without the macro problem).
     let model = shrink_fit(1);
     let reference = solve_reference(&model, &Default::default()).expect("reference");
-    let mut latin = Latin::new(&model, true, false);
+    let mut latin = latin(&model, true, false);
     let mut reached = None;
     for k in 0..3000 {
         latin.iterate();
-        let (e_f, e_w) = latin.errors(&reference.interfaces);
+        let (e_f, e_w) = errors(&latin, &reference.interfaces);
         if e_f <= 1e-6 && e_w <= 1e-6 {
             reached = Some(k + 1);
             break;
@@ -308,7 +112,7 @@ fn plain_relaxation_with_the_macro_problem_converges_to_the_reference_on_the_shr
     assert!(
         reached.is_some(),
         "not converged: {:?}",
-        latin.errors(&reference.interfaces)
+        errors(&latin, &reference.interfaces)
     );
     assert!(latin.locals[0].status.iter().all(|&s| s == Status::Stick));
 }
@@ -324,26 +128,26 @@ fn anderson_with_the_macro_problem_stalls_where_a_part_slips_rigidly() {
     // If this test fails because the stall went away, the builder's rule can go.
     let model = shrink_fit(2);
     let reference = solve_reference(&model, &Default::default()).expect("reference");
-    let mut plain = Latin::new(&model, false, true);
+    let mut plain = latin(&model, false, true);
     let mut reached = None;
     for k in 0..200 {
         plain.iterate();
-        if reached.is_none() && plain.errors(&reference.interfaces).0 <= 1e-8 {
+        if reached.is_none() && errors(&plain, &reference.interfaces).0 <= 1e-8 {
             reached = Some(k + 1);
         }
     }
     assert!(
         reached.is_some(),
         "without the macro problem: {:?}",
-        plain.errors(&reference.interfaces)
+        errors(&plain, &reference.interfaces)
     );
-    let mut coarse = Latin::new(&model, true, true);
+    let mut coarse = latin(&model, true, true);
     let mut best = f64::INFINITY;
     let mut whole_ring_slips = 0;
     let np = model.interfaces[0].n_pairs();
     for k in 0..400 {
         coarse.iterate();
-        let e_f = coarse.errors(&reference.interfaces).0;
+        let e_f = errors(&coarse, &reference.interfaces).0;
         if k >= 200 {
             best = best.min(e_f);
         }
