@@ -58,6 +58,14 @@
 //!   the same 837 Newton iterations (one numeric sparse LU of J costs about 1.1 s). Falls back to
 //!   `SparseLu` when K_ff is not positive definite (a body held only through contact).
 //!
+//! J is singular where the active contact constraints are linearly dependent: where contact pairs
+//! close a cycle of node copies (parts cut into sectors at the same angles in two layers, contact
+//! on the cuts and between the layers: four pairs around each cross-point, whose jumps sum to zero),
+//! a force circulating around the cycle balances at every node, so with every pair of the cycle
+//! in contact the multipliers are not unique. A step whose solve fails or is not finite is then
+//! solved once more with a small shift of the λ diagonal (a proximal step in λ, see
+//! `Problem::newton_step`); the residual and the checks are unchanged, so only the route differs.
+//!
 //! **Convergence** (per step, all ≤ `tolerance`), with F_s = max(‖K u‖_∞ over all dofs including
 //! reactions, ‖f‖_∞, max_m |λ_m|_∞) (N) and U_s = ‖u‖_∞ (mm) of the step:
 //! equilibrium ‖K u − f − contact‖_∞,free / F_s; penetration max(0, −g)/U_s; tension

@@ -24,6 +24,11 @@ pub(crate) struct PairJacobian {
     pub(crate) dlt_t: f64,
 }
 
+/// λ-diagonal shift of a Newton step whose matrix is singular ([`Problem::newton_step`]). The
+/// λ rows are in N and their λ entries dimensionless (1 at a separated pair), next to u entries
+/// of r·n ≈ E·w/h: a shift of 1e-6 is far above round-off of the pivots and far below the rest.
+const SINGULAR_SHIFT: f64 = 1e-6;
+
 /// State of one time step: merged displacement and λ per merged pair in (n, t) components.
 #[derive(Clone)]
 pub(crate) struct StepState {
@@ -352,7 +357,33 @@ impl<'m> Problem<'m> {
 
     /// Solves J dx = −r for the Newton correction (in place in `r`). None if a factorisation
     /// fails or the correction is not finite.
+    ///
+    /// When J is singular (a factorisation fails or the correction is not finite), the step is
+    /// solved once more with [`SINGULAR_SHIFT`] added to the λ diagonal of every pair's two rows
+    /// (a proximal step in the multipliers). J is singular where the active contact constraints
+    /// are linearly dependent: at a cross-point where four contact pairs close a cycle of node
+    /// copies (two layers cut into sectors at the same angles, every pair in contact), the four
+    /// jumps sum to zero around the cycle, so a force circulating around it changes no node's
+    /// balance and the multipliers are determined only up to it. The shifted step keeps the
+    /// multipliers near the last iterate along that freedom; the residual and the convergence
+    /// checks are the unshifted ones, so a converged step solves the discrete problem exactly.
+    /// Only a solve that fails takes the shifted one: every other step is as before, bit for bit.
     pub(crate) fn newton_step(&self, jac: &[PairJacobian], r: &mut [f64], work: &mut NewtonWork) -> Option<()> {
+        let r0 = r.to_vec();
+        if self.newton_step_shifted(jac, r, work, 0.0).is_some() {
+            return Some(());
+        }
+        r.copy_from_slice(&r0);
+        self.newton_step_shifted(jac, r, work, SINGULAR_SHIFT)
+    }
+
+    fn newton_step_shifted(
+        &self,
+        jac: &[PairJacobian],
+        r: &mut [f64],
+        work: &mut NewtonWork,
+        shift: f64,
+    ) -> Option<()> {
         let n_free = self.n_free;
         match &self.solver {
             StepSolver::SparseLu(pat) => {
@@ -363,14 +394,14 @@ impl<'m> Problem<'m> {
                         values[o] = pj.du_n[q];
                         o += 1;
                     }
-                    values[o] = pj.dln_n;
+                    values[o] = pj.dln_n + shift;
                     o += 1;
                     for q in (0..4).filter(|&q| mp.free[q] != NONE) {
                         values[o] = pj.du_t[q];
                         o += 1;
                     }
                     values[o] = pj.dln_t;
-                    values[o + 1] = pj.dlt_t;
+                    values[o + 1] = pj.dlt_t + shift;
                 }
                 let mat = SparseColMat::new_from_argsort(pat.symbolic.clone(), &pat.argsort, values).ok()?;
                 let lu = Lu::try_new_with_symbolic(pat.lu_symbolic.clone(), mat.as_ref()).ok()?;
@@ -403,9 +434,9 @@ impl<'m> Problem<'m> {
                 s_t.fill(0.0);
                 for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
                     let (rn, rt) = (2 * m, 2 * m + 1);
-                    s_t[(rn, rn)] += pj.dln_n;
+                    s_t[(rn, rn)] += pj.dln_n + shift;
                     s_t[(rn, rt)] += pj.dln_t;
-                    s_t[(rt, rt)] += pj.dlt_t;
+                    s_t[(rt, rt)] += pj.dlt_t + shift;
                     for q in (0..4).filter(|&q| mp.free[q] != NONE) {
                         let (fd, cn, ct) = (mp.free[q], pj.du_n[q], pj.du_t[q]);
                         let z = cs.z_t.col(cs.position[fd]);

@@ -1,13 +1,16 @@
 //! A LATIN iteration on a whole model in one thread, from the crate's kernels alone (no nodes, no
 //! bus): the same calls, in the same order, as the subdomain, coarse and interface nodes make.
-//! Shared by the allocation test and the iteration benchmark.
+//! Shared by the allocation test, the iteration benchmark and the reference crate's tests of the
+//! macro problem on curved interfaces (which also switch the macro problem off, mix with
+//! Anderson and start from a given ŝ).
 
 // Each user reads a part of it (the test does not read the stage names).
 #![allow(dead_code)]
 
 use faer::Mat;
+use glissade_mechanics::anderson::{AndersonCoordinator, AndersonHistory, GramPartials, MAX_CONDITION};
 use glissade_mechanics::coarse::{Contribution, MacroProblem};
-use glissade_mechanics::linear::{default_k0, macro_bases, sum_relax_into, SubdomainSolver};
+use glissade_mechanics::linear::{default_k0, macro_bases, relax_into, sum_into, sum_relax_into, SubdomainSolver};
 use glissade_mechanics::local::{IndicatorSums, InterfaceFields, InterfaceLocal};
 use glissade_mechanics::model::{Model, Side};
 use std::time::{Duration, Instant};
@@ -41,14 +44,19 @@ pub struct Latin {
     pub model: Model,
     pub solvers: Vec<SubdomainSolver>,
     fields: Vec<SubdomainFields>,
-    coarse: MacroProblem,
-    rhs: Mat<f64>,
+    pub coarse: MacroProblem,
+    /// Whether the macro problem is solved (else w̃ = 0).
+    pub use_coarse: bool,
+    pub rhs: Mat<f64>,
     pub locals: Vec<InterfaceLocal>,
     pub interface_fields: Vec<InterfaceFields>,
     time_weights: Vec<f64>,
     pub iteration: usize,
     /// Time spent per stage of [`STAGES`], summed over the iterations run.
     pub stage_time: [Duration; 6],
+    /// Anderson mixing (as the subdomain and interface nodes: records from iteration 1, mixes
+    /// from iteration 2), or plain relaxation.
+    anderson: Option<(Vec<AndersonHistory>, AndersonCoordinator)>,
 }
 
 impl Latin {
@@ -60,6 +68,12 @@ impl Latin {
 
     /// As [`Latin::new`], with the condensed linear stage (`dense`) or the sparse one.
     pub fn with_dense(model: Model, dense: bool) -> Self {
+        Self::with_options(model, dense, true, None)
+    }
+
+    /// As [`Latin::with_dense`], with the macro problem solved or not and Anderson mixing over
+    /// `anderson` iterates (window) or plain relaxation.
+    pub fn with_options(model: Model, dense: bool, use_coarse: bool, anderson: Option<usize>) -> Self {
         let k0 = default_k0(&model);
         let bases = macro_bases(&model);
         let nt = model.time.n_points();
@@ -111,6 +125,14 @@ impl Latin {
             .iter()
             .map(|itf| InterfaceFields::zeros(itf.n_pairs(), nt))
             .collect();
+        let mu = model.solver.relaxation;
+        let anderson = anderson.map(|window| {
+            let histories = solvers
+                .iter()
+                .map(|s| AndersonHistory::new(window, mu, s.n_boundary(), nt))
+                .collect();
+            (histories, AndersonCoordinator::new(MAX_CONDITION))
+        });
         Self {
             rhs: Mat::zeros(coarse.n(), nt),
             time_weights: model.time.trapezoid_weights(),
@@ -118,11 +140,49 @@ impl Latin {
             solvers,
             fields,
             coarse,
+            use_coarse,
             locals,
             interface_fields,
             iteration: 0,
             stage_time: [Duration::ZERO; 6],
+            anderson,
         }
+    }
+
+    /// ŝ := `hat` on every interface, as if a local stage had made it: the next iteration's linear
+    /// stage starts from it (relaxed, not the first).
+    pub fn start_from(&mut self, hat: &[InterfaceFields]) {
+        for (local, h) in self.locals.iter_mut().zip(hat) {
+            local.hat = h.clone();
+        }
+        for (solver, x) in self.solvers.iter().zip(&mut self.fields) {
+            for slot in &solver.op.layout.slots {
+                self.locals[slot.interface].q_hat_into(slot.side == Side::A, x.q_hat.as_mut(), slot.offset);
+            }
+        }
+        self.iteration = 1;
+    }
+
+    /// Σ_sides 𝔼ᵀ M F per macro unknown (rows) and time point for the interface fields `s`, and
+    /// the largest of one side's macro forces: the macro problem's constraint, evaluated.
+    pub fn macro_balance(&mut self, s: &[InterfaceFields]) -> (Mat<f64>, f64) {
+        let mut sum = Mat::<f64>::zeros(self.rhs.nrows(), self.rhs.ncols());
+        let mut size = 0.0f64;
+        for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
+            for slot in &solver.op.layout.slots {
+                let f = &s[slot.interface];
+                let f = if slot.side == Side::A { &f.f_a } else { &f.f_b };
+                x.f.as_mut().subrows_mut(slot.offset, f.nrows()).copy_from(f);
+            }
+            solver.macro_forces_into(x.f.as_ref(), x.macro_forces.as_mut());
+            size = size.max(x.macro_forces.norm_max());
+            for j in 0..sum.ncols() {
+                for (r, &g) in x.columns.iter().enumerate() {
+                    sum[(g, j)] += x.macro_forces[(r, j)];
+                }
+            }
+        }
+        (sum, size)
     }
 
     /// One iteration: linear stage from the stored q̂ (0 at iteration 0), relaxation (μ = 1 at
@@ -151,7 +211,11 @@ impl Latin {
                 }
             }
         }
-        self.coarse.solve_in_place(&mut self.rhs);
+        if self.use_coarse {
+            self.coarse.solve_in_place(&mut self.rhs);
+        } else {
+            self.rhs.fill(0.0);
+        }
         for x in &mut self.fields {
             for j in 0..self.rhs.ncols() {
                 for (r, &g) in x.columns.iter().enumerate() {
@@ -160,17 +224,49 @@ impl Latin {
             }
         }
         lap(2, &mut self.stage_time);
-        for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
-            solver.micro2_into(x.w_tilde.as_ref(), x.w2.as_mut(), x.f2.as_mut());
-            sum_relax_into(
-                mu,
-                x.w1.as_mut(),
-                x.f1.as_mut(),
-                x.w2.as_ref(),
-                x.f2.as_ref(),
-                x.w.as_mut(),
-                x.f.as_mut(),
-            );
+        match self.anderson.as_mut() {
+            None => {
+                for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
+                    solver.micro2_into(x.w_tilde.as_ref(), x.w2.as_mut(), x.f2.as_mut());
+                    sum_relax_into(
+                        mu,
+                        x.w1.as_mut(),
+                        x.f1.as_mut(),
+                        x.w2.as_ref(),
+                        x.f2.as_ref(),
+                        x.w.as_mut(),
+                        x.f.as_mut(),
+                    );
+                }
+            }
+            Some((histories, coordinator)) => {
+                for (solver, x) in self.solvers.iter_mut().zip(&mut self.fields) {
+                    solver.micro2_into(x.w_tilde.as_ref(), x.w2.as_mut(), x.f2.as_mut());
+                }
+                if n >= 2 {
+                    let mut sum: Option<GramPartials> = None;
+                    for (h, x) in histories.iter_mut().zip(&self.fields) {
+                        h.record_sum(&x.w, &x.f, [&x.w1, &x.w2], [&x.f1, &x.f2]);
+                        let p = h.partials();
+                        match sum.as_mut() {
+                            None => sum = Some(p),
+                            Some(s) => s.add(&p),
+                        }
+                    }
+                    let step = coordinator.decide(&sum.expect("a subdomain"), false);
+                    for (h, x) in histories.iter_mut().zip(&mut self.fields) {
+                        h.apply(&step, &mut x.w, &mut x.f);
+                    }
+                } else {
+                    for (h, x) in histories.iter_mut().zip(&mut self.fields) {
+                        sum_into(x.w1.as_mut(), x.f1.as_mut(), x.w2.as_ref(), x.f2.as_ref());
+                        if n >= 1 {
+                            h.record(&x.w, &x.f, &x.w1, &x.f1);
+                        }
+                        relax_into(mu, x.w1.as_ref(), x.f1.as_ref(), x.w.as_mut(), x.f.as_mut());
+                    }
+                }
+            }
         }
         lap(3, &mut self.stage_time);
         for (solver, x) in self.solvers.iter().zip(&self.fields) {

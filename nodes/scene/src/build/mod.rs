@@ -251,21 +251,27 @@ impl Ctx<'_> {
         let kinds = self.interface_rules(raw, &names, &subs, &geo, &curve_names)?;
         let gaps = self.gap_specs(raw)?;
         let interfaces = self.finish_interfaces(raw, geo, &kinds, &gaps, &sub_loads)?;
-        // The macro problem does not converge with curved interfaces yet (docs/scenes.md): off by
-        // default there, refused when asked for.
-        if let Some(k) = interfaces.iter().position(|i| i.straight_normal().is_none()) {
-            let (a, b) = (&subs[interfaces[k].a].name, &subs[interfaces[k].b].name);
-            if raw.solver.coarse == Some(true) {
-                return Err(self.err(
-                    "solver.coarse",
-                    format!(
-                        "the macro (coarse) problem is not available on scenes with curved interfaces (`{a}` | `{b}` \
-                         is curved): with it the iteration stalls away from the solution; leave `coarse` unset or \
-                         false"
-                    ),
-                ));
+        // On a scene with a curved or broken-line interface, the macro problem is on unless a
+        // part is held only by contact along which it can slip rigidly and Anderson mixing is on:
+        // that combination stalls (`rigid::part_slipping_rigidly`, docs/scenes.md). Straight
+        // scenes keep the macro problem as they always had it.
+        if interfaces.iter().any(|i| i.straight_normal().is_none()) {
+            let constrained: Vec<&[bool]> = sub_loads.iter().map(|l| l.constrained.as_slice()).collect();
+            let anderson = matches!(solver.acceleration, Acceleration::Anderson { .. });
+            if let (true, Some(s)) = (anderson, rigid::part_slipping_rigidly(&interfaces, &constrained)) {
+                let part = &subs[s].name;
+                if raw.solver.coarse == Some(true) {
+                    return Err(self.err(
+                        "solver.coarse",
+                        format!(
+                            "the macro (coarse) problem with Anderson mixing stalls on this scene: `{part}` is held \
+                             only by contact along which it can slip rigidly; leave `coarse` unset or false, or set \
+                             acceleration = \"none\""
+                        ),
+                    ));
+                }
+                solver.coarse = false;
             }
-            solver.coarse = false;
         }
         self.check_rigid_modes(&subs, &interfaces, &sub_loads)?;
         self.interface_groups(&raw.deployment, &mut deployment, &names, &subs, &interfaces)?;

@@ -98,3 +98,49 @@ impl Ctx<'_> {
         Ok(())
     }
 }
+
+/// A subdomain whose whole boundary hold is contact along which one of its rigid-body motions
+/// slips: it has no prescribed displacement, every interface of it is a contact interface, and a
+/// rigid motion a + ω × (x − x̄) has no normal component at any of their pairs (the rows
+/// [n_x, n_y, ((x − x̄) n_y − (y − ȳ) n_x)/ℓ], weighted by the pair weights, have rank < 3). The
+/// outer ring of a shrink fit is one (its rotation about the centre of the fit). Returns the
+/// first such subdomain.
+///
+/// Why it matters (docs/scenes.md, `solver.coarse`): at an iterate where the whole contact slips
+/// at a time point, that rigid motion changes neither the local stage's forces (slip: F̂·t =
+/// f|C_N|) nor the part's forces (the macro correction moves a free part rigidly, F₂ = 0), so
+/// the force residual Anderson mixing minimises does not see it. On the shrink fit, LATIN with
+/// the macro problem and Anderson mixing then holds whole time points in slip with the outer ring
+/// turned (0.17 mm at the fit on mesh 2) and stalls at a 1e-2 traction error; plain relaxation
+/// leaves such states, and with the macro problem converges to the reference.
+pub(crate) fn part_slipping_rigidly(interfaces: &[Interface], constrained: &[&[bool]]) -> Option<usize> {
+    (0..constrained.len()).find(|&s| {
+        let own: Vec<&Interface> = interfaces.iter().filter(|i| i.side_of(s).is_some()).collect();
+        if own.is_empty() || constrained[s].iter().any(|&c| c) || !own.iter().all(|i| i.is_contact()) {
+            return false;
+        }
+        let pairs = || {
+            own.iter()
+                .flat_map(|i| (0..i.n_pairs()).map(move |p| (i.coords[p], i.normals[p], i.weights[p])))
+        };
+        let total: f64 = pairs().map(|(_, _, w)| w).sum();
+        let mean = pairs().fold([0.0; 2], |m, (x, _, w)| {
+            [m[0] + w * x[0] / total, m[1] + w * x[1] / total]
+        });
+        let scale = pairs()
+            .map(|(x, _, _)| (x[0] - mean[0]).hypot(x[1] - mean[1]))
+            .fold(0.0, f64::max)
+            .max(f64::MIN_POSITIVE);
+        let mut gram = nalgebra::Matrix3::<f64>::zeros();
+        for (x, n, w) in pairs() {
+            let (dx, dy) = ((x[0] - mean[0]) / scale, (x[1] - mean[1]) / scale);
+            let row = nalgebra::Vector3::new(n[0], n[1], dx * n[1] - dy * n[0]);
+            gram += w * row * row.transpose();
+        }
+        let eig = gram.symmetric_eigenvalues();
+        let max = eig.iter().fold(0.0f64, |m, &v| m.max(v));
+        // A rank-3 hold (two flanks, a polygon) gives a ratio of order 1e-2 or more; the normals
+        // of a circle computed from node coordinates carry round-off of ~1e-9 (squared here).
+        eig.iter().any(|&v| v <= 1e-9 * max)
+    })
+}
