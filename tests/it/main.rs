@@ -9,6 +9,7 @@ mod bench;
 mod common;
 mod distributed;
 mod foreign;
+mod full_disk;
 mod fuzz_nodes;
 mod gmsh;
 mod latin_perfect;

@@ -209,8 +209,9 @@ fn now_ns() -> u64 {
 
 /// An I/O error in words, ENOSPC named as such.
 fn io_detail(e: &std::io::Error) -> String {
+    // ENOSPC on Linux.
     if e.raw_os_error() == Some(28) {
-        format!("no space left on device (ENOSPC: {e})")
+        "no space left on device (ENOSPC)".to_string()
     } else {
         e.to_string()
     }
