@@ -227,7 +227,7 @@ fn a_full_disk_stops_the_run_at_the_first_failed_write_and_keeps_what_was_writte
         o.stderr.contains("the run was stopped after") && o.stderr.contains("the file keeps the"),
         "{c}"
     );
-    assert_eq!(o.files, [rec.clone()], "{c}");
+    assert_eq!(o.files, std::slice::from_ref(&rec), "{c}");
     check_recording(&o.left.join(&rec), &reference, false, &c);
 
     // The same as node processes: the recorder process stops at its first failed write, saying
