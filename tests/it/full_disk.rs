@@ -6,7 +6,7 @@
 //! leaves no partial file, and what it kept is complete (the recording: a valid MCAP file that
 //! glissade and Python `mcap` read alike, up to its last chunk).
 
-use crate::common::{scene_text, scratch};
+use crate::common::{scene_file, scratch};
 use crate::recording::{by_topic, python_read, read_back};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -173,8 +173,7 @@ fn check_recording(path: &Path, reference: &BTreeMap<String, Vec<Vec<u8>>>, comp
 #[test]
 fn a_full_disk_stops_the_run_at_the_first_failed_write_and_keeps_what_was_written() {
     let dir = scratch("full-disk");
-    let scene = dir.join("small-three-layer.toml");
-    std::fs::write(&scene, scene_text("small-three-layer")).unwrap();
+    let scene = scene_file(&dir, "small-three-layer");
     // The files of an unconstrained run (same scene, same run id: same sizes).
     let free = dir.join("free");
     let child = Command::new(env!("CARGO_BIN_EXE_glissade"))
