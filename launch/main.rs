@@ -11,7 +11,7 @@ use glissade::children::NodeRole;
 use glissade::distributed::{install_interrupt_handler, run_distributed_observed, Interrupted, Network, Supervision};
 use glissade::load_scene;
 use glissade::node_process::run_node_process;
-use glissade::output::{interface_fields, reference_interfaces, summary, write_json, RunFile};
+use glissade::output::{interface_fields, reference_interfaces, summary, write_json, write_json_new, RunFile};
 use glissade::report::{build_report_with, linear_stage_table, plot_svg, TimeAxis};
 use glissade::runner::{IterationRecord, RunOptions};
 use glissade_messages::Verdict;
@@ -493,7 +493,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 let mut s = summary(&sc, partial, &run_id);
                 s["verdict"] = serde_json::json!("Interrupted");
                 s["interrupted"] = serde_json::json!(true);
-                let p = write_json(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &s)?;
+                let p = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &s)?;
                 println!(
                     "scene `{}`: interrupted after {} iterations; every node was stopped\nsummary: {}",
                     sc.model.name,
@@ -518,31 +518,43 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     if let Some(traffic) = &bus {
         run_summary["bus"] = serde_json::json!(traffic);
     }
-    let summary_path = write_json(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)?;
-    let fields_path = write_json(
+    // The files this run wrote, named with the error when a later one cannot be written (a full
+    // disk): each is complete, and nothing is left of the one that failed.
+    let mut kept: Vec<std::path::PathBuf> = recording.iter().filter(|p| p.is_file()).cloned().collect();
+    let summary_path = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)
+        .map_err(|e| with_kept(e, &kept))?;
+    kept.push(summary_path.clone());
+    let fields_path = write_json_new(
         &args.out,
         &RunFile::Fields.name(&sc.model.name, &run_id),
         &interface_fields(&sc.model, &result.interfaces),
-    )?;
+    )
+    .map_err(|e| with_kept(e, &kept))?;
+    kept.push(fields_path.clone());
     if args.interior || (sc.model.interfaces.is_empty() && !args.vtu) {
-        let p = write_json(
+        let p = write_json_new(
             &args.out,
             &RunFile::Displacement.name(&sc.model.name, &run_id),
             &glissade::output::displacements(&sc.model, &result.displacements),
-        )?;
+        )
+        .map_err(|e| with_kept(e, &kept))?;
         println!("displacements: {}", p.display());
+        kept.push(p);
     }
     let series = if args.vtu {
         let u = glissade::output::displacement_slices(&sc.model, &result.displacements)?;
         let stem = format!("{}-{run_id}", sc.model.name);
-        Some(glissade::vtu::write_series(
+        let v = glissade::vtu::write_series(
             &sc.model,
             &u,
             &result.interfaces,
             &args.out,
             &stem,
             args.vtu_every as usize,
-        )?)
+        )
+        .map_err(|e| with_kept(e, &kept))?;
+        kept.push(v.pvd.clone());
+        Some(v)
     } else {
         None
     };
@@ -570,7 +582,8 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         glissade::vtu::write_new_file(
             &path,
             glissade::output::interface_csv(&sc.model, &result.interfaces)?.as_bytes(),
-        )?;
+        )
+        .map_err(|e| with_kept(e, &kept))?;
         println!("csv: {}", path.display());
     }
     if let Some(v) = series {
@@ -585,6 +598,15 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         Verdict::Converged => ExitCode::SUCCESS,
         _ => ExitCode::from(NOT_CONVERGED),
     })
+}
+
+/// The error of an output that could not be written, with the files the run did write.
+fn with_kept(e: anyhow::Error, kept: &[std::path::PathBuf]) -> anyhow::Error {
+    if kept.is_empty() {
+        return e;
+    }
+    let files: Vec<String> = kept.iter().map(|p| p.display().to_string()).collect();
+    anyhow::anyhow!("{e:#}; kept, complete: {}", files.join(", "))
 }
 
 fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {

@@ -15,7 +15,7 @@
 //! before anything is solved, so an unwritable folder fails the run at once, naming the path.
 
 use crate::children::ChildOutput;
-use crate::runner::{run_in_process_logged, IterationRecord, RunOptions, RunResult};
+use crate::runner::{run_in_process_logged, run_in_process_logged_until, IterationRecord, RunOptions, RunResult};
 use anyhow::{bail, Context};
 use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
 use glissade_recorder::{log_time_now, recording_file_name, Recorder, RecorderOptions, RecordingStats, RunInfo};
@@ -161,18 +161,27 @@ pub fn run_in_process_recorded_logged(
         return Ok((result, records, None));
     };
     let mut recorder = create_recorder(scene, &opts.run_id, path)?;
-    let mut failure = None;
-    let (result, records) = run_in_process_logged(scene, opts, on_iteration, |m| {
+    // The first failed write (e.g. a full disk) stops the run at the end of that iteration.
+    let failure = std::cell::RefCell::new(None);
+    let mut on_iteration = on_iteration;
+    let keep_going = |r: &IterationRecord| {
+        on_iteration(r);
+        failure.borrow().is_none()
+    };
+    let (result, records) = run_in_process_logged_until(scene, opts, keep_going, |m| {
         let spent = observe(m);
-        if failure.is_none() {
+        if failure.borrow().is_none() {
             if let Err(e) = recorder.record(&m.topic(), log_time_now(), &glissade_messages::encode(m)) {
-                failure = Some(e);
+                *failure.borrow_mut() = Some(e);
             }
         }
         spent
     })?;
-    if let Some(e) = failure {
-        return Err(e.into());
+    if let Some(e) = failure.into_inner() {
+        let at = result.iterations.len();
+        return Err(anyhow::Error::new(e).context(format!(
+            "the run was stopped after {at} iteration(s): its recording could not be written"
+        )));
     }
     let stats = recorder.finish()?;
     Ok((

@@ -133,25 +133,73 @@ pub fn write_series(
         std::fs::remove_dir_all(&partial).with_context(|| format!("cannot remove {}", partial.display()))?;
     }
     std::fs::create_dir_all(&partial).with_context(|| format!("cannot create {}", partial.display()))?;
+    let times = series_times(nt, every);
+    let written = write_vtu_files(model, u, &by_interface, &partial, &dir, &times);
+    let (bytes, collection) = match written {
+        Ok(w) => w,
+        Err(e) => {
+            // Nothing of a series that could not be written is kept.
+            let _ = std::fs::remove_dir_all(&partial);
+            return Err(e.context(format!("the ParaView series {} was not written", pvd.display())));
+        }
+    };
+    let text = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"1.0\" byte_order=\"LittleEndian\">\n  <Collection>\n{collection}  </Collection>\n</VTKFile>\n"
+    );
+    if let Err(e) = crate::output::rename_new(&partial, &dir) {
+        let _ = std::fs::remove_dir_all(&partial);
+        bail!(
+            "cannot move {} to {}: {}",
+            partial.display(),
+            dir.display(),
+            crate::output::io_why(&e)
+        );
+    }
+    if let Err(e) = crate::output::write_through_partial(&pvd, false, |w| w.write_all(text.as_bytes())) {
+        // The series' files without their index: removed with it.
+        let _ = std::fs::remove_dir_all(&dir);
+        return Err(e.context(format!("the ParaView series {} was not written", pvd.display())));
+    }
+    Ok(Series {
+        pvd,
+        dir,
+        files: 2 * times.len(),
+        bytes: bytes + text.len() as u64,
+    })
+}
 
+/// Writes the VTU files of time points `times` into `folder` (named in errors as in `dir`, where
+/// they go once complete); returns their bytes and the `.pvd` collection's entries.
+fn write_vtu_files(
+    model: &Model,
+    u: &[Vec<&[f64]>],
+    by_interface: &[Option<&InterfaceSolution>],
+    folder: &Path,
+    dir: &Path,
+    times: &[usize],
+) -> anyhow::Result<(u64, String)> {
     let solid = SolidGrid::new(model);
     let edges = InterfaceGrid::new(model);
     let mut bytes = 0u64;
     let mut buf = Vec::new();
     let mut collection = String::new();
     let dir_name = dir.file_name().expect("a folder name").to_string_lossy().into_owned();
-    let times = series_times(nt, every);
-    for &i in &times {
+    for &i in times {
         let t = model.time.t(i);
         for (part, name) in [(0, format!("solid-{i:04}.vtu")), (1, format!("interfaces-{i:04}.vtu"))] {
             buf.clear();
             if part == 0 {
                 solid.write(model, u, i, &mut buf)?;
             } else {
-                edges.write(model, &by_interface, i, &mut buf);
+                edges.write(model, by_interface, i, &mut buf);
             }
-            let path = partial.join(&name);
-            std::fs::write(&path, &buf).with_context(|| format!("cannot write {}", path.display()))?;
+            std::fs::write(folder.join(&name), &buf).map_err(|e| {
+                anyhow::anyhow!(
+                    "cannot write {}: {}",
+                    dir.join(&name).display(),
+                    crate::output::io_why(&e)
+                )
+            })?;
             bytes += buf.len() as u64;
             let _ = writeln!(
                 collection,
@@ -159,20 +207,7 @@ pub fn write_series(
             );
         }
     }
-    let text = format!(
-        "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"1.0\" byte_order=\"LittleEndian\">\n  <Collection>\n{collection}  </Collection>\n</VTKFile>\n"
-    );
-    std::fs::rename(&partial, &dir)
-        .with_context(|| format!("cannot move {} to {}", partial.display(), dir.display()))?;
-    let tmp = out.join(format!(".{stem}.pvd.partial"));
-    std::fs::write(&tmp, &text).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, &pvd).with_context(|| format!("cannot move {} to {}", tmp.display(), pvd.display()))?;
-    Ok(Series {
-        pvd,
-        dir,
-        files: 2 * times.len(),
-        bytes: bytes + text.len() as u64,
-    })
+    Ok((bytes, collection))
 }
 
 /// Points and cells of a grid, as the bytes of their arrays.
@@ -448,13 +483,7 @@ pub fn write_new_file(path: &Path, data: &[u8]) -> anyhow::Result<()> {
     if std::fs::symlink_metadata(path).is_ok() {
         bail!("{} already exists; nothing was overwritten", path.display());
     }
-    let name = path.file_name().context("a file name")?.to_string_lossy();
-    let tmp = path.with_file_name(format!(".{name}.partial"));
-    let mut f = std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", tmp.display()))?;
-    f.write_all(data)
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))?;
-    Ok(())
+    crate::output::write_through_partial(path, false, |w| w.write_all(data))
 }
 
 #[cfg(test)]

@@ -9,6 +9,13 @@ pub fn scene_text(name: &str) -> String {
     std::fs::read_to_string(format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"))).expect("scene file")
 }
 
+/// A copy of scene `launch/scenes/<name>.toml` in `dir`, for the binary to run; its path.
+pub fn scene_file(dir: &Path, name: &str) -> PathBuf {
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, scene_text(name)).expect("scene copy");
+    path
+}
+
 pub fn scene(text: &str) -> LoadedScene {
     match load_str(text, "test.toml") {
         Ok(s) => s,

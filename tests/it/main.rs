@@ -10,6 +10,7 @@ mod bus_auth;
 mod common;
 mod distributed;
 mod foreign;
+mod full_disk;
 mod fuzz_nodes;
 mod gmsh;
 mod latin_perfect;

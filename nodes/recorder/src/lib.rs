@@ -11,14 +11,17 @@
 //!   schema version, what was recorded) and the scene file as an attachment `scene.toml`;
 //! - chunked; chunk compression none by default (solver fields are full-entropy f64: lz4 and zstd
 //!   shrink them by 0.1–5 % at a fraction of the write speed), lz4 or zstd on request;
-//! - a summary section (statistics, chunk, attachment and metadata indexes) written on
-//!   [`Recorder::finish`] or drop.
+//! - a summary section (statistics, chunk, attachment and metadata indexes) and footer after
+//!   every chunk, replaced by the `mcap` writer's own on [`Recorder::finish`] or drop.
 //!
-//! Durability: the current chunk is closed and the file flushed at the end of every LATIN
-//! iteration (every `Decision` message) and whenever a chunk exceeds the chunk size, so a
-//! recorder killed by SIGKILL leaves a file whose chunks up to the last completed iteration are
-//! readable by [`Recording::open`] (which reports the file as unfinished).
+//! Durability: the current chunk is closed and appended to the file at the end of every LATIN
+//! iteration (every `Decision` message) and whenever it exceeds the chunk size, with a summary
+//! that indexes it ([`durable`]): the file is a complete MCAP file after every chunk, and a
+//! recorder killed by SIGKILL (or stopped by a full disk) leaves one that any MCAP reader reads
+//! up to its last complete chunk (Python `mcap`'s `make_reader` included), and that
+//! [`Recording::open`] reports as not finalised.
 
+mod durable;
 pub mod foreign;
 mod reader;
 mod schema;
@@ -26,10 +29,10 @@ mod schema;
 pub use reader::{ChannelInfo, RecordedMessage, Recording};
 pub use schema::{payload_schema, PAYLOAD_FIELDS};
 
+use durable::{DurableFile, Index, Pending};
 use glissade_messages::{peek_envelope, Stage, SCHEMA_VERSION};
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 /// Fields of space-time size that `full_fields_every = k` records only every k-th iteration (and at
@@ -171,15 +174,30 @@ pub fn recording_file_name(scene_name: &str, run_id: &str) -> String {
 
 /// Writes the messages of one run into an MCAP file.
 pub struct Recorder {
-    writer: Option<mcap::Writer<BufWriter<File>>>,
+    /// The `mcap` writer; it writes into `pending`, which [`Recorder::flush`] appends to `file`.
+    writer: Option<mcap::Writer<Pending>>,
+    pending: Pending,
+    file: DurableFile,
+    /// What the file's summary indexes.
+    index: Index,
     path: PathBuf,
     run_id: String,
     patterns: Vec<String>,
     full_fields_every: u32,
+    chunk_size: u64,
     schemas: HashMap<String, u16>,
     channels: HashMap<String, u16>,
     sequence: u32,
     stats: RecordingStats,
+    /// Messages per channel and bytes of the chunk not yet appended.
+    open_counts: BTreeMap<u16, u64>,
+    open_bytes: u64,
+    /// The last iteration whose decision was written, and the last one appended to the file.
+    last_decision: Option<u32>,
+    /// Messages in the file and the last iteration whose decision is in it.
+    kept: (u64, Option<u32>),
+    /// The first failed write: every later call fails with it, and nothing more is written.
+    failed: Option<String>,
 }
 
 fn now_ns() -> u64 {
@@ -189,9 +207,19 @@ fn now_ns() -> u64 {
         .unwrap_or(0)
 }
 
+/// An I/O error in words, ENOSPC named as such.
+fn io_detail(e: &std::io::Error) -> String {
+    // ENOSPC on Linux.
+    if e.raw_os_error() == Some(28) {
+        "no space left on device (ENOSPC)".to_string()
+    } else {
+        e.to_string()
+    }
+}
+
 impl Recorder {
-    /// Creates the file (and its folder), writes the run's metadata and scene attachment and
-    /// flushes them. Any failure names the path.
+    /// Creates the file (and its folder), writes the run's metadata and scene attachment, and a
+    /// summary and footer. Any failure names the path.
     pub fn create(path: &Path, run: &RunInfo, options: &RecorderOptions) -> Result<Self, RecorderError> {
         let io = |detail: String| RecorderError::Io {
             path: path.to_path_buf(),
@@ -203,17 +231,19 @@ impl Recorder {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| io(format!("cannot create folder {}: {e}", dir.display())))?;
         }
-        let file = File::create(path).map_err(|e| io(format!("cannot create the file: {e}")))?;
+        let file = File::create(path).map_err(|e| io(format!("cannot create the file: {}", io_detail(&e))))?;
         let mcap_err = |e: mcap::McapError| RecorderError::Mcap {
             path: path.to_path_buf(),
             detail: mcap_detail(&e),
         };
+        let pending = Pending::default();
+        // Chunks are closed by the recorder (`flush`), each then appended with a new summary.
         let mut writer = mcap::WriteOptions::new()
             .profile("glissade")
             .library(run.software.clone())
             .compression(options.compression.mcap())
-            .chunk_size(Some(options.chunk_size))
-            .create(BufWriter::with_capacity(1 << 20, file))
+            .chunk_size(None)
+            .create(pending.clone())
             .map_err(mcap_err)?;
         let mut metadata = BTreeMap::new();
         metadata.insert("run_id".to_string(), run.run_id.clone());
@@ -244,9 +274,27 @@ impl Recorder {
                 data: std::borrow::Cow::Borrowed(run.scene_text.as_bytes()),
             })
             .map_err(mcap_err)?;
+        // A first chunk, holding the schema of decisions (every run has them): a summary with no
+        // chunk index makes Python `mcap`'s reader read the data section from the start instead,
+        // which fails on a file whose last append was cut.
+        let (decision_schema, text) = payload_schema("decision");
+        let decision_id = writer
+            .add_schema(&decision_schema, ENCODING, text.as_bytes())
+            .map_err(mcap_err)?;
         writer.flush().map_err(mcap_err)?;
+        let mut index = Index::default();
+        index.add_schema(decision_id, &decision_schema, ENCODING, text.as_bytes());
+        let file = pending
+            .drain(|_, head| {
+                index.scan(0, head)?;
+                DurableFile::create(file, head, index.tail(head.len() as u64))
+            })
+            .map_err(|e| io(format!("cannot write: {}", io_detail(&e))))?;
         Ok(Self {
             writer: Some(writer),
+            pending,
+            file,
+            index,
             path: path.to_path_buf(),
             run_id: run.run_id.clone(),
             patterns: options
@@ -255,10 +303,16 @@ impl Recorder {
                 .map(|p| glissade_messages::topic::within_run(&run.run_id, p))
                 .collect(),
             full_fields_every: options.full_fields_every,
-            schemas: HashMap::new(),
+            chunk_size: options.chunk_size,
+            schemas: HashMap::from([(decision_schema, decision_id)]),
             channels: HashMap::new(),
             sequence: 0,
             stats: RecordingStats::default(),
+            open_counts: BTreeMap::new(),
+            open_bytes: 0,
+            last_decision: None,
+            kept: (0, None),
+            failed: None,
         })
     }
 
@@ -270,17 +324,47 @@ impl Recorder {
         &self.stats
     }
 
-    fn mcap_err(&self, e: mcap::McapError) -> RecorderError {
-        RecorderError::Mcap {
+    /// Remembers the first failure (later calls fail with it) and returns it.
+    fn fail(&mut self, detail: String) -> RecorderError {
+        let detail = self.failed.get_or_insert(detail).clone();
+        RecorderError::Io {
             path: self.path.clone(),
-            detail: mcap_detail(&e),
+            detail,
         }
+    }
+
+    fn check_failed(&self) -> Result<(), RecorderError> {
+        match &self.failed {
+            Some(detail) => Err(RecorderError::Io {
+                path: self.path.clone(),
+                detail: detail.clone(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// What the file holds after a failed write: the messages of the chunks appended before.
+    fn kept(&self) -> String {
+        let (messages, iteration) = self.kept;
+        let through = iteration.map_or("no complete iteration".to_string(), |i| format!("iterations 0 to {i}"));
+        format!(
+            "the file keeps the {messages} messages written before ({through}), a complete MCAP file ({} bytes) \
+             that glissade and other MCAP readers read",
+            self.file.len()
+        )
+    }
+
+    fn mcap_failure(&mut self, e: mcap::McapError) -> RecorderError {
+        let detail = format!("{}; {}", mcap_detail(&e), self.kept());
+        self.fail(detail)
     }
 
     /// Records the wire bytes `bytes` of a message published on `topic`, logged at `log_time_ns`
     /// (ns since the Unix epoch). The bytes must be a message of this run (its envelope is
-    /// checked); a message of another run or of another schema version is an error.
+    /// checked); a message of another run or of another schema version is an error. After a
+    /// failed write every call fails with that write's error.
     pub fn record(&mut self, topic: &str, log_time_ns: u64, bytes: &[u8]) -> Result<Recorded, RecorderError> {
+        self.check_failed()?;
         let msg_err = |detail: String| RecorderError::Message {
             path: self.path.clone(),
             topic: topic.to_string(),
@@ -312,12 +396,11 @@ impl Recorder {
                 let schema = match self.schemas.get(&schema_name) {
                     Some(&s) => s,
                     None => {
-                        let s = writer
-                            .add_schema(&schema_name, ENCODING, text.as_bytes())
-                            .map_err(|e| RecorderError::Mcap {
-                                path: self.path.clone(),
-                                detail: mcap_detail(&e),
-                            })?;
+                        let s = match writer.add_schema(&schema_name, ENCODING, text.as_bytes()) {
+                            Ok(s) => s,
+                            Err(e) => return Err(self.mcap_failure(e)),
+                        };
+                        self.index.add_schema(s, &schema_name, ENCODING, text.as_bytes());
                         self.schemas.insert(schema_name, s);
                         s
                     }
@@ -325,12 +408,18 @@ impl Recorder {
                 let mut meta = BTreeMap::new();
                 meta.insert("schema_version".to_string(), SCHEMA_VERSION.to_string());
                 meta.insert("codec".to_string(), CODEC.to_string());
-                let c = writer
-                    .add_channel(schema, topic, ENCODING, &meta)
-                    .map_err(|e| RecorderError::Mcap {
-                        path: self.path.clone(),
-                        detail: mcap_detail(&e),
-                    })?;
+                let writer = self.writer.as_mut().expect("recorder used after finish");
+                let c = match writer.add_channel(schema, topic, ENCODING, &meta) {
+                    Ok(c) => c,
+                    Err(e) => return Err(self.mcap_failure(e)),
+                };
+                self.index.add_channel(mcap::records::Channel {
+                    id: c,
+                    schema_id: schema,
+                    topic: topic.to_string(),
+                    message_encoding: ENCODING.to_string(),
+                    metadata: meta,
+                });
                 self.channels.insert(topic.to_string(), c);
                 self.stats.channels = self.channels.len();
                 c
@@ -344,50 +433,103 @@ impl Recorder {
         };
         self.sequence = self.sequence.wrapping_add(1);
         let writer = self.writer.as_mut().expect("recorder used after finish");
-        let written = writer.write_to_known_channel(&header, bytes);
-        written.map_err(|e| self.mcap_err(e))?;
+        if let Err(e) = writer.write_to_known_channel(&header, bytes) {
+            return Err(self.mcap_failure(e));
+        }
         self.stats.messages += 1;
         self.stats.payload_bytes += bytes.len() as u64;
+        *self.open_counts.entry(channel).or_default() += 1;
+        // Opcode, length and message header, then the bytes.
+        self.open_bytes += 31 + bytes.len() as u64;
         if field == "decision" {
             // End of an iteration: make everything so far durable.
+            self.last_decision = Some(envelope.iteration);
+            self.flush()?;
+        } else if self.open_bytes >= self.chunk_size {
             self.flush()?;
         }
         Ok(Recorded::Written)
     }
 
-    /// Closes the current chunk and flushes the file.
+    /// Closes the current chunk and appends it to the file with a summary that indexes it.
     pub fn flush(&mut self) -> Result<(), RecorderError> {
+        self.check_failed()?;
         let writer = self.writer.as_mut().expect("recorder used after finish");
-        let r = writer.flush();
-        r.map_err(|e| self.mcap_err(e))
+        if let Err(e) = writer.flush() {
+            return Err(self.mcap_failure(e));
+        }
+        if self.open_counts.is_empty() {
+            return Ok(());
+        }
+        let (file, index, counts) = (&mut self.file, &mut self.index, &self.open_counts);
+        let appended = self.pending.drain(|base, data| {
+            debug_assert_eq!(base, file.data_end());
+            index.scan(base, data)?;
+            index.add_messages(counts);
+            file.append(data, index.tail(base + data.len() as u64))
+        });
+        match appended {
+            Ok(()) => {
+                self.kept = (self.stats.messages, self.last_decision);
+                self.open_counts.clear();
+                self.open_bytes = 0;
+                Ok(())
+            }
+            Err(e) => {
+                let detail = format!("cannot write: {}; {}", io_detail(&e), self.kept());
+                Err(self.fail(detail))
+            }
+        }
     }
 
-    /// Writes the summary section and closes the file.
+    /// Writes the `mcap` writer's summary section and closes the file.
     pub fn finish(mut self) -> Result<RecordingStats, RecorderError> {
         self.finish_inner()?;
         Ok(self.stats.clone())
     }
 
     fn finish_inner(&mut self) -> Result<(), RecorderError> {
-        if let Some(mut writer) = self.writer.take() {
-            writer.finish().map_err(|e| self.mcap_err(e))?;
-            let mut inner = writer.into_inner();
-            std::io::Write::flush(&mut inner).map_err(|e| RecorderError::Io {
-                path: self.path.clone(),
-                detail: e.to_string(),
-            })?;
-            self.stats.file_bytes = inner.get_ref().metadata().map(|m| m.len()).unwrap_or(0);
+        if self.writer.is_none() {
+            return Ok(());
         }
+        if let Err(e) = self.flush() {
+            self.writer = None;
+            return Err(e);
+        }
+        let mut writer = self.writer.take().expect("checked above");
+        if let Err(e) = writer.finish() {
+            return Err(self.mcap_failure(e));
+        }
+        drop(writer);
+        let file = &mut self.file;
+        let written = self.pending.drain(|_, tail| {
+            file.append(
+                &[],
+                durable::Tail {
+                    bytes: tail.to_vec(),
+                    summary: 0..0,
+                },
+            )
+        });
+        if let Err(e) = written {
+            let detail = format!("cannot write the summary: {}; {}", io_detail(&e), self.kept());
+            return Err(self.fail(detail));
+        }
+        self.stats.file_bytes = self.file.len();
         Ok(())
     }
 }
 
 impl Drop for Recorder {
     /// Finalises the file (summary section) when a run ends without [`Recorder::finish`], e.g.
-    /// on an error path; a failure here can only be reported on stderr.
+    /// on an error path; a failure here can only be reported on stderr (once: a failure already
+    /// returned by a call is not repeated).
     fn drop(&mut self) {
+        let failed_before = self.failed.is_some();
         if let Err(e) = self.finish_inner() {
-            eprintln!("error: {e}");
+            if !failed_before {
+                eprintln!("error: {e}");
+            }
         }
     }
 }

@@ -85,6 +85,20 @@ fn check_record(bytes: &[u8], pos: usize) -> Option<(usize, Option<String>)> {
     Some((end, None))
 }
 
+/// The end of the last record the summary of a file with a footer indexes (chunks with their
+/// message indexes, attachments, metadata), if it has a summary and that end is within the file.
+fn indexed_end(bytes: &[u8]) -> Option<usize> {
+    let summary = mcap::Summary::read(bytes).ok()??;
+    let chunks = summary
+        .chunk_indexes
+        .iter()
+        .map(|c| c.chunk_start_offset + c.chunk_length + c.message_index_length);
+    let attachments = summary.attachment_indexes.iter().map(|a| a.offset + a.length);
+    let metadata = summary.metadata_indexes.iter().map(|m| m.offset + m.length);
+    let end = chunks.chain(attachments).chain(metadata).max()?;
+    usize::try_from(end).ok().filter(|&e| e <= bytes.len())
+}
+
 /// A recording loaded in memory and indexed in one pass.
 pub struct Recording {
     path: PathBuf,
@@ -120,6 +134,22 @@ impl Recording {
     /// messages on channels declared in them), and [`Recording::damaged`] names them; reading
     /// goes on after them.
     pub fn from_bytes(path: &Path, mut bytes: Vec<u8>) -> Result<Self, RecorderError> {
+        let footer = mcap::read::footer(&bytes).ok();
+        // The `mcap` writer's own summary has summary offsets; the one the recorder writes after
+        // every chunk has none (crate::durable).
+        let finished = footer.is_some_and(|f| f.summary_offset_start != 0);
+        // A recording that was not finalised holds what its summary indexes: what a reader that
+        // starts from the footer reads. (Bytes past that are an append its recorder did not finish.)
+        let mut unfinished = None;
+        if footer.is_some() && !finished {
+            if let Some(end) = indexed_end(&bytes) {
+                unfinished = Some(format!(
+                    "not finalised (its recorder stopped before the end of the run): read up to byte {end}, the \
+                     end of the last chunk its summary indexes"
+                ));
+                bytes.truncate(end);
+            }
+        }
         let bad = damaged_chunks(&bytes);
         let damaged = (!bad.is_empty()).then(|| {
             let at: Vec<String> = bad.iter().map(|c| format!("byte {} ({})", c.start, c.why)).collect();
@@ -136,7 +166,6 @@ impl Recording {
             path: path.to_path_buf(),
             detail,
         };
-        let finished = mcap::read::footer(&bytes).is_ok();
         let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
         let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
         let mut metadata = BTreeMap::new();
@@ -191,6 +220,10 @@ impl Recording {
                 Record::DataEnd(_) => break,
                 _ => {}
             }
+        }
+        if unfinished.is_some() {
+            // Reading stopped at the end of the indexed records, not at a damaged one.
+            truncated = unfinished;
         }
         if metadata.is_empty() {
             return Err(format(format!(

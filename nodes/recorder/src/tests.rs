@@ -42,6 +42,11 @@ const INTERFACE: NodeId = NodeId {
 
 /// The messages of one iteration of a two-subdomain run, with values depending on `n`.
 fn iteration(n: u32) -> Vec<Message> {
+    iteration_of(n, 6)
+}
+
+/// As [`iteration`], with boundary states of `rows` × 3 values.
+fn iteration_of(n: u32, rows: usize) -> Vec<Message> {
     let mut out = Vec::new();
     for s in 0..2 {
         out.push(msg(
@@ -50,10 +55,10 @@ fn iteration(n: u32) -> Vec<Message> {
             sub(s),
             Payload::BoundaryState {
                 subdomain: s,
-                w: Field::from_fn(6, 3, |r, c| {
+                w: Field::from_fn(rows, 3, |r, c| {
                     (n * 100 + s * 10) as f64 + r as f64 * 0.1 + c as f64 * 1e-3
                 }),
-                f: Field::from_fn(6, 3, |r, c| -(r as f64) * std::f64::consts::PI + c as f64 + n as f64),
+                f: Field::from_fn(rows, 3, |r, c| -(r as f64) * std::f64::consts::PI + c as f64 + n as f64),
             },
         ));
         out.push(msg(
@@ -322,6 +327,17 @@ fn survives_sigkill() {
     assert!(back.len() >= expected.len(), "{} < {}", back.len(), expected.len());
     assert_eq!(back[..expected.len()], expected[..]);
     assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
+    // Python `mcap`'s `make_reader` reads the same messages.
+    let Some(python) = python_mcap() else { return };
+    let crc = back.iter().fold(crc32fast::Hasher::new(), |mut h, w| {
+        h.update(w);
+        h
+    });
+    assert_eq!(
+        python_reads(python, std::slice::from_ref(&path)),
+        [Ok((back.len(), crc.finalize()))],
+        "Python mcap"
+    );
 }
 
 /// A chunk whose bytes changed after it was written (its CRC no longer matches) is reported with
@@ -373,4 +389,154 @@ fn a_damaged_chunk_is_reported_and_skipped() {
     );
     assert_eq!(back[first_missing..], wire[first_missing + skipped..]);
     assert_eq!(back.last(), wire.last());
+}
+
+/// A Python interpreter that imports `mcap`, or None (saying why) unless `GLISSADE_REQUIRE_PYTHON`
+/// is set (CI), where a missing one fails the test.
+fn python_mcap() -> Option<&'static str> {
+    let found = ["python3", "python"].into_iter().find(|p| {
+        std::process::Command::new(p)
+            .args(["-c", "import mcap.reader"])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    });
+    if found.is_none() {
+        assert!(
+            std::env::var_os("GLISSADE_REQUIRE_PYTHON").is_none(),
+            "GLISSADE_REQUIRE_PYTHON is set but no python3 imports `mcap` (pip install -r .ci/python-requirements.txt)"
+        );
+        println!("skipped the Python reader: no python3 with the `mcap` package");
+    }
+    found
+}
+
+/// What Python `mcap`'s `make_reader(f).iter_messages(log_time_order=False)` (on a file: the
+/// seeking reader, which starts from the footer) yields from each file: the number of messages and
+/// the CRC-32 of their bytes in file order, or the error it raised.
+fn python_reads(python: &str, files: &[std::path::PathBuf]) -> Vec<Result<(usize, u32), String>> {
+    const SCRIPT: &str = r#"
+import sys, json, zlib
+from mcap.reader import make_reader
+for path in sys.argv[1:]:
+    try:
+        with open(path, "rb") as f:
+            n, crc = 0, 0
+            for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+                n += 1
+                crc = zlib.crc32(message.data, crc)
+        print(json.dumps({"count": n, "crc": crc}))
+    except Exception as e:
+        print(json.dumps({"error": f"{type(e).__name__}: {e}"}))
+"#;
+    let out = std::process::Command::new(python)
+        .args(["-c", SCRIPT])
+        .args(files)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let field = |k: &str| {
+                l.split(&format!("\"{k}\": "))
+                    .nth(1)
+                    .map(|v| v.split([',', '}']).next().unwrap().to_string())
+            };
+            match field("error") {
+                Some(_) => Err(l.to_string()),
+                None => Ok((
+                    field("count").unwrap().parse().unwrap(),
+                    field("crc").unwrap().parse().unwrap(),
+                )),
+            }
+        })
+        .collect()
+}
+
+/// A recorder killed at any point of any write (simulated: the write it was in keeps none of its
+/// bytes or those up to any page boundary it crosses, where the kernel checks for a fatal signal,
+/// and nothing after it happens) leaves a file that Python `mcap`'s
+/// `make_reader` and [`Recording`] both read, yielding exactly the messages of the chunks whose
+/// append completed, in order: never an error, never fewer, never a message of a chunk that was
+/// being written. The states include kills inside a chunk's bytes, inside the summary and inside
+/// the footer writes of every append, and inside the final summary.
+#[test]
+fn a_kill_at_any_write_leaves_a_file_python_and_glissade_read_up_to_the_last_complete_chunk() {
+    let dir = tempfile::tempdir().unwrap();
+    // Boundary states of 2 × 300 × 3 values (14.4 kB): chunks and summaries span pages, so that
+    // kills land inside them; small chunks, several per iteration.
+    let msgs: Vec<Message> = (0..4).flat_map(|n| iteration_of(n, 300)).collect();
+    let wire: Vec<Vec<u8>> = msgs.iter().map(encode).collect();
+    let options = RecorderOptions {
+        chunk_size: 20_000,
+        ..RecorderOptions::default()
+    };
+    // The writes of an uninterrupted recording, in order.
+    let trace = {
+        let path = dir.path().join("whole.mcap");
+        let mut rec = Recorder::create(&path, &run_info(), &options).unwrap();
+        record_all(&mut rec, &msgs);
+        rec.finish_inner().unwrap();
+        rec.file.trace.clone()
+    };
+    let offsets: Vec<u64> = trace.iter().map(|t| t.1).collect();
+    let trace: Vec<usize> = trace.iter().map(|t| t.0).collect();
+    assert!(trace.len() > 40, "{} writes: too few chunks", trace.len());
+    let mut files = Vec::new();
+    let mut expected = Vec::new();
+    // Op 0 creates the file (metadata and scene, no message): kills from op 1 on.
+    for (op, &len) in trace.iter().enumerate().skip(1) {
+        // Nothing, and every page boundary the write crosses (a kill cuts a write there only).
+        let mut cuts = vec![0];
+        cuts.extend((1..len).filter(|k| (offsets[op] + *k as u64).is_multiple_of(4096)));
+        for bytes in cuts {
+            let path = dir.path().join(format!("kill-{op}-{bytes}.mcap"));
+            let mut rec = Recorder::create(&path, &run_info(), &options).unwrap();
+            rec.file.kill = Some(durable::Kill { ops: op, bytes });
+            let mut died = false;
+            for (k, m) in msgs.iter().enumerate() {
+                if rec.record(&m.topic(), 1_000 + k as u64, &encode(m)).is_err() {
+                    died = true;
+                    break;
+                }
+            }
+            if !died {
+                assert!(rec.finish_inner().is_err(), "kill at op {op} never happened");
+            }
+            let kept = rec.kept.0 as usize;
+            drop(rec);
+            files.push(path);
+            expected.push((op, bytes, kept));
+        }
+    }
+    // Every state: the Rust reader.
+    for (path, &(op, bytes, kept)) in files.iter().zip(&expected) {
+        let r = Recording::open(path).unwrap_or_else(|e| panic!("kill at op {op} + {bytes} bytes: {e}"));
+        assert!(!r.is_finished(), "kill at op {op} + {bytes} bytes");
+        let back: Vec<Vec<u8>> = r.messages().map(|m| m.data.into_owned()).collect();
+        assert_eq!(
+            back[..],
+            wire[..kept],
+            "kill at op {op} + {bytes} bytes: glissade's reader"
+        );
+        assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
+    }
+    // Some states hold part of the run, some none of it, some all of it but the summary.
+    assert!(expected.iter().any(|e| e.2 == 0) && expected.iter().any(|e| e.2 == wire.len()));
+    assert!(expected.iter().any(|e| e.2 > 0 && e.2 < wire.len()));
+    let Some(python) = python_mcap() else { return };
+    for ((read, &(op, bytes, kept)), path) in python_reads(python, &files).into_iter().zip(&expected).zip(&files) {
+        let crc = wire[..kept].iter().fold(crc32fast::Hasher::new(), |mut h, w| {
+            h.update(w);
+            h
+        });
+        assert_eq!(
+            read,
+            Ok((kept, crc.finalize())),
+            "kill at op {op} + {bytes} bytes ({}): Python mcap",
+            path.display()
+        );
+    }
+    println!("{} kill states read by both readers", files.len());
 }
