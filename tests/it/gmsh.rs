@@ -348,7 +348,10 @@ fn curved_scenes_as_processes_are_bit_identical_to_in_process() {
         .unwrap();
         assert_eq!(local.verdict, Verdict::Converged, "{name}");
         crate::distributed::assert_identical(&local, &remote);
-        println!("{name}: {} iterations, as processes bit-identical", local.iterations.len());
+        println!(
+            "{name}: {} iterations, as processes bit-identical",
+            local.iterations.len()
+        );
     }
 }
 
