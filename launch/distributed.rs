@@ -628,10 +628,15 @@ pub fn run_distributed_observed(
                 let Ok(m) = transport::decode_payload(bytes, &expected, Default::default()) else {
                     continue;
                 };
+                // Only what its sender may send, on its sender's key (a member may publish on
+                // its own keys only, but anything there).
+                if m.not_from_its_sender(&a.key).is_some() {
+                    continue;
+                }
                 if let Some(o) = observe.as_mut() {
                     o(&m);
                 }
-                if let Some(rec) = got.take(m) {
+                if let Some(rec) = got.take(m, &plan) {
                     stop_seen |= rec.decision.verdict.is_stop();
                     on_iteration(rec);
                 }
@@ -695,10 +700,13 @@ pub fn run_distributed_observed(
             continue;
         }
         if let Ok(m) = transport::decode_payload(bytes, &expected, Default::default()) {
+            if m.not_from_its_sender(&a.key).is_some() {
+                continue;
+            }
             if let Some(o) = observe.as_mut() {
                 o(&m);
             }
-            if let Some(rec) = got.take(m) {
+            if let Some(rec) = got.take(m, &plan) {
                 on_iteration(rec);
             }
         }
@@ -746,9 +754,15 @@ struct Collected {
 }
 
 impl Collected {
-    /// Keeps the results of message `m`; a decision's record is returned.
-    fn take(&mut self, m: Message) -> Option<&IterationRecord> {
+    /// Keeps the results of message `m` (already checked to be its sender's kind, on its key); a
+    /// decision's record is returned. Each result is taken from the node that owns it, once.
+    fn take(&mut self, m: Message, plan: &Plan) -> Option<&IterationRecord> {
         let from = m.envelope.sender;
+        let owns_interface = |i: u32| {
+            plan.interface_groups
+                .get(from.index as usize)
+                .is_some_and(|g| g.contains(&(i as usize)))
+        };
         match m.payload {
             // Decisions come from interface node 0, one per iteration, in order; anything else on
             // that key is not the run's.
@@ -762,8 +776,14 @@ impl Collected {
                         .iterations
                         .last()
                         .is_some_and(|r| r.iteration >= m.envelope.iteration) => {}
-            Payload::InterfaceSolution(_) if from.role != Role::Interface => {}
-            Payload::Displacement { .. } if from.role != Role::Subdomain => {}
+            Payload::InterfaceSolution(s)
+                if from.role != Role::Interface
+                    || !owns_interface(s.interface)
+                    || self.interfaces.iter().any(|k| k.interface == s.interface) => {}
+            Payload::Displacement { subdomain, .. }
+                if from.role != Role::Subdomain
+                    || subdomain != from.index
+                    || self.displacements.iter().any(|(k, _)| *k == subdomain) => {}
             Payload::Decision(decision) => {
                 self.iterations.push(IterationRecord {
                     iteration: m.envelope.iteration,

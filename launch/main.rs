@@ -158,8 +158,11 @@ fn log_if_asked() -> anyhow::Result<()> {
     let filter = filter
         .into_string()
         .map_err(|v| anyhow::anyhow!("RUST_LOG = {v:?} is not UTF-8"))?;
+    // Zenoh logs a session's whole configuration, the bus password among it, at debug level
+    // when it opens: that module is held at info whatever RUST_LOG asks.
     let filter = tracing_subscriber::EnvFilter::try_new(&filter)
-        .map_err(|e| anyhow::anyhow!("RUST_LOG = {filter:?} is not a tracing filter: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("RUST_LOG = {filter:?} is not a tracing filter: {e}"))?
+        .add_directive("zenoh::api::session=info".parse().expect("a valid directive"));
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)

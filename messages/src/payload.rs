@@ -435,8 +435,30 @@ impl Message {
             return Some(format!("its envelope and payload belong on {topic}"));
         }
         let role = self.envelope.sender.role;
-        (!self.payload.senders().contains(&role))
-            .then(|| format!("a {} node does not send {}", role.key(), self.payload.field_key()))
+        if !self.payload.senders().contains(&role) {
+            return Some(format!(
+                "a {} node does not send {}",
+                role.key(),
+                self.payload.field_key()
+            ));
+        }
+        // A subdomain speaks for itself only.
+        let own = match &self.payload {
+            Payload::HomogenizedOperator { subdomain, .. }
+            | Payload::MacroForces { subdomain, .. }
+            | Payload::BoundaryState { subdomain, .. }
+            | Payload::BoundaryModes { subdomain, .. }
+            | Payload::AndersonGram { subdomain, .. }
+            | Payload::Displacement { subdomain, .. } => Some(*subdomain),
+            _ => None,
+        };
+        own.filter(|&s| s != self.envelope.sender.index).map(|s| {
+            format!(
+                "subdomain {}'s {} is about subdomain {s}",
+                self.envelope.sender.index,
+                self.payload.field_key()
+            )
+        })
     }
 }
 
@@ -459,6 +481,10 @@ mod tests {
         forged.envelope.sender.role = Role::Coarse;
         let why = forged.not_from_its_sender(&forged.topic()).unwrap();
         assert_eq!(why, "a coarse node does not send boundary_state");
+        let mut other = m.clone();
+        other.envelope.sender.index = 3;
+        let why = other.not_from_its_sender(&other.topic()).unwrap();
+        assert_eq!(why, "subdomain 3's boundary_state is about subdomain 2");
     }
 
     #[test]

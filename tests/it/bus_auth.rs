@@ -207,6 +207,7 @@ fn a_rogue_member_changes_nothing_and_strangers_cannot_join() {
             .arg(&scene)
             .args([
                 "--quiet",
+                "--interior",
                 "--run-id",
                 &run_id,
                 "--listen",
@@ -236,7 +237,7 @@ fn a_rogue_member_changes_nothing_and_strangers_cannot_join() {
     );
 
     let rogue = client(&endpoint, Some(&credentials)).expect("the member's credentials join");
-    let node = start_hand_node(Command::new(exe), &run_id, &endpoint, &dir);
+    let node = start_hand_node(Command::new(exe), &run_id, &endpoint, &dir, &["--interior"]);
     // The rogue copies what it hears on the others' keys, iteration + 1; on its own keys it sends
     // the coarse node's macro displacements as its own.
     let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
@@ -279,10 +280,24 @@ fn a_rogue_member_changes_nothing_and_strangers_cannot_join() {
                 m.envelope.iteration += 1;
                 let _ = rogue.put(&key, encode(&m)).wait();
                 forged += 1;
-                if matches!(genuine.payload, glissade_messages::Payload::MacroDisplacements { .. }) {
+                use glissade_messages::Payload as P;
+                if matches!(
+                    genuine.payload,
+                    P::MacroDisplacements { .. } | P::Decision(_) | P::InterfaceSolution(_) | P::Displacement { .. }
+                ) {
+                    // On the rogue's own keys (subdomain 5 of 6 is hosted by process 1 of 2: the
+                    // deployment's groups are consecutive), so the router lets these through:
+                    // the genuine bytes (their envelope names another sender), and a copy "sent"
+                    // by subdomain 5 (a kind a subdomain does not send, or another subdomain's
+                    // displacement). The launcher, the nodes and the recorder must take neither.
+                    let field = genuine.payload.field_key();
+                    let _ = rogue
+                        .put(
+                            topic::within_run(&run_id, format_args!("subdomain/5/{field}")),
+                            encode(&m),
+                        )
+                        .wait();
                     let mut mine: Message = genuine;
-                    // Subdomain 5 of 6 is hosted by process 1 of 2 (the deployment's groups are
-                    // consecutive): the router lets this through, the recorder must not keep it.
                     mine.envelope.sender = id(Role::Subdomain, 5);
                     let _ = rogue.put(mine.topic(), encode(&mine)).wait();
                     disguised += 1;
@@ -322,16 +337,27 @@ fn a_rogue_member_changes_nothing_and_strangers_cannot_join() {
         &scene,
         &"--in-process",
         &"--quiet",
+        &"--interior",
         &"--no-record",
         &"--run-id",
         &run_id,
         &"--out",
         &local,
     ]);
-    let read = |d: &std::path::Path| -> serde_json::Value {
-        let p = d.join(format!("small-three-layer-{run_id}.fields.json"));
+    let read_file = |d: &std::path::Path, what: &str| -> serde_json::Value {
+        let p = d.join(format!("small-three-layer-{run_id}.{what}.json"));
         serde_json::from_str(&std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))).unwrap()
     };
+    let read = |d: &std::path::Path| read_file(d, "fields");
+    assert_eq!(
+        read_file(&dir, "displacement"),
+        read_file(&local, "displacement"),
+        "displacements of the attacked run and of an undisturbed one"
+    );
+    let (attacked, undisturbed) = (read_file(&dir, "summary"), read_file(&local, "summary"));
+    for key in ["iterations", "eta"] {
+        assert_eq!(attacked[key], undisturbed[key], "{key}: forged decisions were taken");
+    }
     assert_eq!(
         read(&dir),
         read(&local),
@@ -350,7 +376,9 @@ fn a_rogue_member_changes_nothing_and_strangers_cannot_join() {
     assert_eq!(macro_on_subdomain_keys, 0, "a disguised message was recorded");
     let out = launcher.output();
     assert!(
-        out.contains("[recorder:0] warning: ") && out.contains("a subdomain node does not send macro_displacements"),
+        out.lines().any(|l| l.starts_with("[recorder:0] warning: ")
+            && l.contains("were not the run's and were not recorded")
+            && (l.contains("does not send") || l.contains("belong on"))),
         "the recorder says what it left out and why:\n{out}"
     );
     let replayed = glissade_ok(&[&"replay", &"--node", &"all", &recording]);

@@ -303,8 +303,9 @@ fn killing_the_launcher_leaves_no_node() {
 }
 
 /// `cmd` (the glissade executable) started as subdomain node 1 of run `run_id` by hand: it
-/// connects to `endpoint` with the credentials the launcher wrote into `out`.
-pub fn start_hand_node(mut cmd: Command, run_id: &str, endpoint: &str, out: &Path) -> Launcher {
+/// connects to `endpoint` with the credentials the launcher wrote into `out`, and `extra`
+/// arguments (those the launcher printed, e.g. `--interior`).
+pub fn start_hand_node(mut cmd: Command, run_id: &str, endpoint: &str, out: &Path, extra: &[&str]) -> Launcher {
     cmd.args([
         "node",
         "subdomain",
@@ -315,6 +316,7 @@ pub fn start_hand_node(mut cmd: Command, run_id: &str, endpoint: &str, out: &Pat
         "--index",
         "1",
     ])
+    .args(extra)
     .arg("--credentials")
     .arg(out.join(format!("{run_id}-subdomain-1.credentials")));
     Launcher::spawn(&mut cmd)
@@ -345,7 +347,7 @@ fn launch_with_hand_started_node(name: &str) -> (Launcher, Launcher, String, Scr
         .arg(&*dir);
     let mut launcher = Launcher::spawn(&mut cmd);
     launcher.wait_for_line("on the other machine", Duration::from_secs(120));
-    let node = start_hand_node(Command::new(exe()), &run_id, &endpoint, &dir);
+    let node = start_hand_node(Command::new(exe()), &run_id, &endpoint, &dir, &[]);
     launcher.wait_for_line("ready, iterating", Duration::from_secs(180));
     std::thread::sleep(Duration::from_millis(1500));
     (launcher, node, run_id, dir)

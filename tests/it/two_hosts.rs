@@ -171,7 +171,7 @@ fn run_across_two_network_namespaces() {
     launcher.wait_for_line("on the other machine", Duration::from_secs(120));
     // The node of the other host gets the scene over the bus: no file there, but its credentials,
     // which the launcher wrote into its --out (here the two hosts share the file system).
-    let mut node = start_hand_node(TwoHosts::exec(&hosts.b, exe), &run_id, &endpoint, &dir_a);
+    let mut node = start_hand_node(TwoHosts::exec(&hosts.b, exe), &run_id, &endpoint, &dir_a, &[]);
     let status = launcher.wait_exit(Duration::from_secs(600));
     let node_status = node.wait_exit(Duration::from_secs(60));
     assert!(status.success(), "launcher: {status}\n{}", launcher.output());
