@@ -140,14 +140,6 @@ pub fn node_tls(
     }))
 }
 
-/// The message identity of node process `name`.
-pub(crate) fn node_id(name: NodeName) -> NodeId {
-    NodeId {
-        role: name.role.role(),
-        index: name.index,
-    }
-}
-
 /// The identity of the recorder process on the bus.
 pub const RECORDER: NodeId = NodeId {
     role: Role::Recorder,
@@ -271,7 +263,7 @@ pub(crate) fn join_bus(
     // Who may connect (DESIGN §4): to a router hosted here, only the run's own processes, each
     // under its own user with a random password, speaking only on its own keys.
     let hosting = net.connect.is_empty();
-    let mut members: Vec<NodeId> = all_nodes.iter().map(|&n| node_id(n)).collect();
+    let mut members: Vec<NodeId> = all_nodes.iter().map(|n| n.id()).collect();
     if net.recording.is_some() {
         members.push(RECORDER);
     }

@@ -42,6 +42,16 @@ pub struct NodeName {
     pub index: u32,
 }
 
+impl NodeName {
+    /// The node's identity in messages and on the bus.
+    pub fn id(self) -> glissade_messages::NodeId {
+        glissade_messages::NodeId {
+            role: self.role.role(),
+            index: self.index,
+        }
+    }
+}
+
 impl std::fmt::Display for NodeName {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}:{}", self.role.key(), self.index)

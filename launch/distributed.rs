@@ -12,7 +12,7 @@
 //! what is left. Every node also watches the others' tokens and the launcher's, so a run stops
 //! even if the launcher itself is killed (local children also die with it: parent-death signal).
 
-use crate::bus::{join_bus, node_id, tls_args, write_credentials, Bus, CredentialFiles, RECORDER};
+use crate::bus::{join_bus, tls_args, write_credentials, Bus, CredentialFiles, RECORDER};
 use crate::children::{spawn_node, Children, NodeName, NodeRole};
 use crate::runner::{IterationRecord, RunOptions, RunResult};
 use anyhow::bail;
@@ -328,7 +328,7 @@ pub fn run_distributed_observed(
         let args = with_supervision(node_args(name, run_id, &node_connect, opts.interior, &node_tls));
         children
             .0
-            .push(spawn_node(exe, name, &args, credentials.get(&node_id(name)).cloned())?);
+            .push(spawn_node(exe, name, &args, credentials.get(&name.id()).cloned())?);
     }
     let mut recorder = match &net.recording {
         Some(path) => Some(crate::recording::spawn_recorder_process(
@@ -384,7 +384,7 @@ pub fn run_distributed_observed(
         for &r in &net.remote {
             let mut args = remote_tls.clone();
             if let Some(dir) = dir {
-                let cr = &credentials[&node_id(r)];
+                let cr = &credentials[&r.id()];
                 let file = write_credentials(dir, run_id, r, cr)?;
                 eprintln!(
                     "(node {r}: copy {} to its machine, readable by its user only; it lets a process speak as {r} in \

@@ -7,7 +7,7 @@ use anyhow::Context;
 use clap::Parser;
 use cli::{Cli, ColorByArg, Command, KernelsArg, ReplayArgs, RoleArg, RunArgs};
 use glissade::bus::Joining;
-use glissade::children::NodeRole;
+use glissade::children::{NodeName, NodeRole};
 use glissade::distributed::{install_interrupt_handler, run_distributed_observed, Interrupted, Network, Supervision};
 use glissade::load_scene;
 use glissade::node_process::run_node_process;
@@ -305,10 +305,13 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     return Ok(ExitCode::SUCCESS);
                 }
             };
-            let credentials = credentials(glissade_messages::NodeId {
-                role: role.role(),
-                index: args.index,
-            })?;
+            let credentials = credentials(
+                NodeName {
+                    role,
+                    index: args.index,
+                }
+                .id(),
+            )?;
             let bus = Joining {
                 connect: &args.connect,
                 tls: tls.as_ref(),
