@@ -135,6 +135,9 @@ pub(crate) enum Command {
     /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
     /// endpoint and receives the scene over the bus.
     Node(NodeArgs),
+    /// Write a generated scene file: `laminate`, plies of square subdomains in frictional contact
+    /// (docs/scenes.md#generated-scenes), e.g. the 1000-subdomain laminate.
+    Generate(GenerateArgs),
     /// Run the stability matrix of stiff and extreme cases and write the table
     /// (`stability.md`, `stability.json`).
     Stability {
@@ -342,4 +345,44 @@ pub(crate) struct RunArgs {
     /// or its rerun+http://… address), or an .rrd file.
     #[arg(long, num_args = 0..=1, default_missing_value = "spawn", value_name = "SINK")]
     pub(crate) rerun: Option<String>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum GenerateKind {
+    /// Plies stacked along y, each cut into square subdomains along x; perfect interfaces within
+    /// a ply, Coulomb contact between plies, the stratified scene's loads.
+    Laminate,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct GenerateArgs {
+    /// What to generate.
+    pub(crate) kind: GenerateKind,
+    /// The scene file to write (refused if it exists).
+    #[arg(long, short)]
+    pub(crate) out: PathBuf,
+    /// Plies.
+    #[arg(long, default_value_t = 20)]
+    pub(crate) plies: usize,
+    /// Subdomains along each ply.
+    #[arg(long, default_value_t = 50)]
+    pub(crate) per_ply: usize,
+    /// QUA8 elements along each side of a subdomain.
+    #[arg(long, default_value_t = 10)]
+    pub(crate) elements: usize,
+    /// Side of a subdomain (mm).
+    #[arg(long, default_value_t = 30.0)]
+    pub(crate) side: f64,
+    /// Time steps N.
+    #[arg(long, default_value_t = 100)]
+    pub(crate) steps: usize,
+    /// Coulomb friction coefficient between plies.
+    #[arg(long, default_value_t = 0.3)]
+    pub(crate) friction: f64,
+    /// Subdomain node processes of a multi-process run.
+    #[arg(long, default_value_t = 3)]
+    pub(crate) subdomain_nodes: usize,
+    /// Interface node processes of a multi-process run.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) interface_nodes: usize,
 }

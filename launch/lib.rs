@@ -7,6 +7,7 @@ pub mod bus;
 pub mod children;
 pub mod console;
 pub mod distributed;
+pub mod generate;
 pub mod node_process;
 pub mod output;
 pub mod recording;

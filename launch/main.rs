@@ -5,7 +5,7 @@ mod cli;
 
 use anyhow::Context;
 use clap::Parser;
-use cli::{Cli, ColorByArg, Command, KernelsArg, ReplayArgs, RoleArg, RunArgs};
+use cli::{Cli, ColorByArg, Command, GenerateKind, KernelsArg, ReplayArgs, RoleArg, RunArgs};
 use glissade::bus::Joining;
 use glissade::children::{NodeName, NodeRole};
 use glissade::distributed::{install_interrupt_handler, run_distributed_observed, Interrupted, Network, Supervision};
@@ -330,6 +330,47 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     shared_memory: args.shared_memory,
                 },
             )?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Generate(args) => {
+            let GenerateKind::Laminate = args.kind;
+            let laminate = glissade::generate::Laminate {
+                plies: args.plies,
+                per_ply: args.per_ply,
+                elements: args.elements,
+                side: args.side,
+                steps: args.steps,
+                friction: args.friction,
+                subdomain_nodes: args.subdomain_nodes,
+                interface_nodes: args.interface_nodes,
+            };
+            let text = laminate.scene_text()?;
+            // Check what was generated as any scene is checked, before writing it.
+            glissade_scene::load_str(&text, &args.out.display().to_string())
+                .context("the generated scene does not load (a bug in the generator)")?;
+            let mut file = std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&args.out)
+                .with_context(|| {
+                    format!(
+                        "cannot create {} (an existing file is not overwritten)",
+                        args.out.display()
+                    )
+                })?;
+            std::io::Write::write_all(&mut file, text.as_bytes())
+                .with_context(|| format!("cannot write {}", args.out.display()))?;
+            println!(
+                "{}: laminate of {} plies × {} subdomains ({} subdomains, {} interfaces), {} × {} QUA8 each, N = {}",
+                args.out.display(),
+                laminate.plies,
+                laminate.per_ply,
+                laminate.subdomains(),
+                laminate.interfaces(),
+                laminate.elements,
+                laminate.elements,
+                laminate.steps
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::Monolithic { scene } => {

@@ -31,7 +31,7 @@ pub use codec::{
 pub use field::{BufferPool, DecodeBuffers, Field, HoldSource};
 pub use identity::{Envelope, NodeId, Role, Stage};
 pub use payload::{Decision, InterfaceIndicators, InterfaceSolution, Message, ParticularModes, Payload, Verdict};
-pub use topic::{key_matches, role_field_topic, run_topics, topic, topic_field};
+pub use topic::{key_matches, role_field_topic, run_topics, topic, topic_field, Routes};
 pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the

@@ -135,18 +135,89 @@ pub fn log(run_id: &str) -> String {
 
 /// Does key `key` match the key expression `expr` (`*`: one chunk, `**`: any number of chunks)?
 pub fn key_matches(expr: &str, key: &str) -> bool {
-    fn rec(e: &[&str], k: &[&str]) -> bool {
-        match (e.first(), k.first()) {
-            (None, None) => true,
-            (Some(&"**"), _) => rec(&e[1..], k) || (!k.is_empty() && rec(e, &k[1..])),
-            (Some(&"*"), Some(_)) => rec(&e[1..], &k[1..]),
-            (Some(a), Some(b)) if a == b => rec(&e[1..], &k[1..]),
-            _ => false,
+    fn rec(mut e: std::str::Split<'_, char>, mut k: std::str::Split<'_, char>) -> bool {
+        loop {
+            match (e.next(), k.clone().next()) {
+                (None, None) => return true,
+                (Some("**"), _) => {
+                    // `**` takes no more chunks, or one more and stays.
+                    loop {
+                        if rec(e.clone(), k.clone()) {
+                            return true;
+                        }
+                        if k.next().is_none() {
+                            return false;
+                        }
+                    }
+                }
+                (Some("*"), Some(_)) => {
+                    k.next();
+                }
+                (Some(a), Some(b)) if a == b => {
+                    k.next();
+                }
+                _ => return false,
+            }
         }
     }
-    let e: Vec<&str> = expr.split('/').collect();
-    let k: Vec<&str> = key.split('/').collect();
-    rec(&e, &k)
+    rec(expr.split('/'), key.split('/'))
+}
+
+/// Which of a fixed list of subscribers (each a list of key expressions) a key reaches,
+/// remembered per key: a run's messages use the same few keys every iteration, so each key is
+/// matched against the subscriptions once rather than once per message (with a thousand
+/// subscribers, matching every message against every subscription was most of an iteration).
+#[derive(Debug, Clone)]
+pub struct Routes {
+    subscriptions: Vec<Vec<String>>,
+    known: std::collections::HashMap<String, Vec<usize>>,
+}
+
+impl Routes {
+    /// Keys remembered at most; past it a key is matched each time (keys come from the run's
+    /// nodes, but a key expression with `**` may let a foreign key in).
+    const MAX_KEYS: usize = 1 << 18;
+
+    pub fn new(subscriptions: Vec<Vec<String>>) -> Self {
+        Self {
+            subscriptions,
+            known: std::collections::HashMap::new(),
+        }
+    }
+
+    /// The subscriptions, in subscriber order.
+    pub fn subscriptions(&self) -> &[Vec<String>] {
+        &self.subscriptions
+    }
+
+    /// For each subscriber, the positions in `keys` of the keys it receives, in order.
+    pub fn deliveries<'a>(&mut self, keys: impl IntoIterator<Item = &'a str>) -> Vec<Vec<usize>> {
+        let mut out = vec![Vec::new(); self.subscriptions.len()];
+        let mut scratch = Vec::new();
+        for (k, key) in keys.into_iter().enumerate() {
+            let to: &[usize] = match self.known.get(key) {
+                Some(to) => to,
+                None => {
+                    scratch.clear();
+                    scratch.extend(
+                        self.subscriptions
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, subs)| subs.iter().any(|s| key_matches(s, key)))
+                            .map(|(j, _)| j),
+                    );
+                    if self.known.len() < Self::MAX_KEYS {
+                        self.known.insert(key.to_string(), scratch.clone());
+                    }
+                    &scratch
+                }
+            };
+            for &j in to {
+                out[j].push(k);
+            }
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -172,6 +243,38 @@ mod tests {
             "glissade/r1/*/*/local_directions/4",
             "glissade/r1/interface/0/local_directions/40"
         ));
+        for (expr, key, expected) in [
+            ("a/**", "a", true),
+            ("a/**", "a/b/c", true),
+            ("a/**/c", "a/c", true),
+            ("a/**/c", "a/b/b/c", true),
+            ("a/**/c", "a/b/b/d", false),
+            ("**", "x/y", true),
+            ("a/*", "a", false),
+            ("a/*", "a/b/c", false),
+            ("a/*/c", "a/b/c", true),
+            ("a/b", "a/b/c", false),
+            ("a/b/c", "a/b", false),
+            ("*/**/z", "y/z", true),
+            ("*/**/z", "z", false),
+        ] {
+            assert_eq!(key_matches(expr, key), expected, "{expr} ~ {key}");
+        }
+    }
+
+    #[test]
+    fn routes_deliver_each_key_to_its_subscribers_in_order() {
+        let mut routes = Routes::new(vec![
+            vec!["r/a/*".into()],
+            vec!["r/**".into()],
+            vec!["r/b/1".into(), "r/a/2".into()],
+            vec![],
+        ]);
+        let keys = ["r/a/1", "r/b/1", "r/a/2", "r/a/1", "s/a/1"];
+        let expected = vec![vec![0, 2, 3], vec![0, 1, 2, 3], vec![1, 2], vec![]];
+        assert_eq!(routes.deliveries(keys), expected);
+        // The second time from what it remembers: the same answer.
+        assert_eq!(routes.deliveries(keys), expected);
     }
 
     /// The wire format of every key of a run, as the processes of other builds expect it.

@@ -4,9 +4,7 @@
 //! (all messages of a round are handled, nodes in parallel on a rayon pool, outputs collected in
 //! node order), so a run is deterministic whatever the thread count.
 
-use glissade_messages::{
-    key_matches, topic_field, Envelope, Field, Message, NodeId, Payload, Role, Stage, SCHEMA_VERSION,
-};
+use glissade_messages::{topic_field, Envelope, Field, Message, NodeId, Payload, Role, Routes, Stage, SCHEMA_VERSION};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -137,17 +135,17 @@ pub struct HandleTime {
 /// Runs nodes in one process.
 pub struct InProcessBus {
     nodes: Vec<Box<dyn Node>>,
-    subscriptions: Vec<Vec<String>>,
+    routes: Routes,
     /// (role, field) → (calls, time), when timing is on.
     timing: Option<BTreeMap<(Role, String), (u64, Duration)>>,
 }
 
 impl InProcessBus {
     pub fn new(nodes: Vec<Box<dyn Node>>) -> Self {
-        let subscriptions = nodes.iter().map(|n| n.subscriptions()).collect();
+        let routes = Routes::new(nodes.iter().map(|n| n.subscriptions()).collect());
         Self {
             nodes,
-            subscriptions,
+            routes,
             timing: None,
         }
     }
@@ -189,23 +187,22 @@ impl InProcessBus {
                 }
             }
             let topics: Vec<String> = queue.iter().map(Message::topic).collect();
+            let deliveries = self.routes.deliveries(topics.iter().map(String::as_str));
             let queue_ref = &queue;
             let timed = self.timing.is_some();
             type Timed = Vec<(usize, Duration)>;
             let results: Vec<Result<(Vec<Message>, Timed), NodeError>> = self
                 .nodes
                 .par_iter_mut()
-                .zip(self.subscriptions.par_iter())
-                .map(|(node, subs)| {
+                .zip(deliveries.par_iter())
+                .map(|(node, mine)| {
                     let (mut out, mut times) = (Vec::new(), Vec::new());
-                    for (k, (m, topic)) in queue_ref.iter().zip(&topics).enumerate() {
-                        if subs.iter().any(|s| key_matches(s, topic)) {
-                            let t0 = timed.then(Instant::now);
-                            out.extend(node.handle(m)?);
-                            out.extend(std::iter::from_fn(|| node.next_output()));
-                            if let Some(t0) = t0 {
-                                times.push((k, t0.elapsed()));
-                            }
+                    for &k in mine {
+                        let t0 = timed.then(Instant::now);
+                        out.extend(node.handle(&queue_ref[k])?);
+                        out.extend(std::iter::from_fn(|| node.next_output()));
+                        if let Some(t0) = t0 {
+                            times.push((k, t0.elapsed()));
                         }
                     }
                     Ok((out, times))

@@ -7,7 +7,7 @@ use glissade_bus::convert::{copy_into, mat_of, FieldPool};
 use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::coarse::{Contribution, MacroProblem};
 use glissade_messages::{role_field_topic, Message, NodeId, Payload, Role, Stage};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// A subdomain's macro slots (interface, number of modes) and its L_E.
 type MacroContribution = (Vec<(usize, usize)>, Mat<f64>);
@@ -18,7 +18,7 @@ pub struct CoarseNode {
     /// Macro modes per interface.
     n_modes: Vec<usize>,
     /// Subdomains that take part (those with at least one interface).
-    subdomains: Vec<u32>,
+    subdomains: BTreeSet<u32>,
     n_times: usize,
     /// Per subdomain: its macro slots (interface, modes) and L_E.
     operators: BTreeMap<u32, MacroContribution>,
@@ -27,7 +27,7 @@ pub struct CoarseNode {
     /// Per subdomain, its last macro forces (allocated at its first), and the subdomains whose
     /// forces of the current iteration arrived.
     forces: BTreeMap<u32, Mat<f64>>,
-    gathered: Vec<u32>,
+    gathered: BTreeSet<u32>,
     /// The macro problem's right-hand side, then its solution (allocated with the problem).
     rhs: Mat<f64>,
     /// Iteration of the macro forces being gathered: the number of macro problems solved.
@@ -48,13 +48,13 @@ impl CoarseNode {
             },
             ctx,
             n_modes,
-            subdomains,
+            subdomains: subdomains.into_iter().collect(),
             n_times,
             operators: BTreeMap::new(),
             problem: None,
             columns: BTreeMap::new(),
             forces: BTreeMap::new(),
-            gathered: Vec::new(),
+            gathered: BTreeSet::new(),
             rhs: Mat::new(),
             iteration: 0,
             decided: None,
@@ -95,7 +95,7 @@ impl CoarseNode {
     }
 
     fn solve(&mut self) -> Vec<Message> {
-        let problem = self.problem.as_ref().expect("assembled before the first solve");
+        let problem = self.problem.as_mut().expect("assembled before the first solve");
         let rhs = &mut self.rhs;
         rhs.fill(0.0);
         for (s, f) in &self.forces {
@@ -230,7 +230,7 @@ impl Node for CoarseNode {
                     .entry(*subdomain)
                     .or_insert_with(|| Mat::zeros(n_m, n_times));
                 copy_into(forces, stored);
-                self.gathered.push(*subdomain);
+                self.gathered.insert(*subdomain);
                 if self.gathered.len() == self.subdomains.len() && self.problem.is_some() {
                     return Ok(self.solve());
                 }

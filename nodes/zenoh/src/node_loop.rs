@@ -13,7 +13,9 @@ use crate::recorder_log::fetch_log;
 use crate::shm::ShmLender;
 use crate::TransportError;
 use glissade_bus::Node;
-use glissade_messages::{encode, key_matches, topic, BlockLender, BufferPool, DecodeBuffers, Expected, Message};
+use glissade_messages::{
+    encode, key_matches, topic, BlockLender, BufferPool, DecodeBuffers, Expected, Message, Routes,
+};
 use rayon::prelude::*;
 use std::collections::{HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -105,7 +107,7 @@ pub fn run_nodes(
     }
     let mut handler = Handler {
         session,
-        subscriptions,
+        routes: Routes::new(subscriptions),
         buffers,
         seen: HashSet::new(),
         published: HashSet::new(),
@@ -409,8 +411,8 @@ type Outcome = Result<Vec<(usize, String)>, (usize, TransportError)>;
 /// Hands the messages that arrive to the process's nodes and publishes what they answer.
 struct Handler<'a> {
     session: &'a Session,
-    /// Each node's subscriptions, in node order.
-    subscriptions: Vec<Vec<String>>,
+    /// Which of the nodes each key reaches ([`Routes`]).
+    routes: Routes,
     /// The received fields' buffers ([`run_nodes`]).
     buffers: Arc<Mutex<BufferPool>>,
     /// Messages already handled (a replacement process re-sends outputs its predecessor may have
@@ -486,18 +488,17 @@ impl Handler<'_> {
     }
 
     /// Each node handles the messages it subscribes to, in parallel with the others.
-    fn dispatch(&self, msgs: &[(String, u64, Message)], nodes: &mut [Box<dyn Node>]) -> Vec<Outcome> {
+    fn dispatch(&mut self, msgs: &[(String, u64, Message)], nodes: &mut [Box<dyn Node>]) -> Vec<Outcome> {
+        let deliveries = self.routes.deliveries(msgs.iter().map(|(key, _, _)| key.as_str()));
         let (session, published) = (self.session, &self.published);
         let failed = AtomicBool::new(false);
         nodes
             .par_iter_mut()
-            .zip(self.subscriptions.par_iter())
-            .map(|(node, subs)| {
+            .zip(deliveries.par_iter())
+            .map(|(node, mine)| {
                 let mut refused = Vec::new();
-                for (k, (key, _, msg)) in msgs.iter().enumerate() {
-                    if !subs.iter().any(|s| key_matches(s, key)) {
-                        continue;
-                    }
+                for &k in mine {
+                    let (key, _, msg) = &msgs[k];
                     if failed.load(Ordering::Relaxed) {
                         break;
                     }

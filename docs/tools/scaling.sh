@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# The scaling table of docs/performance.md ("Many subdomains"): generated laminates of 18, 100,
+# 300 and 1000 subdomains (10 × 10 QUA8 each, N = 100), each run in-process and as processes
+# (TCP through the launcher's router), recording off. Prints one markdown row per size and mode.
+#
+#   docs/tools/scaling.sh [glissade binary] [work folder]
+#
+# Use a release build. Peak memory is the largest sum of the resident memory of every glissade
+# process of the run, sampled every 0.1 s.
+set -euo pipefail
+glissade=${1:-target/release/glissade}
+work=${2:-$(mktemp -d)}
+mkdir -p "$work"
+
+# Sum of the resident memory (kB) of every process named glissade, sampled until $1 exits.
+peak_rss() {
+    local peak=0 now
+    while kill -0 "$1" 2>/dev/null; do
+        now=$(ps -C glissade -o rss= | awk '{s += $1} END {print s + 0}')
+        ((now > peak)) && peak=$now
+        sleep 0.1
+    done
+    echo "$peak"
+}
+
+echo "| subdomains | mode | iterations | set-up (s) | iterations (s) | median iteration from the 3rd (ms) | per subdomain (ms) | peak memory (GB) | bus bytes per iteration (MB) |"
+echo "|---:|---|---:|---:|---:|---:|---:|---:|---:|"
+for size in "3 6" "5 20" "10 30" "20 50"; do
+    set -- $size
+    scene="$work/laminate-$1x$2.toml"
+    [[ -e $scene ]] || "$glissade" generate laminate --plies "$1" --per-ply "$2" -o "$scene" >/dev/null
+    for mode in in-process processes; do
+        out="$work/out-$1x$2-$mode"
+        rm -rf "$out"
+        flags=(--no-record --quiet --out "$out")
+        [[ $mode == in-process ]] && flags+=(--in-process) || flags+=(--verbose)
+        "$glissade" run "$scene" "${flags[@]}" >"$work/log-$1x$2-$mode" 2>&1 &
+        pid=$!
+        peak=$(peak_rss "$pid")
+        wait "$pid"
+        summary=$(ls "$out"/*.summary.json)
+        bytes=$(grep -o '[0-9]* bytes per iteration' "$work/log-$1x$2-$mode" | awk '{s += $1} END {printf "%.1f", s / 1e6}')
+        python3 - "$summary" "$peak" "$(($1 * $2))" "$mode" "${bytes:-}" <<'EOF'
+import json, statistics, sys
+d = json.load(open(sys.argv[1]))
+peak_kb, n, mode, bytes_ = int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
+t = [h["elapsed_s"] for h in d["history"]]
+steps = [b - a for a, b in zip(t, t[1:])][2:]
+median = statistics.median(steps) * 1e3 if steps else float("nan")
+print(f"| {n} | {mode} | {d['iterations']} ({d['verdict']}) | {d['setup_s']:.2f} | {d['solve_s']:.2f} | "
+      f"{median:.1f} | {median / n:.3f} | {peak_kb / 1e6:.2f} | {bytes_ or '—'} |")
+EOF
+    done
+done

@@ -1,0 +1,86 @@
+#!/usr/bin/env bash
+# The shaped-link table of docs/performance.md ("Links that are not loopback"): two network
+# namespaces joined by a veth pair whose two ends are rate-limited with tc's token bucket (tbf),
+# the launcher (its router, the interface and coarse nodes) in one, the three subdomain node
+# processes in the other, started by hand as on a second machine. For each link rate and each
+# linear stage (condensed, PGD), one run of the scene, recording off; prints wall time,
+# iterations and the bytes on the bus per iteration. Needs root (namespaces); every namespace is
+# removed at the end, also on failure.
+#
+#   docs/tools/shaped_link.sh [glissade binary] [scene] [rates...]
+#
+# e.g. docs/tools/shaped_link.sh target/release/glissade launch/scenes/stratified.toml 10gbit 1gbit
+set -euo pipefail
+glissade=$(realpath "${1:-target/release/glissade}")
+scene=$(realpath "${2:-launch/scenes/stratified.toml}")
+shift $(($# < 2 ? $# : 2))
+rates=("${@:-10gbit 1gbit}")
+[[ $(id -u) == 0 ]] || { echo "needs root to create network namespaces" >&2; exit 1; }
+work=$(mktemp -d)
+a=glissade-link-a-$$ b=glissade-link-b-$$ va=gla$$ vb=glb$$
+cleanup() {
+    ip netns pids "$a" 2>/dev/null | xargs -r kill 2>/dev/null || true
+    ip netns pids "$b" 2>/dev/null | xargs -r kill 2>/dev/null || true
+    ip netns del "$a" 2>/dev/null || true
+    ip netns del "$b" 2>/dev/null || true
+    rm -rf "$work"
+}
+trap cleanup EXIT
+ip netns add "$a"
+ip netns add "$b"
+ip link add "$va" type veth peer name "$vb"
+ip link set "$va" netns "$a"
+ip link set "$vb" netns "$b"
+ip -n "$a" addr add 10.214.0.1/24 dev "$va"
+ip -n "$b" addr add 10.214.0.2/24 dev "$vb"
+for ns in "$a" "$b"; do ip -n "$ns" link set lo up; done
+ip -n "$a" link set "$va" up
+ip -n "$b" link set "$vb" up
+endpoint=tcp/10.214.0.1:17447
+
+echo "| link | linear stage | iterations | wall time (s) | per iteration (ms) | bus bytes per iteration (MB) |"
+echo "|---|---|---:|---:|---:|---:|"
+for rate in ${rates[*]}; do
+    # The bucket holds 1 ms at the rate (at least 64 kB); packets wait at most 100 ms for tokens.
+    for pair in "$a $va" "$b $vb"; do
+        set -- $pair
+        tc -n "$1" qdisc replace dev "$2" root tbf rate "$rate" burst 1mbit latency 100ms
+    done
+    for stage in condensed pgd; do
+        sc="$work/$stage.toml"
+        if [[ $stage == pgd ]]; then
+            sed 's/^enabled = false/enabled = true/' "$scene" >"$sc"
+            grep -q '^enabled = true' "$sc" || { echo "$scene has no [solver.pgd] enabled = false to turn on" >&2; exit 1; }
+        else
+            cp "$scene" "$sc"
+        fi
+        run=link-$stage-$rate-$$
+        out="$work/out-$run"
+        mkdir -p "$out"
+        start=$(date +%s.%N)
+        ip netns exec "$a" "$glissade" run "$sc" --no-record --quiet --verbose --run-id "$run" --out "$out" \
+            --listen "$endpoint" --remote subdomain:0,subdomain:1,subdomain:2 >"$out/launcher.log" 2>&1 &
+        launcher=$!
+        nodes=()
+        for i in 0 1 2; do
+            cred="$out/$run-subdomain-$i.credentials"
+            for _ in $(seq 600); do [[ -e $cred ]] && break; sleep 0.1; done
+            [[ -e $cred ]] || { echo "no credentials for subdomain node $i" >&2; cat "$out/launcher.log" >&2; exit 1; }
+            ip netns exec "$b" "$glissade" node subdomain --run "$run" --connect "$endpoint" --index "$i" \
+                --credentials "$cred" >"$out/node-$i.log" 2>&1 &
+            nodes+=($!)
+        done
+        wait "$launcher" || { echo "the run failed:" >&2; cat "$out/launcher.log" >&2; exit 1; }
+        for n in "${nodes[@]}"; do wait "$n"; done
+        end=$(date +%s.%N)
+        python3 - "$out" "$rate" "$stage" "$start" "$end" <<'EOF'
+import glob, json, re, sys
+out, rate, stage, start, end = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4]), float(sys.argv[5])
+d = json.load(open(glob.glob(out + "/*.summary.json")[0]))
+log = open(out + "/launcher.log").read()
+per_iteration = sum(int(b) for b in re.findall(r"(\d+) bytes per iteration", log))
+n = d["iterations"]
+print(f"| {rate} | {stage} | {n} ({d['verdict']}) | {end - start:.1f} | {d['solve_s'] / max(n, 1) * 1e3:.0f} | {per_iteration / 1e6:.1f} |")
+EOF
+    done
+done

@@ -1,0 +1,148 @@
+//! `glissade generate laminate`: the generated scenes are the scenes they say they are, solve
+//! right against the monolithic reference, and run alike in-process and as processes.
+
+use crate::common::{glissade_ok, scene, scene_text, scratch};
+use glissade::generate::Laminate;
+use glissade_messages::Verdict;
+
+/// The model as JSON with every name blanked (ply names differ from the stratified layers').
+fn anonymous(sc: &glissade_scene::LoadedScene) -> serde_json::Value {
+    fn blank(v: &mut serde_json::Value) {
+        match v {
+            serde_json::Value::Object(map) => {
+                for (k, x) in map.iter_mut() {
+                    if k == "name" {
+                        *x = serde_json::Value::Null;
+                    } else {
+                        blank(x);
+                    }
+                }
+            }
+            serde_json::Value::Array(items) => items.iter_mut().for_each(blank),
+            _ => {}
+        }
+    }
+    let mut v = serde_json::to_value(&sc.model).unwrap();
+    blank(&mut v);
+    v
+}
+
+fn small(plies: usize, per_ply: usize) -> Laminate {
+    Laminate {
+        plies,
+        per_ply,
+        elements: 4,
+        steps: 20,
+        subdomain_nodes: 2,
+        ..Laminate::default()
+    }
+}
+
+#[test]
+fn the_laminate_at_the_stratified_parameters_is_the_stratified_scene() {
+    // Three plies of six 30 mm subdomains of 20 × 20 QUA8, N = 1000: the generator's loads are
+    // the stratified scene's, so the two models must be the same discrete problem, bit for bit
+    // (names aside).
+    let generated = Laminate {
+        plies: 3,
+        per_ply: 6,
+        elements: 20,
+        steps: 1000,
+        ..Laminate::default()
+    };
+    let ours = scene(&generated.scene_text().unwrap());
+    let stratified = scene(&scene_text("stratified"));
+    assert_eq!(ours.model.subdomains.len(), 18);
+    assert_eq!(ours.model.interfaces.len(), generated.interfaces());
+    assert!(
+        anonymous(&ours) == anonymous(&stratified),
+        "the generated model differs from stratified.toml's"
+    );
+}
+
+#[test]
+fn a_generated_laminate_matches_the_reference_and_runs_alike_as_processes() {
+    // 4 plies of 5 subdomains: contact between plies, a macro problem over 20 subdomains (the
+    // sparse factorisation of Σ L_E), several interfaces per subdomain.
+    let sc = scene(&small(4, 5).scene_text().unwrap());
+    let check = glissade::accuracy::check_scene("laminate-4x5", &sc, &Default::default()).unwrap();
+    for stop in &check.stops {
+        // DESIGN §3's promise: at the stop the true contact-traction error is at most 3× the
+        // accuracy asked for.
+        let err = stop.true_error.expect("a stop with a true error");
+        assert!(
+            err <= 3.0 * stop.accuracy,
+            "accuracy {:e}: true error {err:e} at iteration {:?}",
+            stop.accuracy,
+            stop.iteration
+        );
+    }
+    let options = |id: &str| glissade::runner::RunOptions {
+        run_id: id.into(),
+        interior: false,
+    };
+    let local = glissade::runner::run_in_process(&sc, &options("local"), |_| {}).unwrap();
+    assert_eq!(local.verdict, Verdict::Converged);
+    let remote = glissade::distributed::run_multi_process(
+        &sc,
+        &options("generate-processes"),
+        std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
+        |_| {},
+    )
+    .unwrap();
+    crate::distributed::assert_identical(&local, &remote);
+}
+
+#[test]
+fn generate_writes_a_scene_that_checks_and_never_overwrites() {
+    let dir = scratch("generate");
+    let out = dir.join("lam.toml");
+    let printed = glissade_ok(&[
+        &"generate",
+        &"laminate",
+        &"--plies",
+        &"5",
+        &"--per-ply",
+        &"20",
+        &"-o",
+        &out,
+    ]);
+    assert!(printed.contains("100 subdomains, 175 interfaces"), "{printed}");
+    let checked = glissade_ok(&[&"check", &out]);
+    assert!(
+        checked.contains("100 subdomains, 175 interfaces (80 contact), 101 time points, 68200 dofs"),
+        "{checked}"
+    );
+    let before = std::fs::read(&out).unwrap();
+    let again = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["generate", "laminate", "--plies", "2", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&again.stderr);
+    assert!(
+        !again.status.success() && stderr.contains("not overwritten"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), before, "an existing scene was changed");
+    for (args, expected) in [
+        (vec!["--plies", "0"], "plies = 0: must be at least 1"),
+        (
+            vec!["--plies", "2", "--per-ply", "1", "--subdomain-nodes", "3"],
+            "subdomain-nodes = 3: must be at most 2",
+        ),
+        (vec!["--side=-1"], "side = -1: must be a finite number > 0"),
+    ] {
+        let bad = dir.join("bad.toml");
+        let r = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .args(["generate", "laminate", "-o"])
+            .arg(&bad)
+            .args(&args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(!bad.exists(), "{args:?} wrote a file");
+    }
+}
