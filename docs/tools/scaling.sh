@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The scaling table of docs/performance.md ("Many subdomains"): generated laminates of 18, 100,
-# 300 and 1000 subdomains (10 × 10 QUA8 each, N = 100), each run in-process and as processes
-# (TCP through the launcher's router), recording off. Prints one markdown row per size and mode.
+# 300 and 1000 subdomains (10 × 10 QUA8 each, N = 100), each run in-process, as processes with
+# fields through shared memory (what the launcher chooses for an unrecorded run on one machine) and
+# as processes over TCP (through the launcher's router), recording off. Prints one markdown row per
+# size and mode; bus bytes per iteration count the messages sent every iteration.
 #
 #   docs/tools/scaling.sh [glissade binary] [work folder]
 #
@@ -29,17 +31,23 @@ for size in "3 6" "5 20" "10 30" "20 50"; do
     set -- $size
     scene="$work/laminate-$1x$2.toml"
     [[ -e $scene ]] || "$glissade" generate laminate --plies "$1" --per-ply "$2" -o "$scene" >/dev/null
-    for mode in in-process processes; do
+    tcp="$work/laminate-$1x$2-tcp.toml"
+    [[ -e $tcp ]] || printf '%s\n\n[network]\nshared_memory = false\n' "$(cat "$scene")" >"$tcp"
+    for mode in in-process shared-memory tcp; do
         out="$work/out-$1x$2-$mode"
         rm -rf "$out"
         flags=(--no-record --quiet --out "$out")
         [[ $mode == in-process ]] && flags+=(--in-process) || flags+=(--verbose)
-        "$glissade" run "$scene" "${flags[@]}" >"$work/log-$1x$2-$mode" 2>&1 &
+        file=$scene
+        [[ $mode == tcp ]] && file=$tcp
+        "$glissade" run "$file" "${flags[@]}" >"$work/log-$1x$2-$mode" 2>&1 &
         pid=$!
         peak=$(peak_rss "$pid")
         wait "$pid"
         summary=$(ls "$out"/*.summary.json)
-        bytes=$(grep -o '[0-9]* bytes per iteration' "$work/log-$1x$2-$mode" | awk '{s += $1} END {printf "%.1f", s / 1e6}')
+        # Set-up and final messages (homogenized operators, interface solutions) are not per iteration.
+        bytes=$(grep -v 'homogenized_operator\|interface_solution' "$work/log-$1x$2-$mode" |
+            grep -o '[0-9]* bytes per iteration' | awk '{s += $1} END {if (NR) printf "%.1f", s / 1e6}' || true)
         python3 - "$summary" "$peak" "$(($1 * $2))" "$mode" "${bytes:-}" <<'EOF'
 import json, statistics, sys
 d = json.load(open(sys.argv[1]))
