@@ -1,0 +1,96 @@
+//! The subcommands' bodies, by group: a run ([`run`]), recordings ([`replay`]), the commands that
+//! measure (the reference, reports, benches, the stability matrix: [`measure`]); and what they
+//! share: exit codes, run ids, the output folder's check and scene loading with overrides.
+
+pub(crate) mod measure;
+pub(crate) mod replay;
+pub(crate) mod run;
+
+pub(crate) use crate::cli::{ColorByArg, ReplayArgs, RunArgs};
+pub(crate) use anyhow::Context;
+pub(crate) use glissade::distributed::{install_interrupt_handler, run_distributed_observed, Interrupted, Network};
+pub(crate) use glissade::load_scene;
+pub(crate) use glissade::output::{
+    interface_fields, reference_interfaces, summary, write_json, write_json_new, RunFile,
+};
+pub(crate) use glissade::report::{build_report_with, linear_stage_table, plot_svg, TimeAxis};
+pub(crate) use glissade::runner::{IterationRecord, RunOptions};
+pub(crate) use glissade_messages::Verdict;
+pub(crate) use glissade_reference::{solve_reference_steps, verify, ReferenceError, ReferenceOptions, ReferenceRun};
+pub(crate) use glissade_scene::{LoadedScene, Overrides, RecordOverride};
+pub(crate) use indicatif::{ProgressBar, ProgressStyle};
+pub(crate) use std::process::ExitCode;
+
+/// Exit code of a run, or of a reference solve, that ended without converging (outputs are still
+/// written).
+pub(crate) const NOT_CONVERGED: u8 = 3;
+
+/// Exit code of a run stopped by Ctrl-C or SIGTERM (128 + SIGINT, as shells report it).
+pub(crate) const INTERRUPTED: u8 = 130;
+
+/// A run id nobody can guess: 128 bits from the operating system's random source, in hex. The
+/// run's key expressions (`glissade/<run id>/…`) are namespaced by it, so runs on a shared router
+/// cannot collide and a client cannot publish into a run by naming it without being told the id.
+/// Longest run id: with a scene name of up to 100 characters, every output file name stays
+/// well under the 255 bytes file systems allow.
+pub(crate) const MAX_RUN_ID_CHARS: usize = 64;
+
+/// A run id becomes a key-expression chunk and part of file names: 1 to 64 letters, digits, `-`
+/// or `_` (no wildcard, no path).
+pub(crate) fn check_run_id(option: &str, run_id: &str) -> anyhow::Result<()> {
+    let ok = (1..=MAX_RUN_ID_CHARS).contains(&run_id.len())
+        && run_id
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+    if !ok {
+        anyhow::bail!(
+            "{option} `{}`: a run id is 1 to {MAX_RUN_ID_CHARS} letters, digits, `-` or `_` (it becomes a \
+             key-expression chunk and part of file names)",
+            run_id.chars().take(80).collect::<String>()
+        );
+    }
+    Ok(())
+}
+
+pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create output folder {}", out.display()))?;
+    let probe = out.join(format!(".probe-{}", std::process::id()));
+    std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", out.display()))?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// The scene with the command line's `--accuracy`, `--tolerance` and `--max-iterations` applied,
+/// after checking them and that the output folder is writable (before anything is solved).
+pub(crate) fn load_with_overrides(
+    scene: &std::path::Path,
+    out: &std::path::Path,
+    overrides: &Overrides,
+) -> anyhow::Result<glissade_scene::LoadedScene> {
+    let sc = load_scene(scene)?;
+    if let Some(tolerance) = overrides.tolerance {
+        if !(tolerance > 0.0 && tolerance.is_finite()) {
+            anyhow::bail!("--tolerance {tolerance}: must be a positive number");
+        }
+    }
+    if let Some(accuracy) = overrides.accuracy {
+        if !(accuracy > 0.0 && accuracy < 1.0) {
+            anyhow::bail!("--accuracy {accuracy}: must be a relative error in (0, 1)");
+        }
+    }
+    if overrides.max_iterations == Some(0) {
+        anyhow::bail!("--max-iterations 0: must be at least 1");
+    }
+    ensure_writable(out)?;
+    // Into the scene text, not only this process's model: node processes (`bench --processes`)
+    // build their model from the text.
+    Ok(sc.with_overrides(&scene.display().to_string(), overrides)?)
+}
+
+/// A random run id: 128 bits in hex.
+pub(crate) fn default_run_id() -> anyhow::Result<String> {
+    let mut bytes = [0u8; 16];
+    getrandom::fill(&mut bytes)
+        .map_err(|e| anyhow::anyhow!("cannot draw a random run id from the operating system: {e}"))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}

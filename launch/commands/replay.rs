@@ -1,0 +1,181 @@
+//! `glissade replay` and `glissade export`: a finished run's recording into Rerun, re-executed
+//! node by node, or written in formats other tools read.
+
+use super::*;
+
+pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
+    let recording = glissade_recorder::Recording::open(&args.recording)?;
+    if let Some(why) = recording.truncated() {
+        eprintln!(
+            "warning: {}: {why}; replaying what was written",
+            args.recording.display()
+        );
+    }
+    if let Some(why) = recording.damaged() {
+        eprintln!("warning: {}: {why}", args.recording.display());
+    }
+    if !args.node.is_empty() {
+        use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
+        let mut nodes = Vec::new();
+        for n in &args.node {
+            if n == "all" {
+                nodes.extend(recorded_nodes(&recording)?);
+            } else {
+                nodes.push(parse_node(n)?);
+            }
+        }
+        let mut differing = 0;
+        for (k, id) in nodes.into_iter().enumerate() {
+            let r = reexecute(&recording, id)?;
+            if let (0, Some(why)) = (k, r.skipped.describe()) {
+                eprintln!("warning: {}: {why}", args.recording.display());
+            }
+            match &r.mismatch {
+                None => println!(
+                    "node {id}: {} outputs bit-identical to the recording ({} bytes; {} recorded inputs)",
+                    r.outputs, r.bytes, r.inputs
+                ),
+                Some(m) => {
+                    differing += 1;
+                    println!("node {id}: differs from the recording: {m}");
+                }
+            }
+        }
+        return Ok(if differing == 0 {
+            ExitCode::SUCCESS
+        } else {
+            ExitCode::from(NOT_CONVERGED)
+        });
+    }
+    let sink = if args.spawn {
+        glissade_replay::Sink::Spawn
+    } else if let Some(url) = args.connect {
+        glissade_replay::Sink::Connect(url)
+    } else {
+        let p = args.save.unwrap_or_else(|| args.recording.with_extension("rrd"));
+        glissade_replay::Sink::Save(p)
+    };
+    // PGD runs: the basis sizes are the mode-form states' time-function counts.
+    let basis_sizes = match glissade_replay::reexecute::recorded_basis_sizes(&recording)? {
+        Some(b) => {
+            println!(
+                "PGD basis sizes: {} linear stages, from the recorded mode-form states",
+                b.len()
+            );
+            b
+        }
+        None => Vec::new(),
+    };
+    let opts = glissade_replay::ReplayOptions {
+        sink: sink.clone(),
+        basis_sizes,
+        color_by: match args.color_by {
+            ColorByArg::VonMises => glissade_replay::ColorBy::VonMises,
+            ColorByArg::Displacement => glissade_replay::ColorBy::Displacement,
+        },
+        amplification: args.amplification,
+        time_point: args.time_point,
+        reference: args.reference,
+    };
+    let t0 = std::time::Instant::now();
+    let s = glissade_replay::replay(&recording, &opts)?;
+    if let Some(why) = s.skipped.describe() {
+        eprintln!("warning: {}: {why}", args.recording.display());
+    }
+    let range = s
+        .color_range
+        .map_or_else(|| "no colour range".to_string(), |r| format!("colour range {r}"));
+    println!(
+        "replayed {} messages: {} iterations, {} meshes (time point {}, displacements × {:.3e}, {range}) in {:.2} s",
+        s.messages,
+        s.iterations,
+        s.meshes,
+        s.time_point,
+        s.amplification,
+        t0.elapsed().as_secs_f64()
+    );
+    if let (Some(t), Some(&(it, e_f, e_w))) = (s.reference_s, s.errors.last()) {
+        println!(
+            "error against the reference (solved in {t:.2} s), iteration {it}: tractions {e_f:.3e}, jumps {e_w:.3e}"
+        );
+    }
+    if let glissade_replay::Sink::Save(p) = sink {
+        println!("rerun: {} (open with `rerun {}`)", p.display(), p.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `glissade export`: `vtu` is the folder of the ParaView series and its time-point stride.
+pub(crate) fn export(
+    recording: &std::path::Path,
+    vtu: Option<(&std::path::Path, usize)>,
+    csv: Option<&std::path::Path>,
+    foreign: Option<&std::path::Path>,
+) -> anyhow::Result<ExitCode> {
+    if vtu.is_none() && csv.is_none() && foreign.is_none() {
+        anyhow::bail!("nothing to export: give --vtu <DIR>, --csv <DIR>, --foreign <DIR> or several");
+    }
+    for dir in vtu.iter().map(|v| v.0).chain(csv.iter().copied()) {
+        ensure_writable(dir)?;
+    }
+    if let Some(dir) = foreign {
+        let e = glissade_recorder::foreign::export(recording, dir, &glissade::recording::software())?;
+        if let Some(why) = &e.source_truncated {
+            eprintln!(
+                "warning: {}: {why}; the export holds the messages before it",
+                recording.display()
+            );
+        }
+        if let Some(why) = &e.source_damaged {
+            eprintln!("warning: {}: {why}; the export holds the others", recording.display());
+        }
+        println!(
+            "foreign-readable (protobuf): {} ({} messages on {} channels, {:.1} MB)",
+            e.path.display(),
+            e.messages,
+            e.channels,
+            e.bytes as f64 * 1e-6
+        );
+        if vtu.is_none() && csv.is_none() {
+            return Ok(ExitCode::SUCCESS);
+        }
+    }
+    let rec = glissade_recorder::Recording::open(recording)?;
+    let state = glissade_replay::final_state(&rec)?;
+    if let Some(why) = state.skipped.describe() {
+        eprintln!("warning: {}: {why}", recording.display());
+    }
+    let model = &state.model;
+    let stem = format!("{}-{}", model.name, rec.run_id());
+    if let Some((dir, every)) = vtu {
+        let u: Vec<Vec<&[f64]>> = (0..model.subdomains.len() as u32)
+            .map(|s| {
+                state
+                    .u
+                    .get(&s)
+                    .map(|per_time| per_time.iter().map(Vec::as_slice).collect())
+                    .with_context(|| {
+                        format!(
+                            "{}: no displacement of subdomain `{}` can be recovered (no boundary state recorded)",
+                            recording.display(),
+                            model.subdomains[s as usize].name
+                        )
+                    })
+            })
+            .collect::<anyhow::Result<_>>()?;
+        let v = glissade::vtu::write_series(model, &u, &state.interfaces, dir, &stem, every)?;
+        println!(
+            "paraview: {} ({} files, {:.1} MB)",
+            v.pvd.display(),
+            v.files,
+            v.bytes as f64 * 1e-6
+        );
+    }
+    if let Some(dir) = csv {
+        let path = dir.join(format!("{stem}.interfaces.csv"));
+        let text = glissade::output::interface_csv(model, &state.interfaces)?;
+        glissade::vtu::write_new_file(&path, text.as_bytes())?;
+        println!("csv: {}", path.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,288 @@
+//! `glissade run`: a scene in-process or as node processes, its progress, its live Rerun view
+//! and its outputs.
+
+use super::*;
+
+/// The live Rerun view of `run --rerun`, fed every message of the run; its first failure is kept
+/// and reported when the run ends (the run itself does not depend on the view).
+pub(crate) struct LiveView {
+    view: Option<glissade_replay::View>,
+    failure: Option<glissade_replay::ReplayError>,
+}
+
+impl LiveView {
+    fn new(args: &RunArgs, sc: &LoadedScene, run_id: &str) -> anyhow::Result<Self> {
+        let view = match &args.rerun {
+            Some(sink) => {
+                let sink = glissade_replay::Sink::parse(sink).map_err(|e| anyhow::anyhow!("--rerun {e}"))?;
+                let opts = glissade_replay::ReplayOptions {
+                    sink,
+                    color_by: glissade_replay::ColorBy::VonMises,
+                    amplification: None,
+                    time_point: None,
+                    reference: false,
+                    basis_sizes: Vec::new(),
+                };
+                let origin = args.scene.display().to_string();
+                Some(glissade_replay::View::new(&sc.text, &origin, run_id, &opts, None)?)
+            }
+            None => None,
+        };
+        Ok(Self { view, failure: None })
+    }
+
+    fn message(&mut self, m: &glissade_messages::Message) {
+        if let (Some(v), None) = (self.view.as_mut(), &self.failure) {
+            if let Err(e) = v.message(m) {
+                self.failure = Some(e);
+            }
+        }
+    }
+
+    fn finish(&mut self) -> anyhow::Result<()> {
+        if let Some(e) = self.failure.take() {
+            anyhow::bail!("--rerun: {e}");
+        }
+        if let Some(v) = self.view.take() {
+            let s = v.finish()?;
+            println!("rerun: {} iterations, {} meshes streamed", s.iterations, s.meshes);
+        }
+        Ok(())
+    }
+}
+
+pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
+    glissade::console::set_verbose(args.verbose);
+    let overrides = Overrides {
+        accuracy: args.accuracy,
+        record: match (args.no_record, args.record) {
+            (true, _) | (false, Some(crate::cli::RecordArg::Off)) => Some(RecordOverride::Off),
+            (false, Some(crate::cli::RecordArg::Full)) => Some(RecordOverride::Full),
+            (false, None) => None,
+        },
+        ..Default::default()
+    };
+    let run_id = match args.run_id.clone() {
+        Some(id) => id,
+        None => default_run_id()?,
+    };
+    check_run_id("--run-id", &run_id)?;
+    // Fails before solving if the outputs cannot be written.
+    let sc = load_with_overrides(&args.scene, &args.out, &overrides)?;
+    let existing = glissade::output::existing_outputs(&args.out, &sc.model.name, &run_id);
+    if !existing.is_empty() {
+        anyhow::bail!(
+            "--out {}: run {run_id} of scene `{}` already has outputs there ({}); nothing was overwritten: \
+             choose another --run-id (or leave it out for a new random one) or another --out",
+            args.out.display(),
+            sc.model.name,
+            existing
+                .iter()
+                .map(|p| p.file_name().unwrap_or_default().to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let bar = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(sc.model.solver.max_iterations as u64)
+    };
+    bar.set_style(ProgressStyle::with_template("{spinner} [{elapsed}] it {pos}  {msg}").expect("valid template"));
+    bar.set_message(format!(
+        "building operators of {} subdomains",
+        sc.model.subdomains.len()
+    ));
+    let opts = RunOptions {
+        run_id: run_id.clone(),
+        interior: args.interior || args.vtu,
+    };
+    let progress = |r: &IterationRecord| {
+        bar.set_position(r.iteration as u64 + 1);
+        bar.set_message(glissade::output::progress_line(&sc.model, r));
+    };
+    let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
+    if let Some(p) = &recording {
+        println!(
+            "recording to {}: {}",
+            p.display(),
+            glissade::recording::expected_size(&sc)
+        );
+    }
+    let mut live = LiveView::new(&args, &sc, &run_id)?;
+    // Linear-stage totals per linear stage: in process only (a node process keeps its records).
+    let mut linear_stages = None;
+    let mut bus = None;
+    let result = if args.in_process {
+        let (result, records, outcome) =
+            glissade::recording::run_in_process_recorded_logged(&sc, &opts, recording.as_deref(), progress, |m| {
+                let t0 = std::time::Instant::now();
+                live.message(m);
+                t0.elapsed()
+            })?;
+        linear_stages = Some(glissade::output::linear_stage_totals(&sc, &records));
+        live.finish()?;
+        if let Some(st) = outcome.and_then(|o| o.stats) {
+            glissade::console::note(&format!(
+                "recorded {} messages on {} channels",
+                st.messages, st.channels
+            ));
+        }
+        result
+    } else {
+        let exe = std::env::current_exe().context("cannot locate the glissade executable to spawn nodes")?;
+        install_interrupt_handler()?;
+        let net = Network {
+            listen: args.listen.clone(),
+            connect: args.connect.clone(),
+            remote: args.remote.clone(),
+            remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
+            recording: recording.clone(),
+            credentials: Some(args.out.clone()),
+        };
+        let observe = live
+            .view
+            .is_some()
+            .then_some(|m: &glissade_messages::Message| live.message(m));
+        match run_distributed_observed(&sc, &opts, &exe, &net, progress, observe) {
+            Ok((result, traffic)) => {
+                bar.finish_and_clear();
+                live.finish()?;
+                let per = traffic.iterations.max(1) as f64;
+                for (kind, t) in &traffic.by_kind {
+                    let rate = if t.messages >= traffic.iterations {
+                        format!("{:.0} bytes per iteration", t.bytes as f64 / per)
+                    } else {
+                        "set-up or final, not per iteration".to_string()
+                    };
+                    glissade::console::note(&format!(
+                        "bus: {kind}: {} message(s), {} bytes ({rate})",
+                        t.messages, t.bytes
+                    ));
+                }
+                bus = Some(traffic);
+                result
+            }
+            Err(e) => {
+                bar.finish_and_clear();
+                let Some(Interrupted { partial }) = e.downcast_ref::<Interrupted>() else {
+                    return Err(e);
+                };
+                let mut s = summary(&sc, partial, &run_id);
+                s["verdict"] = serde_json::json!("Interrupted");
+                s["interrupted"] = serde_json::json!(true);
+                let p = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &s)?;
+                println!(
+                    "scene `{}`: interrupted after {} iterations; every node was stopped\nsummary: {}",
+                    sc.model.name,
+                    partial.iterations.len(),
+                    p.display()
+                );
+                return Ok(ExitCode::from(INTERRUPTED));
+            }
+        }
+    };
+    bar.finish_and_clear();
+    for l in &result.left_out {
+        println!("left out: {l}");
+    }
+    let mut run_summary = summary(&sc, &result, &run_id);
+    run_summary["linear_stages"] = match &linear_stages {
+        Some(totals) => serde_json::json!(totals.iter().map(|t| t.json()).collect::<Vec<_>>()),
+        None => {
+            serde_json::json!("not measured: a multi-process run's subdomain nodes keep their linear-stage records")
+        }
+    };
+    if let Some(traffic) = &bus {
+        run_summary["bus"] = serde_json::json!(traffic);
+    }
+    // The files this run wrote, named with the error when a later one cannot be written (a full
+    // disk): each is complete, and nothing is left of the one that failed.
+    let mut kept: Vec<std::path::PathBuf> = recording.iter().filter(|p| p.is_file()).cloned().collect();
+    let summary_path = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)
+        .map_err(|e| with_kept(e, &kept))?;
+    kept.push(summary_path.clone());
+    let fields_path = write_json_new(
+        &args.out,
+        &RunFile::Fields.name(&sc.model.name, &run_id),
+        &interface_fields(&sc.model, &result.interfaces),
+    )
+    .map_err(|e| with_kept(e, &kept))?;
+    kept.push(fields_path.clone());
+    if args.interior || (sc.model.interfaces.is_empty() && !args.vtu) {
+        let p = write_json_new(
+            &args.out,
+            &RunFile::Displacement.name(&sc.model.name, &run_id),
+            &glissade::output::displacements(&sc.model, &result.displacements),
+        )
+        .map_err(|e| with_kept(e, &kept))?;
+        println!("displacements: {}", p.display());
+        kept.push(p);
+    }
+    let series = if args.vtu {
+        let u = glissade::output::displacement_slices(&sc.model, &result.displacements)?;
+        let stem = format!("{}-{run_id}", sc.model.name);
+        let v = glissade::vtu::write_series(
+            &sc.model,
+            &u,
+            &result.interfaces,
+            &args.out,
+            &stem,
+            args.vtu_every as usize,
+        )
+        .map_err(|e| with_kept(e, &kept))?;
+        kept.push(v.pvd.clone());
+        Some(v)
+    } else {
+        None
+    };
+    println!(
+        "scene `{}`: {}; setup {:.2} s, iterations {:.2} s",
+        sc.model.name,
+        glissade::output::outcome(&sc.model, &result),
+        result.setup_s,
+        result.solve_s
+    );
+    for t in linear_stages.iter().flatten() {
+        println!("{}", t.line());
+    }
+    if let Some(size) = recording
+        .as_deref()
+        .and_then(|p| std::fs::metadata(p).ok())
+        .map(|m| m.len())
+    {
+        let path = recording.as_deref().expect("a recording path").display();
+        println!("recording: {path} ({:.1} MB)", size as f64 * 1e-6);
+    }
+    println!("summary: {}\nfields: {}", summary_path.display(), fields_path.display());
+    if args.csv {
+        let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
+        glissade::vtu::write_new_file(
+            &path,
+            glissade::output::interface_csv(&sc.model, &result.interfaces)?.as_bytes(),
+        )
+        .map_err(|e| with_kept(e, &kept))?;
+        println!("csv: {}", path.display());
+    }
+    if let Some(v) = series {
+        println!(
+            "paraview: {} ({} files, {:.1} MB)",
+            v.pvd.display(),
+            v.files,
+            v.bytes as f64 * 1e-6
+        );
+    }
+    Ok(match result.verdict {
+        Verdict::Converged => ExitCode::SUCCESS,
+        _ => ExitCode::from(NOT_CONVERGED),
+    })
+}
+
+/// The error of an output that could not be written, with the files the run did write.
+pub(crate) fn with_kept(e: anyhow::Error, kept: &[std::path::PathBuf]) -> anyhow::Error {
+    if kept.is_empty() {
+        return e;
+    }
+    let files: Vec<String> = kept.iter().map(|p| p.display().to_string()).collect();
+    anyhow::anyhow!("{e:#}; kept, complete: {}", files.join(", "))
+}
