@@ -65,7 +65,7 @@ pub use error::TransportError;
 pub use handshake::{fetch_scene, publish_done, publish_start, publish_stop, scene_fingerprint_of, serve_scene};
 pub use node_loop::{run_nodes, NodeRun};
 pub use presence::{launcher_token, tokens_alive, Presence};
-pub use publish::{publish, publish_lent, SHARED_ENCODING_MIN};
+pub use publish::{publish, publish_lent, Publishers, SHARED_ENCODING_MIN};
 pub use receive::{decode_payload, message_hash, payload_hash};
 pub use recorder_log::{decode_log, encode_log, fetch_log};
 pub use shm::{shared_memory_lockable, shared_memory_room, ShmLender};

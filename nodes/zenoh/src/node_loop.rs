@@ -7,7 +7,7 @@
 
 use crate::error::zerr;
 use crate::presence::watch_tokens;
-use crate::publish::{publish_lent, put_bytes};
+use crate::publish::Publishers;
 use crate::receive::{batches, message_hash, PayloadBlocks, Received};
 use crate::recorder_log::fetch_log;
 use crate::shm::ShmLender;
@@ -107,6 +107,7 @@ pub fn run_nodes(
     }
     let mut handler = Handler {
         session,
+        publishers: Publishers::new(session),
         routes: Routes::new(subscriptions),
         buffers,
         seen: HashSet::new(),
@@ -411,6 +412,8 @@ type Outcome = Result<Vec<(usize, String)>, (usize, TransportError)>;
 /// Hands the messages that arrive to the process's nodes and publishes what they answer.
 struct Handler<'a> {
     session: &'a Session,
+    /// Its publishers, one per key this process's nodes publish on.
+    publishers: Publishers<'a>,
     /// Which of the nodes each key reaches ([`Routes`]).
     routes: Routes,
     /// The received fields' buffers ([`run_nodes`]).
@@ -427,7 +430,7 @@ impl Handler<'_> {
     fn start(&self, nodes: &mut [Box<dyn Node>]) -> Result<(), TransportError> {
         for node in nodes {
             let outs = node.start()?;
-            publish_outputs(self.session, node.as_mut(), outs, &self.published)?;
+            publish_outputs(&self.publishers, node.as_mut(), outs, &self.published)?;
         }
         Ok(())
     }
@@ -490,7 +493,7 @@ impl Handler<'_> {
     /// Each node handles the messages it subscribes to, in parallel with the others.
     fn dispatch(&mut self, msgs: &[(String, u64, Message)], nodes: &mut [Box<dyn Node>]) -> Vec<Outcome> {
         let deliveries = self.routes.deliveries(msgs.iter().map(|(key, _, _)| key.as_str()));
-        let (session, published) = (self.session, &self.published);
+        let (publishers, published) = (&self.publishers, &self.published);
         let failed = AtomicBool::new(false);
         nodes
             .par_iter_mut()
@@ -504,7 +507,7 @@ impl Handler<'_> {
                     }
                     let mut handled = || -> Result<(), TransportError> {
                         let outs = node.handle(msg)?;
-                        publish_outputs(session, node.as_mut(), outs, published)
+                        publish_outputs(publishers, node.as_mut(), outs, published)
                     };
                     match handled() {
                         Ok(()) => {}
@@ -569,17 +572,17 @@ impl Handler<'_> {
 /// Publishes `outs`, a node's outputs, then its further outputs one at a time, each once the one
 /// before is out ([`Node::next_output`]), giving each back to the node ([`Node::recycle`]).
 fn publish_outputs(
-    session: &Session,
+    publishers: &Publishers<'_>,
     node: &mut dyn Node,
     outs: Vec<Message>,
     published: &HashSet<u64>,
 ) -> Result<(), TransportError> {
     for mut out in outs {
-        publish_new(session, &mut out, published)?;
+        publish_new(publishers, &mut out, published)?;
         node.recycle(out);
     }
     while let Some(mut out) = node.next_output() {
-        publish_new(session, &mut out, published)?;
+        publish_new(publishers, &mut out, published)?;
         node.recycle(out);
     }
     Ok(())
@@ -588,15 +591,15 @@ fn publish_outputs(
 /// Publishes `msg` unless it is among the outputs already on the bus (`published`, the hashes
 /// of a resumed process's outputs that the recorder holds).
 /// Lent field blocks are sent without a copy ([`publish_lent`]).
-fn publish_new(session: &Session, msg: &mut Message, published: &HashSet<u64>) -> Result<(), TransportError> {
+fn publish_new(publishers: &Publishers<'_>, msg: &mut Message, published: &HashSet<u64>) -> Result<(), TransportError> {
     if published.is_empty() {
-        return publish_lent(session, msg);
+        return publishers.publish_lent(msg);
     }
     let (topic, bytes) = (msg.topic(), encode(msg));
     if published.contains(&message_hash(&topic, &bytes)) {
         return Ok(());
     }
-    put_bytes(session, &topic, bytes)
+    publishers.put(&topic, bytes)
 }
 
 #[cfg(test)]
