@@ -120,8 +120,9 @@ impl Laminate {
                 }
             });
         }
+        // As the scene's [deployment] rule: one interface node, or at most one per interface.
         let m = self.interfaces();
-        if self.interface_nodes < 1 || (m > 0 && self.interface_nodes > m) {
+        if self.interface_nodes < 1 || (self.interface_nodes > 1 && self.interface_nodes > m) {
             return Err(if self.interface_nodes < 1 {
                 GenerateError::TooSmall {
                     what: "interface-nodes",

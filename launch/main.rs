@@ -237,18 +237,22 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 interface_nodes: args.interface_nodes,
             };
             let text = laminate.scene_text()?;
-            // Check what was generated as any scene is checked, before writing it.
+            // Check what was generated as any scene is checked, before writing it; but not
+            // against this machine's memory: the scene may be meant for a larger one.
+            glissade_scene::set_machine_memory(0);
             glissade_scene::load_str(&text, &args.out.display().to_string())
                 .context("the generated scene does not load (a bug in the generator)")?;
             let mut file = std::fs::OpenOptions::new()
                 .write(true)
                 .create_new(true)
                 .open(&args.out)
-                .with_context(|| {
-                    format!(
-                        "cannot create {} (an existing file is not overwritten)",
-                        args.out.display()
-                    )
+                .map_err(|e| {
+                    let also = if e.kind() == std::io::ErrorKind::AlreadyExists {
+                        " (an existing file is not overwritten)"
+                    } else {
+                        ""
+                    };
+                    anyhow::anyhow!("cannot create {}: {e}{also}", args.out.display())
                 })?;
             std::io::Write::write_all(&mut file, text.as_bytes())
                 .with_context(|| format!("cannot write {}", args.out.display()))?;

@@ -7,8 +7,8 @@
 #
 #   docs/tools/scaling.sh [glissade binary] [work folder]
 #
-# Use a release build. Peak memory is the largest sum of the resident memory of every glissade
-# process of the run, sampled every 0.1 s.
+# Use a release build, on a machine where no other glissade runs. Peak memory is the largest sum
+# of the resident memory of every process named glissade, sampled every 0.1 s.
 set -euo pipefail
 glissade=${1:-target/release/glissade}
 work=${2:-$(mktemp -d)}
@@ -43,7 +43,12 @@ for size in "3 6" "5 20" "10 30" "20 50"; do
         "$glissade" run "$file" "${flags[@]}" >"$work/log-$1x$2-$mode" 2>&1 &
         pid=$!
         peak=$(peak_rss "$pid")
-        wait "$pid"
+        wait "$pid" || { echo "the $mode run of $scene failed:" >&2; cat "$work/log-$1x$2-$mode" >&2; exit 1; }
+        if [[ $mode == shared-memory ]] && ! grep -q "fields through shared memory" "$work/log-$1x$2-$mode"; then
+            echo "the launcher did not choose shared memory for $scene:" >&2
+            cat "$work/log-$1x$2-$mode" >&2
+            exit 1
+        fi
         summary=$(ls "$out"/*.summary.json)
         # Set-up and final messages (homogenized operators, interface solutions) are not per iteration.
         bytes=$(grep -v 'homogenized_operator\|interface_solution' "$work/log-$1x$2-$mode" |
@@ -53,7 +58,8 @@ import json, statistics, sys
 d = json.load(open(sys.argv[1]))
 peak_kb, n, mode, bytes_ = int(sys.argv[2]), int(sys.argv[3]), sys.argv[4], sys.argv[5]
 t = [h["elapsed_s"] for h in d["history"]]
-steps = [b - a for a, b in zip(t, t[1:])][2:]
+# Iteration k's time is t[k] − t[k−1]; from the 3rd iteration (k = 2) on.
+steps = [b - a for a, b in zip(t, t[1:])][1:]
 median = statistics.median(steps) * 1e3 if steps else float("nan")
 print(f"| {n} | {mode} | {d['iterations']} ({d['verdict']}) | {d['setup_s']:.2f} | {d['solve_s']:.2f} | "
       f"{median:.1f} | {median / n:.3f} | {peak_kb / 1e6:.2f} | {bytes_ or '—'} |")

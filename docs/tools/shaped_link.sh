@@ -19,12 +19,18 @@ rates=("${@:-10gbit 1gbit}")
 work=$(mktemp -d)
 a=glissade-link-a-$$ b=glissade-link-b-$$ va=gla$$ vb=glb$$
 cleanup() {
+    # A failed run's logs first.
+    for log in "$work"/out-*/*.log; do
+        [[ -e $log && $keep_logs == 1 ]] && { echo "--- $log" >&2; cat "$log" >&2; }
+    done
+    ip link del "$va" 2>/dev/null || true
     ip netns pids "$a" 2>/dev/null | xargs -r kill 2>/dev/null || true
     ip netns pids "$b" 2>/dev/null | xargs -r kill 2>/dev/null || true
     ip netns del "$a" 2>/dev/null || true
     ip netns del "$b" 2>/dev/null || true
     rm -rf "$work"
 }
+keep_logs=1
 trap cleanup EXIT
 ip netns add "$a"
 ip netns add "$b"
@@ -38,20 +44,32 @@ ip -n "$a" link set "$va" up
 ip -n "$b" link set "$vb" up
 endpoint=tcp/10.214.0.1:17447
 
+# Bits per second of a tc rate such as 10gbit or 500mbit.
+tc_bits() {
+    local n=${1%%[a-z]*} unit=${1##*[0-9]}
+    case $unit in
+        gbit) echo $((n * 1000000000)) ;;
+        mbit) echo $((n * 1000000)) ;;
+        *) echo "rate $1: give it in gbit or mbit" >&2; exit 1 ;;
+    esac
+}
+
 echo "| link | linear stage | iterations | wall time (s) | per iteration (ms) | bus bytes per iteration (MB) |"
 echo "|---|---|---:|---:|---:|---:|"
 for rate in ${rates[*]}; do
-    # The bucket holds 1 ms at the rate (at least 64 kB); packets wait at most 100 ms for tokens.
+    # The bucket holds 1 ms at the rate; packets wait at most 100 ms for tokens.
+    bits=$(tc_bits "$rate")
     for pair in "$a $va" "$b $vb"; do
         set -- $pair
-        tc -n "$1" qdisc replace dev "$2" root tbf rate "$rate" burst 1mbit latency 100ms
+        tc -n "$1" qdisc replace dev "$2" root tbf rate "$rate" burst $((bits / 8000)) latency 100ms
     done
     for stage in condensed pgd; do
         sc="$work/$stage.toml"
         # Every field over the link: no shared memory (the namespaces share /dev/shm).
         if [[ $stage == pgd ]]; then
-            sed 's/^enabled = false/enabled = true/' "$scene" >"$sc"
-            grep -q '^enabled = true' "$sc" || { echo "$scene has no [solver.pgd] enabled = false to turn on" >&2; exit 1; }
+            # `enabled = false` of the [solver.pgd] table only.
+            awk '/^\[/ {pgd = ($0 == "[solver.pgd]")} pgd && /^enabled = false/ {sub(/false/, "true"); on = 1} {print} END {exit !on}' \
+                "$scene" >"$sc" || { echo "$scene has no [solver.pgd] enabled = false to turn on" >&2; exit 1; }
         else
             cp "$scene" "$sc"
         fi
@@ -88,3 +106,4 @@ print(f"| {rate} | {stage} | {n} ({d['verdict']}) | {end - start:.1f} | {d['solv
 EOF
     done
 done
+keep_logs=0

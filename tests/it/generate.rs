@@ -27,17 +27,6 @@ fn anonymous(sc: &glissade_scene::LoadedScene) -> serde_json::Value {
     v
 }
 
-fn small(plies: usize, per_ply: usize) -> Laminate {
-    Laminate {
-        plies,
-        per_ply,
-        elements: 4,
-        steps: 20,
-        subdomain_nodes: 2,
-        ..Laminate::default()
-    }
-}
-
 #[test]
 fn the_laminate_at_the_stratified_parameters_is_the_stratified_scene() {
     // Three plies of six 30 mm subdomains of 20 × 20 QUA8, N = 1000: the generator's loads are
@@ -62,10 +51,28 @@ fn the_laminate_at_the_stratified_parameters_is_the_stratified_scene() {
 
 #[test]
 fn a_generated_laminate_matches_the_reference_and_runs_alike_as_processes() {
-    // 4 plies of 5 subdomains: contact between plies, a macro problem over 20 subdomains (the
-    // sparse factorisation of Σ L_E), several interfaces per subdomain.
-    let sc = scene(&small(4, 5).scene_text().unwrap());
-    let check = glissade::accuracy::check_scene("laminate-4x5", &sc, &Default::default()).unwrap();
+    // 8 plies of 15 subdomains of 2 × 2 QUA8: 217 interfaces, 651 macro unknowns, so the macro
+    // problem is factorised sparse (above DENSE_UP_TO), through the coarse node in-process and
+    // as a process.
+    let laminate = Laminate {
+        plies: 8,
+        per_ply: 15,
+        elements: 2,
+        steps: 6,
+        subdomain_nodes: 2,
+        ..Laminate::default()
+    };
+    let sc = scene(&laminate.scene_text().unwrap());
+    let unknowns: usize = glissade_mechanics::linear::macro_bases(&sc.model)
+        .iter()
+        .map(Vec::len)
+        .sum();
+    assert_eq!(
+        glissade_mechanics::coarse::Factorisation::for_size(unknowns),
+        glissade_mechanics::coarse::Factorisation::Sparse,
+        "{unknowns} macro unknowns"
+    );
+    let check = glissade::accuracy::check_scene("laminate-8x15", &sc, &Default::default()).unwrap();
     for stop in &check.stops {
         // DESIGN §3's promise: at the stop the true contact-traction error is at most 3× the
         // accuracy asked for.
@@ -132,6 +139,19 @@ fn generate_writes_a_scene_that_checks_and_never_overwrites() {
             "subdomain-nodes = 3: must be at most 2",
         ),
         (vec!["--side=-1"], "side = -1: must be a finite number > 0"),
+        (
+            vec![
+                "--plies",
+                "1",
+                "--per-ply",
+                "1",
+                "--subdomain-nodes",
+                "1",
+                "--interface-nodes",
+                "2",
+            ],
+            "interface-nodes = 2: must be at most 0",
+        ),
     ] {
         let bad = dir.join("bad.toml");
         let r = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))

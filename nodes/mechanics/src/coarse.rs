@@ -304,13 +304,18 @@ mod tests {
 
     #[test]
     fn a_free_rigid_mode_is_refused() {
-        // Every contribution annihilates the constant vector (a structure held by nothing).
+        // Every contribution is a weighted graph Laplacian (off-diagonal −|m_ij|, diagonal the
+        // sum of their magnitudes): positive semi-definite with the constant vector in its null
+        // space, as Σ L_E is when a rigid mode of the structure is held by nothing.
         let k = 6;
-        let mut l = spd_block(k, 3);
-        for i in 0..k {
-            let row: f64 = (0..k).map(|j| l[(i, j)]).sum();
-            l[(i, i)] -= row;
-        }
+        let m = spd_block(k, 3);
+        let l = Mat::from_fn(k, k, |i, j| {
+            if i == j {
+                (0..k).filter(|&c| c != i).map(|c| m[(i, c)].abs()).sum::<f64>()
+            } else {
+                -m[(i, j)].abs()
+            }
+        });
         let slots = [(0, 3), (1, 3)];
         let parts = [Contribution {
             subdomain: 0,

@@ -35,7 +35,7 @@ fn publish_with(session: &Session, msg: &Message, put: &Put<'_>) -> Result<(), T
 /// quarter of its time in that matching).
 pub struct Publishers<'s> {
     session: &'s Session,
-    declared: std::sync::RwLock<std::collections::HashMap<String, zenoh::pubsub::Publisher<'static>>>,
+    declared: std::sync::RwLock<std::collections::HashMap<String, std::sync::Arc<zenoh::pubsub::Publisher<'static>>>>,
 }
 
 impl<'s> Publishers<'s> {
@@ -51,28 +51,37 @@ impl<'s> Publishers<'s> {
     }
 
     /// Puts `bytes` on `key` through its publisher (declared now if it is the key's first
-    /// message), blocking rather than dropping under congestion.
+    /// message), blocking rather than dropping under congestion. No lock is held while it puts.
     pub fn put(&self, key: &str, bytes: impl Into<zenoh::bytes::ZBytes>) -> Result<(), TransportError> {
-        let bytes = bytes.into();
-        let put = |p: &zenoh::pubsub::Publisher<'static>, bytes| {
-            p.put(bytes).wait().map_err(|e| zerr(&format!("put {key}"), e))
-        };
         // A poisoned lock only means another thread panicked while holding it: the map is intact.
-        if let Some(p) = self.declared.read().unwrap_or_else(|e| e.into_inner()).get(key) {
-            return put(p, bytes);
-        }
-        let mut declared = self.declared.write().unwrap_or_else(|e| e.into_inner());
-        let p = match declared.entry(key.to_string()) {
-            std::collections::hash_map::Entry::Occupied(o) => o.into_mut(),
-            std::collections::hash_map::Entry::Vacant(v) => v.insert(
-                self.session
-                    .declare_publisher(key.to_string())
-                    .congestion_control(CongestionControl::Block)
-                    .wait()
-                    .map_err(|e| zerr(&format!("declare a publisher on {key}"), e))?,
-            ),
+        let known = self
+            .declared
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(key)
+            .cloned();
+        let publisher = match known {
+            Some(p) => p,
+            None => {
+                let mut declared = self.declared.write().unwrap_or_else(|e| e.into_inner());
+                match declared.entry(key.to_string()) {
+                    std::collections::hash_map::Entry::Occupied(o) => o.get().clone(),
+                    std::collections::hash_map::Entry::Vacant(v) => v
+                        .insert(std::sync::Arc::new(
+                            self.session
+                                .declare_publisher(key.to_string())
+                                .congestion_control(CongestionControl::Block)
+                                .wait()
+                                .map_err(|e| zerr(&format!("declare a publisher on {key}"), e))?,
+                        ))
+                        .clone(),
+                }
+            }
         };
-        put(p, bytes)
+        publisher
+            .put(bytes.into())
+            .wait()
+            .map_err(|e| zerr(&format!("put {key}"), e))
     }
 
     /// [`publish`] through the declared publishers.
