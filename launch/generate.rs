@@ -103,41 +103,29 @@ impl Laminate {
                 range: "≥ 0",
             });
         }
-        let n = self.subdomains();
-        if !(1..=n).contains(&self.subdomain_nodes) {
-            return Err(if self.subdomain_nodes < 1 {
-                GenerateError::TooSmall {
-                    what: "subdomain-nodes",
-                    value: self.subdomain_nodes,
-                    min: 1,
-                }
+        // A process count is at least 1 and at most `max`, except that one is always allowed (the
+        // scene's [deployment] rule: one interface node even on a scene without interfaces).
+        let processes = |what, value: usize, max: usize, why| {
+            if value < 1 {
+                Err(GenerateError::TooSmall { what, value, min: 1 })
+            } else if value > max.max(1) {
+                Err(GenerateError::TooLarge { what, value, max, why })
             } else {
-                GenerateError::TooLarge {
-                    what: "subdomain-nodes",
-                    value: self.subdomain_nodes,
-                    max: n,
-                    why: "one subdomain per process at most",
-                }
-            });
-        }
-        // As the scene's [deployment] rule: one interface node, or at most one per interface.
-        let m = self.interfaces();
-        if self.interface_nodes < 1 || (self.interface_nodes > 1 && self.interface_nodes > m) {
-            return Err(if self.interface_nodes < 1 {
-                GenerateError::TooSmall {
-                    what: "interface-nodes",
-                    value: self.interface_nodes,
-                    min: 1,
-                }
-            } else {
-                GenerateError::TooLarge {
-                    what: "interface-nodes",
-                    value: self.interface_nodes,
-                    max: m,
-                    why: "one interface per process at least",
-                }
-            });
-        }
+                Ok(())
+            }
+        };
+        processes(
+            "subdomain-nodes",
+            self.subdomain_nodes,
+            self.subdomains(),
+            "one subdomain per process at most",
+        )?;
+        processes(
+            "interface-nodes",
+            self.interface_nodes,
+            self.interfaces(),
+            "one interface per process at least",
+        )?;
         Ok(())
     }
 

@@ -205,11 +205,6 @@ impl Routes {
         }
     }
 
-    /// The subscriptions, in subscriber order.
-    pub fn subscriptions(&self) -> &[Vec<String>] {
-        &self.subscriptions
-    }
-
     /// The subscribers `key` reaches, in order.
     fn match_key(&self, key: &str, into: &mut Vec<usize>) {
         into.clear();

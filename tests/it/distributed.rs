@@ -44,6 +44,19 @@ pub(crate) fn assert_identical(a: &RunResult, b: &RunResult) {
 }
 
 /// `text` with `lines` added at the top of its `[deployment]` section.
+/// Runs `sc` in-process and as processes (run id `run_id`), asserts that both give the same bits,
+/// and returns the in-process result.
+pub(crate) fn in_process_equals_processes(sc: &glissade_scene::LoadedScene, run_id: &str) -> RunResult {
+    let opts = |id: &str| RunOptions {
+        run_id: id.into(),
+        interior: false,
+    };
+    let local = run_in_process(sc, &opts("local"), |_| {}).unwrap();
+    let remote = run_multi_process(sc, &opts(run_id), exe(), |_| {}).unwrap();
+    assert_identical(&local, &remote);
+    local
+}
+
 fn with_deployment(text: &str, lines: &str) -> String {
     assert!(text.contains("\n[deployment]\n"), "the scene has a deployment section");
     text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{lines}\n"), 1)

@@ -84,20 +84,8 @@ fn a_generated_laminate_matches_the_reference_and_runs_alike_as_processes() {
             stop.iteration
         );
     }
-    let options = |id: &str| glissade::runner::RunOptions {
-        run_id: id.into(),
-        interior: false,
-    };
-    let local = glissade::runner::run_in_process(&sc, &options("local"), |_| {}).unwrap();
+    let local = crate::distributed::in_process_equals_processes(&sc, "generate-processes");
     assert_eq!(local.verdict, Verdict::Converged);
-    let remote = glissade::distributed::run_multi_process(
-        &sc,
-        &options("generate-processes"),
-        std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
-        |_| {},
-    )
-    .unwrap();
-    crate::distributed::assert_identical(&local, &remote);
 }
 
 #[test]

@@ -334,20 +334,8 @@ fn curved_scenes_as_processes_are_bit_identical_to_in_process() {
         assert!(!text.contains("[deployment]"), "{name} has its own deployment");
         let sc = mesh_scene(&format!("{text}\n[deployment]\nsubdomain_nodes = 2\n"));
         assert!(sc.text.contains("data = "), "the scene text carries its mesh");
-        let options = |id: &str| glissade::runner::RunOptions {
-            run_id: id.into(),
-            interior: false,
-        };
-        let local = glissade::runner::run_in_process(&sc, &options("local"), |_| {}).unwrap();
-        let remote = glissade::distributed::run_multi_process(
-            &sc,
-            &options(&format!("gmsh-processes-{name}")),
-            std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
-            |_| {},
-        )
-        .unwrap();
+        let local = crate::distributed::in_process_equals_processes(&sc, &format!("gmsh-processes-{name}"));
         assert_eq!(local.verdict, Verdict::Converged, "{name}");
-        crate::distributed::assert_identical(&local, &remote);
         println!(
             "{name}: {} iterations, as processes bit-identical",
             local.iterations.len()

@@ -20,15 +20,6 @@ while True:
     time.sleep(1)
 "#;
 
-/// A free loopback port (bound then released; the router takes it right after).
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 #[test]
 fn a_run_through_a_router_of_its_own_gives_the_in_process_bits() {
     let Some(python) = python_with(&["zenoh"]) else {
@@ -37,7 +28,7 @@ fn a_run_through_a_router_of_its_own_gives_the_in_process_bits() {
     let dir = scratch("real-router");
     let script = dir.join("router.py");
     std::fs::write(&script, ROUTER).unwrap();
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let endpoint = format!("tcp/127.0.0.1:{}", glissade_zenoh::free_loopback_port().unwrap());
     // Killed and reaped on drop, also when the test fails.
     let mut router = Launcher::spawn(Command::new(python).arg(&script).arg(&endpoint));
     router.wait_for_line("router listening", Duration::from_secs(60));

@@ -46,10 +46,6 @@ impl<'s> Publishers<'s> {
         }
     }
 
-    pub fn session(&self) -> &'s Session {
-        self.session
-    }
-
     /// Puts `bytes` on `key` through its publisher (declared now if it is the key's first
     /// message), blocking rather than dropping under congestion. No lock is held while it puts.
     pub fn put(&self, key: &str, bytes: impl Into<zenoh::bytes::ZBytes>) -> Result<(), TransportError> {
@@ -82,11 +78,6 @@ impl<'s> Publishers<'s> {
             .put(bytes.into())
             .wait()
             .map_err(|e| zerr(&format!("put {key}"), e))
-    }
-
-    /// [`publish`] through the declared publishers.
-    pub fn publish(&self, msg: &Message) -> Result<(), TransportError> {
-        publish_with(self.session, msg, &|key, bytes| self.put(key, bytes))
     }
 
     /// [`publish_lent`] through the declared publishers.
