@@ -16,8 +16,9 @@
 //!   between passes make the real traffic lower). Their ratios to the measured rates give the
 //!   compute and memory-traffic bounds the iteration time is compared to.
 
-use crate::distributed::{run_distributed, Network};
-use crate::runner::{run_in_process, run_in_process_timed, RunOptions, RunResult};
+use crate::distributed::Network;
+use crate::run::Run;
+use crate::runner::{RunOptions, RunResult};
 use faer::{Accum, Mat, Par};
 use glissade_bus::HandleTime;
 use glissade_deploy::Plan;
@@ -213,13 +214,12 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
     // records, and for every subdomain for each step (all of them take it).
     let mut record_passes = vec![0usize; model.subdomains.len()];
     let mut step_passes = 0usize;
-    let (result, times): (RunResult, Vec<HandleTime>) = run_in_process_timed(
-        scene,
-        &RunOptions {
-            run_id: run_id.into(),
-            interior: false,
-        },
-        |m| {
+    let opts = RunOptions {
+        run_id: run_id.into(),
+        interior: false,
+    };
+    let outcome = Run::new(scene, &opts)
+        .observe(|m| {
             match &m.payload {
                 Payload::AndersonGram { subdomain, gram, .. } => {
                     if let Some(p) = record_passes.get_mut(*subdomain as usize) {
@@ -230,8 +230,10 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
                 _ => {}
             }
             Duration::ZERO
-        },
-    )?;
+        })
+        .handle_times()
+        .in_process()?;
+    let (result, times): (_, Vec<HandleTime>) = (outcome.result, outcome.handle_times);
     let machine = machine_rates(largest, nt);
     let iterations = result.iterations.len().max(1);
     let per_it = |s: f64| 1e3 * s / iterations as f64;
@@ -508,13 +510,15 @@ pub fn compare_processes(
             interior: false,
         };
         give_back_freed_memory();
-        let in_process = same_run("in-process", run_in_process(scene, &opts(run_id()?), |_| {})?)?;
+        let in_process = same_run("in-process", Run::new(scene, &opts(run_id()?)).in_process()?.result)?;
         let mut times = [(0.0, 0.0, None); 2];
         for (t, shm) in times.iter_mut().zip([false, true]) {
             give_back_freed_memory();
             let mut sc = scene.clone();
             sc.network.shared_memory = Some(shm);
-            let (r, _) = run_distributed(&sc, &opts(run_id()?), exe, &Network::default(), |_| {})?;
+            let r = Run::new(&sc, &opts(run_id()?))
+                .processes(exe, &Network::default())?
+                .result;
             *t = same_run(if shm { "through shared memory" } else { "over TCP" }, r)?;
         }
         out.push(ProcessRound {

@@ -46,7 +46,7 @@ pub struct Host {
 
 /// Whether a run whose scene leaves `network.shared_memory` unset passes its fields through
 /// shared memory: Ok(why) when node restarts are off for it anyway (they need fields that do not
-/// go through shared memory: see [`run_distributed`]), every node runs on this machine, the bus
+/// go through shared memory: see [`crate::distributed::run_processes`]), every node runs on this machine, the bus
 /// is not encrypted (with TLS, fields stay on the encrypted link), processes may lock shared
 /// memory and `/dev/shm` has [`SHARED_MEMORY_ROOM`] free; Err(why not) otherwise.
 pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, String> {
@@ -243,6 +243,7 @@ pub(crate) fn join_bus(
     scene: &LoadedScene,
     run_id: &str,
     net: &Network,
+    recorded: bool,
     all_nodes: &[NodeName],
     groups: &[Vec<u32>],
 ) -> anyhow::Result<Bus> {
@@ -264,7 +265,7 @@ pub(crate) fn join_bus(
     // under its own user with a random password, speaking only on its own keys.
     let hosting = net.connect.is_empty();
     let mut members: Vec<NodeId> = all_nodes.iter().map(|n| n.id()).collect();
-    if net.recording.is_some() {
+    if recorded {
         members.push(RECORDER);
     }
     let credentials: BTreeMap<NodeId, transport::Credentials> = if hosting {
@@ -328,7 +329,7 @@ pub(crate) fn join_bus(
         Some(on) => on,
         None => {
             let host = Host {
-                recorded: net.recording.is_some(),
+                recorded,
                 remote_nodes: !net.remote.is_empty(),
                 room: transport::shared_memory_room(),
                 lockable: transport::shared_memory_lockable(),

@@ -90,8 +90,6 @@ pub struct Network {
     pub remote: Vec<NodeName>,
     /// Longest wait for the nodes started by hand to be ready (default: 300 s).
     pub remote_timeout: Option<Duration>,
-    /// MCAP file a recorder process writes every message of the run to; None: no recorder.
-    pub recording: Option<std::path::PathBuf>,
     /// Folder where the credentials of the nodes started by hand (`remote`) are written, one
     /// file each, readable by this user only, removed when the run ends (the run's `--out`).
     pub credentials: Option<std::path::PathBuf>,
@@ -188,44 +186,31 @@ fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
     names
 }
 
-/// Runs `scene` with one process per node group, all on this machine over loopback.
-pub fn run_multi_process(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    exe: &Path,
-    on_iteration: impl FnMut(&IterationRecord),
-) -> anyhow::Result<RunResult> {
-    run_distributed(scene, opts, exe, &Network::default(), on_iteration).map(|(result, _)| result)
-}
-
-/// Runs `scene` with one process per node group on the bus `net` describes; nodes listed in
-/// `net.remote` are left to be started by hand. Returns the result and the bus traffic.
-pub fn run_distributed(
+/// The run as processes behind [`crate::run::Run::processes`]: one process per node group on the
+/// bus `net` describes, nodes listed in `net.remote` left to be started by hand, a recorder
+/// process writing `recording` when given. `observe`, when given, sees every message of the run
+/// the launcher receives, in arrival order (the live Rerun view of a multi-process run). Without
+/// it, the launcher copies and decodes only the messages it keeps (decisions, interface
+/// solutions, displacements) and just counts the others, most of the bus's bytes. Returns the
+/// result and the bus traffic.
+pub(crate) fn run_processes(
     scene: &LoadedScene,
     opts: &RunOptions,
     exe: &Path,
     net: &Network,
-    on_iteration: impl FnMut(&IterationRecord),
-) -> anyhow::Result<(RunResult, Traffic)> {
-    run_distributed_observed(scene, opts, exe, net, on_iteration, None::<fn(&Message)>)
-}
-
-/// As [`run_distributed`]; `observe`, when given, sees every message of the run the launcher
-/// receives, in arrival order (the live Rerun view of a multi-process run). Without it, the
-/// launcher copies and decodes only the messages it keeps (decisions, interface solutions,
-/// displacements) and just counts the others, most of the bus's bytes.
-pub fn run_distributed_observed(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    exe: &Path,
-    net: &Network,
+    recording: Option<&Path>,
     mut on_iteration: impl FnMut(&IterationRecord),
     mut observe: Option<impl FnMut(&Message)>,
 ) -> anyhow::Result<(RunResult, Traffic)> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
         // Nothing to distribute: the in-process direct solve.
-        let result = crate::runner::run_in_process(scene, opts, on_iteration)?;
+        let keep_going = |r: &IterationRecord| {
+            on_iteration(r);
+            true
+        };
+        let no_observer = |_: &Message| Duration::ZERO;
+        let result = crate::runner::run_logged(scene, opts, keep_going, no_observer, None, None, None)?;
         return Ok((result, Traffic::default()));
     }
     let t0 = Instant::now();
@@ -263,7 +248,7 @@ pub fn run_distributed_observed(
         shared_memory,
         node_args: node_tls,
         credentials,
-    } = join_bus(scene, run_id, net, &all_nodes, &groups)?;
+    } = join_bus(scene, run_id, net, recording.is_some(), &all_nodes, &groups)?;
     let _launcher_token = transport::launcher_token(&session, run_id)?;
     let mut presence = transport::Presence::watch(&session, run_id)?;
     let launcher = NodeId {
@@ -303,7 +288,7 @@ pub fn run_distributed_observed(
     // missed it waits (seen with shared memory forced on in the restart test, on a loaded
     // machine: 2 of 100 runs went wrong, a stall and a recorder missing 7 messages).
     let restarts = scene.deployment.restarts;
-    let no_resume = unresumable(scene, net.recording.is_some()).or_else(|| {
+    let no_resume = unresumable(scene, recording.is_some()).or_else(|| {
         shared_memory.then(|| {
             "network.shared_memory = true: a killed node's last messages may reach some nodes and not others"
                 .to_string()
@@ -330,7 +315,7 @@ pub fn run_distributed_observed(
             .0
             .push(spawn_node(exe, name, &args, credentials.get(&name.id()).cloned())?);
     }
-    let mut recorder = match &net.recording {
+    let mut recorder = match recording {
         Some(path) => Some(crate::recording::spawn_recorder_process(
             exe,
             &session,

@@ -12,6 +12,7 @@ pub mod node_process;
 pub mod output;
 pub mod recording;
 pub mod report;
+pub mod run;
 pub mod runner;
 pub mod stability;
 pub mod vtu;

@@ -15,12 +15,12 @@
 //! before anything is solved, so an unwritable folder fails the run at once, naming the path.
 
 use crate::children::ChildOutput;
-use crate::runner::{run_in_process_logged, run_in_process_logged_until, IterationRecord, RunOptions, RunResult};
 use anyhow::{bail, Context};
 use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
-use glissade_recorder::{log_time_now, recording_file_name, Recorder, RecorderOptions, RecordingStats, RunInfo};
+use glissade_recorder::{
+    log_time_now, recording_file_name, Recorder, RecorderError, RecorderOptions, RecordingStats, RunInfo,
+};
 use glissade_scene::{fingerprint, load_str, LoadedScene};
-use glissade_subdomain::LinearStageRecord;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -108,12 +108,8 @@ fn run_info(scene: &LoadedScene, run_id: &str) -> RunInfo {
 }
 
 /// Creates the recorder of a run (the file exists and holds the scene when this returns).
-pub fn create_recorder(scene: &LoadedScene, run_id: &str, path: &Path) -> anyhow::Result<Recorder> {
-    Ok(Recorder::create(
-        path,
-        &run_info(scene, run_id),
-        &recorder_options(scene),
-    )?)
+pub fn create_recorder(scene: &LoadedScene, run_id: &str, path: &Path) -> Result<Recorder, RecorderError> {
+    Recorder::create(path, &run_info(scene, run_id), &recorder_options(scene))
 }
 
 /// What a recording holds once finished.
@@ -121,77 +117,6 @@ pub fn create_recorder(scene: &LoadedScene, run_id: &str, path: &Path) -> anyhow
 pub struct RecordingOutcome {
     pub path: PathBuf,
     pub stats: Option<RecordingStats>,
-}
-
-/// An in-process run whose messages are recorded to `path` (when given). The recorder's time is
-/// part of the run's wall time.
-pub fn run_in_process_recorded(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    path: Option<&Path>,
-    on_iteration: impl FnMut(&IterationRecord),
-) -> anyhow::Result<(RunResult, Option<RecordingOutcome>)> {
-    run_in_process_recorded_observed(scene, opts, path, on_iteration, |_| Duration::ZERO)
-}
-
-/// As [`run_in_process_recorded`], and `observe` sees every message of the run (e.g. a live
-/// view); the wall time it returns is left out of the run's times.
-pub fn run_in_process_recorded_observed(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    path: Option<&Path>,
-    on_iteration: impl FnMut(&IterationRecord),
-    observe: impl FnMut(&glissade_messages::Message) -> Duration,
-) -> anyhow::Result<(RunResult, Option<RecordingOutcome>)> {
-    run_in_process_recorded_logged(scene, opts, path, on_iteration, observe)
-        .map(|(result, _, outcome)| (result, outcome))
-}
-
-/// As [`run_in_process_recorded_observed`], and returns every subdomain's linear-stage records
-/// (wall time, flops, PGD basis per iteration; see [`run_in_process_logged`]).
-pub fn run_in_process_recorded_logged(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    path: Option<&Path>,
-    on_iteration: impl FnMut(&IterationRecord),
-    mut observe: impl FnMut(&glissade_messages::Message) -> Duration,
-) -> anyhow::Result<(RunResult, Vec<LinearStageRecord>, Option<RecordingOutcome>)> {
-    let Some(path) = path else {
-        let (result, records) = run_in_process_logged(scene, opts, on_iteration, observe)?;
-        return Ok((result, records, None));
-    };
-    let mut recorder = create_recorder(scene, &opts.run_id, path)?;
-    // The first failed write (e.g. a full disk) stops the run at the end of that iteration.
-    let failure = std::cell::RefCell::new(None);
-    let mut on_iteration = on_iteration;
-    let keep_going = |r: &IterationRecord| {
-        on_iteration(r);
-        failure.borrow().is_none()
-    };
-    let (result, records) = run_in_process_logged_until(scene, opts, keep_going, |m| {
-        let spent = observe(m);
-        if failure.borrow().is_none() {
-            if let Err(e) = recorder.record(&m.topic(), log_time_now(), &glissade_messages::encode(m)) {
-                *failure.borrow_mut() = Some(e);
-            }
-        }
-        spent
-    })?;
-    if let Some(e) = failure.into_inner() {
-        let at = result.iterations.len();
-        return Err(anyhow::Error::new(e).context(format!(
-            "the run was stopped after {at} iteration(s): its recording could not be written"
-        )));
-    }
-    let stats = recorder.finish()?;
-    Ok((
-        result,
-        records,
-        Some(RecordingOutcome {
-            path: path.to_path_buf(),
-            stats: Some(stats),
-        }),
-    ))
 }
 
 /// The recorder process of a multi-process run, seen from the launcher. Killed when dropped.

@@ -7,7 +7,8 @@
 //! iteration's messages on the bus and, with PGD, every subdomain's basis size per iteration
 //! (plotted under the errors).
 
-use crate::runner::{run_in_process_logged_until, AndersonTally, RunOptions, RunResult};
+use crate::run::Run;
+use crate::runner::{AndersonTally, RunOptions, RunResult};
 use glissade_bus::convert::view;
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::ReferenceErrors;
@@ -410,11 +411,9 @@ pub fn report_against(
     };
     // The smallest traction error measured so far (the observer sets it, the decisions read it).
     let best = Cell::new(f64::INFINITY);
-    let (result, records) = run_in_process_logged_until(
-        scene,
-        &opts,
-        |_| stop_at.is_none_or(|e| best.get() > e),
-        |m| {
+    let outcome = Run::new(scene, &opts)
+        .until(|_| stop_at.is_none_or(|e| best.get() > e))
+        .observe(|m| {
             let t = Instant::now();
             if !matches!(m.envelope.stage, Stage::Setup | Stage::Final) {
                 let it = m.envelope.iteration as usize;
@@ -444,8 +443,10 @@ pub fn report_against(
                 }
             }
             t.elapsed()
-        },
-    )?;
+        })
+        .linear_stages()
+        .in_process()?;
+    let (result, records) = (outcome.result, outcome.linear_stages);
     if let Some(e) = undecodable {
         anyhow::bail!("the run's own boundary state could not be read: {e}");
     }

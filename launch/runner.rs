@@ -14,7 +14,7 @@ use glissade_mechanics::model::{Model, Side, TimeGrid};
 use glissade_messages::{Decision, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict};
 use glissade_reference::glued::solve_glued;
 use glissade_scene::LoadedScene;
-use glissade_subdomain::{LinearStageLog, LinearStageRecord};
+use glissade_subdomain::LinearStageLog;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -117,83 +117,23 @@ pub enum RunError {
     Glued(AssemblyError),
     #[error("time-coarse start (solver.time_coarsening): {0}")]
     TimeStart(String),
+    #[error("recording: {0}")]
+    Recording(glissade_recorder::RecorderError),
+    #[error("the run was stopped after {iterations} iteration(s): its recording could not be written: {source}")]
+    RecordingStopped {
+        iterations: usize,
+        source: glissade_recorder::RecorderError,
+    },
+    #[error("{0} is available in-process only")]
+    InProcessOnly(&'static str),
 }
 
-/// Runs `scene` in-process. `on_iteration` sees each iteration's decision as it is made.
-pub fn run_in_process(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    on_iteration: impl FnMut(&IterationRecord),
-) -> Result<RunResult, RunError> {
-    run_in_process_observed(scene, opts, on_iteration, |_| Duration::ZERO)
-}
-
-/// As [`run_in_process`], and `observe` sees every message of the run in publication order. It
-/// returns the wall time it spent, which is left out of the iterations' elapsed times (so a
-/// report may measure errors without charging the solver for it).
-pub fn run_in_process_observed(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    mut on_iteration: impl FnMut(&IterationRecord),
-    observe: impl FnMut(&Message) -> Duration,
-) -> Result<RunResult, RunError> {
-    run_logged(
-        scene,
-        opts,
-        |r| {
-            on_iteration(r);
-            true
-        },
-        observe,
-        None,
-        None,
-        None,
-    )
-}
-
-/// As [`run_in_process_observed`], and returns every subdomain's linear-stage records (wall
-/// time, PGD basis size and criteria per iteration), sorted by (iteration, subdomain).
-pub fn run_in_process_logged(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    mut on_iteration: impl FnMut(&IterationRecord),
-    observe: impl FnMut(&Message) -> Duration,
-) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
-    let keep_going = |r: &IterationRecord| {
-        on_iteration(r);
-        true
-    };
-    run_in_process_logged_until(scene, opts, keep_going, observe)
-}
-
-/// As [`run_in_process_logged`], and the run stops after the first iteration for which
-/// `keep_going` returns false (its verdict is then that iteration's, usually `Continue`).
-pub fn run_in_process_logged_until(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    on_iteration: impl FnMut(&IterationRecord) -> bool,
-    observe: impl FnMut(&Message) -> Duration,
-) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
-    let log = LinearStageLog::default();
-    let result = run_logged(scene, opts, on_iteration, observe, Some(log.clone()), None, None)?;
-    let mut records = log.lock().map(|v| v.clone()).unwrap_or_default();
-    records.sort_by_key(|r| (r.iteration, r.subdomain));
-    Ok((result, records))
-}
-
-/// As [`run_in_process_observed`], with every node's handling time summed per (role, message
-/// field) (what `glissade bench` splits an iteration by).
-pub fn run_in_process_timed(
-    scene: &LoadedScene,
-    opts: &RunOptions,
-    observe: impl FnMut(&Message) -> Duration,
-) -> Result<(RunResult, Vec<HandleTime>), RunError> {
-    let mut times = Vec::new();
-    let result = run_logged(scene, opts, |_| true, observe, None, Some(&mut times), None)?;
-    Ok((result, times))
-}
-
-fn run_logged(
+/// The in-process run behind [`crate::run::Run::in_process`]: `on_iteration` sees each
+/// decision and stops the run when it returns false; `observe` sees every message and returns
+/// the wall time it spent, left out of the iterations' elapsed times; `log` and `timing` collect
+/// the linear-stage records and the handling times; `solvers`: operators already built (a
+/// time-coarse start's coarse solve reuses the fine run's).
+pub(crate) fn run_logged(
     scene: &LoadedScene,
     opts: &RunOptions,
     mut on_iteration: impl FnMut(&IterationRecord) -> bool,

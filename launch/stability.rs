@@ -19,7 +19,8 @@
 //! `glissade stability` runs the whole matrix (most of its time goes to steps-10000 and the thin
 //! layers); `--quick` leaves out the [`SLOW`] cases and is what `tests/it/stability.rs` runs.
 
-use crate::runner::{run_in_process_observed, AndersonTally, RunOptions};
+use crate::run::Run;
+use crate::runner::{AndersonTally, RunOptions};
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
 use glissade_mechanics::model::Model;
 use glissade_messages::Verdict;
@@ -347,20 +348,19 @@ fn latin_run(case: &Case, scene: &str, accelerated: bool) -> (RunRow, Option<Sto
     );
     let t0 = Instant::now();
     let result = catch_unwind(AssertUnwindSafe(|| {
-        run_in_process_observed(
-            &sc,
-            &RunOptions {
-                run_id,
-                interior: false,
-            },
-            |_| {},
-            |m| {
+        let opts = RunOptions {
+            run_id,
+            interior: false,
+        };
+        Run::new(&sc, &opts)
+            .observe(|m| {
                 if let Some(t) = tally.as_mut() {
                     t.observe(m);
                 }
                 Duration::ZERO
-            },
-        )
+            })
+            .in_process()
+            .map(|o| o.result)
     }));
     let result = match result {
         Ok(Ok(r)) => r,

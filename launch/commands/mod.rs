@@ -8,12 +8,13 @@ pub(crate) mod run;
 
 pub(crate) use crate::cli::{ColorByArg, ReplayArgs, RunArgs};
 pub(crate) use anyhow::Context;
-pub(crate) use glissade::distributed::{install_interrupt_handler, run_distributed_observed, Interrupted, Network};
+pub(crate) use glissade::distributed::{install_interrupt_handler, Interrupted, Network};
 pub(crate) use glissade::load_scene;
 pub(crate) use glissade::output::{
     interface_fields, reference_interfaces, summary, write_json, write_json_new, RunFile,
 };
 pub(crate) use glissade::report::{build_report_with, linear_stage_table, plot_svg, TimeAxis};
+pub(crate) use glissade::run::Run;
 pub(crate) use glissade::runner::{IterationRecord, RunOptions};
 pub(crate) use glissade_messages::Verdict;
 pub(crate) use glissade_reference::{solve_reference_steps, verify, ReferenceError, ReferenceOptions, ReferenceRun};

@@ -110,25 +110,31 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         );
     }
     let mut live = LiveView::new(&args, &sc, &run_id)?;
+    let watched = live.view.is_some();
+    let mut run = Run::new(&sc, &opts)
+        .recorded(recording.as_deref())
+        .on_iteration(progress);
+    if watched {
+        run = run.observe(|m| {
+            let t0 = std::time::Instant::now();
+            live.message(m);
+            t0.elapsed()
+        });
+    }
     // Linear-stage totals per linear stage: in process only (a node process keeps its records).
     let mut linear_stages = None;
     let mut bus = None;
     let result = if args.in_process {
-        let (result, records, outcome) =
-            glissade::recording::run_in_process_recorded_logged(&sc, &opts, recording.as_deref(), progress, |m| {
-                let t0 = std::time::Instant::now();
-                live.message(m);
-                t0.elapsed()
-            })?;
-        linear_stages = Some(glissade::output::linear_stage_totals(&sc, &records));
+        let outcome = run.linear_stages().in_process()?;
+        linear_stages = Some(glissade::output::linear_stage_totals(&sc, &outcome.linear_stages));
         live.finish()?;
-        if let Some(st) = outcome.and_then(|o| o.stats) {
+        if let Some(st) = outcome.recording.and_then(|o| o.stats) {
             glissade::console::note(&format!(
                 "recorded {} messages on {} channels",
                 st.messages, st.channels
             ));
         }
-        result
+        outcome.result
     } else {
         let exe = std::env::current_exe().context("cannot locate the glissade executable to spawn nodes")?;
         install_interrupt_handler()?;
@@ -137,17 +143,13 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             connect: args.connect.clone(),
             remote: args.remote.clone(),
             remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
-            recording: recording.clone(),
             credentials: Some(args.out.clone()),
         };
-        let observe = live
-            .view
-            .is_some()
-            .then_some(|m: &glissade_messages::Message| live.message(m));
-        match run_distributed_observed(&sc, &opts, &exe, &net, progress, observe) {
-            Ok((result, traffic)) => {
+        match run.processes(&exe, &net) {
+            Ok(outcome) => {
                 bar.finish_and_clear();
                 live.finish()?;
+                let traffic = outcome.traffic.unwrap_or_default();
                 let per = traffic.iterations.max(1) as f64;
                 for (kind, t) in &traffic.by_kind {
                     let rate = if t.messages >= traffic.iterations {
@@ -161,7 +163,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                     ));
                 }
                 bus = Some(traffic);
-                result
+                outcome.result
             }
             Err(e) => {
                 bar.finish_and_clear();

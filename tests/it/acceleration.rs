@@ -4,8 +4,9 @@
 
 use crate::common::{scene, scene_text};
 use crate::distributed::assert_identical;
-use glissade::distributed::run_multi_process;
-use glissade::runner::{run_in_process, run_in_process_observed, RunOptions, RunResult};
+use glissade::distributed::Network;
+use glissade::run::Run;
+use glissade::runner::{RunOptions, RunResult};
 use glissade_mechanics::local::error_against_reference;
 use glissade_mechanics::model::Acceleration;
 use glissade_messages::{Payload, Verdict};
@@ -30,20 +31,18 @@ fn solve(sc: &LoadedScene, acceleration: Acceleration, tolerance: f64, k0_factor
     sc.model.solver.max_iterations = 20_000;
     sc.model.solver.stagnation_window = 20_000;
     let (mut grams, mut steps) = (0, 0);
-    let result = run_in_process_observed(
-        &sc,
-        &opts("acceleration"),
-        |_| {},
-        |m| {
+    let result = Run::new(&sc, &opts("acceleration"))
+        .observe(|m| {
             match m.payload {
                 Payload::AndersonGram { .. } => grams += 1,
                 Payload::AndersonStep { .. } => steps += 1,
                 _ => {}
             }
             Duration::ZERO
-        },
-    )
-    .expect("run");
+        })
+        .in_process()
+        .map(|o| o.result)
+        .expect("run");
     assert_eq!(
         result.verdict,
         Verdict::Converged,
@@ -104,14 +103,11 @@ fn processes_match_in_process_bit_for_bit_with_anderson() {
     let sc = scene(&text);
     assert!(matches!(sc.model.solver.acceleration, Acceleration::Anderson { .. }));
     assert!(sc.deployment.subdomain_nodes >= 2);
-    let local = run_in_process(&sc, &opts("local"), |_| {}).unwrap();
-    let remote = run_multi_process(
-        &sc,
-        &opts("acceleration-distributed-1"),
-        Path::new(env!("CARGO_BIN_EXE_glissade")),
-        |_| {},
-    )
-    .unwrap();
+    let local = Run::new(&sc, &opts("local")).in_process().map(|o| o.result).unwrap();
+    let remote = Run::new(&sc, &opts("acceleration-distributed-1"))
+        .processes(Path::new(env!("CARGO_BIN_EXE_glissade")), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     println!(
         "Anderson: in-process {} iterations, processes {} iterations",
         local.iterations.len(),

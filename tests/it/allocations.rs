@@ -6,7 +6,8 @@
 //! count must make the same number of them.
 
 use crate::common::{scene, scene_text};
-use glissade::runner::{run_in_process, RunOptions};
+use glissade::run::Run;
+use glissade::runner::RunOptions;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
@@ -62,7 +63,7 @@ fn field_allocations(iterations: u32) -> (u64, usize) {
     };
     COUNT.store(0, Ordering::Relaxed);
     WATCH.store((N + 1) * std::mem::size_of::<f64>(), Ordering::Relaxed);
-    let result = run_in_process(&sc, &opts, |_| {});
+    let result = Run::new(&sc, &opts).in_process().map(|o| o.result);
     WATCH.store(0, Ordering::Relaxed);
     let result = result.expect("run");
     (COUNT.load(Ordering::Relaxed), result.iterations.len())

@@ -11,7 +11,8 @@
 //! lower block is F̂_a·t. Every run goes to a tight η with the stagnation stop off.
 
 use crate::common::{rel_max, scene};
-use glissade::runner::{run_in_process, RunOptions, RunResult};
+use glissade::run::Run;
+use glissade::runner::{RunOptions, RunResult};
 use glissade_mechanics::model::{Interface, Side};
 use glissade_messages::{InterfaceSolution, Verdict};
 use glissade_reference::glued::solve_glued;
@@ -83,14 +84,15 @@ fn solve(text: &str, tolerance: f64, k0_factor: f64) -> (LoadedScene, RunResult,
     sc.model.solver.max_iterations = 50_000;
     sc.model.solver.stagnation_window = 0;
     let clock = Instant::now();
-    let result = run_in_process(
+    let result = Run::new(
         &sc,
         &RunOptions {
             run_id: "analytic".into(),
             interior: false,
         },
-        |_| {},
     )
+    .in_process()
+    .map(|o| o.result)
     .expect("run");
     let secs = clock.elapsed().as_secs_f64();
     assert_eq!(

@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests.
 
-use glissade::runner::{run_in_process, RunOptions, RunResult};
+use glissade::run::Run;
+use glissade::runner::{RunOptions, RunResult};
 use glissade_scene::{load_str, LoadedScene};
 use std::path::{Path, PathBuf};
 
@@ -24,14 +25,15 @@ pub fn scene(text: &str) -> LoadedScene {
 }
 
 pub fn run(scene: &LoadedScene) -> RunResult {
-    run_in_process(
+    Run::new(
         scene,
         &RunOptions {
             run_id: "test".into(),
             interior: false,
         },
-        |_| {},
     )
+    .in_process()
+    .map(|o| o.result)
     .expect("run")
 }
 

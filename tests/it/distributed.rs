@@ -2,8 +2,9 @@
 //! off): the same scene run in-process and as processes gives bit-identical results.
 
 use crate::common::{scene, scene_text};
-use glissade::distributed::{run_distributed, run_multi_process, Network};
-use glissade::runner::{run_in_process, RunOptions, RunResult};
+use glissade::distributed::Network;
+use glissade::run::Run;
+use glissade::runner::{RunOptions, RunResult};
 use glissade_zenoh as transport;
 use std::path::Path;
 use std::time::Duration;
@@ -51,8 +52,11 @@ pub(crate) fn in_process_equals_processes(sc: &glissade_scene::LoadedScene, run_
         run_id: id.into(),
         interior: false,
     };
-    let local = run_in_process(sc, &opts("local"), |_| {}).unwrap();
-    let remote = run_multi_process(sc, &opts(run_id), exe(), |_| {}).unwrap();
+    let local = Run::new(sc, &opts("local")).in_process().map(|o| o.result).unwrap();
+    let remote = Run::new(sc, &opts(run_id))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     assert_identical(&local, &remote);
     local
 }
@@ -65,20 +69,21 @@ fn with_deployment(text: &str, lines: &str) -> String {
 /// An in-process run of `sc` and how many `indicator_partials` messages crossed its bus.
 fn in_process_with_partials(sc: &glissade_scene::LoadedScene) -> (RunResult, usize) {
     let mut partials = 0;
-    let result = glissade::runner::run_in_process_observed(
+    let result = Run::new(
         sc,
         &RunOptions {
             run_id: "local".into(),
             interior: false,
         },
-        |_| {},
-        |m| {
-            if matches!(m.payload, glissade_messages::Payload::IndicatorPartials { .. }) {
-                partials += 1;
-            }
-            Duration::ZERO
-        },
     )
+    .observe(|m| {
+        if matches!(m.payload, glissade_messages::Payload::IndicatorPartials { .. }) {
+            partials += 1;
+        }
+        Duration::ZERO
+    })
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
     (result, partials)
 }
@@ -134,15 +139,15 @@ fn several_interface_nodes_match_one_bit_for_bit() {
     }
     let sc = scene(&with_deployment(&base, "interface_nodes = 3"));
     let one = crate::common::run(&scene(&base));
-    let remote = run_multi_process(
+    let remote = Run::new(
         &sc,
         &RunOptions {
             run_id: "distributed-test-3".into(),
             interior: false,
         },
-        exe(),
-        |_| {},
     )
+    .processes(exe(), &Network::default())
+    .map(|o| o.result)
     .unwrap();
     println!(
         "processes: {} iterations; nodes {:?}",
@@ -169,15 +174,15 @@ fn stratified_over_three_interface_processes() {
         "interfaces per node: {:?}",
         groups.iter().map(Vec::len).collect::<Vec<_>>()
     );
-    let remote = run_multi_process(
+    let remote = Run::new(
         &sc,
         &RunOptions {
             run_id: "distributed-test-4".into(),
             interior: false,
         },
-        exe(),
-        |_| {},
     )
+    .processes(exe(), &Network::default())
+    .map(|o| o.result)
     .unwrap();
     println!(
         "stratified N = 10, 3 interface nodes: {} iterations; nodes {:?}",
@@ -202,24 +207,25 @@ fn processes_match_in_process_bit_for_bit() {
         sc.deployment.subdomain_nodes >= 2,
         "the scene spreads its subdomains over processes"
     );
-    let local = run_in_process(
+    let local = Run::new(
         &sc,
         &RunOptions {
             run_id: "local".into(),
             interior: false,
         },
-        |_| {},
     )
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
-    let remote = run_multi_process(
+    let remote = Run::new(
         &sc,
         &RunOptions {
             run_id: "distributed-test-1".into(),
             interior: false,
         },
-        exe(),
-        |_| {},
     )
+    .processes(exe(), &Network::default())
+    .map(|o| o.result)
     .unwrap();
     println!(
         "in-process {} iterations, processes {} iterations; nodes {:?}",
@@ -247,41 +253,42 @@ fn pgd_mode_form_processes_match_in_process_bit_for_bit() {
     let sc = scene(&text);
     assert_eq!(sc.linear_stage, glissade_mechanics::linear::LinearStage::Pgd);
     let (mut held, mut rotations) = (BTreeMap::new(), 0);
-    let local = glissade::runner::run_in_process_observed(
+    let local = Run::new(
         &sc,
         &RunOptions {
             run_id: "local-pgd".into(),
             interior: false,
         },
-        |_| {},
-        |m| {
-            if let Payload::BoundaryModes {
-                subdomain,
-                first_mode,
-                lambda,
-                ..
-            } = &m.payload
-            {
-                let before: usize = held.get(subdomain).copied().unwrap_or(0);
-                if (*first_mode as usize) < before {
-                    rotations += 1;
-                }
-                held.insert(*subdomain, lambda.rows());
-            }
-            Duration::ZERO
-        },
     )
+    .observe(|m| {
+        if let Payload::BoundaryModes {
+            subdomain,
+            first_mode,
+            lambda,
+            ..
+        } = &m.payload
+        {
+            let before: usize = held.get(subdomain).copied().unwrap_or(0);
+            if (*first_mode as usize) < before {
+                rotations += 1;
+            }
+            held.insert(*subdomain, lambda.rows());
+        }
+        Duration::ZERO
+    })
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
     assert!(rotations > 0, "the compression rotated modes on the wire");
-    let remote = run_multi_process(
+    let remote = Run::new(
         &sc,
         &RunOptions {
             run_id: "distributed-pgd".into(),
             interior: false,
         },
-        exe(),
-        |_| {},
     )
+    .processes(exe(), &Network::default())
+    .map(|o| o.result)
     .unwrap();
     println!(
         "PGD in mode form: {} iterations in-process and as processes, {rotations} messages with rotated modes",
@@ -297,24 +304,25 @@ fn stratified_over_three_subdomain_processes() {
     let text = scene_text("stratified").replace("N = 1000", "N = 10");
     let sc = scene(&text);
     assert_eq!(sc.deployment.subdomain_nodes, 3);
-    let local = run_in_process(
+    let local = Run::new(
         &sc,
         &RunOptions {
             run_id: "local".into(),
             interior: false,
         },
-        |_| {},
     )
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
-    let remote = run_multi_process(
+    let remote = Run::new(
         &sc,
         &RunOptions {
             run_id: "distributed-test-2".into(),
             interior: false,
         },
-        exe(),
-        |_| {},
     )
+    .processes(exe(), &Network::default())
+    .map(|o| o.result)
     .unwrap();
     println!(
         "stratified N = 10: {} iterations; nodes {:?}",
@@ -342,8 +350,11 @@ fn shared_memory_processes_match_in_process_bit_for_bit() {
         run_id: run_id.into(),
         interior: true,
     };
-    let local = run_in_process(&sc, &opts("local"), |_| {}).unwrap();
-    let remote = run_multi_process(&sc, &opts("distributed-shm"), exe(), |_| {}).unwrap();
+    let local = Run::new(&sc, &opts("local")).in_process().map(|o| o.result).unwrap();
+    let remote = Run::new(&sc, &opts("distributed-shm"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     assert!(!local.displacements.is_empty());
     assert_eq!(remote.displacements.len(), local.displacements.len());
     assert_identical(&local, &remote);
@@ -483,14 +494,15 @@ fn messages_of_another_run_are_ignored() {
     use std::sync::Arc;
 
     let sc = scene(&scene_text("small-three-layer"));
-    let local = run_in_process(
+    let local = Run::new(
         &sc,
         &RunOptions {
             run_id: "local".into(),
             interior: false,
         },
-        |_| {},
     )
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
     let port = transport::free_loopback_port().unwrap();
     let endpoint = format!("tcp/127.0.0.1:{port}");
@@ -505,10 +517,6 @@ fn messages_of_another_run_are_ignored() {
     // The victim's run is recorded: what its recorder keeps must be the run's own messages.
     let dir = crate::common::scratch("foreign-messages");
     let recording = dir.join("victim.mcap");
-    let net_a = Network {
-        recording: Some(recording.clone()),
-        ..net.clone()
-    };
     let victim = "shared-bus-a";
     let stop = Arc::new(AtomicBool::new(false));
     let publisher = {
@@ -600,28 +608,27 @@ fn messages_of_another_run_are_ignored() {
     };
     let (a, b) = std::thread::scope(|s| {
         let a = s.spawn(|| {
-            run_distributed(
+            Run::new(
                 &sc,
                 &RunOptions {
                     run_id: victim.into(),
                     interior: false,
                 },
-                exe(),
-                &net_a,
-                |_| {},
             )
+            .recorded(Some(&recording))
+            .processes(exe(), &net)
+            .map(|o| (o.result, o.traffic.unwrap_or_default()))
         });
         let b = s.spawn(|| {
-            run_distributed(
+            Run::new(
                 &sc,
                 &RunOptions {
                     run_id: "shared-bus-b".into(),
                     interior: false,
                 },
-                exe(),
-                &net,
-                |_| {},
             )
+            .processes(exe(), &net)
+            .map(|o| (o.result, o.traffic.unwrap_or_default()))
         });
         (a.join().unwrap(), b.join().unwrap())
     });

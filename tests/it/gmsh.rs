@@ -193,15 +193,18 @@ fn gmsh_stratified_equals_the_block_scene() {
     let block = mesh_scene(&small(shipped("stratified")));
     let gmsh = mesh_scene(&small(shipped("stratified-gmsh")));
     let (rb, rg) = (run(&block), run(&gmsh));
-    let remote = glissade::distributed::run_multi_process(
+    let remote = glissade::run::Run::new(
         &gmsh,
         &glissade::runner::RunOptions {
             run_id: "gmsh-stratified".into(),
             interior: false,
         },
-        std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
-        |_| {},
     )
+    .processes(
+        std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
+        &glissade::distributed::Network::default(),
+    )
+    .map(|o| o.result)
     .unwrap();
     crate::distributed::assert_identical(&rg, &remote);
     assert_eq!(rb.iterations.len(), rg.iterations.len());

@@ -2,7 +2,8 @@
 //! LATIN and the reference agree on contact tractions and jumps.
 
 use crate::common::{scene, scene_text};
-use glissade::runner::{run_in_process, RunOptions};
+use glissade::run::Run;
+use glissade::runner::RunOptions;
 use glissade_bus::convert::mat_of;
 use glissade_mechanics::local::{error_against_reference, InterfaceFields};
 use glissade_messages::Verdict;
@@ -16,14 +17,15 @@ fn latin_vs_reference(name: &str, tolerance: f64, k0_factor: f64) -> (f64, f64) 
     sc.model.solver.max_iterations = 20000;
     sc.model.solver.stagnation_window = 20000;
     let reference = solve_reference(&sc.model, &ReferenceOptions::default()).expect("reference");
-    let result = run_in_process(
+    let result = Run::new(
         &sc,
         &RunOptions {
             run_id: "mono".into(),
             interior: false,
         },
-        |_| {},
     )
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
     assert_eq!(result.verdict, Verdict::Converged, "{name}");
     let mut s: Vec<InterfaceFields> = Vec::new();
@@ -87,14 +89,15 @@ fn accuracy_stop_meets_the_requested_accuracy() {
             (sc.model.solver.accuracy, sc.model.solver.tolerance) = (Some(accuracy), None);
             sc.model.solver.contact_tolerance = None;
             sc.model.solver.max_iterations = 2000;
-            let result = run_in_process(
+            let result = Run::new(
                 &sc,
                 &RunOptions {
                     run_id: "accuracy".into(),
                     interior: false,
                 },
-                |_| {},
             )
+            .in_process()
+            .map(|o| o.result)
             .unwrap();
             assert_eq!(result.verdict, Verdict::Converged, "{name} at {accuracy:e}");
             let last = &result.iterations.last().expect("iterations").decision;
@@ -125,14 +128,15 @@ fn a_run_that_misses_the_accuracy_says_so() {
         sc.model.solver.max_iterations = max_iterations;
         sc.model.solver.accuracy = Some(accuracy);
         sc.model.solver.tolerance = Some(1e-2);
-        let result = run_in_process(
+        let result = Run::new(
             &sc,
             &RunOptions {
                 run_id: "outcome".into(),
                 interior: false,
             },
-            |_| {},
         )
+        .in_process()
+        .map(|o| o.result)
         .unwrap();
         glissade::output::outcome(&sc.model, &result)
     };

@@ -3,6 +3,7 @@
 
 use crate::common::{rel_max, run, scene, scene_text};
 use glissade::report::{build_reports, comparison_table, plot_svg, Variant};
+use glissade::run::Run;
 use glissade::runner::RunResult;
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::error_against_reference;
@@ -305,7 +306,7 @@ fn reports_stop_at_an_accuracy() {
 #[test]
 fn reports_count_linear_stage_flops() {
     use glissade::output::linear_stage_totals;
-    use glissade::runner::{run_in_process_logged, RunOptions};
+    use glissade::runner::RunOptions;
     use glissade_deploy::Plan;
     use glissade_mechanics::linear::SubdomainSolver;
 
@@ -396,7 +397,11 @@ fn reports_count_linear_stage_flops() {
         run_id: "flops".into(),
         interior: false,
     };
-    let (result, records) = run_in_process_logged(&sparse, &opts, |_| {}, |_| std::time::Duration::ZERO).expect("run");
+    let (result, records) = Run::new(&sparse, &opts)
+        .linear_stages()
+        .in_process()
+        .map(|o| (o.result, o.linear_stages))
+        .expect("run");
     let totals = linear_stage_totals(&sparse, &records);
     assert_eq!(totals.len(), 1);
     let t = &totals[0];
@@ -416,7 +421,7 @@ fn reports_count_linear_stage_flops() {
 /// same states sent as full fields (`BoundaryState` of the expanded W and F): printed.
 #[test]
 fn pgd_messages_carry_each_mode_once() {
-    use glissade::runner::{run_in_process_logged, RunOptions};
+    use glissade::runner::RunOptions;
     use glissade_messages::{encode, Message, Payload};
     use std::collections::BTreeMap;
     let mut sc = scene_file("small-three-layer");
@@ -429,11 +434,8 @@ fn pgd_messages_carry_each_mode_once() {
         run_id: "modes".into(),
         interior: false,
     };
-    let (result, records) = run_in_process_logged(
-        &sc,
-        &opts,
-        |_| {},
-        |m| {
+    let (result, records) = Run::new(&sc, &opts)
+        .observe(|m| {
             match &m.payload {
                 Payload::BoundaryState { subdomain, .. } => panic!("PGD subdomain {subdomain} sent full fields"),
                 Payload::BoundaryModes {
@@ -474,9 +476,11 @@ fn pgd_messages_carry_each_mode_once() {
                 _ => {}
             }
             std::time::Duration::ZERO
-        },
-    )
-    .expect("run");
+        })
+        .linear_stages()
+        .in_process()
+        .map(|o| (o.result, o.linear_stages))
+        .expect("run");
     assert_eq!(result.verdict, Verdict::Converged);
     // Every subdomain ends with the basis its linear stage holds: the modes went over the bus once.
     let last = records.iter().map(|r| r.iteration).max().expect("records");

@@ -4,8 +4,8 @@
 //! SIGKILL leaves every chunk it wrote readable.
 
 use crate::common::{scene, scene_text, scratch, Scratch};
-use glissade::recording::run_in_process_recorded;
-use glissade::runner::{run_in_process_observed, RunOptions};
+use glissade::run::Run;
+use glissade::runner::RunOptions;
 use glissade_recorder::Recording;
 use std::collections::BTreeMap;
 use std::io::BufRead;
@@ -22,18 +22,19 @@ fn temp_dir(tag: &str) -> Scratch {
 fn bus_messages(text: &str, run_id: &str) -> Messages {
     let sc = scene(text);
     let mut out = Vec::new();
-    run_in_process_observed(
+    Run::new(
         &sc,
         &RunOptions {
             run_id: run_id.into(),
             interior: false,
         },
-        |_| {},
-        |m| {
-            out.push((m.topic(), glissade_messages::encode(m)));
-            Duration::ZERO
-        },
     )
+    .observe(|m| {
+        out.push((m.topic(), glissade_messages::encode(m)));
+        Duration::ZERO
+    })
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
     out
 }
@@ -123,7 +124,11 @@ fn in_process_recording_reads_back_with_both_readers() {
         run_id: "rec-1".into(),
         interior: false,
     };
-    let (result, outcome) = run_in_process_recorded(&sc, &opts, Some(&path), |_| {}).unwrap();
+    let (result, outcome) = Run::new(&sc, &opts)
+        .recorded(Some(&path))
+        .in_process()
+        .map(|o| (o.result, o.recording))
+        .unwrap();
     let stats = outcome.unwrap().stats.unwrap();
     let bus = bus_messages(&text, "rec-1");
     assert!(result.iterations.len() > 5, "{} iterations", result.iterations.len());
@@ -176,7 +181,11 @@ fn recording_off_restricted_and_unwritable() {
     ));
     let path = glissade::recording::recording_path(&only, "rec-2", &dir).unwrap();
     assert_eq!(path, dir.join("small-three-layer-rec-2.mcap"));
-    let (result, _) = run_in_process_recorded(&only, &opts, Some(&path), |_| {}).unwrap();
+    let (result, _) = Run::new(&only, &opts)
+        .recorded(Some(&path))
+        .in_process()
+        .map(|o| (o.result, o.recording))
+        .unwrap();
     let (r, msgs) = read_back(&path);
     let topics: Vec<&str> = r.channels().iter().map(|c| c.topic.as_str()).collect();
     assert_eq!(
@@ -194,7 +203,12 @@ fn recording_off_restricted_and_unwritable() {
     std::fs::write(&blocker, b"x").unwrap();
     let bad = blocker.join("sub").join("r.mcap");
     let mut solved = false;
-    let e = run_in_process_recorded(&only, &opts, Some(&bad), |_| solved = true).unwrap_err();
+    let e = Run::new(&only, &opts)
+        .recorded(Some(&bad))
+        .on_iteration(|_| solved = true)
+        .in_process()
+        .map(|o| (o.result, o.recording))
+        .unwrap_err();
     assert!(format!("{e:#}").contains(&bad.display().to_string()), "{e:#}");
     assert!(!solved, "the error comes before any iteration");
 }

@@ -6,9 +6,10 @@ use crate::common::{scene, scene_text};
 use crate::common::{scratch, Scratch};
 use crate::distributed::assert_identical;
 use crate::node_failures::processes_with;
-use glissade::distributed::{run_distributed, Network};
-use glissade::runner::{run_in_process, RunOptions};
-use std::path::Path;
+use glissade::distributed::Network;
+use glissade::run::Run;
+use glissade::runner::RunOptions;
+use std::path::{Path, PathBuf};
 
 fn exe() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_glissade"))
@@ -27,16 +28,12 @@ fn options(run_id: &str) -> RunOptions {
     }
 }
 
-/// A scratch folder, a run id, and a bus whose run is recorded into the folder (`run.mcap`), for
-/// run `name`.
-fn recorded_run(name: &str) -> (Scratch, String, Network) {
+/// A scratch folder, a run id, and the recording file of run `name` in that folder (`run.mcap`).
+fn recorded_run(name: &str) -> (Scratch, String, PathBuf) {
     let dir = scratch(name);
     let run_id = format!("{name}-{}", std::process::id());
-    let net = Network {
-        recording: Some(dir.join("run.mcap")),
-        ..Network::default()
-    };
-    (dir, run_id, net)
+    let recording = dir.join("run.mcap");
+    (dir, run_id, recording)
 }
 
 /// A small xorshift generator: the kill iterations are reproducible from the printed seed.
@@ -74,8 +71,10 @@ fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
 /// (itself bit-identical to a multi-process run, tests/it/distributed.rs).
 #[test]
 fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
-    let undisturbed =
-        run_in_process(&scene(&small_three_layer("")), &options("undisturbed"), |_| {}).expect("undisturbed run");
+    let undisturbed = Run::new(&scene(&small_three_layer("")), &options("undisturbed"))
+        .in_process()
+        .map(|o| o.result)
+        .expect("undisturbed run");
     let n = undisturbed.iterations.len() as u64;
     assert!(
         n > 6,
@@ -95,15 +94,19 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
         // Not the last iteration: the kill must land while the run still needs the node.
         let at = 1 + rng.below(n - 3) as u32;
         println!("seed {seed:#x}: kill {role}:{index} at iteration {at} of {n}");
-        let (dir, run_id, net) = recorded_run(&format!("recovery-{role}-{index}"));
+        let (dir, run_id, recording) = recorded_run(&format!("recovery-{role}-{index}"));
         let opts = options(&run_id);
         let mut killed = None;
-        let (result, _) = run_distributed(&sc, &opts, exe(), &net, |r| {
-            if r.iteration == at && killed.is_none() {
-                killed = Some(kill_node(&run_id, role, index));
-            }
-        })
-        .unwrap_or_else(|e| panic!("run with {role}:{index} killed at iteration {at}: {e:#}"));
+        let (result, _) = Run::new(&sc, &opts)
+            .recorded(Some(&recording))
+            .on_iteration(|r| {
+                if r.iteration == at && killed.is_none() {
+                    killed = Some(kill_node(&run_id, role, index));
+                }
+            })
+            .processes(exe(), &Network::default())
+            .map(|o| (o.result, o.traffic.unwrap_or_default()))
+            .unwrap_or_else(|e| panic!("run with {role}:{index} killed at iteration {at}: {e:#}"));
         let old = killed.expect("the kill iteration was reached");
         assert!(!processes_with(&run_id, &[]).contains(&old));
         assert!(
@@ -127,15 +130,19 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
 #[test]
 fn a_node_that_keeps_dying_stops_the_run_after_its_restarts() {
     let sc = scene(&small_three_layer("restarts = 1"));
-    let (_dir, run_id, net) = recorded_run("recovery-again");
+    let (_dir, run_id, recording) = recorded_run("recovery-again");
     let opts = options(&run_id);
     let mut kills = Vec::new();
-    let err = run_distributed(&sc, &opts, exe(), &net, |r| {
-        if (r.iteration == 2 || r.iteration == 5) && kills.len() < 2 {
-            kills.push(kill_node(&run_id, "subdomain", "0"));
-        }
-    })
-    .expect_err("the run must stop");
+    let err = Run::new(&sc, &opts)
+        .recorded(Some(&recording))
+        .on_iteration(|r| {
+            if (r.iteration == 2 || r.iteration == 5) && kills.len() < 2 {
+                kills.push(kill_node(&run_id, "subdomain", "0"));
+            }
+        })
+        .processes(exe(), &Network::default())
+        .map(|o| (o.result, o.traffic.unwrap_or_default()))
+        .expect_err("the run must stop");
     let msg = format!("{err:#}");
     assert_eq!(kills.len(), 2, "{msg}");
     assert_ne!(kills[0], kills[1], "the second kill hits the replacement");
@@ -159,16 +166,20 @@ fn restarts_need_a_complete_recording() {
         sc.recording.incomplete().as_deref(),
         Some("recording.full_fields_every = 5 leaves full fields out")
     );
-    let (_dir, run_id, net) = recorded_run("recovery-thinned");
+    let (_dir, run_id, recording) = recorded_run("recovery-thinned");
     let opts = options(&run_id);
     let mut killed = false;
-    let err = run_distributed(&sc, &opts, exe(), &net, |r| {
-        if r.iteration == 2 && !killed {
-            kill_node(&run_id, "subdomain", "0");
-            killed = true;
-        }
-    })
-    .expect_err("the run must stop");
+    let err = Run::new(&sc, &opts)
+        .recorded(Some(&recording))
+        .on_iteration(|r| {
+            if r.iteration == 2 && !killed {
+                kill_node(&run_id, "subdomain", "0");
+                killed = true;
+            }
+        })
+        .processes(exe(), &Network::default())
+        .map(|o| (o.result, o.traffic.unwrap_or_default()))
+        .expect_err("the run must stop");
     assert!(format!("{err:#}").contains("node subdomain:0 failed"), "{err:#}");
     assert!(
         processes_with(&run_id, &[]).is_empty(),

@@ -2,7 +2,8 @@
 //! problem: QUA8, node-to-node contact weighted by the lumped edge mass, backward-Euler Coulomb).
 
 use crate::common::{scene, scene_text};
-use glissade::runner::{run_in_process, RunOptions};
+use glissade::run::Run;
+use glissade::runner::RunOptions;
 use glissade_messages::Verdict;
 use serde_json::Value;
 
@@ -28,14 +29,15 @@ fn compare_with(
     (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(tolerance));
     sc.model.solver.max_iterations = 20000;
     sc.model.solver.stagnation_window = 0;
-    let result = run_in_process(
+    let result = Run::new(
         &sc,
         &RunOptions {
             run_id: "ref".into(),
             interior: false,
         },
-        |_| {},
     )
+    .in_process()
+    .map(|o| o.result)
     .unwrap();
     assert_eq!(
         result.verdict,

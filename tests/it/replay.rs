@@ -5,7 +5,7 @@
 //! the pinned Rerun CLI accepts, and `glissade run --rerun <file.rrd>` streams a live run's view.
 
 use crate::common::{glissade_ok, python_with, scene, scene_text, scratch, Scratch};
-use glissade::recording::run_in_process_recorded;
+use glissade::run::Run;
 use glissade::runner::RunOptions;
 use glissade_messages::{encode, Payload, Role, Stage};
 use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
@@ -25,7 +25,11 @@ fn record(text: &str, dir: &Path, run_id: &str) -> PathBuf {
         run_id: run_id.into(),
         interior: false,
     };
-    let (result, outcome) = run_in_process_recorded(&sc, &opts, Some(path.as_path()), |_| {}).unwrap();
+    let (result, outcome) = Run::new(&sc, &opts)
+        .recorded(Some(path.as_path()))
+        .in_process()
+        .map(|o| (o.result, o.recording))
+        .unwrap();
     assert!(result.iterations.len() > 2, "{} iterations", result.iterations.len());
     assert!(outcome.is_some());
     path
@@ -402,8 +406,11 @@ fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
         run_id: "rx-pgd-log".into(),
         interior: false,
     };
-    let (_, records) =
-        glissade::runner::run_in_process_logged(&scene(&text), &opts, |_| {}, |_| std::time::Duration::ZERO).unwrap();
+    let (_, records) = Run::new(&scene(&text), &opts)
+        .linear_stages()
+        .in_process()
+        .map(|o| (o.result, o.linear_stages))
+        .unwrap();
     let mut expected: Vec<(u32, u32, usize)> = records.iter().map(|r| (r.iteration, r.subdomain, r.modes)).collect();
     expected.sort_unstable();
     assert!(

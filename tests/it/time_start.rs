@@ -4,8 +4,9 @@
 
 use crate::common::{scene, scene_text};
 use crate::distributed::assert_identical;
-use glissade::distributed::run_multi_process;
-use glissade::runner::{run_in_process_observed, RunOptions, RunResult};
+use glissade::distributed::Network;
+use glissade::run::Run;
+use glissade::runner::{RunOptions, RunResult};
 use glissade_mechanics::local::error_against_reference;
 use glissade_mechanics::model::TimeStart;
 use glissade_messages::{Payload, Role, Verdict};
@@ -30,11 +31,8 @@ fn solve(sc: &LoadedScene, start: Option<TimeStart>, tolerance: f64, k0_factor: 
     sc.model.solver.max_iterations = 20_000;
     sc.model.solver.stagnation_window = 20_000;
     let mut from_launcher = Vec::new();
-    let result = run_in_process_observed(
-        &sc,
-        &opts("time-start"),
-        |_| {},
-        |m| {
+    let result = Run::new(&sc, &opts("time-start"))
+        .observe(|m| {
             if let (Role::Launcher, Payload::LocalDirections { subdomain, q_hat, .. }) =
                 (m.envelope.sender.role, &m.payload)
             {
@@ -46,9 +44,10 @@ fn solve(sc: &LoadedScene, start: Option<TimeStart>, tolerance: f64, k0_factor: 
                 from_launcher.push(*subdomain);
             }
             Duration::ZERO
-        },
-    )
-    .expect("run");
+        })
+        .in_process()
+        .map(|o| o.result)
+        .expect("run");
     assert_eq!(result.verdict, Verdict::Converged, "{start:?}");
     (result, from_launcher)
 }
@@ -120,14 +119,11 @@ fn time_coarse_start_processes_match_in_process_bit_for_bit() {
     let sc = scene(&text);
     assert!(sc.model.solver.time_start.is_some());
     assert!(sc.deployment.subdomain_nodes >= 2);
-    let local = glissade::runner::run_in_process(&sc, &opts("local"), |_| {}).unwrap();
-    let remote = run_multi_process(
-        &sc,
-        &opts("time-start-distributed-1"),
-        Path::new(env!("CARGO_BIN_EXE_glissade")),
-        |_| {},
-    )
-    .unwrap();
+    let local = Run::new(&sc, &opts("local")).in_process().map(|o| o.result).unwrap();
+    let remote = Run::new(&sc, &opts("time-start-distributed-1"))
+        .processes(Path::new(env!("CARGO_BIN_EXE_glissade")), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     assert_eq!(local.verdict, Verdict::Converged);
     assert_identical(&local, &remote);
 }

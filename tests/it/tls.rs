@@ -4,7 +4,8 @@
 //! multicast scouting off, every wait bounded, every process reaped.
 
 use crate::common::scratch;
-use glissade::distributed::run_multi_process;
+use glissade::distributed::Network;
+use glissade::run::Run;
 use glissade::runner::RunOptions;
 use glissade_zenoh as transport;
 use std::path::{Path, PathBuf};
@@ -100,7 +101,10 @@ fn three_layers_over_mutual_tls_with_access_control_match_in_process() {
         interior: false,
     };
     let exe = Path::new(env!("CARGO_BIN_EXE_glissade"));
-    let e = run_multi_process(&glissade::load_scene(&path).unwrap(), &options, exe, |_| {}).unwrap_err();
+    let e = Run::new(&glissade::load_scene(&path).unwrap(), &options)
+        .processes(exe, &Network::default())
+        .map(|o| o.result)
+        .unwrap_err();
     let message = format!("{e:#}");
     assert!(
         message.contains("network.allow: the launcher's certificate")

@@ -1,0 +1,246 @@
+//! The one way to run a scene: [`Run`] says what the run is (scene, options, recording, what the
+//! caller watches and measures) and runs it in this process ([`Run::in_process`]) or as node
+//! processes on a Zenoh bus ([`Run::processes`]); [`Outcome`] is what it gives. Both modes give the
+//! same iterations and bit-identical fields (DESIGN §1).
+//!
+//! The steps of a run, in order (deal.II's setup/assemble/solve/output): the plan and the
+//! operators are set up (`glissade_deploy`), the nodes are built and iterated on a bus
+//! ([`crate::runner`] in-process, [`crate::distributed`] as processes), and the caller writes the
+//! outputs from the [`Outcome`] ([`crate::output`]).
+
+use crate::distributed::{Network, Traffic};
+use crate::recording::{create_recorder, RecordingOutcome};
+use crate::runner::{run_logged, IterationRecord, RunError, RunOptions, RunResult};
+use glissade_bus::HandleTime;
+use glissade_messages::Message;
+use glissade_scene::LoadedScene;
+use glissade_subdomain::{LinearStageLog, LinearStageRecord};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// A run of a scene, set up step by step, then run in one of the two modes.
+///
+/// ```no_run
+/// # fn f(scene: &glissade_scene::LoadedScene) -> Result<(), glissade::runner::RunError> {
+/// use glissade::run::Run;
+/// use glissade::runner::RunOptions;
+/// let opts = RunOptions { run_id: "r1".into(), interior: false };
+/// let outcome = Run::new(scene, &opts)
+///     .on_iteration(|r| println!("iteration {}: η = {:e}", r.iteration, r.decision.eta))
+///     .in_process()?;
+/// println!("{:?}", outcome.result.verdict);
+/// # Ok(()) }
+/// ```
+pub struct Run<'a> {
+    scene: &'a LoadedScene,
+    opts: RunOptions,
+    recording: Option<PathBuf>,
+    on_iteration: Box<dyn FnMut(&IterationRecord) -> bool + 'a>,
+    /// The caller may stop the run early ([`Run::until`]).
+    stops_early: bool,
+    observe: Option<Box<dyn FnMut(&Message) -> Duration + 'a>>,
+    linear_stages: bool,
+    handle_times: bool,
+}
+
+/// What a run gave.
+#[derive(Debug)]
+pub struct Outcome {
+    pub result: RunResult,
+    /// Every subdomain's linear-stage records (wall time, flops, PGD basis per iteration), sorted
+    /// by (iteration, subdomain), when asked for with [`Run::linear_stages`].
+    pub linear_stages: Vec<LinearStageRecord>,
+    /// Every node's handling time summed per (role, message field), when asked for with
+    /// [`Run::handle_times`] (what `glissade bench` splits an iteration by).
+    pub handle_times: Vec<HandleTime>,
+    /// The recording, when the run was recorded ([`Run::recorded`]).
+    pub recording: Option<RecordingOutcome>,
+    /// What crossed the bus, by message kind (a run as processes).
+    pub traffic: Option<Traffic>,
+}
+
+impl<'a> Run<'a> {
+    /// A run of `scene` with `opts`, unrecorded, watched by no one.
+    pub fn new(scene: &'a LoadedScene, opts: &RunOptions) -> Self {
+        Self {
+            scene,
+            opts: opts.clone(),
+            recording: None,
+            on_iteration: Box::new(|_| true),
+            stops_early: false,
+            observe: None,
+            linear_stages: false,
+            handle_times: false,
+        }
+    }
+
+    /// Records every message of the run to `path` (MCAP), when given. In-process, the launcher
+    /// records what the bus delivers and the recorder's time is part of the run's wall time; as
+    /// processes, a recorder process does ([`crate::recording`]).
+    pub fn recorded(mut self, path: Option<&Path>) -> Self {
+        self.recording = path.map(Path::to_path_buf);
+        self
+    }
+
+    /// `f` sees each iteration's decision as it is made.
+    pub fn on_iteration(mut self, mut f: impl FnMut(&IterationRecord) + 'a) -> Self {
+        self.on_iteration = Box::new(move |r| {
+            f(r);
+            true
+        });
+        self.stops_early = false;
+        self
+    }
+
+    /// `keep_going` sees each iteration's decision; the run stops after the first iteration for
+    /// which it returns false (its verdict is then that iteration's, usually `Continue`).
+    /// In-process only.
+    pub fn until(mut self, keep_going: impl FnMut(&IterationRecord) -> bool + 'a) -> Self {
+        self.on_iteration = Box::new(keep_going);
+        self.stops_early = true;
+        self
+    }
+
+    /// `observe` sees every message of the run (in-process: in publication order; as processes:
+    /// every message the launcher receives, in arrival order, e.g. for a live view). In-process,
+    /// the wall time it returns is left out of the iterations' elapsed times, so that a report may
+    /// measure errors without charging the solver for it; as processes it is not used.
+    pub fn observe(mut self, observe: impl FnMut(&Message) -> Duration + 'a) -> Self {
+        self.observe = Some(Box::new(observe));
+        self
+    }
+
+    /// Keeps every subdomain's linear-stage records ([`Outcome::linear_stages`]). In-process only.
+    pub fn linear_stages(mut self) -> Self {
+        self.linear_stages = true;
+        self
+    }
+
+    /// Times every node's handling per (role, message field) ([`Outcome::handle_times`]).
+    /// In-process only.
+    pub fn handle_times(mut self) -> Self {
+        self.handle_times = true;
+        self
+    }
+
+    /// Runs every node in this process, on the in-process bus (subdomain work within a round in
+    /// parallel on all cores).
+    pub fn in_process(self) -> Result<Outcome, RunError> {
+        let Run {
+            scene,
+            opts,
+            recording,
+            mut on_iteration,
+            stops_early: _,
+            observe,
+            linear_stages,
+            handle_times,
+        } = self;
+        let mut observe = observe.unwrap_or_else(|| Box::new(|_| Duration::ZERO));
+        let log = linear_stages.then(LinearStageLog::default);
+        let mut times = Vec::new();
+        let timing = handle_times.then_some(&mut times);
+        let (result, recording) = match &recording {
+            None => (
+                run_logged(scene, &opts, on_iteration, observe, log.clone(), timing, None)?,
+                None,
+            ),
+            Some(path) => {
+                let mut recorder = create_recorder(scene, &opts.run_id, path).map_err(RunError::Recording)?;
+                // The first failed write (e.g. a full disk) stops the run at the end of that
+                // iteration.
+                let failure = std::cell::RefCell::new(None);
+                let keep_going = |r: &IterationRecord| on_iteration(r) && failure.borrow().is_none();
+                let result = run_logged(
+                    scene,
+                    &opts,
+                    keep_going,
+                    |m| {
+                        let spent = observe(m);
+                        if failure.borrow().is_none() {
+                            let bytes = glissade_messages::encode(m);
+                            if let Err(e) = recorder.record(&m.topic(), glissade_recorder::log_time_now(), &bytes) {
+                                *failure.borrow_mut() = Some(e);
+                            }
+                        }
+                        spent
+                    },
+                    log.clone(),
+                    timing,
+                    None,
+                )?;
+                if let Some(source) = failure.into_inner() {
+                    return Err(RunError::RecordingStopped {
+                        iterations: result.iterations.len(),
+                        source,
+                    });
+                }
+                let stats = recorder.finish().map_err(RunError::Recording)?;
+                let outcome = RecordingOutcome {
+                    path: path.clone(),
+                    stats: Some(stats),
+                };
+                (result, Some(outcome))
+            }
+        };
+        let mut records = log
+            .map(|log| log.lock().map(|v| v.clone()).unwrap_or_default())
+            .unwrap_or_default();
+        records.sort_by_key(|r| (r.iteration, r.subdomain));
+        Ok(Outcome {
+            result,
+            linear_stages: records,
+            handle_times: times,
+            recording,
+            traffic: None,
+        })
+    }
+
+    /// Runs the scene as node processes of `exe` (`glissade node …`) on the bus `net` describes
+    /// (by default a router hosted by this process on a free loopback port); nodes listed in
+    /// `net.remote` are left to be started by hand. A recorded run starts a recorder process.
+    pub fn processes(self, exe: &Path, net: &Network) -> anyhow::Result<Outcome> {
+        let Run {
+            scene,
+            opts,
+            recording,
+            mut on_iteration,
+            stops_early,
+            observe,
+            linear_stages,
+            handle_times,
+        } = self;
+        for (asked, what) in [
+            (stops_early, "stopping a run early (until)"),
+            (linear_stages, "linear-stage records"),
+            (handle_times, "handling times"),
+        ] {
+            if asked {
+                return Err(RunError::InProcessOnly(what).into());
+            }
+        }
+        let observe = observe.map(|mut o| {
+            move |m: &Message| {
+                o(m);
+            }
+        });
+        let (result, traffic) = crate::distributed::run_processes(
+            scene,
+            &opts,
+            exe,
+            net,
+            recording.as_deref(),
+            |r| {
+                on_iteration(r);
+            },
+            observe,
+        )?;
+        Ok(Outcome {
+            result,
+            linear_stages: Vec::new(),
+            handle_times: Vec::new(),
+            recording: recording.map(|path| RecordingOutcome { path, stats: None }),
+            traffic: Some(traffic),
+        })
+    }
+}
