@@ -18,6 +18,9 @@ use glissade_subdomain::{LinearStageLog, LinearStageRecord};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+/// What watches every message of an in-process run, returning the wall time it spent.
+type Observer<'a> = Box<dyn FnMut(&Message) -> Duration + 'a>;
+
 /// A run of a scene, set up step by step, then run in one of the two modes.
 ///
 /// ```no_run
@@ -38,7 +41,7 @@ pub struct Run<'a> {
     on_iteration: Box<dyn FnMut(&IterationRecord) -> bool + 'a>,
     /// The caller may stop the run early ([`Run::until`]).
     stops_early: bool,
-    observe: Option<Box<dyn FnMut(&Message) -> Duration + 'a>>,
+    observe: Option<Observer<'a>>,
     linear_stages: bool,
     handle_times: bool,
 }
@@ -136,7 +139,7 @@ impl<'a> Run<'a> {
             linear_stages,
             handle_times,
         } = self;
-        let mut observe = observe.unwrap_or_else(|| Box::new(|_| Duration::ZERO));
+        let mut observe: Observer = observe.unwrap_or_else(|| Box::new(|_| Duration::ZERO));
         let log = linear_stages.then(LinearStageLog::default);
         let mut times = Vec::new();
         let timing = handle_times.then_some(&mut times);
