@@ -1,0 +1,611 @@
+//! Supervising a run as processes once its nodes are started: the launcher watches its children's
+//! exit statuses and every node's liveliness token, restarts a dead node process when the run
+//! allows it, starts the iterations once every node is ready, keeps the results from the bus
+//! (decisions, interface solutions, displacements), tells the nodes to leave once it holds them
+//! all, and stops every node when one fails, when the run stalls or when it is interrupted.
+
+use super::setup::{token_of, SetUp};
+use super::spawn::Spawned;
+use super::{
+    interrupted, Interrupted, Traffic, DEPARTURE_GRACE, EXIT_GRACE, FINISH_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT,
+    STOP_TIMEOUT, STRAGGLER_TIMEOUT,
+};
+use crate::children::{spawn_node, Children, NodeName};
+use crate::runner::{IterationRecord, RunResult};
+use anyhow::bail;
+use glissade_deploy::Plan;
+use glissade_messages::{Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Verdict};
+use glissade_scene::LoadedScene;
+use glissade_zenoh as transport;
+use std::collections::{BTreeMap, HashSet};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// The state of a run's supervision, from the start of its processes to their exit.
+pub(super) struct Supervisor<'r> {
+    run_id: &'r str,
+    scene: &'r LoadedScene,
+    set_up: &'r SetUp,
+    /// The watch on the nodes' liveliness tokens.
+    presence: transport::Presence,
+    net: &'r super::Network,
+    exe: &'r Path,
+    expected: Expected,
+    /// The nodes by liveliness token key.
+    tokens: BTreeMap<String, NodeName>,
+    /// Restarts per node process, up to the scene's `deployment.restarts`.
+    restarts: usize,
+    restarted: BTreeMap<NodeName, usize>,
+    /// When each node started by hand was seen to leave.
+    remote_lost: BTreeMap<NodeName, Instant>,
+    /// Final displacement fields the launcher waits for (with `interior`).
+    final_displacements: usize,
+    /// Messages already taken (a restarted node re-sends what its predecessor may have sent).
+    heard: HashSet<u64>,
+    pub(super) got: Collected,
+    pub(super) traffic: Traffic,
+    stop_seen: bool,
+    done_sent: bool,
+    ended_at: Option<Instant>,
+    last_message: Instant,
+}
+
+impl<'r> Supervisor<'r> {
+    pub(super) fn new(
+        run_id: &'r str,
+        scene: &'r LoadedScene,
+        set_up: &'r SetUp,
+        presence: transport::Presence,
+        net: &'r super::Network,
+        exe: &'r Path,
+        interior: bool,
+    ) -> Self {
+        Self {
+            run_id,
+            scene,
+            set_up,
+            presence,
+            net,
+            exe,
+            expected: Expected {
+                run_id: run_id.to_string(),
+                scene_fingerprint: scene.fingerprint,
+            },
+            tokens: set_up.tokens(run_id),
+            restarts: scene.deployment.restarts,
+            restarted: BTreeMap::new(),
+            remote_lost: BTreeMap::new(),
+            final_displacements: if interior {
+                set_up.groups.iter().map(Vec::len).sum()
+            } else {
+                0
+            },
+            heard: HashSet::new(),
+            got: Collected::default(),
+            traffic: Traffic::default(),
+            stop_seen: false,
+            done_sent: false,
+            ended_at: None,
+            last_message: Instant::now(),
+        }
+    }
+
+    /// Stops every node (`stop` on the bus, then kills what is left after [`STOP_TIMEOUT`]).
+    fn stop_all(&self, children: &mut Children, reason: &str) {
+        let _ = transport::publish_stop(&self.set_up.bus.session, self.run_id, reason);
+        children.wait_all(STOP_TIMEOUT);
+    }
+
+    /// Supervises the run until every node process has exited (or fails): the launcher's main
+    /// loop. `on_iteration` sees each decision, `observe` every message kept.
+    pub(super) fn supervise(
+        &mut self,
+        spawned: &mut Spawned,
+        mut on_iteration: impl FnMut(&IterationRecord),
+        observe: &mut Option<impl FnMut(&Message)>,
+    ) -> anyhow::Result<()> {
+        loop {
+            if interrupted() {
+                self.stop_all(&mut spawned.children, "the launcher was interrupted");
+                let (nodes, left_out) = self.set_up.plan.describe(&self.scene.model, self.set_up.groups.len());
+                let got = std::mem::take(&mut self.got);
+                return Err(Interrupted {
+                    partial: got.into_result(&self.set_up.plan, Verdict::Continue, nodes, left_out),
+                }
+                .into());
+            }
+            self.watch_presence(&mut spawned.children);
+            if let Some(f) = self.failure(spawned)? {
+                self.stop_all(
+                    &mut spawned.children,
+                    &format!("the run failed: {}", f.split("; its last lines").next().unwrap_or("")),
+                );
+                bail!("{f}");
+            }
+            if self.got.started.is_none() {
+                // Waiting for the nodes' tokens: look again every few milliseconds (the run
+                // starts as soon as the last node is ready).
+                if let Ok(a) = self.set_up.arrivals.recv_timeout(Duration::from_millis(5)) {
+                    count(&mut self.traffic, &a);
+                }
+                continue;
+            }
+            // Once `done` is out the node processes are leaving: look for their exits every few
+            // milliseconds instead of every 50 ms.
+            let poll = if self.done_sent {
+                Duration::from_millis(2)
+            } else {
+                Duration::from_millis(50)
+            };
+            match self.set_up.arrivals.recv_timeout(poll) {
+                Ok(a) => {
+                    self.last_message = Instant::now();
+                    self.receive(&a, &mut on_iteration, observe)?;
+                }
+                Err(_) => {
+                    if self.idle(&mut spawned.children)? {
+                        return Ok(());
+                    }
+                }
+            }
+        }
+    }
+
+    /// Takes the liveliness tokens that came and went since the last look.
+    fn watch_presence(&mut self, children: &mut Children) {
+        for (key, up) in self.presence.changes() {
+            let Some(&name) = self.tokens.get(&key) else { continue };
+            if let Some(p) = children.0.iter_mut().find(|p| p.name == name) {
+                if up {
+                    p.token_seen = true;
+                    p.token_lost = None;
+                } else if p.status.is_none() && p.token_seen {
+                    p.token_lost = Some(Instant::now());
+                }
+            } else if !up {
+                self.remote_lost.entry(name).or_insert_with(Instant::now);
+            }
+        }
+    }
+
+    /// What stops the run, if anything: a node process that failed (and may not be restarted),
+    /// a node started by hand that left, the recorder's failure before the start, nodes not
+    /// ready in time. Starts the iterations once every node is ready.
+    fn failure(&mut self, spawned: &mut Spawned) -> anyhow::Result<Option<String>> {
+        let (mut child_failure, dead) = self.child_failure(&mut spawned.children)?;
+        // A node process that died mid-run: a replacement resumes from the recorder's log, up to
+        // `restarts` times per node.
+        if let (Some(k), Some(why), true) = (
+            dead,
+            &child_failure,
+            self.set_up.supervised && self.got.started.is_some(),
+        ) {
+            child_failure = self.restart(&mut spawned.children, k, why)?;
+        }
+        // A node started by hand that left before the end is the culprit if it left first (the
+        // others leave after it, DEPARTURE_GRACE later); messages already sent may still bring
+        // the stop decision within that grace.
+        let first_remote_lost = self.remote_lost.iter().min_by_key(|(_, &t)| t).map(|(&n, &t)| (n, t));
+        let mut failure = match first_remote_lost {
+            Some((name, lost)) if !self.stop_seen && (lost.elapsed() > DEPARTURE_GRACE || child_failure.is_some()) => {
+                Some(format!(
+                    "node {name} (started by hand elsewhere) left the run before it finished; \
+                     its exit status and log are on its own machine"
+                ))
+            }
+            _ => child_failure,
+        };
+        if self.got.started.is_none() && failure.is_none() {
+            failure = spawned
+                .recorder
+                .as_mut()
+                .and_then(|r| r.check().err())
+                .map(|e| format!("{e:#}"));
+        }
+        if self.got.started.is_none() && failure.is_none() {
+            failure = self.start_when_ready(spawned)?;
+        }
+        Ok(failure)
+    }
+
+    /// The first local node process that failed, and its index: exited with a failure (or
+    /// before the run started), or lost its connection to the bus while still running. A node
+    /// that exited because a peer left is not the culprit when that peer's token went first.
+    fn child_failure(&self, children: &mut Children) -> anyhow::Result<(Option<String>, Option<usize>)> {
+        let mut child_failure: Option<String> = None;
+        let mut dead: Option<usize> = None;
+        for (k, p) in children.0.iter_mut().enumerate() {
+            if p.status.is_some() || child_failure.is_some() {
+                continue;
+            }
+            if let Some(status) = p.child.try_wait()? {
+                p.status = Some(status);
+                if !status.success() {
+                    p.output.settle();
+                    child_failure = Some(format!(
+                        "node {} failed ({status}); its last lines:\n    {}",
+                        p.name,
+                        p.last_lines()
+                    ));
+                    dead = Some(k);
+                } else if self.got.started.is_none() {
+                    child_failure = Some(format!("node {} exited before the run started", p.name));
+                }
+            } else if p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) {
+                child_failure = Some(format!(
+                    "node {} lost its connection to the bus (its liveliness token disappeared {} s ago, \
+                     the process still runs); its last lines:\n    {}",
+                    p.name,
+                    EXIT_GRACE.as_secs(),
+                    p.last_lines()
+                ));
+                dead = Some(k);
+            }
+        }
+        // A node that exited because a peer left is not the culprit when that peer's token went
+        // first while its process still runs (stopped or hung): name the peer.
+        if let Some(k) = dead.filter(|&k| children.0[k].status.is_some()) {
+            let exited_lost = children.0[k].token_lost;
+            let silent = children
+                .0
+                .iter()
+                .enumerate()
+                .filter(|(j, p)| *j != k && p.status.is_none())
+                .filter_map(|(j, p)| Some((j, p.token_lost?)))
+                .filter(|(_, lost)| exited_lost.is_none_or(|e| *lost <= e))
+                .min_by_key(|(_, lost)| *lost);
+            if let Some((j, lost)) = silent {
+                let exited = children.0[k].name;
+                let p = &mut children.0[j];
+                child_failure = Some(match p.child.try_wait()? {
+                    // It died too (before the other, as its token says): the usual report.
+                    Some(status) => {
+                        p.status = Some(status);
+                        p.output.settle();
+                        format!(
+                            "node {} failed ({status}); its last lines:\n    {}",
+                            p.name,
+                            p.last_lines()
+                        )
+                    }
+                    None => format!(
+                        "node {} stopped answering: its liveliness token disappeared {:.1} s ago, before node \
+                         {exited} failed, while its process still runs (stopped or hung?); its last lines:\n    {}",
+                        p.name,
+                        lost.elapsed().as_secs_f64(),
+                        p.last_lines()
+                    ),
+                });
+                dead = Some(j);
+            }
+        }
+        Ok((child_failure, dead))
+    }
+
+    /// Restarts dead node process `k` (it resumes from the recording) if it has restarts left;
+    /// otherwise the run's failure.
+    fn restart(&mut self, children: &mut Children, k: usize, why: &str) -> anyhow::Result<Option<String>> {
+        let name = children.0[k].name;
+        let restarts = self.restarts;
+        let count = self.restarted.entry(name).or_default();
+        let why_short = why.split("; its last lines").next().unwrap_or(why).to_string();
+        if *count >= restarts {
+            return Ok(Some(format!(
+                "node {name} died again after {restarts} restart(s) (deployment.restarts = {restarts}): {why}"
+            )));
+        }
+        *count += 1;
+        eprintln!(
+            "{why_short}; restarting it ({} of {restarts}): it resumes from the recording",
+            *count
+        );
+        let p = &mut children.0[k];
+        let _ = p.child.kill();
+        let _ = p.child.wait();
+        let base = p.args.clone();
+        let mut args = base.clone();
+        args.push("--resume".into());
+        let credentials = p.credentials.clone();
+        *p = spawn_node(self.exe, name, &args, credentials)?;
+        p.args = base;
+        Ok(None)
+    }
+
+    /// Starts the iterations (`start`, then a time-coarse start's local directions) once every
+    /// node's token is up and the recorder is ready; fails when nodes are not ready in time.
+    fn start_when_ready(&mut self, spawned: &mut Spawned) -> anyhow::Result<Option<String>> {
+        let set_up = self.set_up;
+        let recorder_ready = spawned.recorder.as_ref().is_none_or(|r| r.is_ready());
+        let missing: Vec<NodeName> = self
+            .tokens
+            .iter()
+            .filter(|(k, _)| !self.presence.is_alive(k))
+            .map(|(_, &n)| n)
+            .collect();
+        if missing.is_empty() && recorder_ready {
+            let session = &set_up.bus.session;
+            transport::publish_start(session, self.run_id)?;
+            for m in set_up.time_start.iter().flat_map(|t| &t.messages) {
+                transport::publish(session, m)?;
+            }
+            self.got.setup_s = self.set_up.t0.elapsed().as_secs_f64();
+            self.got.started = Some(Instant::now());
+            self.last_message = Instant::now();
+            crate::console::note(&format!(
+                "run {}: {} node(s) ready, iterating",
+                self.run_id,
+                set_up.all_nodes.len()
+            ));
+            return Ok(None);
+        }
+        let remote = &self.net.remote;
+        let local_late = missing.iter().any(|n| !remote.contains(n)) && self.set_up.t0.elapsed() > READY_TIMEOUT;
+        let remote_late =
+            missing.iter().any(|n| remote.contains(n)) && self.set_up.t0.elapsed() > spawned.remote_timeout;
+        if !(local_late || remote_late) {
+            return Ok(None);
+        }
+        Ok(Some(format!(
+            "nodes not ready within {} s: {} (a node started by hand must use --run {} and reach the bus)",
+            if remote_late {
+                spawned.remote_timeout
+            } else {
+                READY_TIMEOUT
+            }
+            .as_secs(),
+            missing.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", "),
+            self.run_id
+        )))
+    }
+
+    /// Counts message `a` and keeps what the launcher needs of it; says `done` once the launcher
+    /// holds the final decision and every final output (a node that closed its session right
+    /// after its last put could lose it).
+    fn receive(
+        &mut self,
+        a: &Arrival,
+        on_iteration: &mut impl FnMut(&IterationRecord),
+        observe: &mut Option<impl FnMut(&Message)>,
+    ) -> anyhow::Result<()> {
+        if let Some(rec) = self.take(a, observe) {
+            self.stop_seen |= rec.decision.verdict.is_stop();
+            on_iteration(&rec);
+        }
+        if !self.done_sent
+            && self.stop_seen
+            && self.got.interfaces.len() == self.scene.model.interfaces.len()
+            && self.got.displacements.len() >= self.final_displacements
+        {
+            transport::publish_done(&self.set_up.bus.session, self.run_id)?;
+            self.got.finished = Some(Instant::now());
+            self.done_sent = true;
+        }
+        Ok(())
+    }
+
+    /// Counts message `a`, decodes it if the launcher keeps it and it is its sender's (once:
+    /// a restarted node re-sends outputs its predecessor may have sent already), shows it to
+    /// `observe` and keeps its result; a decision's record is returned.
+    fn take(&mut self, a: &Arrival, observe: &mut Option<impl FnMut(&Message)>) -> Option<IterationRecord> {
+        let bytes = count(&mut self.traffic, a)?;
+        if !self.heard.insert(transport::payload_hash(&a.key, bytes)) {
+            return None;
+        }
+        let m = transport::decode_payload(bytes, &self.expected, Default::default()).ok()?;
+        // Only what its sender may send, on its sender's key (a member may publish on its own
+        // keys only, but anything there).
+        if m.not_from_its_sender(&a.key).is_some() {
+            return None;
+        }
+        if let Some(o) = observe.as_mut() {
+            o(&m);
+        }
+        self.got.take(m, &self.set_up.plan).cloned()
+    }
+
+    /// Nothing arrived for a while: true once every node process has exited and every node
+    /// started by hand has left; fails when nodes started by hand do not leave after the end or
+    /// when the bus has been silent for [`IDLE_TIMEOUT`].
+    fn idle(&mut self, children: &mut Children) -> anyhow::Result<bool> {
+        let presence = &self.presence;
+        let remote = &self.net.remote;
+        let locals_done = children.0.iter().all(|p| p.status.is_some());
+        let remotes_gone = remote.iter().all(|&r| !presence.is_alive(&token_of(self.run_id, r)));
+        if locals_done && remotes_gone {
+            return Ok(true);
+        }
+        if locals_done && self.stop_seen {
+            let since = *self.ended_at.get_or_insert_with(Instant::now);
+            if since.elapsed() > FINISH_TIMEOUT {
+                let late: Vec<String> = remote
+                    .iter()
+                    .filter(|&&r| presence.is_alive(&token_of(self.run_id, r)))
+                    .map(|r| r.to_string())
+                    .collect();
+                self.stop_all(children, "the run is over");
+                bail!(
+                    "node(s) {} did not leave within {} s after the run ended",
+                    late.join(", "),
+                    FINISH_TIMEOUT.as_secs()
+                );
+            }
+        }
+        if self.last_message.elapsed() > IDLE_TIMEOUT {
+            self.stop_all(children, "the run stalled");
+            bail!(
+                "no message on the bus for {} s: the run stalled",
+                IDLE_TIMEOUT.as_secs()
+            );
+        }
+        Ok(false)
+    }
+
+    /// Takes the messages still queued (sent before their nodes left), and the ones the router
+    /// has yet to hand to this process's subscriber: a node's last puts may arrive after the node
+    /// exited. Waits for them up to [`STRAGGLER_TIMEOUT`] while interface solutions are missing.
+    pub(super) fn drain(
+        &mut self,
+        mut on_iteration: impl FnMut(&IterationRecord),
+        observe: &mut Option<impl FnMut(&Message)>,
+    ) {
+        let drain_until = Instant::now() + STRAGGLER_TIMEOUT;
+        let interfaces = self.scene.model.interfaces.len();
+        loop {
+            let next = match self.set_up.arrivals.try_recv() {
+                Ok(m) => Some(m),
+                Err(_) if self.got.interfaces.len() < interfaces && Instant::now() < drain_until => {
+                    self.set_up.arrivals.recv_timeout(Duration::from_millis(50)).ok()
+                }
+                Err(_) => break,
+            };
+            let Some(a) = next else { continue };
+            if let Some(rec) = self.take(&a, observe) {
+                on_iteration(&rec);
+            }
+        }
+    }
+}
+
+/// What the launcher gathers from the bus: the decisions, the interfaces' and subdomains' final
+/// fields, the set-up time and when the iterations started.
+#[derive(Default)]
+pub(super) struct Collected {
+    pub(super) iterations: Vec<IterationRecord>,
+    pub(super) interfaces: Vec<InterfaceSolution>,
+    displacements: Vec<(u32, Field)>,
+    setup_s: f64,
+    pub(super) started: Option<Instant>,
+    /// When the launcher held every result and said `done`: the end of the iterations. The node
+    /// processes leave after it (the kernel's release of their memory takes some 30–80 ms at
+    /// N = 1000), which is not counted, as an in-process run's release of its nodes' memory is
+    /// not.
+    finished: Option<Instant>,
+}
+impl Collected {
+    /// Keeps the results of message `m` (already checked to be its sender's kind, on its key); a
+    /// decision's record is returned. Each result is taken from the node that owns it, once.
+    fn take(&mut self, m: Message, plan: &Plan) -> Option<&IterationRecord> {
+        let from = m.envelope.sender;
+        let owns_interface = |i: u32| {
+            plan.interface_groups
+                .get(from.index as usize)
+                .is_some_and(|g| g.contains(&(i as usize)))
+        };
+        match m.payload {
+            // Decisions come from interface node 0, one per iteration, in order; anything else on
+            // that key is not the run's.
+            Payload::Decision(_)
+                if from
+                    != (NodeId {
+                        role: Role::Interface,
+                        index: 0,
+                    })
+                    || self
+                        .iterations
+                        .last()
+                        .is_some_and(|r| r.iteration >= m.envelope.iteration) => {}
+            Payload::InterfaceSolution(s)
+                if from.role != Role::Interface
+                    || !owns_interface(s.interface)
+                    || self.interfaces.iter().any(|k| k.interface == s.interface) => {}
+            Payload::Displacement { subdomain, .. }
+                if from.role != Role::Subdomain
+                    || subdomain != from.index
+                    || self.displacements.iter().any(|(k, _)| *k == subdomain) => {}
+            Payload::Decision(decision) => {
+                self.iterations.push(IterationRecord {
+                    iteration: m.envelope.iteration,
+                    elapsed_s: self.started.map_or(0.0, |t| t.elapsed().as_secs_f64()),
+                    decision,
+                });
+                return self.iterations.last();
+            }
+            Payload::InterfaceSolution(s) => self.interfaces.push(s),
+            Payload::Displacement { subdomain, u } => self.displacements.push((subdomain, u)),
+            _ => {}
+        }
+        None
+    }
+
+    /// The run's result (complete, or what there is after an interruption); `verdict` when no
+    /// decision came.
+    pub(super) fn into_result(
+        mut self,
+        plan: &Plan,
+        verdict: Verdict,
+        nodes: Vec<String>,
+        left_out: Vec<String>,
+    ) -> RunResult {
+        self.interfaces.sort_by_key(|s| s.interface);
+        self.displacements.sort_by_key(|d| d.0);
+        RunResult {
+            setup_s: self.setup_s,
+            solve_s: self.started.map_or(0.0, |t| {
+                self.finished
+                    .unwrap_or_else(Instant::now)
+                    .saturating_duration_since(t)
+                    .as_secs_f64()
+            }),
+            verdict: self.iterations.last().map_or(verdict, |r| r.decision.verdict.clone()),
+            iterations: self.iterations,
+            interfaces: self.interfaces,
+            displacements: self.displacements,
+            k0: plan.k0.clone(),
+            nodes,
+            left_out,
+        }
+    }
+}
+
+/// A message as the launcher's subscriber passes it on.
+pub(super) struct Arrival {
+    key: String,
+    /// Its size on the bus.
+    size: usize,
+    /// Its envelope says it belongs to the run.
+    ours: bool,
+    /// The message, when the launcher keeps it ([`Arrival::of`]): Zenoh's buffers themselves,
+    /// read where they are by the thread that decodes them.
+    bytes: Option<zenoh::bytes::ZBytes>,
+}
+
+impl Arrival {
+    /// A message of run `run_id` seen on `key`: Zenoh's buffers are kept (shared, not copied)
+    /// only if it is the run's and it is a decision, an interface solution or a displacement
+    /// (what the launcher keeps), or `keep_all`; the multi-MB fields in between are only
+    /// counted. The launcher's main thread decodes the kept ones straight from those buffers:
+    /// a copy made here, on Zenoh's receiving thread, took its memory from that thread's
+    /// allocator arena, fresh pages from the kernel for the 141 MB of final solutions at
+    /// N = 1000, freed again on the main thread once decoded.
+    pub(super) fn of(key: &str, payload: &zenoh::bytes::ZBytes, run_id: &str, keep_all: bool) -> Self {
+        // The envelope is the message's first bytes: the first slice holds it unless the
+        // message came in tiny fragments, then the whole message is looked at.
+        let first = payload.slices().next().unwrap_or(&[]);
+        let ours = glissade_messages::peek_envelope(first, run_id).is_ok()
+            || (first.len() < payload.len() && glissade_messages::peek_envelope(&payload.to_bytes(), run_id).is_ok());
+        let kept = keep_all || matches!(kind_of(key), "decision" | "interface_solution" | "displacement");
+        Self {
+            key: key.to_string(),
+            size: payload.len(),
+            ours,
+            bytes: (ours && kept).then(|| payload.clone()),
+        }
+    }
+}
+
+/// The field of a key ("?" if it has none).
+fn kind_of(key: &str) -> &str {
+    glissade_messages::topic_field(key).unwrap_or("?")
+}
+
+/// Adds a message to the traffic if it belongs to the run (its envelope says so); returns its
+/// bytes if the launcher keeps them.
+pub(super) fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a zenoh::bytes::ZBytes> {
+    if !a.ours {
+        return None;
+    }
+    let t = traffic.by_kind.entry(kind_of(&a.key).to_string()).or_default();
+    t.messages += 1;
+    t.bytes += a.size as u64;
+    a.bytes.as_ref()
+}
