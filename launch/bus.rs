@@ -6,7 +6,7 @@
 
 use crate::children::NodeName;
 use crate::distributed::Network;
-use anyhow::{bail, Context};
+use crate::error::{invalid, Error, IoWhat, Result};
 use glissade_messages::{NodeId, Role};
 use glissade_scene::LoadedScene;
 use glissade_zenoh as transport;
@@ -18,8 +18,8 @@ use std::time::Duration;
 const RUN_ID_PROBE: Duration = Duration::from_secs(2);
 
 /// A free TCP port on the loopback interface.
-pub(crate) fn free_port() -> anyhow::Result<u16> {
-    transport::free_loopback_port().context("cannot bind a loopback port")
+pub(crate) fn free_port() -> Result<u16> {
+    transport::free_loopback_port().what(|| "cannot bind a loopback port".into())
 }
 
 /// The endpoint a node on this machine connects to for a router listening on `listen`.
@@ -95,13 +95,13 @@ pub(crate) fn tls_args(root_ca: &Path, identity: Option<(&Path, &Path)>) -> Vec<
 }
 
 /// The common name of the (first) certificate in PEM file `path`, if it has one.
-pub(crate) fn cert_common_name(path: &Path) -> anyhow::Result<Option<String>> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+pub(crate) fn cert_common_name(path: &Path) -> Result<Option<String>> {
+    let bytes = std::fs::read(path).what(|| format!("cannot read {}", path.display()))?;
     let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
-        .map_err(|e| anyhow::anyhow!("{}: not a PEM certificate: {e}", path.display()))?;
+        .map_err(|e| Error::Invalid(format!("{}: not a PEM certificate: {e}", path.display())))?;
     let cert = pem
         .parse_x509()
-        .map_err(|e| anyhow::anyhow!("{}: not an X.509 certificate: {e}", path.display()))?;
+        .map_err(|e| Error::Invalid(format!("{}: not an X.509 certificate: {e}", path.display())))?;
     let cn = cert.subject().iter_common_name().next().and_then(|cn| cn.as_str().ok());
     Ok(cn.map(str::to_string))
 }
@@ -112,15 +112,15 @@ pub fn node_tls(
     root_ca: Option<&Path>,
     cert: Option<&Path>,
     key: Option<&Path>,
-) -> anyhow::Result<Option<transport::Tls>> {
+) -> Result<Option<transport::Tls>> {
     let identity = match (cert, key) {
         (Some(c), Some(k)) => Some((c.to_path_buf(), k.to_path_buf())),
         (None, None) => None,
-        _ => bail!("--tls-cert and --tls-key go together (a certificate and its private key)"),
+        _ => invalid!("--tls-cert and --tls-key go together (a certificate and its private key)"),
     };
     let Some(root_ca) = root_ca else {
         if identity.is_some() {
-            bail!("--tls-cert needs --tls-root-ca (the certificate authority of the run)");
+            invalid!("--tls-cert needs --tls-root-ca (the certificate authority of the run)");
         }
         return Ok(None);
     };
@@ -130,7 +130,7 @@ pub fn node_tls(
         ("--tls-key", key),
     ] {
         if let Some(p) = path {
-            std::fs::File::open(p).with_context(|| format!("{flag} {}: cannot read it", p.display()))?;
+            std::fs::File::open(p).what(|| format!("{flag} {}: cannot read it", p.display()))?;
         }
     }
     Ok(Some(transport::Tls {
@@ -149,7 +149,7 @@ pub const RECORDER: NodeId = NodeId {
 /// The credentials of a node process from its `--credentials` argument: a file the launcher
 /// wrote (readable by its owner only, as an SSH key must be), or `-` for the line the launcher
 /// writes to a process it starts. The user must be the node's own ([`transport::user_of`]).
-pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> anyhow::Result<Option<transport::Credentials>> {
+pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> Result<Option<transport::Credentials>> {
     let Some(path) = arg else {
         return Ok(None);
     };
@@ -157,27 +157,28 @@ pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> anyhow::Result<Option
         let mut line = String::new();
         std::io::stdin()
             .read_line(&mut line)
-            .context("--credentials -: cannot read standard input")?;
+            .what(|| "--credentials -: cannot read standard input".into())?;
         line
     } else {
         use std::os::unix::fs::PermissionsExt;
         let meta =
-            std::fs::metadata(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?;
+            std::fs::metadata(path).what(|| format!("--credentials {}: cannot read it", path.display()))?;
         let mode = meta.permissions().mode() & 0o777;
         if mode & 0o077 != 0 {
-            bail!(
+            invalid!(
                 "--credentials {}: readable by others (mode {mode:03o}); whoever reads it can speak for this node \
                  in the run: `chmod 600` it",
                 path.display()
             );
         }
-        std::fs::read_to_string(path).with_context(|| format!("--credentials {}: cannot read it", path.display()))?
+        std::fs::read_to_string(path).what(|| format!("--credentials {}: cannot read it", path.display()))?
     };
     let credentials =
-        transport::Credentials::parse(&text).map_err(|e| anyhow::anyhow!("--credentials {}: {e}", path.display()))?;
+        transport::Credentials::parse(&text)
+            .map_err(|e| Error::Invalid(format!("--credentials {}: {e}", path.display())))?;
     let own = transport::user_of(id);
     if credentials.user != own {
-        bail!(
+        invalid!(
             "--credentials {}: they are {}'s, not this node's ({own}); each node has its own",
             path.display(),
             credentials.user
@@ -203,7 +204,7 @@ pub(crate) fn write_credentials(
     run_id: &str,
     name: NodeName,
     credentials: &transport::Credentials,
-) -> anyhow::Result<PathBuf> {
+) -> Result<PathBuf> {
     use std::io::Write;
     use std::os::unix::fs::OpenOptionsExt;
     let path = dir.join(format!("{run_id}-{}-{}.credentials", name.role.key(), name.index));
@@ -212,9 +213,9 @@ pub(crate) fn write_credentials(
         .create_new(true)
         .mode(0o600)
         .open(&path)
-        .with_context(|| format!("cannot create {} (the credentials of node {name})", path.display()))?;
+        .what(|| format!("cannot create {} (the credentials of node {name})", path.display()))?;
     f.write_all(credentials.line().as_bytes())
-        .with_context(|| format!("cannot write {}", path.display()))?;
+        .what(|| format!("cannot write {}", path.display()))?;
     Ok(path)
 }
 
@@ -246,14 +247,14 @@ pub(crate) fn join_bus(
     recorded: bool,
     all_nodes: &[NodeName],
     groups: &[Vec<u32>],
-) -> anyhow::Result<Bus> {
+) -> Result<Bus> {
     for l in &net.listen {
         if l.ends_with(":0") {
-            bail!("--listen {l}: give an explicit port (nodes started elsewhere must know it)");
+            invalid!("--listen {l}: give an explicit port (nodes started elsewhere must know it)");
         }
     }
     if !net.connect.is_empty() && !net.listen.is_empty() {
-        bail!("--listen and --connect exclude each other: the launcher either hosts the router or connects to one");
+        invalid!("--listen and --connect exclude each other: the launcher either hosts the router or connects to one");
     }
     // TLS and access control as the scene's [network] says.
     let tls = scene.network.tls.as_ref().map(|t| transport::Tls {
@@ -307,7 +308,7 @@ pub(crate) fn join_bus(
         None
     };
     if scene.network.allow.is_some() && !hosting {
-        bail!(
+        invalid!(
             "network.allow: access control is enforced by the router this launcher hosts; with --connect {}, \
              configure it on that router",
             net.connect.join(", ")
@@ -317,7 +318,7 @@ pub(crate) fn join_bus(
         // The nodes this launcher starts present its certificate.
         let cn = cert_common_name(&t.cert)?;
         if all_nodes.iter().any(|n| !net.remote.contains(n)) && !cn.as_ref().is_some_and(|cn| allow.contains(cn)) {
-            bail!(
+            invalid!(
                 "network.allow: the launcher's certificate {} has common name {}, which the list does not allow; \
                  the nodes it starts present that certificate (list it, or start every node by hand)",
                 t.cert.display(),
@@ -343,10 +344,13 @@ pub(crate) fn join_bus(
     };
     let bus_config = |mode: &str, listen: &[String], connect: &[String], auth: Option<&transport::Auth>| {
         let access = if mode == "router" { access.as_ref() } else { None };
-        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access)
-            .context("the bus (the scene's [network] section, --listen, --connect)")?;
+        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access).map_err(|e| {
+            Error::Invalid(format!(
+                "the bus (the scene's [network] section, --listen, --connect): {e}"
+            ))
+        })?;
         transport::set_shared_memory(&mut c, shared_memory)?;
-        anyhow::Ok(c)
+        Ok::<_, Error>(c)
     };
     // How every process joins the bus: TLS, and shared memory when the scene asks for it or the
     // launcher chose it (only between processes on one machine; across machines Zenoh uses the
@@ -373,8 +377,10 @@ pub(crate) fn join_bus(
         let auth = transport::Auth::Router {
             dictionary: dictionary.path().to_path_buf(),
         };
-        let session = transport::open(bus_config("router", &listen, &[], Some(&auth))?)
-            .with_context(|| format!("cannot host the Zenoh router on {}", listen.join(", ")))?;
+        let session = transport::open(bus_config("router", &listen, &[], Some(&auth))?).map_err(|source| Error::Bus {
+            what: format!("cannot host the Zenoh router on {}", listen.join(", ")),
+            source,
+        })?;
         drop(dictionary);
         let connect = vec![local_endpoint(&listen[0])];
         (
@@ -383,8 +389,10 @@ pub(crate) fn join_bus(
             format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
         )
     } else {
-        let session = transport::open(bus_config("client", &[], &net.connect, None)?)
-            .with_context(|| format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")))?;
+        let session = transport::open(bus_config("client", &[], &net.connect, None)?).map_err(|source| Error::Bus {
+            what: format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")),
+            source,
+        })?;
         (
             session,
             net.connect.clone(),
@@ -396,7 +404,7 @@ pub(crate) fn join_bus(
     if !net.connect.is_empty() {
         let taken = transport::tokens_alive(&session, run_id, RUN_ID_PROBE)?;
         if !taken.is_empty() {
-            bail!(
+            invalid!(
                 "run id {run_id} is already in use on {description}: {} alive there; nothing was started: choose \
                  another --run-id (or leave it out for a new random one)",
                 taken.join(", ")
@@ -424,12 +432,12 @@ pub struct Joining<'a> {
 
 impl Joining<'_> {
     /// A client session on the bus (shared memory on or off), or an error saying what to check.
-    pub fn open(&self, shared_memory: bool) -> anyhow::Result<zenoh::Session> {
+    pub fn open(&self, shared_memory: bool) -> Result<zenoh::Session> {
         let auth = self.credentials.cloned().map(transport::Auth::Client);
         let mut config = transport::secure_config("client", &[], self.connect, false, self.tls, auth.as_ref(), None)
-            .context("--connect, --tls-*")?;
+            .map_err(|e| Error::Invalid(format!("--connect, --tls-*: {e}")))?;
         transport::set_shared_memory(&mut config, shared_memory)?;
-        transport::open(config).with_context(|| {
+        transport::open(config).map_err(|source| {
             let mut hints = Vec::new();
             if self.tls.is_some() {
                 hints.push(
@@ -443,11 +451,14 @@ impl Joining<'_> {
                 "a router hosted by `glissade run` admits only the run's processes: give --credentials, the file \
                  the launcher wrote for this node"
             });
-            format!(
-                "cannot join the run's bus at {} ({})",
-                self.connect.join(", "),
-                hints.join("; ")
-            )
+            Error::Bus {
+                what: format!(
+                    "cannot join the run's bus at {} ({})",
+                    self.connect.join(", "),
+                    hints.join("; ")
+                ),
+                source,
+            }
         })
     }
 }

@@ -3,7 +3,7 @@
 //! the launcher (parent-death signal) and, for node processes, killed when the run's set of
 //! children is dropped on any error path.
 
-use anyhow::Context;
+use crate::error::{IoWhat, Result};
 use glissade_messages::Role;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
@@ -187,7 +187,7 @@ pub(crate) fn spawn_node(
     name: NodeName,
     args: &[String],
     credentials: Option<glissade_zenoh::Credentials>,
-) -> anyhow::Result<NodeProcess> {
+) -> Result<NodeProcess> {
     let mut cmd = Command::new(exe);
     cmd.args(args);
     {
@@ -197,7 +197,7 @@ pub(crate) fn spawn_node(
         cmd.process_group(0);
     }
     let (child, output) = spawn_child(cmd, &name.to_string(), libc::SIGKILL, credentials.as_ref())
-        .with_context(|| format!("cannot start node process {name} ({})", exe.display()))?;
+        .what(|| format!("cannot start node process {name} ({})", exe.display()))?;
     Ok(NodeProcess {
         name,
         child,

@@ -7,6 +7,7 @@ pub mod bus;
 pub mod children;
 pub mod console;
 pub mod distributed;
+pub mod error;
 pub mod generate;
 pub mod node_process;
 pub mod output;
@@ -17,7 +18,8 @@ pub mod runner;
 pub mod stability;
 pub mod vtu;
 
-use anyhow::Context;
+use error::IoWhat;
+pub use error::{Error, Result};
 use glissade_scene::{load_str, LoadedScene};
 use std::path::Path;
 
@@ -37,8 +39,8 @@ pub fn machine_memory() -> Option<u64> {
 
 /// Reads and validates a scene file; its TLS files (`network.tls`) become relative to its folder
 /// and must be readable.
-pub fn load_scene(path: &Path) -> anyhow::Result<LoadedScene> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read scene file {}", path.display()))?;
+pub fn load_scene(path: &Path) -> Result<LoadedScene> {
+    let text = std::fs::read_to_string(path).what(|| format!("cannot read scene file {}", path.display()))?;
     let mut scene = load_str(&text, &path.display().to_string())?;
     scene.network.resolve_files(path)?;
     Ok(scene)

@@ -15,7 +15,7 @@
 //! before anything is solved, so an unwritable folder fails the run at once, naming the path.
 
 use crate::children::ChildOutput;
-use anyhow::{bail, Context};
+use crate::error::{failed, invalid, zenoh, Error, IoWhat, Result};
 use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
 use glissade_recorder::{
     log_time_now, recording_file_name, Recorder, RecorderError, RecorderOptions, RecordingStats, RunInfo,
@@ -157,7 +157,7 @@ pub fn spawn_recorder_process(
     tls: &[String],
     credentials: Option<&glissade_zenoh::Credentials>,
     path: &Path,
-) -> anyhow::Result<RecorderProcess> {
+) -> Result<RecorderProcess> {
     let ready = Arc::new(AtomicBool::new(false));
     let flag = ready.clone();
     let watch = session
@@ -166,7 +166,7 @@ pub fn spawn_recorder_process(
         .history(true)
         .callback(move |s| flag.store(s.kind() == zenoh::sample::SampleKind::Put, Ordering::SeqCst))
         .wait()
-        .map_err(|e| anyhow::anyhow!("zenoh: watch the recorder's liveliness: {e}"))?;
+        .map_err(|e| zenoh("watch the recorder's liveliness", e))?;
     let mut cmd = Command::new(exe);
     cmd.args(["node", "recorder", "--run", run_id, "--connect", endpoint])
         .args(tls)
@@ -174,7 +174,7 @@ pub fn spawn_recorder_process(
         .arg(path);
     // The recorder finalises its file if the launcher dies (SIGTERM, not SIGKILL).
     let (child, output) = crate::children::spawn_child(cmd, "recorder:0", libc::SIGTERM, credentials)
-        .with_context(|| format!("cannot start the recorder process ({})", exe.display()))?;
+        .what(|| format!("cannot start the recorder process ({})", exe.display()))?;
     Ok(RecorderProcess {
         child,
         ready,
@@ -213,9 +213,9 @@ impl RecorderProcess {
 
     /// Fails when the recorder process has exited with an error (e.g. before the run starts,
     /// when it cannot create the file).
-    pub fn check(&mut self) -> anyhow::Result<()> {
+    pub fn check(&mut self) -> Result<()> {
         match self.failure() {
-            Some(f) => bail!("{f}"),
+            Some(f) => Err(Error::Failed(f)),
             None => Ok(()),
         }
     }
@@ -290,7 +290,7 @@ pub fn run_recorder_process(
     bus: &crate::bus::Joining,
     shared_memory: bool,
     path: &Path,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     // SAFETY: the handler only stores to an atomic.
     unsafe {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
@@ -304,10 +304,10 @@ pub fn run_recorder_process(
         scene_fingerprint: fp,
     };
     let Payload::Scene { text } = decode(&bytes, &expected)?.payload else {
-        bail!("the launcher's scene query returned another payload");
+        invalid!("the launcher's scene query returned another payload");
     };
     if fingerprint(&text) != fp {
-        bail!("the scene received from the bus does not match its fingerprint {fp:016x}");
+        invalid!("the scene received from the bus does not match its fingerprint {fp:016x}");
     }
     let scene = load_str(&text, "<scene from the bus>")?;
     let mut recorder = create_recorder(&scene, run_id, path)?;
@@ -329,7 +329,7 @@ pub fn run_recorder_process(
             ));
         })
         .wait()
-        .map_err(|e| anyhow::anyhow!("zenoh: subscribe to the run: {e}"))?;
+        .map_err(|e| zenoh("subscribe to the run", e))?;
     // A replacement node process asks for the messages it needs to resume; the query goes
     // through the same channel, so every message heard before it is in the file when it is
     // answered.
@@ -339,13 +339,13 @@ pub fn run_recorder_process(
             let _ = log_tx.send(Heard::LogQuery(q));
         })
         .wait()
-        .map_err(|e| anyhow::anyhow!("zenoh: declare the log queryable: {e}"))?;
+        .map_err(|e| zenoh("declare the log queryable", e))?;
     let incomplete = scene.recording.incomplete();
     let _token = session
         .liveliness()
         .declare_token(glissade_messages::topic::recorder_alive(run_id))
         .wait()
-        .map_err(|e| anyhow::anyhow!("zenoh: liveliness token: {e}"))?;
+        .map_err(|e| zenoh("liveliness token", e))?;
     let (end, stop) = (
         glissade_messages::topic::end(run_id),
         glissade_messages::topic::stop(run_id),
@@ -372,7 +372,7 @@ pub fn run_recorder_process(
             }
             if since.elapsed() > DRAIN_TIMEOUT {
                 recorder.finish()?;
-                bail!(
+                failed!(
                     "received {seen} of the {n} messages the launcher saw within {DRAIN_TIMEOUT:?} after the stop; {} is finalised without the rest",
                     path.display()
                 );
@@ -405,7 +405,7 @@ pub fn run_recorder_process(
                 if key == end {
                     let n = <[u8; 8]>::try_from(bytes.as_slice())
                         .map(u64::from_le_bytes)
-                        .map_err(|_| anyhow::anyhow!("malformed end message ({} bytes)", bytes.len()))?;
+                        .map_err(|_| Error::Invalid(format!("malformed end message ({} bytes)", bytes.len())))?;
                     target = Some((n, Instant::now()));
                     continue;
                 }
@@ -442,13 +442,13 @@ pub fn run_recorder_process(
             }
             Err(mpsc::RecvTimeoutError::Timeout) if last.elapsed() > IDLE_TIMEOUT => {
                 recorder.finish()?;
-                bail!(
+                failed!(
                     "no message on the bus for {IDLE_TIMEOUT:?}; {} is finalised",
                     path.display()
                 );
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
-            Err(mpsc::RecvTimeoutError::Disconnected) => bail!("the subscriber closed"),
+            Err(mpsc::RecvTimeoutError::Disconnected) => return Err(Error::Failed("the subscriber closed".into())),
         }
     }
     let stats = recorder.finish()?;

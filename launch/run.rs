@@ -202,7 +202,7 @@ impl<'a> Run<'a> {
     /// Runs the scene as node processes of `exe` (`glissade node …`) on the bus `net` describes
     /// (by default a router hosted by this process on a free loopback port); nodes listed in
     /// `net.remote` are left to be started by hand. A recorded run starts a recorder process.
-    pub fn processes(self, exe: &Path, net: &Network) -> anyhow::Result<Outcome> {
+    pub fn processes(self, exe: &Path, net: &Network) -> crate::Result<Outcome> {
         let Run {
             scene,
             opts,

@@ -22,8 +22,8 @@ mod spawn;
 mod supervise;
 
 use crate::children::NodeName;
+use crate::error::{Error, Result};
 use crate::runner::{IterationRecord, RunOptions, RunResult};
-use anyhow::bail;
 use glissade_messages::{Message, Verdict};
 use glissade_scene::LoadedScene;
 use std::collections::BTreeMap;
@@ -63,13 +63,16 @@ extern "C" fn on_interrupt(_signal: libc::c_int) {
 
 /// Makes SIGINT and SIGTERM request a clean stop of the run (see [`interrupted`]); a second
 /// signal exits at once with status 130.
-pub fn install_interrupt_handler() -> anyhow::Result<()> {
+pub fn install_interrupt_handler() -> Result<()> {
     for signal in [libc::SIGINT, libc::SIGTERM] {
         // SAFETY: the handler only touches an atomic and calls the async-signal-safe _exit.
         let previous =
             unsafe { libc::signal(signal, on_interrupt as extern "C" fn(libc::c_int) as libc::sighandler_t) };
         if previous == libc::SIG_ERR {
-            bail!("cannot install the handler of signal {signal}");
+            return Err(Error::Io {
+                what: format!("cannot install the handler of signal {signal}"),
+                source: std::io::Error::last_os_error(),
+            });
         }
     }
     Ok(())
@@ -160,7 +163,7 @@ pub(crate) fn run_processes(
     recording: Option<&Path>,
     mut on_iteration: impl FnMut(&IterationRecord),
     mut observe: Option<impl FnMut(&Message)>,
-) -> anyhow::Result<(RunResult, Traffic)> {
+) -> Result<(RunResult, Traffic)> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
         // Nothing to distribute: the in-process direct solve.
@@ -180,11 +183,11 @@ pub(crate) fn run_processes(
     supervisor.drain(&mut on_iteration, &mut observe);
     let (got, mut traffic) = (supervisor.got, supervisor.traffic);
     if got.interfaces.len() != model.interfaces.len() {
-        bail!(
+        return Err(Error::Failed(format!(
             "the run ended with {} of the {} interface solutions on the bus",
             got.interfaces.len(),
             model.interfaces.len()
-        );
+        )));
     }
     traffic.iterations = got.iterations.len() as u64;
     let (mut names, mut left_out) = set_up.plan.describe(model, set_up.groups.len());

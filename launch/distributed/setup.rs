@@ -6,8 +6,8 @@ use super::supervise::Arrival;
 use super::unresumable;
 use crate::bus::{join_bus, Bus, RECORDER};
 use crate::children::{NodeName, NodeRole};
+use crate::error::{invalid, zenoh, Result};
 use crate::runner::{RunOptions, TimeStartRun};
-use anyhow::bail;
 use glissade_bus::RunContext;
 use glissade_deploy::Plan;
 use glissade_messages::{encode, Message, NodeId, Payload, Role, Stage};
@@ -71,7 +71,7 @@ pub(super) fn set_up(
     net: &super::Network,
     recording: Option<&Path>,
     keep_all: bool,
-) -> anyhow::Result<(SetUp, transport::Presence)> {
+) -> Result<(SetUp, transport::Presence)> {
     let t0 = Instant::now();
     let model = &scene.model;
     let run_id = &opts.run_id;
@@ -88,7 +88,7 @@ pub(super) fn set_up(
     let all_nodes = run_nodes_of(&plan, groups.len());
     for r in &net.remote {
         if !all_nodes.contains(r) {
-            bail!(
+            invalid!(
                 "--remote {r}: this run has no such node (its nodes: {})",
                 all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
             );
@@ -117,7 +117,7 @@ pub(super) fn set_up(
             let _ = tx.send(Arrival::of(s.key_expr().as_str(), s.payload(), &watched_run, keep_all));
         })
         .wait()
-        .map_err(|e| anyhow::anyhow!("zenoh: subscribe to the run: {e}"))?;
+        .map_err(|e| zenoh("subscribe to the run", e))?;
 
     // Node processes that die mid-run are restarted (they resume from the recorder's log) when
     // the scene allows restarts, the run is recorded completely and its fields do not go through

@@ -6,9 +6,9 @@ use super::setup::{node_args, SetUp};
 use super::READY_TIMEOUT;
 use crate::bus::{tls_args, write_credentials, CredentialFiles};
 use crate::children::{spawn_node, Children};
+use crate::error::{invalid, Result};
 use crate::recording::RecorderProcess;
 use crate::runner::RunOptions;
-use anyhow::bail;
 use glissade_scene::LoadedScene;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -40,7 +40,7 @@ pub(super) fn spawn(
     exe: &Path,
     net: &super::Network,
     recording: Option<&Path>,
-) -> anyhow::Result<Spawned> {
+) -> Result<Spawned> {
     let run_id = &opts.run_id;
     let bus = &set_up.bus;
     let mut children = Children(Vec::new());
@@ -101,7 +101,7 @@ pub(super) fn spawn(
         remote_tls.extend(bus.shared_memory.then(|| "--shared-memory".to_string()));
         let dir = match (&net.credentials, bus.hosting) {
             (Some(d), true) => Some(d),
-            (None, true) => bail!("nodes started by hand need their credentials written to a folder (none given)"),
+            (None, true) => invalid!("nodes started by hand need their credentials written to a folder (none given)"),
             (_, false) => None,
         };
         for &r in &net.remote {

@@ -11,8 +11,8 @@ use super::{
     STOP_TIMEOUT, STRAGGLER_TIMEOUT,
 };
 use crate::children::{spawn_node, Children, NodeName};
+use crate::error::{Error, IoWhat, Result};
 use crate::runner::{IterationRecord, RunResult};
-use anyhow::bail;
 use glissade_deploy::Plan;
 use glissade_messages::{Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Verdict};
 use glissade_scene::LoadedScene;
@@ -103,7 +103,7 @@ impl<'r> Supervisor<'r> {
         spawned: &mut Spawned,
         mut on_iteration: impl FnMut(&IterationRecord),
         observe: &mut Option<impl FnMut(&Message)>,
-    ) -> anyhow::Result<()> {
+    ) -> Result<()> {
         loop {
             if interrupted() {
                 self.stop_all(&mut spawned.children, "the launcher was interrupted");
@@ -120,7 +120,7 @@ impl<'r> Supervisor<'r> {
                     &mut spawned.children,
                     &format!("the run failed: {}", f.split("; its last lines").next().unwrap_or("")),
                 );
-                bail!("{f}");
+                return Err(Error::Failed(f));
             }
             if self.got.started.is_none() {
                 // Waiting for the nodes' tokens: look again every few milliseconds (the run
@@ -171,7 +171,7 @@ impl<'r> Supervisor<'r> {
     /// What stops the run, if anything: a node process that failed (and may not be restarted),
     /// a node started by hand that left, the recorder's failure before the start, nodes not
     /// ready in time. Starts the iterations once every node is ready.
-    fn failure(&mut self, spawned: &mut Spawned) -> anyhow::Result<Option<String>> {
+    fn failure(&mut self, spawned: &mut Spawned) -> Result<Option<String>> {
         let (mut child_failure, dead) = self.child_failure(&mut spawned.children)?;
         // A node process that died mid-run: a replacement resumes from the recorder's log, up to
         // `restarts` times per node.
@@ -211,14 +211,14 @@ impl<'r> Supervisor<'r> {
     /// The first local node process that failed, and its index: exited with a failure (or
     /// before the run started), or lost its connection to the bus while still running. A node
     /// that exited because a peer left is not the culprit when that peer's token went first.
-    fn child_failure(&self, children: &mut Children) -> anyhow::Result<(Option<String>, Option<usize>)> {
+    fn child_failure(&self, children: &mut Children) -> Result<(Option<String>, Option<usize>)> {
         let mut child_failure: Option<String> = None;
         let mut dead: Option<usize> = None;
         for (k, p) in children.0.iter_mut().enumerate() {
             if p.status.is_some() || child_failure.is_some() {
                 continue;
             }
-            if let Some(status) = p.child.try_wait()? {
+            if let Some(status) = p.child.try_wait().what(|| format!("cannot wait for node process {}", p.name))? {
                 p.status = Some(status);
                 if !status.success() {
                     p.output.settle();
@@ -257,7 +257,8 @@ impl<'r> Supervisor<'r> {
             if let Some((j, lost)) = silent {
                 let exited = children.0[k].name;
                 let p = &mut children.0[j];
-                child_failure = Some(match p.child.try_wait()? {
+                let status = p.child.try_wait().what(|| format!("cannot wait for node process {}", p.name))?;
+                child_failure = Some(match status {
                     // It died too (before the other, as its token says): the usual report.
                     Some(status) => {
                         p.status = Some(status);
@@ -284,7 +285,7 @@ impl<'r> Supervisor<'r> {
 
     /// Restarts dead node process `k` (it resumes from the recording) if it has restarts left;
     /// otherwise the run's failure.
-    fn restart(&mut self, children: &mut Children, k: usize, why: &str) -> anyhow::Result<Option<String>> {
+    fn restart(&mut self, children: &mut Children, k: usize, why: &str) -> Result<Option<String>> {
         let name = children.0[k].name;
         let restarts = self.restarts;
         let count = self.restarted.entry(name).or_default();
@@ -313,7 +314,7 @@ impl<'r> Supervisor<'r> {
 
     /// Starts the iterations (`start`, then a time-coarse start's local directions) once every
     /// node's token is up and the recorder is ready; fails when nodes are not ready in time.
-    fn start_when_ready(&mut self, spawned: &mut Spawned) -> anyhow::Result<Option<String>> {
+    fn start_when_ready(&mut self, spawned: &mut Spawned) -> Result<Option<String>> {
         let set_up = self.set_up;
         let recorder_ready = spawned.recorder.as_ref().is_none_or(|r| r.is_ready());
         let missing: Vec<NodeName> = self
@@ -366,7 +367,7 @@ impl<'r> Supervisor<'r> {
         a: &Arrival,
         on_iteration: &mut impl FnMut(&IterationRecord),
         observe: &mut Option<impl FnMut(&Message)>,
-    ) -> anyhow::Result<()> {
+    ) -> Result<()> {
         if let Some(rec) = self.take(a, observe) {
             self.stop_seen |= rec.decision.verdict.is_stop();
             on_iteration(&rec);
@@ -406,7 +407,7 @@ impl<'r> Supervisor<'r> {
     /// Nothing arrived for a while: true once every node process has exited and every node
     /// started by hand has left; fails when nodes started by hand do not leave after the end or
     /// when the bus has been silent for [`IDLE_TIMEOUT`].
-    fn idle(&mut self, children: &mut Children) -> anyhow::Result<bool> {
+    fn idle(&mut self, children: &mut Children) -> Result<bool> {
         let presence = &self.presence;
         let remote = &self.net.remote;
         let locals_done = children.0.iter().all(|p| p.status.is_some());
@@ -423,19 +424,19 @@ impl<'r> Supervisor<'r> {
                     .map(|r| r.to_string())
                     .collect();
                 self.stop_all(children, "the run is over");
-                bail!(
+                return Err(Error::Failed(format!(
                     "node(s) {} did not leave within {} s after the run ended",
                     late.join(", "),
                     FINISH_TIMEOUT.as_secs()
-                );
+                )));
             }
         }
         if self.last_message.elapsed() > IDLE_TIMEOUT {
             self.stop_all(children, "the run stalled");
-            bail!(
+            return Err(Error::Failed(format!(
                 "no message on the bus for {} s: the run stalled",
                 IDLE_TIMEOUT.as_secs()
-            );
+            )));
         }
         Ok(false)
     }

@@ -1,0 +1,102 @@
+//! The launcher library's errors (DESIGN §1: thiserror enums carrying data in the libraries,
+//! anyhow only in the binary). Each says what failed and where, in the words the console prints;
+//! the cause, when there is one, is its `source`, and the binary prints the chain
+//! ("what: cause").
+
+use crate::distributed::Interrupted;
+use crate::runner::RunError;
+use glissade_recorder::RecorderError;
+use glissade_scene::SceneError;
+use glissade_zenoh::TransportError;
+use std::path::PathBuf;
+
+/// What went wrong in the launcher library.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Building or iterating a run's nodes.
+    #[error(transparent)]
+    Run(#[from] RunError),
+    /// A scene that cannot be used (located: file, key, line).
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    /// The bus: Zenoh, a node's stop, a peer that left.
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    /// A message that does not decode as one of the run's.
+    #[error(transparent)]
+    Decode(#[from] glissade_messages::DecodeError),
+    /// A recording that cannot be written or read.
+    #[error(transparent)]
+    Recorder(#[from] RecorderError),
+    /// The run was interrupted (SIGINT, SIGTERM); it holds what was done.
+    #[error(transparent)]
+    Interrupted(Box<Interrupted>),
+    /// A file or folder that cannot be read, created or written (`what` names it).
+    #[error("{what}")]
+    Io {
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The bus cannot be hosted, reached or joined (`what` says which and what to check).
+    #[error("{what}")]
+    Bus {
+        what: String,
+        #[source]
+        source: TransportError,
+    },
+    /// A file that is there already: nothing was overwritten.
+    #[error("{} already exists; nothing was overwritten", .0.display())]
+    Exists(PathBuf),
+    /// An argument, a setting or an input that cannot be used: the message names it and says why.
+    #[error("{0}")]
+    Invalid(String),
+    /// A run as processes that failed: the node, how it failed and its last lines, or why the
+    /// run stopped (stalled, nodes not ready, a recorder that failed).
+    #[error("{0}")]
+    Failed(String),
+}
+
+impl From<Interrupted> for Error {
+    fn from(i: Interrupted) -> Self {
+        Error::Interrupted(Box::new(i))
+    }
+}
+
+/// The launcher library's results.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// An I/O error with what was being done (`what`: e.g. "cannot read scene file x.toml").
+pub(crate) trait IoWhat<T> {
+    fn what(self, what: impl FnOnce() -> String) -> Result<T>;
+}
+
+impl<T> IoWhat<T> for std::io::Result<T> {
+    fn what(self, what: impl FnOnce() -> String) -> Result<T> {
+        self.map_err(|source| Error::Io { what: what(), source })
+    }
+}
+
+/// An `Error::Invalid` with this message.
+macro_rules! invalid {
+    ($($arg:tt)*) => {
+        return Err($crate::error::Error::Invalid(format!($($arg)*)))
+    };
+}
+pub(crate) use invalid;
+
+/// An `Error::Failed` with this message.
+macro_rules! failed {
+    ($($arg:tt)*) => {
+        return Err($crate::error::Error::Failed(format!($($arg)*)))
+    };
+}
+pub(crate) use failed;
+
+/// The Zenoh error of `what`, as [`TransportError::Zenoh`].
+pub(crate) fn zenoh(what: &str, e: impl std::fmt::Display) -> Error {
+    Error::Transport(TransportError::Zenoh {
+        what: what.to_string(),
+        detail: e.to_string(),
+    })
+}
