@@ -89,7 +89,7 @@ impl<'a> Parser<'a> {
         match self.b.get(self.pos..self.pos + N) {
             Some(s) => {
                 self.pos += N;
-                Ok(s.try_into().expect("N bytes"))
+                Ok(s.try_into().expect("get(pos..pos + N) is N bytes long"))
             }
             None => Err(self.eof(what)),
         }
