@@ -46,16 +46,16 @@ pub fn encode(msg: &Message) -> Vec<u8> {
     // Sized first, then written once into a buffer of that size: a multi-MB field is copied
     // once, not regrown and moved as it is written.
     let mut out = Vec::with_capacity(encoded_len(msg));
-    bincode::encode_into_std_write(&msg.envelope, &mut out, config()).expect("encoding into a Vec cannot fail");
-    bincode::encode_into_std_write(&msg.payload, &mut out, config()).expect("encoding into a Vec cannot fail");
+    bincode::encode_into_std_write(&msg.envelope, &mut out, config()).expect("writing into a Vec never fails");
+    bincode::encode_into_std_write(&msg.payload, &mut out, config()).expect("writing into a Vec never fails");
     out
 }
 
 /// The size of [`encode`]'s bytes, without encoding.
 pub fn encoded_len(msg: &Message) -> usize {
     let mut size = bincode::enc::write::SizeWriter::default();
-    bincode::encode_into_writer(&msg.envelope, &mut size, config()).expect("sizing cannot fail");
-    bincode::encode_into_writer(&msg.payload, &mut size, config()).expect("sizing cannot fail");
+    bincode::encode_into_writer(&msg.envelope, &mut size, config()).expect("a size writer never fails");
+    bincode::encode_into_writer(&msg.payload, &mut size, config()).expect("a size writer never fails");
     size.bytes_written
 }
 
@@ -94,8 +94,8 @@ pub fn encode_pieces(msg: &Message) -> Vec<Piece> {
         pieces: Vec::new(),
         current: Vec::with_capacity(256),
     };
-    bincode::encode_into_writer(&msg.envelope, &mut w, config()).expect("encoding into a Vec cannot fail");
-    bincode::encode_into_writer(&msg.payload, &mut w, config()).expect("encoding into a Vec cannot fail");
+    bincode::encode_into_writer(&msg.envelope, &mut w, config()).expect("the piece writer never fails");
+    bincode::encode_into_writer(&msg.payload, &mut w, config()).expect("the piece writer never fails");
     if !w.current.is_empty() {
         w.pieces.push(Piece::Bytes(w.current));
     }

@@ -95,7 +95,10 @@ impl CoarseNode {
     }
 
     fn solve(&mut self) -> Vec<Message> {
-        let problem = self.problem.as_mut().expect("assembled before the first solve");
+        let problem = self
+            .problem
+            .as_mut()
+            .expect("both callers solve once assemble has set the problem");
         let rhs = &mut self.rhs;
         rhs.fill(0.0);
         for (s, f) in &self.forces {

@@ -24,7 +24,10 @@ impl InterfaceNode {
             return Err(self.not_taken(msg));
         }
         expect_origin(id, msg, Role::Subdomain, Some(s))?;
-        let d = self.decider.as_mut().expect("checked");
+        let d = self
+            .decider
+            .as_mut()
+            .expect("checked on entry: a decider with Anderson");
         if !d.anderson_participants.contains(&s) {
             return Err(NodeError::rejected(
                 id,
@@ -89,7 +92,11 @@ impl InterfaceNode {
         d.grams.clear();
         d.stepped = Some(at);
         let changed = std::mem::take(&mut d.directions_changed);
-        let step = d.anderson.as_mut().expect("checked").decide(&sum, changed);
+        let step = d
+            .anderson
+            .as_mut()
+            .expect("checked on entry: a decider with Anderson")
+            .decide(&sum, changed);
         let (gamma, restart) = match step {
             AndersonStep::Mix(g) => (g, false),
             AndersonStep::Plain => (Vec::new(), false),

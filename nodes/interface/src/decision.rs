@@ -61,7 +61,10 @@ impl InterfaceNode {
 
     /// The decider stores node `from`'s share; with every node's (or a divergence), it decides.
     fn take_share(&mut self, from: u32, share: Vec<InterfaceIndicators>, diverged: Option<String>) -> Vec<Message> {
-        let d = self.decider.as_mut().expect("decider");
+        let d = self
+            .decider
+            .as_mut()
+            .expect("only the deciding node takes shares: report and indicator_partials check it");
         d.shares.insert(from, share);
         if d.diverged.is_none() {
             d.diverged = diverged;
@@ -76,7 +79,10 @@ impl InterfaceNode {
     /// rule and acts on the decision.
     fn decide(&mut self) -> Vec<Message> {
         let n = self.iteration;
-        let d = self.decider.as_mut().expect("decider");
+        let d = self
+            .decider
+            .as_mut()
+            .expect("only the deciding node takes shares: report and indicator_partials check it");
         let shares = std::mem::take(&mut d.shares);
         let (sums, updates, verdict) = match d.diverged.take() {
             Some(detail) => (IndicatorSums::default(), Vec::new(), Verdict::Diverged { detail }),

@@ -56,7 +56,9 @@ impl InterfaceNode {
                 .participants
                 .iter()
                 .map(|&s| {
-                    let layout = layouts[s as usize].as_ref().expect("participant");
+                    let layout = layouts[s as usize]
+                        .as_ref()
+                        .expect("every participant has a boundary layout");
                     layout
                         .slots
                         .iter()

@@ -157,7 +157,9 @@ impl InterfaceNode {
 
     /// Names a boundary entry: interface, pair and component.
     fn locate(&self, s: usize, row: usize) -> String {
-        let layout = self.layouts[s].as_ref().expect("participant");
+        let layout = self.layouts[s]
+            .as_ref()
+            .expect("handle refuses a subdomain without a boundary layout");
         for slot in &layout.slots {
             if row >= slot.offset && row < slot.offset + 2 * slot.n_pairs {
                 let e = row - slot.offset;
@@ -181,7 +183,9 @@ impl InterfaceNode {
     /// The step of the forces since the previous iteration is summed on the way, on the
     /// interfaces the error estimate follows ([`force_step_sums`]).
     fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
-        let layout = self.layouts[s as usize].as_ref().expect("participant");
+        let layout = self.layouts[s as usize]
+            .as_ref()
+            .expect("handle refuses a subdomain without a boundary layout");
         for slot in &layout.slots {
             if let Some(p) = self.position[slot.interface] {
                 let (to_w, to_f) = self.fields[p].side_mut(slot.side);
@@ -233,7 +237,10 @@ impl InterfaceNode {
         else {
             unreachable!("called on boundary modes")
         };
-        let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
+        let n_b = self.layouts[s as usize]
+            .as_ref()
+            .expect("handle refuses a subdomain without a boundary layout")
+            .len();
         let nt = self.model.time.n_points();
         let reject = |what: String| NodeError::rejected(self.id, format!("boundary modes of subdomain {s}: {what}"));
         if z.rows() != n_b || lambda.cols() != nt {
@@ -262,7 +269,9 @@ impl InterfaceNode {
             }
             (Some(_), true) => return Err(reject("a second particular part".into())),
             (None, false) => return Err(reject("mode form before its particular part".into())),
-            (None, true) => self.modes[s as usize].take().expect("held"),
+            (None, true) => self.modes[s as usize]
+                .take()
+                .expect("this arm is taken when a form is held"),
         };
         if let Err(e) = receiver
             .form
@@ -277,7 +286,7 @@ impl InterfaceNode {
         receiver
             .form
             .update(*first_mode as usize, &z.data, &g.data, &lambda.data)
-            .expect("checked");
+            .expect("`check` accepted these modes above");
         receiver.form.expand_into(receiver.w.as_mut(), receiver.f.as_mut());
         Ok(receiver)
     }
@@ -365,7 +374,10 @@ impl Node for InterfaceNode {
             return Ok(Vec::new());
         }
         if let (Some(w), Some(f)) = (w, f) {
-            let n_b = self.layouts[s as usize].as_ref().expect("participant").len();
+            let n_b = self.layouts[s as usize]
+                .as_ref()
+                .expect("handle refuses a subdomain without a boundary layout")
+                .len();
             let nt = self.model.time.n_points();
             expect_shape(self.id, "w", w, n_b, nt)?;
             expect_shape(self.id, "f", f, n_b, nt)?;

@@ -329,7 +329,11 @@ impl Parser<'_> {
             }
             self.pos += 1;
             let b = self.expr()?;
-            Node::Call2(f2.expect("checked above"), Box::new(a), Box::new(b))
+            Node::Call2(
+                f2.expect("f1 or f2 is a function (checked above) and f1 is not"),
+                Box::new(a),
+                Box::new(b),
+            )
         };
         if self.peek() != Some(b')') {
             return Err(self.error("expected `)`"));

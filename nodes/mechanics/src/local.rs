@@ -214,8 +214,12 @@ pub fn force_step_sums(
     let (mut num, mut den) = (0.0, 0.0);
     for (i, &wt) in time_weights.iter().enumerate() {
         let (o, n) = (
-            old.col(i).try_as_col_major().expect("column-major"),
-            new.col(i).try_as_col_major().expect("column-major"),
+            old.col(i)
+                .try_as_col_major()
+                .expect("the interfaces' force fields have unit row stride"),
+            new.col(i)
+                .try_as_col_major()
+                .expect("the interfaces' force fields have unit row stride"),
         );
         let (o, n) = (o.as_slice(), n.as_slice());
         let (mut col_num, mut col_den) = (0.0, 0.0);

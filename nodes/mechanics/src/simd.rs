@@ -55,7 +55,10 @@ fn capped(level: Level) -> Level {
 /// [`detected`] again with `None`: for benchmarks that compare the levels in one run.
 pub fn set_process_level(level: Option<Level>) {
     let code = level.map_or(0, |l| {
-        1 + LEVELS.iter().position(|x| *x == capped(l)).expect("a level") as u8
+        1 + LEVELS
+            .iter()
+            .position(|x| *x == capped(l))
+            .expect("capped gives one of LEVELS") as u8
     });
     PROCESS.store(code, std::sync::atomic::Ordering::Relaxed);
 }

@@ -266,7 +266,7 @@ impl Index {
                     name: name.clone(),
                     encoding: encoding.clone(),
                 })
-                .expect("writing to memory");
+                .expect("writing a record into a Vec never fails");
             body.extend_from_slice(&(data.len() as u32).to_le_bytes());
             body.extend_from_slice(data);
             frame(&mut b, op::SCHEMA, &body);
@@ -305,7 +305,9 @@ where
     T: for<'a> binrw::BinWrite<Args<'a> = ()>,
 {
     let mut body = Vec::new();
-    Cursor::new(&mut body).write_le(r).expect("writing to memory");
+    Cursor::new(&mut body)
+        .write_le(r)
+        .expect("writing a record into a Vec never fails");
     frame(out, opcode, &body);
 }
 

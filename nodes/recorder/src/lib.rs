@@ -391,7 +391,10 @@ impl Recorder {
         let channel = match self.channels.get(topic) {
             Some(&c) => c,
             None => {
-                let writer = self.writer.as_mut().expect("recorder used after finish");
+                let writer = self
+                    .writer
+                    .as_mut()
+                    .expect("only finishing takes the writer, and nothing records after it");
                 let (schema_name, text) = payload_schema(field);
                 let schema = match self.schemas.get(&schema_name) {
                     Some(&s) => s,
@@ -408,7 +411,10 @@ impl Recorder {
                 let mut meta = BTreeMap::new();
                 meta.insert("schema_version".to_string(), SCHEMA_VERSION.to_string());
                 meta.insert("codec".to_string(), CODEC.to_string());
-                let writer = self.writer.as_mut().expect("recorder used after finish");
+                let writer = self
+                    .writer
+                    .as_mut()
+                    .expect("only finishing takes the writer, and nothing records after it");
                 let c = match writer.add_channel(schema, topic, ENCODING, &meta) {
                     Ok(c) => c,
                     Err(e) => return Err(self.mcap_failure(e)),
@@ -432,7 +438,10 @@ impl Recorder {
             publish_time: log_time_ns,
         };
         self.sequence = self.sequence.wrapping_add(1);
-        let writer = self.writer.as_mut().expect("recorder used after finish");
+        let writer = self
+            .writer
+            .as_mut()
+            .expect("only finishing takes the writer, and nothing records after it");
         if let Err(e) = writer.write_to_known_channel(&header, bytes) {
             return Err(self.mcap_failure(e));
         }
@@ -454,7 +463,10 @@ impl Recorder {
     /// Closes the current chunk and appends it to the file with a summary that indexes it.
     pub fn flush(&mut self) -> Result<(), RecorderError> {
         self.check_failed()?;
-        let writer = self.writer.as_mut().expect("recorder used after finish");
+        let writer = self
+            .writer
+            .as_mut()
+            .expect("only finishing takes the writer, and nothing records after it");
         if let Err(e) = writer.flush() {
             return Err(self.mcap_failure(e));
         }
@@ -496,7 +508,7 @@ impl Recorder {
             self.writer = None;
             return Err(e);
         }
-        let mut writer = self.writer.take().expect("checked above");
+        let mut writer = self.writer.take().expect("a recorder without a writer returned above");
         if let Err(e) = writer.finish() {
             return Err(self.mcap_failure(e));
         }

@@ -122,7 +122,12 @@ struct HeldSlice {
 impl glissade_messages::HeldBlock for HeldSlice {
     fn values(&self) -> &[f64] {
         // Checked aligned and of a whole number of values when the block was taken.
-        bytemuck::cast_slice(self.payload.slices().nth(self.k).expect("the payload's slice"))
+        bytemuck::cast_slice(
+            self.payload
+                .slices()
+                .nth(self.k)
+                .expect("slice k was found among this payload's slices, which do not change"),
+        )
     }
 }
 
@@ -136,7 +141,9 @@ pub(crate) fn batches(received: impl IntoIterator<Item = Box<Received>>) -> Vec<
             hashes = HashSet::from([r.hash]);
             out.push(Vec::new());
         }
-        out.last_mut().expect("a batch").push(*r);
+        out.last_mut()
+            .expect("a batch is pushed above when `out` is empty")
+            .push(*r);
     }
     out
 }

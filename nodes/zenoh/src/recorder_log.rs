@@ -35,11 +35,19 @@ pub fn decode_log(bytes: &[u8]) -> Result<Vec<(String, Vec<u8>)>, TransportError
         Ok(s)
     };
     while at < bytes.len() {
-        let n = u32::from_le_bytes(take(&mut at, 4, "key length")?.try_into().expect("4 bytes")) as usize;
+        let n = u32::from_le_bytes(
+            take(&mut at, 4, "key length")?
+                .try_into()
+                .expect("take returns the 4 bytes asked for"),
+        ) as usize;
         let key = std::str::from_utf8(take(&mut at, n, "key")?)
             .map_err(|_| bad(at, "key is not UTF-8"))?
             .to_string();
-        let n = u64::from_le_bytes(take(&mut at, 8, "message length")?.try_into().expect("8 bytes"));
+        let n = u64::from_le_bytes(
+            take(&mut at, 8, "message length")?
+                .try_into()
+                .expect("take returns the 8 bytes asked for"),
+        );
         let n = usize::try_from(n).map_err(|_| bad(at, "message length"))?;
         out.push((key, take(&mut at, n, "message")?.to_vec()));
     }

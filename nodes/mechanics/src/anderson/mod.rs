@@ -191,7 +191,10 @@ impl AndersonHistory {
     /// rows past its own p count as zeros).
     pub fn record_coordinates(&mut self, state: MatRef<'_, f64>, image: MatRef<'_, f64>) {
         let (mu, last_slot) = (self.mu, self.last_slot);
-        let c = self.coords.as_mut().expect("history without coordinates");
+        let c = self
+            .coords
+            .as_mut()
+            .expect("called on a history built with_coordinates (a caller's bug otherwise)");
         let rows = state.nrows();
         assert!(rows <= c.p.nrows() && rows >= c.p_rows, "coordinates rows");
         assert_eq!(
@@ -220,7 +223,10 @@ impl AndersonHistory {
     pub fn apply_coordinates(&mut self, step: &AndersonStep, mut out: MatMut<'_, f64>) {
         let gamma = self.begin_step(step);
         let slots = self.stored_slots();
-        let c = self.coords.as_ref().expect("history without coordinates");
+        let c = self
+            .coords
+            .as_ref()
+            .expect("called on a history built with_coordinates (a caller's bug otherwise)");
         assert_eq!((out.nrows(), out.ncols()), (c.p_rows, self.cols), "coordinates shape");
         for j in 0..self.cols {
             for r in 0..c.p_rows {
