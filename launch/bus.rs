@@ -108,11 +108,7 @@ pub(crate) fn cert_common_name(path: &Path) -> Result<Option<String>> {
 
 /// The TLS of a node process from its `--tls-root-ca`, `--tls-cert` and `--tls-key` arguments
 /// (None without them); each file must be readable.
-pub fn node_tls(
-    root_ca: Option<&Path>,
-    cert: Option<&Path>,
-    key: Option<&Path>,
-) -> Result<Option<transport::Tls>> {
+pub fn node_tls(root_ca: Option<&Path>, cert: Option<&Path>, key: Option<&Path>) -> Result<Option<transport::Tls>> {
     let identity = match (cert, key) {
         (Some(c), Some(k)) => Some((c.to_path_buf(), k.to_path_buf())),
         (None, None) => None,
@@ -161,8 +157,7 @@ pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> Result<Option<transpo
         line
     } else {
         use std::os::unix::fs::PermissionsExt;
-        let meta =
-            std::fs::metadata(path).what(|| format!("--credentials {}: cannot read it", path.display()))?;
+        let meta = std::fs::metadata(path).what(|| format!("--credentials {}: cannot read it", path.display()))?;
         let mode = meta.permissions().mode() & 0o777;
         if mode & 0o077 != 0 {
             invalid!(
@@ -173,9 +168,8 @@ pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> Result<Option<transpo
         }
         std::fs::read_to_string(path).what(|| format!("--credentials {}: cannot read it", path.display()))?
     };
-    let credentials =
-        transport::Credentials::parse(&text)
-            .map_err(|e| Error::Invalid(format!("--credentials {}: {e}", path.display())))?;
+    let credentials = transport::Credentials::parse(&text)
+        .map_err(|e| Error::Invalid(format!("--credentials {}: {e}", path.display())))?;
     let own = transport::user_of(id);
     if credentials.user != own {
         invalid!(
@@ -344,11 +338,12 @@ pub(crate) fn join_bus(
     };
     let bus_config = |mode: &str, listen: &[String], connect: &[String], auth: Option<&transport::Auth>| {
         let access = if mode == "router" { access.as_ref() } else { None };
-        let mut c = transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access).map_err(|e| {
-            Error::Invalid(format!(
-                "the bus (the scene's [network] section, --listen, --connect): {e}"
-            ))
-        })?;
+        let mut c =
+            transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access).map_err(|e| {
+                Error::Invalid(format!(
+                    "the bus (the scene's [network] section, --listen, --connect): {e}"
+                ))
+            })?;
         transport::set_shared_memory(&mut c, shared_memory)?;
         Ok::<_, Error>(c)
     };
@@ -377,10 +372,11 @@ pub(crate) fn join_bus(
         let auth = transport::Auth::Router {
             dictionary: dictionary.path().to_path_buf(),
         };
-        let session = transport::open(bus_config("router", &listen, &[], Some(&auth))?).map_err(|source| Error::Bus {
-            what: format!("cannot host the Zenoh router on {}", listen.join(", ")),
-            source,
-        })?;
+        let session =
+            transport::open(bus_config("router", &listen, &[], Some(&auth))?).map_err(|source| Error::Bus {
+                what: format!("cannot host the Zenoh router on {}", listen.join(", ")),
+                source,
+            })?;
         drop(dictionary);
         let connect = vec![local_endpoint(&listen[0])];
         (

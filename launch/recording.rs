@@ -285,12 +285,7 @@ fn log_of(path: &Path, patterns: &str) -> Result<Vec<u8>, String> {
 /// The `glissade node recorder` process: fetches the scene, creates the file, subscribes to the
 /// run, declares its liveliness token, and records until the launcher's stop (or SIGINT/SIGTERM,
 /// which finalise the file too).
-pub fn run_recorder_process(
-    run_id: &str,
-    bus: &crate::bus::Joining,
-    shared_memory: bool,
-    path: &Path,
-) -> Result<()> {
+pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memory: bool, path: &Path) -> Result<()> {
     // SAFETY: the handler only stores to an atomic.
     unsafe {
         libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);

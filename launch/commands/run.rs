@@ -167,9 +167,10 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             }
             Err(e) => {
                 bar.finish_and_clear();
-                let Some(Interrupted { partial }) = e.downcast_ref::<Interrupted>() else {
-                    return Err(e);
+                let glissade::Error::Interrupted(interrupted) = e else {
+                    return Err(e.into());
                 };
+                let Interrupted { partial } = &*interrupted;
                 let mut s = summary(&sc, partial, &run_id);
                 s["verdict"] = serde_json::json!("Interrupted");
                 s["interrupted"] = serde_json::json!(true);

@@ -218,7 +218,11 @@ impl<'r> Supervisor<'r> {
             if p.status.is_some() || child_failure.is_some() {
                 continue;
             }
-            if let Some(status) = p.child.try_wait().what(|| format!("cannot wait for node process {}", p.name))? {
+            if let Some(status) = p
+                .child
+                .try_wait()
+                .what(|| format!("cannot wait for node process {}", p.name))?
+            {
                 p.status = Some(status);
                 if !status.success() {
                     p.output.settle();
@@ -257,7 +261,10 @@ impl<'r> Supervisor<'r> {
             if let Some((j, lost)) = silent {
                 let exited = children.0[k].name;
                 let p = &mut children.0[j];
-                let status = p.child.try_wait().what(|| format!("cannot wait for node process {}", p.name))?;
+                let status = p
+                    .child
+                    .try_wait()
+                    .what(|| format!("cannot wait for node process {}", p.name))?;
                 child_failure = Some(match status {
                     // It died too (before the other, as its token says): the usual report.
                     Some(status) => {
