@@ -51,10 +51,18 @@ pub enum Error {
     /// An argument, a setting or an input that cannot be used: the message names it and says why.
     #[error("{0}")]
     Invalid(String),
-    /// A run as processes that failed: the node, how it failed and its last lines, or why the
-    /// run stopped (stalled, nodes not ready, a recorder that failed).
+    /// Something that failed and why: a run as processes (the node, how it failed and its last
+    /// lines; or why the run stopped: stalled, nodes not ready, a recorder that failed), a file
+    /// that could not be written (nothing of it kept), results that do not fit the scene.
     #[error("{0}")]
     Failed(String),
+    /// What was not done (`what`) because of `source`.
+    #[error("{what}")]
+    NotDone {
+        what: String,
+        #[source]
+        source: Box<Error>,
+    },
 }
 
 impl From<Interrupted> for Error {

@@ -1,7 +1,7 @@
 //! Run outputs: the JSON summary and the interface fields, written under an output folder.
 
+use crate::error::{failed, Error, IoWhat, Result};
 use crate::runner::RunResult;
-use anyhow::Context;
 use glissade_deploy::Plan;
 use glissade_mechanics::laws::{dot, STATUS_NAMES};
 use glissade_mechanics::linear::LinearStage;
@@ -372,18 +372,17 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
 pub fn displacement_slices<'a>(
     model: &Model,
     displacements: &'a [(u32, glissade_messages::Field)],
-) -> anyhow::Result<Vec<Vec<&'a [f64]>>> {
+) -> Result<Vec<Vec<&'a [f64]>>> {
     let nt = model.time.n_points();
     (0..model.subdomains.len())
         .map(|s| {
             let sub = &model.subdomains[s];
-            let (_, f) = displacements
-                .iter()
-                .find(|(k, _)| *k as usize == s)
-                .with_context(|| format!("the run returned no displacement of subdomain `{}`", sub.name))?;
+            let (_, f) = displacements.iter().find(|(k, _)| *k as usize == s).ok_or_else(|| {
+                Error::Failed(format!("the run returned no displacement of subdomain `{}`", sub.name))
+            })?;
             let rows = f.rows();
             if rows != sub.n_dofs() || f.cols() != nt {
-                anyhow::bail!(
+                failed!(
                     "displacement of subdomain `{}` is {rows} × {}, the scene gives {} × {nt}",
                     sub.name,
                     f.cols(),
@@ -448,20 +447,22 @@ pub fn status_name(c: u8) -> String {
 /// The interface fields of ŝ as CSV: one row per time point and node pair, with the pair's
 /// position, the tractions on side a and the jumps in the interface's frame, and the status
 /// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface). docs/outputs.md.
-pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> anyhow::Result<String> {
+pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<String> {
     use std::fmt::Write as _;
     let nt = model.time.n_points();
     let mut out = String::from("time,interface,a,b,pair,x,y,traction_n,traction_t,jump_n,jump_t,status\n");
     for i in 0..nt {
         let t = model.time.t(i);
         for sol in interfaces {
-            let itf = model
-                .interfaces
-                .get(sol.interface as usize)
-                .with_context(|| format!("solution of interface {}, which the scene does not have", sol.interface))?;
+            let itf = model.interfaces.get(sol.interface as usize).ok_or_else(|| {
+                Error::Failed(format!(
+                    "solution of interface {}, which the scene does not have",
+                    sol.interface
+                ))
+            })?;
             let np = itf.n_pairs();
             if sol.f_a_hat.rows() != 2 * np || sol.f_a_hat.cols() != nt {
-                anyhow::bail!(
+                failed!(
                     "interface {}: F̂_a is {} × {}, the scene gives {} × {nt}",
                     sol.interface,
                     sol.f_a_hat.rows(),
@@ -476,10 +477,10 @@ pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> anyhow:
                     let code = *sol
                         .status
                         .get(i * np + p)
-                        .with_context(|| format!("interface {}: statuses missing", sol.interface))?;
+                        .ok_or_else(|| Error::Failed(format!("interface {}: statuses missing", sol.interface)))?;
                     *STATUS_NAMES
                         .get(code as usize)
-                        .with_context(|| format!("interface {}: status code {code}", sol.interface))?
+                        .ok_or_else(|| Error::Failed(format!("interface {}: status code {code}", sol.interface)))?
                 } else {
                     "perfect"
                 };
@@ -512,8 +513,11 @@ pub fn write_through_partial(
     path: &Path,
     replace: bool,
     fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
-) -> anyhow::Result<()> {
-    let name = path.file_name().context("a file name")?.to_string_lossy();
+) -> Result<()> {
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::Invalid(format!("{}: not a file name", path.display())))?
+        .to_string_lossy();
     let tmp = path.with_file_name(format!(".{name}.partial"));
     // A stale partial file of a run's output is refused (a run never starts over one); others
     // are replaced.
@@ -530,7 +534,7 @@ pub fn write_through_partial(
     });
     if let Err(e) = written {
         let _ = std::fs::remove_file(&tmp);
-        anyhow::bail!(
+        failed!(
             "cannot write {}: {} (nothing of it was kept)",
             path.display(),
             io_why(&e)
@@ -544,9 +548,9 @@ pub fn write_through_partial(
     if let Err(e) = published {
         let _ = std::fs::remove_file(&tmp);
         if e.kind() == std::io::ErrorKind::AlreadyExists {
-            anyhow::bail!("{} already exists; nothing was overwritten", path.display());
+            return Err(Error::Exists(path.to_path_buf()));
         }
-        anyhow::bail!("cannot move {} to {}: {}", tmp.display(), path.display(), io_why(&e));
+        failed!("cannot move {} to {}: {}", tmp.display(), path.display(), io_why(&e));
     }
     Ok(())
 }
@@ -581,17 +585,17 @@ pub fn rename_new(from: &Path, to: &Path) -> std::io::Result<()> {
 
 /// Writes `value` as JSON to `dir/name`, creating `dir`, through a partial file (replacing an
 /// existing file of that name); returns the path.
-pub fn write_json(dir: &Path, name: &str, value: &Value) -> anyhow::Result<PathBuf> {
+pub fn write_json(dir: &Path, name: &str, value: &Value) -> Result<PathBuf> {
     write_json_as(dir, name, value, true)
 }
 
 /// As [`write_json`], never over an existing file (a run's outputs).
-pub fn write_json_new(dir: &Path, name: &str, value: &Value) -> anyhow::Result<PathBuf> {
+pub fn write_json_new(dir: &Path, name: &str, value: &Value) -> Result<PathBuf> {
     write_json_as(dir, name, value, false)
 }
 
-fn write_json_as(dir: &Path, name: &str, value: &Value, replace: bool) -> anyhow::Result<PathBuf> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create output folder {}", dir.display()))?;
+fn write_json_as(dir: &Path, name: &str, value: &Value, replace: bool) -> Result<PathBuf> {
+    std::fs::create_dir_all(dir).what(|| format!("cannot create output folder {}", dir.display()))?;
     let path = dir.join(name);
     write_through_partial(&path, replace, |w| {
         serde_json::to_writer(w, value).map_err(std::io::Error::from)

@@ -13,8 +13,8 @@
 //!   −1 on perfect interfaces, −2 at an edge end clamped on both sides, which is no pair), `normal`
 //!   and `tangent`; cell data `interface` and `contact` (1 on contact interfaces).
 
+use crate::error::{failed, Error, IoWhat, Result};
 use crate::output::pair_values;
-use anyhow::{bail, Context};
 use glissade_mechanics::model::Model;
 use glissade_mechanics::post::{nodal_stresses_into, von_mises, NodalStress};
 use glissade_messages::InterfaceSolution;
@@ -68,10 +68,10 @@ pub fn write_series(
     out: &Path,
     stem: &str,
     every: usize,
-) -> anyhow::Result<Series> {
+) -> Result<Series> {
     let nt = model.time.n_points();
     if u.len() != model.subdomains.len() {
-        bail!(
+        failed!(
             "displacements of {} subdomains, the scene has {}",
             u.len(),
             model.subdomains.len()
@@ -80,7 +80,7 @@ pub fn write_series(
     for (s, per_time) in u.iter().enumerate() {
         let sub = &model.subdomains[s];
         if per_time.len() != nt || per_time.iter().any(|v| v.len() != sub.n_dofs()) {
-            bail!(
+            failed!(
                 "displacement of subdomain `{}`: {} time points of {:?} values, the scene gives {nt} of {}",
                 sub.name,
                 per_time.len(),
@@ -91,14 +91,17 @@ pub fn write_series(
     }
     let mut by_interface: Vec<Option<&InterfaceSolution>> = vec![None; model.interfaces.len()];
     for sol in interfaces {
-        let slot = by_interface
-            .get_mut(sol.interface as usize)
-            .with_context(|| format!("solution of interface {}, which the scene does not have", sol.interface))?;
+        let slot = by_interface.get_mut(sol.interface as usize).ok_or_else(|| {
+            Error::Failed(format!(
+                "solution of interface {}, which the scene does not have",
+                sol.interface
+            ))
+        })?;
         *slot = Some(sol);
     }
     for (i, itf) in model.interfaces.iter().enumerate() {
         let Some(sol) = by_interface[i] else {
-            bail!(
+            failed!(
                 "no solution of interface {i} ({} | {})",
                 model.subdomains[itf.a].name,
                 model.subdomains[itf.b].name
@@ -107,7 +110,7 @@ pub fn write_series(
         let rows = 2 * itf.n_pairs();
         for (name, f) in [("F̂_a", &sol.f_a_hat), ("Ŵ_a", &sol.w_a_hat), ("Ŵ_b", &sol.w_b_hat)] {
             if f.rows() != rows || f.cols() != nt {
-                bail!(
+                failed!(
                     "interface {i}: {name} is {} × {}, the scene gives {rows} × {nt}",
                     f.rows(),
                     f.cols()
@@ -115,7 +118,7 @@ pub fn write_series(
             }
         }
         if itf.is_contact() && sol.status.len() != itf.n_pairs() * nt {
-            bail!(
+            failed!(
                 "interface {i}: {} statuses, the scene gives {}",
                 sol.status.len(),
                 itf.n_pairs() * nt
@@ -125,14 +128,14 @@ pub fn write_series(
     let (pvd, dir) = series_paths(out, stem);
     for p in [&pvd, &dir] {
         if std::fs::symlink_metadata(p).is_ok() {
-            bail!("{} already exists; nothing was overwritten", p.display());
+            return Err(Error::Exists(p.to_path_buf()));
         }
     }
     let partial = out.join(format!(".{stem}-vtu.partial"));
     if partial.exists() {
-        std::fs::remove_dir_all(&partial).with_context(|| format!("cannot remove {}", partial.display()))?;
+        std::fs::remove_dir_all(&partial).what(|| format!("cannot remove {}", partial.display()))?;
     }
-    std::fs::create_dir_all(&partial).with_context(|| format!("cannot create {}", partial.display()))?;
+    std::fs::create_dir_all(&partial).what(|| format!("cannot create {}", partial.display()))?;
     let times = series_times(nt, every);
     let written = write_vtu_files(model, u, &by_interface, &partial, &dir, &times);
     let (bytes, collection) = match written {
@@ -140,7 +143,10 @@ pub fn write_series(
         Err(e) => {
             // Nothing of a series that could not be written is kept.
             let _ = std::fs::remove_dir_all(&partial);
-            return Err(e.context(format!("the ParaView series {} was not written", pvd.display())));
+            return Err(Error::NotDone {
+                what: format!("the ParaView series {} was not written", pvd.display()),
+                source: Box::new(e),
+            });
         }
     };
     let text = format!(
@@ -148,7 +154,7 @@ pub fn write_series(
     );
     if let Err(e) = crate::output::rename_new(&partial, &dir) {
         let _ = std::fs::remove_dir_all(&partial);
-        bail!(
+        failed!(
             "cannot move {} to {}: {}",
             partial.display(),
             dir.display(),
@@ -158,7 +164,10 @@ pub fn write_series(
     if let Err(e) = crate::output::write_through_partial(&pvd, false, |w| w.write_all(text.as_bytes())) {
         // The series' files without their index: removed with it.
         let _ = std::fs::remove_dir_all(&dir);
-        return Err(e.context(format!("the ParaView series {} was not written", pvd.display())));
+        return Err(Error::NotDone {
+            what: format!("the ParaView series {} was not written", pvd.display()),
+            source: Box::new(e),
+        });
     }
     Ok(Series {
         pvd,
@@ -177,7 +186,7 @@ fn write_vtu_files(
     folder: &Path,
     dir: &Path,
     times: &[usize],
-) -> anyhow::Result<(u64, String)> {
+) -> Result<(u64, String)> {
     let solid = SolidGrid::new(model);
     let edges = InterfaceGrid::new(model);
     let mut bytes = 0u64;
@@ -194,11 +203,11 @@ fn write_vtu_files(
                 edges.write(model, by_interface, i, &mut buf);
             }
             std::fs::write(folder.join(&name), &buf).map_err(|e| {
-                anyhow::anyhow!(
+                Error::Failed(format!(
                     "cannot write {}: {}",
                     dir.join(&name).display(),
                     crate::output::io_why(&e)
-                )
+                ))
             })?;
             bytes += buf.len() as u64;
             let _ = writeln!(
@@ -277,7 +286,7 @@ impl SolidGrid {
         SolidGrid { geometry, subdomain }
     }
 
-    fn write(&self, model: &Model, u: &[Vec<&[f64]>], i: usize, out: &mut Vec<u8>) -> anyhow::Result<()> {
+    fn write(&self, model: &Model, u: &[Vec<&[f64]>], i: usize, out: &mut Vec<u8>) -> Result<()> {
         let n_points = self.geometry.n_points;
         let mut displacement = Vec::with_capacity(24 * n_points);
         let mut stress = Vec::with_capacity(48 * n_points);
@@ -290,7 +299,7 @@ impl SolidGrid {
             nodal.resize(n, [0.0; 4]);
             count.resize(n, 0);
             nodal_stresses_into(sub, model.plane, v, &mut nodal, &mut count)
-                .with_context(|| format!("stresses of subdomain `{}`", sub.name))?;
+                .map_err(|e| Error::Failed(format!("stresses of subdomain `{}`: {e}", sub.name)))?;
             for k in 0..n {
                 put_f64(&mut displacement, &[v[2 * k], v[2 * k + 1], 0.0]);
                 let [sx, sy, sz, txy] = nodal[k];
@@ -479,9 +488,9 @@ impl Appended {
 }
 
 /// Writes `data` (already complete) to `path` through a partial file, refusing to overwrite.
-pub fn write_new_file(path: &Path, data: &[u8]) -> anyhow::Result<()> {
+pub fn write_new_file(path: &Path, data: &[u8]) -> Result<()> {
     if std::fs::symlink_metadata(path).is_ok() {
-        bail!("{} already exists; nothing was overwritten", path.display());
+        return Err(Error::Exists(path.to_path_buf()));
     }
     crate::output::write_through_partial(path, false, |w| w.write_all(data))
 }
