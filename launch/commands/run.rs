@@ -203,14 +203,14 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     // disk): each is complete, and nothing is left of the one that failed.
     let mut kept: Vec<std::path::PathBuf> = recording.iter().filter(|p| p.is_file()).cloned().collect();
     let summary_path = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)
-        .map_err(|e| with_kept(e, &kept))?;
+        .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(summary_path.clone());
     let fields_path = write_json_new(
         &args.out,
         &RunFile::Fields.name(&sc.model.name, &run_id),
         &interface_fields(&sc.model, &result.interfaces),
     )
-    .map_err(|e| with_kept(e, &kept))?;
+    .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(fields_path.clone());
     if args.interior || (sc.model.interfaces.is_empty() && !args.vtu) {
         let p = write_json_new(
@@ -218,7 +218,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             &RunFile::Displacement.name(&sc.model.name, &run_id),
             &glissade::output::displacements(&sc.model, &result.displacements),
         )
-        .map_err(|e| with_kept(e, &kept))?;
+        .map_err(|e| with_kept(e.into(), &kept))?;
         println!("displacements: {}", p.display());
         kept.push(p);
     }
@@ -233,7 +233,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             &stem,
             args.vtu_every as usize,
         )
-        .map_err(|e| with_kept(e, &kept))?;
+        .map_err(|e| with_kept(e.into(), &kept))?;
         kept.push(v.pvd.clone());
         Some(v)
     } else {
@@ -264,7 +264,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             &path,
             glissade::output::interface_csv(&sc.model, &result.interfaces)?.as_bytes(),
         )
-        .map_err(|e| with_kept(e, &kept))?;
+        .map_err(|e| with_kept(e.into(), &kept))?;
         println!("csv: {}", path.display());
     }
     if let Some(v) = series {
