@@ -278,6 +278,7 @@ pub fn run_distributed_observed(
         .envelope(launcher, 0, Stage::Setup),
         payload: Payload::Scene {
             text: scene.text.clone(),
+            overrides: scene.overrides,
         },
     };
     let _queryable = transport::serve_scene(&session, run_id, encode(&scene_msg))?;
