@@ -1,5 +1,5 @@
 //! A node process (`glissade node subdomain|interface|coarse`): joins the run's bus, fetches the
-//! scene over it, builds its nodes as the scene's deployment says and runs them until the run
+//! scene (its text and the launcher's command-line overrides) over it, builds its nodes as the scene's deployment says and runs them until the run
 //! ends.
 
 use crate::bus::Joining;
@@ -10,7 +10,7 @@ use anyhow::bail;
 use glissade_bus::RunContext;
 use glissade_deploy::{build_interface_node, build_nodes, Plan, Selection};
 use glissade_messages::{decode, Expected, Payload};
-use glissade_scene::{fingerprint, load_str};
+use glissade_scene::{fingerprint_with, load_with};
 use glissade_zenoh as transport;
 use std::sync::Arc;
 use std::time::Duration;
@@ -40,16 +40,17 @@ pub fn run_node_process(
         scene_fingerprint: fp,
     };
     let msg = decode(&bytes, &expected)?;
-    let Payload::Scene { text } = msg.payload else {
+    let Payload::Scene { text, overrides } = msg.payload else {
         bail!(
             "the launcher's scene query returned a {} message",
             msg.payload.field_key()
         )
     };
-    if fingerprint(&text) != fp {
+    if fingerprint_with(&text, &overrides) != fp {
         bail!("the scene received from the bus does not match its fingerprint {fp:016x}");
     }
-    let scene = load_str(&text, "<scene from the bus>")?;
+    // The scene as written with the launcher's command-line overrides: the run's model.
+    let scene = load_with(&text, "<scene from the bus>", &overrides)?;
     let model = Arc::new(scene.model.clone());
     let plan = Plan::new(&model).with_scene(&scene);
     let selection = match role {

@@ -20,7 +20,7 @@ use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
 use glissade_recorder::{
     log_time_now, recording_file_name, Recorder, RecorderError, RecorderOptions, RecordingStats, RunInfo,
 };
-use glissade_scene::{fingerprint, load_str, LoadedScene};
+use glissade_scene::{fingerprint_with, load_with, LoadedScene};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -103,6 +103,7 @@ fn run_info(scene: &LoadedScene, run_id: &str) -> RunInfo {
         scene_name: scene.model.name.clone(),
         scene_fingerprint: scene.fingerprint,
         scene_text: scene.text.clone(),
+        scene_overrides: scene.overrides,
         software: software(),
     }
 }
@@ -298,13 +299,14 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
         run_id: run_id.to_string(),
         scene_fingerprint: fp,
     };
-    let Payload::Scene { text } = decode(&bytes, &expected)?.payload else {
+    let Payload::Scene { text, overrides } = decode(&bytes, &expected)?.payload else {
         invalid!("the launcher's scene query returned another payload");
     };
-    if fingerprint(&text) != fp {
+    if fingerprint_with(&text, &overrides) != fp {
         invalid!("the scene received from the bus does not match its fingerprint {fp:016x}");
     }
-    let scene = load_str(&text, "<scene from the bus>")?;
+    // With the overrides: `--record full` and the iteration cap are the run's, not the file's.
+    let scene = load_with(&text, "<scene from the bus>", &overrides)?;
     let mut recorder = create_recorder(&scene, run_id, path)?;
     eprintln!(
         "{}recording to {} (pid {})",

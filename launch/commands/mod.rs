@@ -61,31 +61,19 @@ pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The scene with the command line's `--accuracy`, `--tolerance` and `--max-iterations` applied,
-/// after checking them and that the output folder is writable (before anything is solved).
+/// The scene with the command line's `--accuracy`, `--tolerance`, `--max-iterations` and
+/// `--record` applied (each checked as the scene's own key is, and refused with that key's
+/// error), after checking that the output folder is writable (before anything is solved). The
+/// overrides stay beside the scene text: node processes get both over the bus, and recordings
+/// attach both.
 pub(crate) fn load_with_overrides(
     scene: &std::path::Path,
     out: &std::path::Path,
     overrides: &Overrides,
 ) -> anyhow::Result<glissade_scene::LoadedScene> {
-    let sc = load_scene(scene)?;
-    if let Some(tolerance) = overrides.tolerance {
-        if !(tolerance > 0.0 && tolerance.is_finite()) {
-            anyhow::bail!("--tolerance {tolerance}: must be a positive number");
-        }
-    }
-    if let Some(accuracy) = overrides.accuracy {
-        if !(accuracy > 0.0 && accuracy < 1.0) {
-            anyhow::bail!("--accuracy {accuracy}: must be a relative error in (0, 1)");
-        }
-    }
-    if overrides.max_iterations == Some(0) {
-        anyhow::bail!("--max-iterations 0: must be at least 1");
-    }
+    let sc = load_scene(scene)?.with_overrides(&scene.display().to_string(), overrides)?;
     ensure_writable(out)?;
-    // Into the scene text, not only this process's model: node processes (`bench --processes`)
-    // build their model from the text.
-    Ok(sc.with_overrides(&scene.display().to_string(), overrides)?)
+    Ok(sc)
 }
 
 /// A random run id: 128 bits in hex.

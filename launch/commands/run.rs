@@ -24,7 +24,14 @@ impl LiveView {
                     basis_sizes: Vec::new(),
                 };
                 let origin = args.scene.display().to_string();
-                Some(glissade_replay::View::new(&sc.text, &origin, run_id, &opts, None)?)
+                Some(glissade_replay::View::new(
+                    &sc.text,
+                    &sc.overrides,
+                    &origin,
+                    run_id,
+                    &opts,
+                    None,
+                )?)
             }
             None => None,
         };

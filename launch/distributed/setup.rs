@@ -106,6 +106,7 @@ pub(super) fn set_up(
         envelope: ctx.envelope(launcher, 0, Stage::Setup),
         payload: Payload::Scene {
             text: scene.text.clone(),
+            overrides: scene.overrides,
         },
     };
     let queryable = transport::serve_scene(session, run_id, encode(&scene_msg))?;

@@ -11,12 +11,14 @@
 //! - `field`, `values`: fields and their buffers ([`Field`], [`Values`], [`BufferPool`],
 //!   [`DecodeBuffers`]);
 //! - `payload`: what is sent ([`Payload`] and its structs, [`Message`]);
+//! - `overrides`: the command-line settings that travel with the scene text ([`Overrides`]);
 //! - [`topic`](mod@topic): every key expression of a run;
 //! - `codec`: [`encode`], [`decode`] and their checks ([`DecodeError`], [`Expected`]).
 
 mod codec;
 mod field;
 mod identity;
+mod overrides;
 mod payload;
 pub mod topic;
 mod values;
@@ -30,6 +32,7 @@ pub use codec::{
 };
 pub use field::{BufferPool, DecodeBuffers, Field, HoldSource};
 pub use identity::{Envelope, NodeId, Role, Stage};
+pub use overrides::{Overrides, RecordOverride};
 pub use payload::{Decision, InterfaceIndicators, InterfaceSolution, Message, ParticularModes, Payload, Verdict};
 pub use topic::{key_matches, role_field_topic, run_topics, topic, topic_field, Routes};
 pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
@@ -37,5 +40,6 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
 /// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
 /// `BoundaryModes`, a PGD subdomain's state in mode form. Version 4: the decision carries the step
-/// of the contact forces and the error estimate, `InterfaceIndicators` the step's sums.
-pub const SCHEMA_VERSION: u32 = 4;
+/// of the contact forces and the error estimate, `InterfaceIndicators` the step's sums. Version 5:
+/// `Scene` carries the command-line [`Overrides`] beside the text (the text is the file as written).
+pub const SCHEMA_VERSION: u32 = 5;

@@ -2,7 +2,7 @@
 //! [`Verdict`], [`InterfaceIndicators`], [`ParticularModes`], [`InterfaceSolution`]), the checks
 //! of their sizes after decoding, and the [`Message`] (envelope + payload).
 
-use crate::{DecodeBuffers, DecodeError, Envelope, Field, Role};
+use crate::{DecodeBuffers, DecodeError, Envelope, Field, Overrides, Role};
 use serde::{Deserialize, Serialize};
 
 /// How a run ended, or that it goes on.
@@ -104,9 +104,11 @@ pub struct InterfaceSolution {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 #[bincode(decode_context = "DecodeBuffers")]
 pub enum Payload {
-    /// The scene file's text, so that remote nodes need no file.
+    /// The scene file's text as written, so that remote nodes need no file, and the command-line
+    /// settings applied to it: the text and the overrides together build the run's model.
     Scene {
         text: String,
+        overrides: Overrides,
     },
     /// L_E of a subdomain over its macro slots (interface, number of modes), sent once.
     HomogenizedOperator {
@@ -514,7 +516,11 @@ mod tests {
             q_hat: Field::zeros(4, 5),
         };
         assert_eq!(lengths(directions), [20]);
-        assert!(lengths(Payload::Scene { text: "x".into() }).is_empty());
+        assert!(lengths(Payload::Scene {
+            text: "x".into(),
+            overrides: Overrides::default()
+        })
+        .is_empty());
     }
 
     #[test]

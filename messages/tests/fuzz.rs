@@ -10,8 +10,8 @@
 
 use glissade_messages::{
     decode, decode_from_reader, decode_from_slices, encode, encode_pieces, BufferPool, Decision, DecodeBuffers,
-    Envelope, Expected, Field, HeldBlock, HoldSource, InterfaceIndicators, InterfaceSolution, Message, NodeId, Payload,
-    Piece, Role, Stage, Values, Verdict, SCHEMA_VERSION,
+    Envelope, Expected, Field, HeldBlock, HoldSource, InterfaceIndicators, InterfaceSolution, Message, NodeId,
+    Overrides, Payload, Piece, RecordOverride, Role, Stage, Values, Verdict, SCHEMA_VERSION,
 };
 use proptest::prelude::*;
 use std::sync::{Arc, Mutex};
@@ -113,6 +113,23 @@ fn anderson_payload() -> impl Strategy<Value = Payload> {
     ]
 }
 
+/// Command-line overrides, each present or not.
+fn overrides() -> impl Strategy<Value = Overrides> {
+    let record = prop_oneof![Just(RecordOverride::Off), Just(RecordOverride::Full)];
+    (
+        proptest::option::of(any::<f64>()),
+        proptest::option::of(any::<f64>()),
+        proptest::option::of(any::<usize>()),
+        proptest::option::of(record),
+    )
+        .prop_map(|(accuracy, tolerance, max_iterations, record)| Overrides {
+            accuracy,
+            tolerance,
+            max_iterations,
+            record,
+        })
+}
+
 /// The payload kinds other than Anderson's.
 fn other_payload() -> impl Strategy<Value = Payload> {
     let verdict = prop_oneof![
@@ -123,7 +140,7 @@ fn other_payload() -> impl Strategy<Value = Payload> {
         ".{0,12}".prop_map(|detail| Verdict::Diverged { detail }),
     ];
     prop_oneof![
-        ".{0,40}".prop_map(|text| Payload::Scene { text }),
+        (".{0,40}", overrides()).prop_map(|(text, overrides)| Payload::Scene { text, overrides }),
         (
             any::<u32>(),
             proptest::collection::vec((any::<u32>(), any::<u32>()), 0..4),
@@ -457,10 +474,11 @@ proptest! {
                     stage: Stage::Linear,
                     sender: NodeId { role: Role::Subdomain, index: 0 },
                 },
-                payload: Payload::Scene { text: String::new() },
+                payload: Payload::Scene { text: String::new(), overrides: Overrides::default() },
             });
-            // The envelope without its empty Scene payload (variant index u32 + length u64).
-            bytes.extend_from_slice(&env[..env.len() - 12]);
+            // The envelope without its empty Scene payload (variant index u32, length u64, and the
+            // four absent overrides, a byte each).
+            bytes.extend_from_slice(&env[..env.len() - 16]);
         }
         bytes.extend_from_slice(&tail);
         check(&bytes, &[])?;

@@ -460,7 +460,12 @@ fn replay_skips_and_reports_what_is_not_the_runs() {
         &dir.to_path_buf(),
     ]);
     let original = glissade_recorder::Recording::open(&dir.join("small-three-layer-fr.mcap")).unwrap();
-    let loaded = glissade_scene::load_str(original.scene_text().unwrap(), "scene.toml").unwrap();
+    let loaded = glissade_scene::load_with(
+        original.scene_text().unwrap(),
+        "scene.toml",
+        original.scene_overrides().unwrap(),
+    )
+    .unwrap();
     let forged_path = dir.join("forged.mcap");
     let mut out = glissade::recording::create_recorder(&loaded, "fr", &forged_path).unwrap();
     let mut forged = 0;

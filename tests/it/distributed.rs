@@ -44,7 +44,6 @@ pub(crate) fn assert_identical(a: &RunResult, b: &RunResult) {
     }
 }
 
-/// `text` with `lines` added at the top of its `[deployment]` section.
 /// Runs `sc` in-process and as processes (run id `run_id`), asserts that both give the same bits,
 /// and returns the in-process result.
 pub(crate) fn in_process_equals_processes(sc: &glissade_scene::LoadedScene, run_id: &str) -> RunResult {
@@ -61,6 +60,56 @@ pub(crate) fn in_process_equals_processes(sc: &glissade_scene::LoadedScene, run_
     local
 }
 
+/// Command-line overrides reach the node processes: the launcher serves the scene text as
+/// written with the overrides beside it, and every node process rebuilds the overridden model
+/// from the two. With `--max-iterations` below the scene's own convergence the processes stop at
+/// the cap, and with a looser `--accuracy` they stop earlier, bit for bit as the overridden model
+/// runs in-process (a node process with the file's settings would stop elsewhere, and would
+/// refuse the scene's fingerprint).
+#[test]
+fn command_line_overrides_reach_the_node_processes() {
+    use glissade_messages::{Overrides, Verdict};
+    let written = scene(&scene_text("small-three-layer"));
+    let plain = crate::common::run(&written);
+    let n = plain.iterations.len();
+    assert!(
+        n > 5 && plain.verdict == Verdict::Converged,
+        "{n} iterations, {:?}",
+        plain.verdict
+    );
+    let cap = n - 2;
+    let capped = written
+        .with_overrides(
+            "test.toml",
+            &Overrides {
+                max_iterations: Some(cap),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    assert_eq!(capped.text, written.text, "the text travels as written");
+    let r = in_process_equals_processes(&capped, "overrides-cap");
+    assert_eq!((r.iterations.len(), &r.verdict), (cap, &Verdict::MaxIterations));
+    let loose = written
+        .with_overrides(
+            "test.toml",
+            &Overrides {
+                accuracy: Some(5e-2),
+                max_iterations: Some(n + 10),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    let r = in_process_equals_processes(&loose, "overrides-accuracy");
+    assert!(
+        r.iterations.len() < n && r.verdict == Verdict::Converged,
+        "accuracy 5e-2: {} iterations ({n} at the scene's 1e-3), {:?}",
+        r.iterations.len(),
+        r.verdict
+    );
+}
+
+/// `text` with `lines` added at the top of its `[deployment]` section.
 fn with_deployment(text: &str, lines: &str) -> String {
     assert!(text.contains("\n[deployment]\n"), "the scene has a deployment section");
     text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{lines}\n"), 1)

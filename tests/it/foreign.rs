@@ -27,7 +27,7 @@ fn fails(args: &[&str]) -> String {
 /// Decodes every message of an export with the protobuf decoder of `mcap-protobuf-support` and
 /// prints, as JSON: messages per topic, the schema and message encodings seen, (iteration, η) of
 /// every Decision, and the values of the last message on `field_topic` (its `w`) as the hex of
-/// their little-endian bytes.
+/// their little-endian bytes, and the text attachments by name.
 const READER: &str = r#"
 import json, struct, sys
 from collections import Counter
@@ -45,8 +45,9 @@ with open(sys.argv[1], "rb") as f:
             eta.append([proto.envelope.iteration, proto.eta])
         if channel.topic == sys.argv[2]:
             w = struct.pack("<%dd" % len(proto.w.values), *proto.w.values).hex()
+    attachments = {a.name: a.data.decode() for a in reader.iter_attachments()}
 print(json.dumps({"counts": counts, "encodings": sorted(encodings), "eta": eta, "w": w,
-                  "run_ids": sorted(run_ids)}))
+                  "run_ids": sorted(run_ids), "attachments": attachments}))
 "#;
 
 #[test]
@@ -57,7 +58,18 @@ fn an_export_decodes_with_a_foreign_protobuf_reader() {
     let dir = scratch("foreign");
     let scene = format!("{}/launch/scenes/small-three-layer.toml", env!("CARGO_MANIFEST_DIR"));
     let out = dir.display().to_string();
-    glissade_ok(&[&"run", &scene, &"--in-process", &"--out", &out, &"--run-id", &"x"]);
+    // `--accuracy` at the scene's own value: the same run, with an override to record.
+    glissade_ok(&[
+        &"run",
+        &scene,
+        &"--in-process",
+        &"--accuracy",
+        &"0.001",
+        &"--out",
+        &out,
+        &"--run-id",
+        &"x",
+    ]);
     let original = dir.join("small-three-layer-x.mcap");
     let foreign = dir.join("foreign");
     let printed = glissade_ok(&[&"export", &original, &"--foreign", &foreign]);
@@ -99,6 +111,19 @@ fn an_export_decodes_with_a_foreign_protobuf_reader() {
     assert_eq!(counts, expected_counts, "every message of every topic, decoded");
     assert_eq!(seen["encodings"], serde_json::json!([["protobuf", "protobuf"]]));
     assert_eq!(seen["run_ids"], serde_json::json!(["x"]));
+    // The scene as written and the command line's overrides, beside it.
+    let attachments = &seen["attachments"];
+    assert_eq!(
+        attachments["scene.toml"].as_str(),
+        Some(std::fs::read_to_string(&scene).unwrap().as_str())
+    );
+    let overrides: serde_json::Value =
+        serde_json::from_str(attachments["overrides.json"].as_str().expect("overrides.json")).unwrap();
+    assert_eq!(
+        overrides,
+        serde_json::json!({"accuracy": 0.001, "tolerance": null, "max_iterations": null, "record": null})
+    );
+    assert_eq!(rec.scene_overrides().and_then(|o| o.accuracy), Some(0.001));
 
     // η per iteration equals the summary's, exactly (both shortest round-trip decimal of the same
     // doubles).

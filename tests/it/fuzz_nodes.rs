@@ -388,6 +388,7 @@ impl Fuzzer {
             _ => {
                 bad.payload = Payload::Scene {
                     text: "[time]\nT = 1.0".into(),
+                    overrides: Default::default(),
                 };
                 (
                     bad,

@@ -7,9 +7,10 @@
 use crate::common::{glissade_ok, python_with, scene, scene_text, scratch, Scratch};
 use glissade::run::Run;
 use glissade::runner::RunOptions;
-use glissade_messages::{encode, Payload, Role, Stage};
+use glissade_messages::{encode, Overrides, Payload, RecordOverride, Role, Stage, Verdict};
 use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
 use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
+use glissade_scene::LoadedScene;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -19,13 +20,17 @@ fn temp_dir(tag: &str) -> Scratch {
 
 /// Records an in-process run of `text` into `dir`; returns the file.
 fn record(text: &str, dir: &Path, run_id: &str) -> PathBuf {
-    let sc = scene(text);
+    record_scene(&scene(text), dir, run_id)
+}
+
+/// Records an in-process run of `sc` into `dir`; returns the file.
+fn record_scene(sc: &LoadedScene, dir: &Path, run_id: &str) -> PathBuf {
     let path = dir.join(format!("{}-{run_id}.mcap", sc.model.name));
     let opts = RunOptions {
         run_id: run_id.into(),
         interior: false,
     };
-    let (result, outcome) = Run::new(&sc, &opts)
+    let (result, outcome) = Run::new(sc, &opts)
         .recorded(Some(path.as_path()))
         .in_process()
         .map(|o| (o.result, o.recording))
@@ -54,6 +59,66 @@ fn every_node_of_a_recorded_run_reexecutes_bit_identically() {
         assert_eq!(r.outputs, r.recorded_outputs, "node {id}");
         assert!(r.inputs > 0 && r.outputs > 0, "node {id}: {r:?}");
     }
+}
+
+/// A run with command-line overrides records the scene text as written and the overrides beside
+/// it, and readers rebuild the overridden model from the two: the replay's final state has the
+/// overridden cap and accuracy, and every node re-executes bit for bit, the interface node's stop
+/// at the overridden cap included (the text alone would let the run go on: it converges later).
+#[test]
+fn a_recording_with_overrides_rebuilds_the_overridden_model() {
+    let dir = temp_dir("reexec-overrides");
+    let written = scene(&scene_text("small-three-layer"));
+    let overrides = Overrides {
+        accuracy: Some(1e-4),
+        tolerance: None,
+        max_iterations: Some(4),
+        record: Some(RecordOverride::Full),
+    };
+    let sc = written.with_overrides("test.toml", &overrides).unwrap();
+    assert!(
+        written.model.solver.max_iterations > 4 && sc.fingerprint != written.fingerprint,
+        "{}",
+        written.model.solver.max_iterations
+    );
+    let path = record_scene(&sc, &dir, "rx-ov");
+    let recording = Recording::open(&path).unwrap();
+    assert_eq!(
+        recording.scene_text(),
+        Some(written.text.as_str()),
+        "the text as written"
+    );
+    assert_eq!(recording.scene_overrides(), Some(&overrides));
+    assert_eq!(recording.scene_fingerprint(), sc.fingerprint);
+    let decisions: Vec<(u32, Verdict)> = recording
+        .messages()
+        .filter(|m| m.topic.ends_with("/decision"))
+        .map(|m| {
+            let msg = recording.decode(&m).unwrap();
+            match msg.payload {
+                Payload::Decision(d) => (msg.envelope.iteration, d.verdict),
+                p => panic!("{}", p.field_key()),
+            }
+        })
+        .collect();
+    assert_eq!(
+        decisions.last(),
+        Some(&(3, Verdict::MaxIterations)),
+        "stopped at the overridden cap"
+    );
+    let state = glissade_replay::final_state(&recording).unwrap();
+    let solver = &state.model.solver;
+    assert_eq!((solver.max_iterations, solver.accuracy), (4, Some(1e-4)));
+    let nodes = recorded_nodes(&recording).unwrap();
+    assert!(nodes.iter().any(|n| n.role == Role::Interface), "{nodes:?}");
+    for id in nodes {
+        let r = reexecute(&recording, id).unwrap();
+        assert_eq!(r.mismatch, None, "node {id}");
+        assert_eq!(r.outputs, r.recorded_outputs, "node {id}");
+    }
+    // The written scene run without the cap goes on past it: the cap is the overrides'.
+    let plain = crate::common::run(&written);
+    assert!(plain.iterations.len() > 4, "{} iterations", plain.iterations.len());
 }
 
 /// With a time-coarse start the subdomains' first inputs are the launcher's local directions:
@@ -94,6 +159,7 @@ fn a_tampered_recording_names_the_first_differing_message_and_field() {
         scene_name: sc.model.name.clone(),
         scene_fingerprint: sc.fingerprint,
         scene_text: text.clone(),
+        scene_overrides: sc.overrides,
         software: "test".into(),
     };
     let mut rec = Recorder::create(&tampered_path, &run, &RecorderOptions::default()).unwrap();

@@ -1,5 +1,5 @@
 //! Foreign-readable copies of recordings (`glissade export --foreign`): the same channels, topics,
-//! log and publish times, scene attachment and `glissade` metadata, with every message re-encoded
+//! log and publish times, scene and overrides attachments and `glissade` metadata, with every message re-encoded
 //! as protobuf (message encoding `protobuf`; each schema, encoding `protobuf`, a serialized
 //! `google.protobuf.FileDescriptorSet` of `glissade.proto`, named by its message
 //! `glissade.<Payload>`), so that any MCAP tool decodes it: Foxglove, `mcap cat --json`, Python's
@@ -16,7 +16,7 @@ pub mod schema;
 pub use encode::encode_into;
 pub use schema::{file_descriptor_set_bytes, proto_source, PROTO_FILE};
 
-use crate::{mcap_detail, RecorderError, Recording, METADATA_NAME, SCENE_ATTACHMENT};
+use crate::{mcap_detail, RecorderError, Recording, METADATA_NAME, OVERRIDES_ATTACHMENT, SCENE_ATTACHMENT};
 use glissade_messages::{decode_from_reader, BufferPool, DecodeBuffers, Expected, Payload, SCHEMA_VERSION};
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -173,6 +173,18 @@ fn write(rec: &Recording, name: &str, path: &Path, software: &str) -> Result<(u6
                 name: SCENE_ATTACHMENT.to_string(),
                 media_type: "application/toml".to_string(),
                 data: std::borrow::Cow::Borrowed(text.as_bytes()),
+            })
+            .map_err(mcap_err)?;
+    }
+    if let Some(overrides) = rec.scene_overrides() {
+        let (log_time, create_time) = rec.scene_times();
+        writer
+            .attach(&mcap::Attachment {
+                log_time,
+                create_time,
+                name: OVERRIDES_ATTACHMENT.to_string(),
+                media_type: "application/json".to_string(),
+                data: std::borrow::Cow::Owned(crate::overrides_json(overrides).into_bytes()),
             })
             .map_err(mcap_err)?;
     }

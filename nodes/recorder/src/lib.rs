@@ -8,7 +8,10 @@
 //!   data is a text description of the envelope and payload layout with the schema version;
 //! - the payload bytes are exactly the bytes on the wire (envelope + payload, [`glissade_messages::encode`]);
 //! - a metadata record `glissade` (run id, scene name and fingerprint, software version, wire
-//!   schema version, what was recorded) and the scene file as an attachment `scene.toml`;
+//!   schema version, what was recorded), the scene file as written as an attachment `scene.toml`
+//!   and the command-line overrides the run applied to it as an attachment `overrides.json` (the
+//!   serde JSON form of [`glissade_messages::Overrides`], every key present, `null` when not
+//!   given): the two rebuild the run's model;
 //! - chunked; chunk compression none by default (solver fields are full-entropy f64: lz4 and zstd
 //!   shrink them by 0.1–5 % at a fraction of the write speed), lz4 or zstd on request;
 //! - a summary section (statistics, chunk, attachment and metadata indexes) and footer after
@@ -30,7 +33,7 @@ pub use reader::{ChannelInfo, RecordedMessage, Recording};
 pub use schema::{payload_schema, PAYLOAD_FIELDS};
 
 use durable::{DurableFile, Index, Pending};
-use glissade_messages::{peek_envelope, Stage, SCHEMA_VERSION};
+use glissade_messages::{peek_envelope, Overrides, Stage, SCHEMA_VERSION};
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -50,6 +53,8 @@ pub const ENCODING: &str = "bincode2";
 pub const METADATA_NAME: &str = "glissade";
 /// Name of the attachment holding the scene file.
 pub const SCENE_ATTACHMENT: &str = "scene.toml";
+/// Name of the attachment holding the command-line overrides applied to the scene (JSON).
+pub const OVERRIDES_ATTACHMENT: &str = "overrides.json";
 /// Codec description written into channel metadata.
 pub const CODEC: &str =
     "serde + bincode 2, standard config, little-endian, fixed-width integers; envelope then payload";
@@ -116,8 +121,10 @@ pub struct RunInfo {
     pub run_id: String,
     pub scene_name: String,
     pub scene_fingerprint: u64,
-    /// The scene file's text.
+    /// The scene file's text as written.
     pub scene_text: String,
+    /// The command-line settings the run applied on top of `scene_text`.
+    pub scene_overrides: Overrides,
     /// e.g. `glissade 0.1.0 (release)`.
     pub software: String,
 }
@@ -165,6 +172,11 @@ pub struct RecordingStats {
     pub channels: usize,
     /// File size after finishing.
     pub file_bytes: u64,
+}
+
+/// The content of the `overrides.json` attachment.
+pub(crate) fn overrides_json(overrides: &Overrides) -> String {
+    serde_json::to_string(overrides).expect("overrides are plain numbers and names")
 }
 
 /// File name of a run's recording: `<scene>-<run id>.mcap`.
@@ -272,6 +284,15 @@ impl Recorder {
                 name: SCENE_ATTACHMENT.to_string(),
                 media_type: "application/toml".to_string(),
                 data: std::borrow::Cow::Borrowed(run.scene_text.as_bytes()),
+            })
+            .map_err(mcap_err)?;
+        writer
+            .attach(&mcap::Attachment {
+                log_time: t,
+                create_time: t,
+                name: OVERRIDES_ATTACHMENT.to_string(),
+                media_type: "application/json".to_string(),
+                data: std::borrow::Cow::Owned(overrides_json(&run.scene_overrides).into_bytes()),
             })
             .map_err(mcap_err)?;
         // A first chunk, holding the schema of decisions (every run has them): a summary with no

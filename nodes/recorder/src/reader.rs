@@ -1,7 +1,7 @@
 //! Reading recordings back: channels, metadata, the scene, and the messages in file order.
 
-use crate::{RecorderError, METADATA_NAME, SCENE_ATTACHMENT};
-use glissade_messages::{decode, DecodeError, Expected, Message};
+use crate::{RecorderError, METADATA_NAME, OVERRIDES_ATTACHMENT, SCENE_ATTACHMENT};
+use glissade_messages::{decode, DecodeError, Expected, Message, Overrides};
 use mcap::read::{ChunkFlattener, Options};
 use mcap::records::Record;
 use std::borrow::Cow;
@@ -106,6 +106,8 @@ pub struct Recording {
     channels: Vec<ChannelInfo>,
     metadata: BTreeMap<String, String>,
     scene_text: Option<String>,
+    /// The command-line overrides applied to the scene (attachment `overrides.json`).
+    scene_overrides: Option<Overrides>,
     /// Log and create time of the scene attachment.
     scene_times: (u64, u64),
     /// The file ends with a summary and the closing magic.
@@ -170,6 +172,7 @@ impl Recording {
         let mut schemas: BTreeMap<u16, (String, String)> = BTreeMap::new();
         let mut metadata = BTreeMap::new();
         let mut scene_text = None;
+        let mut scene_overrides = None;
         let mut scene_times = (0, 0);
         let mut truncated = None;
         let records = ChunkFlattener::new_with_options(&bytes, Options::IgnoreEndMagic | Options::ValidateChunkCrcs)
@@ -217,6 +220,13 @@ impl Recording {
                             .map_err(|_| format("the scene attachment is not UTF-8".into()))?,
                     );
                 }
+                Record::Attachment { header, data, .. } if header.name == OVERRIDES_ATTACHMENT => {
+                    scene_overrides = Some(serde_json::from_slice(&data).map_err(|e| {
+                        format(format!(
+                            "the attachment {OVERRIDES_ATTACHMENT} is not the overrides' JSON: {e}"
+                        ))
+                    })?);
+                }
                 Record::DataEnd(_) => break,
                 _ => {}
             }
@@ -250,6 +260,7 @@ impl Recording {
             channels: channels.into_values().collect(),
             metadata,
             scene_text,
+            scene_overrides,
             scene_times,
             finished,
             truncated,
@@ -286,6 +297,13 @@ impl Recording {
     /// The scene file recorded with the run.
     pub fn scene_text(&self) -> Option<&str> {
         self.scene_text.as_deref()
+    }
+
+    /// The command-line settings the run applied on top of [`Recording::scene_text`] (attachment
+    /// `overrides.json`): the two rebuild the run's model (`glissade_scene::load_with`). None
+    /// when the recording holds no such attachment.
+    pub fn scene_overrides(&self) -> Option<&Overrides> {
+        self.scene_overrides.as_ref()
     }
 
     /// Log and create time (ns since the Unix epoch) of the scene attachment; zeros without one.

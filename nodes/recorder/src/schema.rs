@@ -4,7 +4,13 @@ use glissade_messages::SCHEMA_VERSION;
 
 /// (field chunk of the key expression, schema name `glissade.<Payload type>`, payload layout).
 pub const PAYLOAD_FIELDS: [(&str, &str, &str); 13] = [
-    ("scene", "glissade.Scene", "{ text: String }"),
+    (
+        "scene",
+        "glissade.Scene",
+        "{ text: String, overrides: Overrides }\n\
+         Overrides { accuracy: Option<f64>, tolerance: Option<f64>, max_iterations: Option<u64>, record: Option<RecordOverride> }\n\
+         RecordOverride = enum { Off, Full } (u32 variant index); Option = u8 0 (None) or 1 then the value",
+    ),
     (
         "homogenized_operator",
         "glissade.HomogenizedOperator",

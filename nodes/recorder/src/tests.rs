@@ -1,5 +1,7 @@
 use super::*;
-use glissade_messages::{encode, Decision, Envelope, Field, Message, NodeId, Payload, Role, Verdict};
+use glissade_messages::{
+    encode, Decision, Envelope, Field, Message, NodeId, Overrides, Payload, RecordOverride, Role, Verdict,
+};
 use std::io::BufRead;
 
 const RUN: &str = "r1";
@@ -10,6 +12,12 @@ fn run_info() -> RunInfo {
         scene_name: "tiny".into(),
         scene_fingerprint: 0xabcd,
         scene_text: "name = \"tiny\"\n# a scene\n".into(),
+        scene_overrides: Overrides {
+            accuracy: Some(1e-4),
+            max_iterations: Some(7),
+            record: Some(RecordOverride::Full),
+            ..Overrides::default()
+        },
         software: "glissade test".into(),
     }
 }
@@ -114,6 +122,7 @@ fn recording_reads_back_with_channels_schemas_metadata_and_summary() {
     let r = Recording::open(&path).unwrap();
     assert!(r.is_finished() && r.truncated().is_none());
     assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
+    assert_eq!(r.scene_overrides(), Some(&run_info().scene_overrides));
     assert_eq!(r.metadata()["run_id"], RUN);
     assert_eq!(r.metadata()["schema_version"], SCHEMA_VERSION.to_string());
     assert_eq!(r.scene_fingerprint(), 0xabcd);
@@ -153,7 +162,8 @@ fn recording_reads_back_with_channels_schemas_metadata_and_summary() {
     assert_eq!(summary.stats.unwrap().message_count, msgs.len() as u64);
     assert_eq!(summary.channels.len(), 5);
     assert_eq!(summary.schemas.len(), 3);
-    assert_eq!(summary.attachment_indexes.len(), 1);
+    let attachments: Vec<&str> = summary.attachment_indexes.iter().map(|a| a.name.as_str()).collect();
+    assert_eq!(attachments, [SCENE_ATTACHMENT, OVERRIDES_ATTACHMENT]);
     assert_eq!(summary.metadata_indexes.len(), 1);
     // One chunk per iteration at least (closed at every decision).
     assert!(summary.chunk_indexes.len() >= 3, "{}", summary.chunk_indexes.len());
@@ -327,6 +337,7 @@ fn survives_sigkill() {
     assert!(back.len() >= expected.len(), "{} < {}", back.len(), expected.len());
     assert_eq!(back[..expected.len()], expected[..]);
     assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
+    assert_eq!(r.scene_overrides(), Some(&run_info().scene_overrides));
     // Python `mcap`'s `make_reader` reads the same messages.
     let Some(python) = python_mcap() else { return };
     let crc = back.iter().fold(crc32fast::Hasher::new(), |mut h, w| {
@@ -521,6 +532,7 @@ fn a_kill_at_any_write_leaves_a_file_python_and_glissade_read_up_to_the_last_com
             "kill at op {op} + {bytes} bytes: glissade's reader"
         );
         assert_eq!(r.scene_text(), Some(run_info().scene_text.as_str()));
+        assert_eq!(r.scene_overrides(), Some(&run_info().scene_overrides));
     }
     // Some states hold part of the run, some none of it, some all of it but the summary.
     assert!(expected.iter().any(|e| e.2 == 0) && expected.iter().any(|e| e.2 == wire.len()));

@@ -1,5 +1,6 @@
 //! Re-executing one node of a recorded run (`glissade replay --node <role>:<id>`): the node is
-//! rebuilt from the recording's scene, fed every recorded message it subscribes to, in recorded
+//! rebuilt from the recording's scene (its text and the command-line overrides the run applied),
+//! fed every recorded message it subscribes to, in recorded
 //! order, and its outputs are compared byte for byte with the messages the recording holds from
 //! it, topic by topic. A mismatch names the first differing recorded message (key, iteration,
 //! stage) and the first differing field in it.
@@ -9,7 +10,7 @@ use glissade_bus::{Node, NodeError, RunContext};
 use glissade_deploy::{build_nodes, BuildError, Plan, Selection};
 use glissade_messages::{encode, key_matches, DecodeError, Message, NodeId, Role};
 use glissade_recorder::{Recording, THINNED_FIELDS};
-use glissade_scene::{load_str, SceneError};
+use glissade_scene::{load_with, SceneError};
 use glissade_subdomain::{LinearStageLog, LinearStageRecord};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -159,7 +160,11 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
     let text = recording
         .scene_text()
         .ok_or_else(|| refuse("the recording holds no scene".into()))?;
-    let scene = load_str(text, &format!("{path} (scene.toml)"))?;
+    let overrides = recording
+        .scene_overrides()
+        .ok_or_else(|| refuse("the recording holds no command-line overrides (attachment overrides.json)".into()))?;
+    // The scene as written with the run's command-line overrides: the model the run solved.
+    let scene = load_with(text, &format!("{path} (scene.toml)"), overrides)?;
     if scene.fingerprint != recording.scene_fingerprint() {
         return Err(refuse(format!(
             "the recorded scene's fingerprint {:016x} differs from the recording's {:016x}",

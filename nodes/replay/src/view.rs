@@ -8,9 +8,9 @@ use crate::{rerr, BoundaryStates, ColorBy, ReplayError, ReplayOptions, ReplaySum
 use glissade_bus::convert::view;
 use glissade_mechanics::local::{InterfaceFields, ReferenceErrors};
 use glissade_mechanics::model::Model;
-use glissade_messages::{Field, InterfaceSolution, Message, Payload, Stage};
+use glissade_messages::{Field, InterfaceSolution, Message, Overrides, Payload, Stage};
 use glissade_reference::{solve_reference, ReferenceOptions};
-use glissade_scene::load_str;
+use glissade_scene::load_with;
 use std::collections::BTreeMap;
 
 /// The Rerun view of one run, fed message by message.
@@ -39,18 +39,20 @@ pub struct View {
 }
 
 impl View {
-    /// Opens the sink, sends the layout (the blueprint) and logs the scene. `range` and
+    /// Opens the sink, sends the layout (the blueprint) and logs the scene: its text as written
+    /// with the command-line `overrides` the run applied (the run's model). `range` and
     /// `amplification` fix the colour range (with its legend) and the displacement amplification
     /// (None: from the first iteration logged, and the colour range and legend per iteration,
     /// then the final state's).
     pub fn new(
         scene_text: &str,
+        overrides: &Overrides,
         origin: &str,
         run_id: &str,
         opts: &ReplayOptions,
         range: Option<ColourRange>,
     ) -> Result<Self, ReplayError> {
-        let scene = load_str(scene_text, origin).map_err(|e| ReplayError::Content {
+        let scene = load_with(scene_text, origin, overrides).map_err(|e| ReplayError::Content {
             path: origin.to_string(),
             detail: e.to_string(),
         })?;
@@ -73,7 +75,7 @@ impl View {
         rec.log_static(
             "scene",
             &rerun::TextDocument::new(format!(
-                "scene `{}`, run `{run_id}`\ncoloured by {}{}\n\n{scene_text}",
+                "scene `{}`, run `{run_id}`\ncoloured by {}{}\ncommand-line overrides: {overrides}\n\n{scene_text}",
                 model.name,
                 match opts.color_by {
                     ColorBy::Displacement => "|u| (mm)",

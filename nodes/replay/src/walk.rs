@@ -5,9 +5,9 @@ use crate::draw::{largest_time_point, nodal_field};
 use crate::legend::{ColourRange, Frame};
 use crate::recovery::{final_displacements, Recovery};
 use crate::{BoundaryStates, ReplayError, ReplayOptions, ReplaySummary, View};
-use glissade_messages::{InterfaceSolution, Message, Payload};
+use glissade_messages::{InterfaceSolution, Message, Overrides, Payload};
 use glissade_recorder::{RecordedMessage, Recording};
-use glissade_scene::load_str;
+use glissade_scene::load_with;
 use std::collections::BTreeMap;
 
 /// A run's final state as its recording holds it: the scene's model, every subdomain's
@@ -80,19 +80,28 @@ fn content(recording: &Recording, detail: String) -> ReplayError {
     }
 }
 
-/// The scene text a recording holds, and the name it is known by in messages.
-fn recorded_scene(recording: &Recording) -> Result<(&str, String), ReplayError> {
+/// The scene text a recording holds, the command-line overrides the run applied to it, and the
+/// name the scene is known by in messages.
+fn recorded_scene(recording: &Recording) -> Result<(&str, &Overrides, String), ReplayError> {
     let text = recording
         .scene_text()
         .ok_or_else(|| content(recording, "the recording holds no scene (attachment scene.toml)".into()))?;
-    Ok((text, format!("{} (scene.toml)", recording.path().display())))
+    let overrides = recording.scene_overrides().ok_or_else(|| {
+        content(
+            recording,
+            "the recording holds no command-line overrides (attachment overrides.json)".into(),
+        )
+    })?;
+    Ok((text, overrides, format!("{} (scene.toml)", recording.path().display())))
 }
 
 /// Reads the final state of the run recorded in `recording` (one pass over its messages).
 pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
     let content = |detail: String| content(recording, detail);
-    let (text, origin) = recorded_scene(recording)?;
-    let model = load_str(text, &origin).map_err(|e| content(e.to_string()))?.model;
+    let (text, overrides, origin) = recorded_scene(recording)?;
+    let model = load_with(text, &origin, overrides)
+        .map_err(|e| content(e.to_string()))?
+        .model;
     let mut interfaces: BTreeMap<u32, InterfaceSolution> = BTreeMap::new();
     let mut displacements = BTreeMap::new();
     let mut last_states = BTreeMap::new();
@@ -133,7 +142,7 @@ pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
 /// Replays `recording` into the sink of `opts`: the colour range and amplification come from the
 /// final state, then every message goes through a [`View`].
 pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySummary, ReplayError> {
-    let (text, origin) = recorded_scene(recording)?;
+    let (text, overrides, origin) = recorded_scene(recording)?;
 
     // Pass 1: the final state, and the time point of the per-iteration meshes.
     let FinalState {
@@ -162,7 +171,7 @@ pub fn replay(recording: &Recording, opts: &ReplayOptions) -> Result<ReplaySumma
     }
 
     // Pass 2: every message, as a live run would give them.
-    let mut view = View::new(text, &origin, recording.run_id(), &opts, Some(range))?;
+    let mut view = View::new(text, overrides, &origin, recording.run_id(), &opts, Some(range))?;
     let mut again = Skipped::default();
     for (_, _, msg) in run_messages(recording, &mut again) {
         view.message(&msg)?;

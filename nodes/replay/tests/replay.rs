@@ -37,6 +37,7 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
         scene_name: model.name.clone(),
         scene_fingerprint: scene.fingerprint,
         scene_text: text.clone(),
+        scene_overrides: scene.overrides,
         software: "test".into(),
     };
     let mut rec = Recorder::create(&mcap, &run, &RecorderOptions::default()).unwrap();

@@ -8,6 +8,14 @@
 //! the TOML key at fault (`materials.steel.nu`, `block[2].nx`, `interface[0].friction`,
 //! `boundary[3]`, …; array indices count from 0).
 //!
+//! Command-line settings ([`Overrides`]: `--accuracy`, `--tolerance`, `--max-iterations`,
+//! `--record`) are applied to the loaded scene, not written into its text:
+//! [`LoadedScene::with_overrides`] sets the model's and the recording's values, each checked by the
+//! rule and reported with the key (`solver.max_iterations`, …) the file's own value gets. The text
+//! stays as written and the overrides travel and are recorded beside it; [`load_with`] rebuilds
+//! the run's scene from the two, and [`fingerprint_with`] covers both (it is the text's
+//! [`fingerprint`] when nothing is overridden).
+//!
 //! The format itself, every key with its unit, default and constraint, what the builder makes of
 //! blocks, interface and boundary rules, and an annotated example, is documented once, in
 //! `docs/scenes.md` of the repository; the crate's tests check that the annotated example builds
@@ -28,6 +36,10 @@ pub use settings::{
     balanced_interface_groups, final_field_bytes, full_field_bytes_per_iteration, Deployment, Network, Recording,
     TlsFiles, AUTO_FULL_FIELDS_EVERY, AUTO_FULL_FIELD_BYTES,
 };
+
+// The command-line overrides are a wire type (defined with the messages): they travel beside the
+// scene text in the `scene` message and are recorded beside it; this crate applies them.
+pub use glissade_messages::{Overrides, RecordOverride};
 
 use build::Ctx;
 use diagnostics::{parse_raw, toml_error};
@@ -51,10 +63,14 @@ pub struct LoadedScene {
     pub pgd: PgdParams,
     /// How subdomains solve their linear stage.
     pub linear_stage: LinearStage,
-    /// [`fingerprint`] of `text`.
+    /// [`fingerprint_with`] of `text` and `overrides`.
     pub fingerprint: u64,
-    /// The scene text as given (remote nodes get the scene from the bus).
+    /// The scene text as written (remote nodes get the scene from the bus, recordings attach it);
+    /// with a mesh file, the file's bytes are embedded in it.
     pub text: String,
+    /// The command-line settings applied to the model and the recording settings on top of
+    /// `text` ([`LoadedScene::with_overrides`]); they travel and are recorded with the text.
+    pub overrides: Overrides,
     /// How the processes of a run reach each other (`[network]`).
     pub network: Network,
 }
@@ -71,12 +87,43 @@ pub struct SceneError {
 
 /// FNV-1a 64-bit hash of the bytes of `text` (stable across platforms and runs).
 pub fn fingerprint(text: &str) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in text.as_bytes() {
+    fnv1a(0xcbf2_9ce4_8422_2325, text.as_bytes())
+}
+
+fn fnv1a(mut h: u64, bytes: &[u8]) -> u64 {
+    for &b in bytes {
         h ^= u64::from(b);
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
     }
     h
+}
+
+/// The fingerprint of a run's scene: of `text` and the command-line `overrides` applied to it.
+/// Without overrides it is [`fingerprint`]`(text)`; with some, the FNV-1a hash goes on from the
+/// text's over a NUL byte (never in a scene: TOML refuses it) and then, for accuracy, tolerance,
+/// max_iterations and record in this order, a 0 byte when absent or a 1 byte and the value's
+/// 8 bytes little-endian (f64 bits; the iteration count as u64; record: 0 off, 1 full). Runs of one
+/// text with different overrides never share a fingerprint.
+pub fn fingerprint_with(text: &str, overrides: &Overrides) -> u64 {
+    if overrides.is_none() {
+        return fingerprint(text);
+    }
+    let mut bytes = vec![0u8];
+    let mut value = |v: Option<u64>| match v {
+        None => bytes.push(0),
+        Some(v) => {
+            bytes.push(1);
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+    };
+    value(overrides.accuracy.map(f64::to_bits));
+    value(overrides.tolerance.map(f64::to_bits));
+    value(overrides.max_iterations.map(|m| m as u64));
+    value(overrides.record.map(|r| match r {
+        RecordOverride::Off => 0,
+        RecordOverride::Full => 1,
+    }));
+    fnv1a(fingerprint(text), &bytes)
 }
 
 /// Parses, validates and builds the scene in `text`; `file` names it in errors and gives the
@@ -103,8 +150,20 @@ pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
         linear_stage: built.linear_stage,
         fingerprint: fingerprint(text),
         text: text.to_string(),
+        overrides: Overrides::default(),
         network: ctx.network(&raw.network)?,
     })
+}
+
+/// The scene of `text` with the command-line `overrides` applied ([`LoadedScene::with_overrides`]):
+/// what every process of a run and every reader of a recording rebuilds the run's model with, from
+/// the text and the overrides that travel and are recorded together.
+pub fn load_with(text: &str, file: &str, overrides: &Overrides) -> Result<LoadedScene, SceneError> {
+    let mut scene = load_str(text, file)?;
+    if !overrides.is_none() {
+        scene.apply(file, overrides)?;
+    }
+    Ok(scene)
 }
 
 /// `text` with `[mesh] data` set to the base64 of the mesh file's `bytes`, so that the scene
@@ -131,86 +190,61 @@ fn embed_mesh(text: &str, file: &str, mesh_file: &str, bytes: &[u8]) -> Result<S
     ))
 }
 
-/// Scene settings given on the command line, applied by [`LoadedScene::with_overrides`].
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Overrides {
-    pub accuracy: Option<f64>,
-    pub tolerance: Option<f64>,
-    pub max_iterations: Option<usize>,
-    pub record: Option<RecordOverride>,
-}
-
-/// What `--record` / `--no-record` ask of the recording.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RecordOverride {
-    /// No recording (`[recording] enabled = false`).
-    Off,
-    /// Every message, full fields at every iteration (`enabled = true`, `topics = ["**"]`,
-    /// `full_fields_every = 1`).
-    Full,
-}
-
 impl LoadedScene {
-    /// This scene with `[solver] accuracy`, `tolerance` and/or `max_iterations`, and the
-    /// recording (`--record`), set as if written in its file: the scene text is rewritten with them (a first comment line says so), so that its
-    /// fingerprint, the text that node processes fetch from the bus and the text a recording
-    /// attaches all describe the run, not only this process's model. `file` names the scene in
-    /// errors and gives the default model name, as in [`load_str`]; the network settings (TLS
-    /// paths already resolved against the scene's folder) are kept. An invalid value is the
-    /// scene error the file would give.
+    /// This scene with the command line's `overrides` applied to its model and recording
+    /// settings, each value checked by the rule, and reported with the error, the file's own key
+    /// gets (`solver.max_iterations`, …; `file` names the scene). The text stays as written: the
+    /// result holds the overrides (on top of any it had), its fingerprint covers both
+    /// ([`fingerprint_with`]), and [`load_with`] rebuilds it from the two.
     pub fn with_overrides(&self, file: &str, overrides: &Overrides) -> Result<LoadedScene, SceneError> {
-        if *overrides == Overrides::default() {
+        if overrides.is_none() {
             return Ok(self.clone());
         }
-        let mut table: toml::Table = self.text.parse().map_err(|e| toml_error(&self.text, file, &e, true))?;
-        let err = |key: &str, problem: String| SceneError {
-            file: file.to_string(),
-            key: key.to_string(),
-            problem,
-        };
-        let solver = table
-            .entry("solver")
-            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-            .as_table_mut()
-            .ok_or_else(|| err("solver", "is not a table".into()))?;
-        let mut said = Vec::new();
-        for (key, value) in [("accuracy", overrides.accuracy), ("tolerance", overrides.tolerance)] {
-            if let Some(v) = value {
-                solver.insert(key.into(), toml::Value::Float(v));
-                said.push(format!("[solver] {key} = {v:e}"));
-            }
+        if !self.overrides.is_none() {
+            // Overrides given before: the scene as written with all of them, so that the text and
+            // the merged overrides rebuild exactly this scene.
+            let mut scene = load_with(&self.text, file, &self.overrides.then(*overrides))?;
+            scene.network = self.network.clone();
+            return Ok(scene);
+        }
+        let mut scene = self.clone();
+        scene.apply(file, overrides)?;
+        Ok(scene)
+    }
+
+    /// Sets the overrides of a scene that has none yet.
+    fn apply(&mut self, file: &str, overrides: &Overrides) -> Result<(), SceneError> {
+        debug_assert!(self.overrides.is_none());
+        let ctx = Ctx { file };
+        let solver = &mut self.model.solver;
+        if let Some(a) = overrides.accuracy {
+            ctx.check_accuracy(a)?;
+            solver.accuracy = Some(a);
+        }
+        if let Some(t) = overrides.tolerance {
+            ctx.check_tolerance(t)?;
+            solver.tolerance = Some(t);
         }
         if let Some(m) = overrides.max_iterations {
-            let m = i64::try_from(m).map_err(|_| err("solver.max_iterations", format!("{m} is too large")))?;
-            solver.insert("max_iterations".into(), toml::Value::Integer(m));
-            said.push(format!("[solver] max_iterations = {m}"));
+            ctx.check_max_iterations(m)?;
+            solver.max_iterations = m;
         }
         if let Some(record) = overrides.record {
-            let recording = table
-                .entry("recording")
-                .or_insert_with(|| toml::Value::Table(toml::Table::new()))
-                .as_table_mut()
-                .ok_or_else(|| err("recording", "is not a table".into()))?;
+            let mut recording = self.recording.clone();
             match record {
-                RecordOverride::Off => {
-                    recording.insert("enabled".into(), toml::Value::Boolean(false));
-                    said.push("[recording] enabled = false".into());
-                }
+                RecordOverride::Off => recording.enabled = false,
                 RecordOverride::Full => {
-                    recording.insert("enabled".into(), toml::Value::Boolean(true));
-                    recording.insert(
-                        "topics".into(),
-                        toml::Value::Array(vec![toml::Value::String("**".into())]),
-                    );
-                    recording.insert("full_fields_every".into(), toml::Value::Integer(1));
-                    said.push("[recording] complete".into());
+                    recording.enabled = true;
+                    recording.topics = vec!["**".to_string()];
+                    recording.full_fields_every = 1;
+                    recording.full_fields_auto = false;
                 }
             }
+            ctx.check_recording(&recording)?;
+            self.recording = recording;
         }
-        let body = toml::to_string(&table).map_err(|e| err("(syntax)", format!("cannot write the scene back: {e}")))?;
-        let text = format!("# {file} with {} set on the command line\n{body}", said.join(", "));
-        let mut scene = load_str(&text, file)?;
-        scene.network = self.network.clone();
-        Ok(scene)
+        self.overrides = *overrides;
+        self.fingerprint = fingerprint_with(&self.text, overrides);
+        Ok(())
     }
 }

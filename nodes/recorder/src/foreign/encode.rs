@@ -3,7 +3,9 @@
 //! little-endian f64 (a packed `repeated double`). Every scalar is written, zeros included, so that
 //! the bytes carry the value exactly (−0.0 too); a `None` is an absent field.
 
-use glissade_messages::{Decision, Envelope, Field, InterfaceIndicators, Message, Payload, Role, Stage, Verdict};
+use glissade_messages::{
+    Decision, Envelope, Field, InterfaceIndicators, Message, Payload, RecordOverride, Role, Stage, Verdict,
+};
 use prost::encoding::{encode_varint, encoded_len_varint};
 
 const VARINT: u64 = 0;
@@ -193,7 +195,28 @@ pub fn encode_into(m: &Message, out: &mut Vec<u8>) {
     out.reserve(fields_len(&m.payload) + 256);
     envelope(out, &m.envelope);
     match &m.payload {
-        Payload::Scene { text } => bytes(out, 2, text.as_bytes()),
+        Payload::Scene { text, overrides } => {
+            bytes(out, 2, text.as_bytes());
+            if let Some(a) = overrides.accuracy {
+                double(out, 3, a);
+            }
+            if let Some(t) = overrides.tolerance {
+                double(out, 4, t);
+            }
+            if let Some(m) = overrides.max_iterations {
+                uint(out, 5, m as u64);
+            }
+            if let Some(r) = overrides.record {
+                uint(
+                    out,
+                    6,
+                    match r {
+                        RecordOverride::Off => 0,
+                        RecordOverride::Full => 1,
+                    },
+                );
+            }
+        }
         Payload::HomogenizedOperator { subdomain, slots, l_e } => {
             uint(out, 2, *subdomain as u64);
             for (interface, modes) in slots {

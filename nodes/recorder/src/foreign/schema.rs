@@ -141,6 +141,14 @@ pub const ENUMS: &[EnumDef] = &[
         ],
     },
     EnumDef {
+        name: "Record",
+        doc: "What the command line asked of a run's recording.",
+        values: &[
+            ("RECORD_OFF", "no recording ([recording] enabled = false)"),
+            ("RECORD_FULL", "every message, full fields at every iteration"),
+        ],
+    },
+    EnumDef {
         name: "ContactStatus",
         doc: "Contact status of an interface node pair at a time point.",
         values: &[
@@ -156,8 +164,20 @@ pub const ENUMS: &[EnumDef] = &[
 pub const MESSAGES: &[MessageDef] = &[
     MessageDef {
         name: "Scene",
-        doc: "The scene file's text (TOML).",
-        fields: &[ENVELOPE, f("text", 2, Ty::String, "")],
+        doc: "The scene file's text (TOML) as written, and the settings given on the command line that the run applied on top of it (each absent when not given).",
+        fields: &[
+            ENVELOPE,
+            f("text", 2, Ty::String, ""),
+            opt("accuracy", 3, Ty::Double, "[solver] accuracy (--accuracy)"),
+            opt("tolerance", 4, Ty::Double, "[solver] tolerance (--tolerance)"),
+            opt(
+                "max_iterations",
+                5,
+                Ty::Uint64,
+                "[solver] max_iterations (--max-iterations)",
+            ),
+            opt("record", 6, Ty::Enum("Record"), "the recording (--record, --no-record)"),
+        ],
     },
     MessageDef {
         name: "HomogenizedOperator",

@@ -4,8 +4,8 @@
 
 use super::*;
 use glissade_messages::{
-    Decision, Envelope, Field, InterfaceIndicators, InterfaceSolution, Message, NodeId, ParticularModes, Role, Stage,
-    Verdict,
+    Decision, Envelope, Field, InterfaceIndicators, InterfaceSolution, Message, NodeId, Overrides, ParticularModes,
+    RecordOverride, Role, Stage, Verdict,
 };
 use prost::Message as _;
 use prost_reflect::{DescriptorPool, DynamicMessage, ReflectMessage, Value};
@@ -70,6 +70,24 @@ fn samples() -> Vec<Message> {
     let payloads = vec![
         Payload::Scene {
             text: "name = \"tiny\" # é\n".into(),
+            overrides: Overrides::default(),
+        },
+        Payload::Scene {
+            text: String::new(),
+            overrides: Overrides {
+                accuracy: Some(1e-4),
+                tolerance: Some(0.0),
+                max_iterations: Some(0),
+                record: Some(RecordOverride::Off),
+            },
+        },
+        Payload::Scene {
+            text: "x".into(),
+            overrides: Overrides {
+                max_iterations: Some(usize::MAX),
+                record: Some(RecordOverride::Full),
+                ..Overrides::default()
+            },
         },
         Payload::HomogenizedOperator {
             subdomain: 3,
@@ -282,6 +300,18 @@ fn from_proto(m: &DynamicMessage) -> Message {
     let payload = match m.descriptor().name() {
         "Scene" => Payload::Scene {
             text: string(m, "text"),
+            overrides: Overrides {
+                accuracy: opt_f64("accuracy"),
+                tolerance: opt_f64("tolerance"),
+                max_iterations: m
+                    .has_field_by_name("max_iterations")
+                    .then(|| u64_(m, "max_iterations") as usize),
+                record: m.has_field_by_name("record").then(|| match enum_(m, "record") {
+                    0 => RecordOverride::Off,
+                    1 => RecordOverride::Full,
+                    other => panic!("record {other}"),
+                }),
+            },
         },
         "HomogenizedOperator" => Payload::HomogenizedOperator {
             subdomain: u32_(m, "subdomain"),

@@ -71,19 +71,15 @@ impl Ctx<'_> {
             format!("{} is outside (0, 1]", s.relaxation)
         })?;
         if let Some(a) = s.accuracy {
-            self.check(positive(a) && a < 1.0, "solver.accuracy", || {
-                format!("{a} is outside (0, 1) (a relative error of the contact tractions)")
-            })?;
+            self.check_accuracy(a)?;
         }
         if let Some(t) = s.tolerance {
-            self.check(positive(t), "solver.tolerance", || format!("{t} must be > 0"))?;
+            self.check_tolerance(t)?;
         }
         if let Some(c) = s.contact_tolerance {
             self.check(positive(c), "solver.contact_tolerance", || format!("{c} must be > 0"))?;
         }
-        self.check(s.max_iterations >= 1, "solver.max_iterations", || {
-            "must be ≥ 1".to_string()
-        })?;
+        self.check_max_iterations(s.max_iterations)?;
         self.check(s.stagnation_window >= 1, "solver.stagnation_window", || {
             "must be ≥ 1".to_string()
         })?;
@@ -107,6 +103,25 @@ impl Ctx<'_> {
         }
         self.check(positive(s.i0), "solver.i0", || format!("{} must be > 0", s.i0))?;
         Ok(s)
+    }
+
+    /// `solver.accuracy`, from the file or the command line.
+    pub(crate) fn check_accuracy(&self, a: f64) -> Result<(), SceneError> {
+        self.check(a > 0.0 && a < 1.0, "solver.accuracy", || {
+            format!("{a} is outside (0, 1) (a relative error of the contact tractions)")
+        })
+    }
+
+    /// `solver.tolerance`, from the file or the command line.
+    pub(crate) fn check_tolerance(&self, t: f64) -> Result<(), SceneError> {
+        self.check(t > 0.0 && t.is_finite(), "solver.tolerance", || {
+            format!("{t} must be > 0")
+        })
+    }
+
+    /// `solver.max_iterations`, from the file or the command line.
+    pub(crate) fn check_max_iterations(&self, m: usize) -> Result<(), SceneError> {
+        self.check(m >= 1, "solver.max_iterations", || "must be ≥ 1".to_string())
     }
 
     /// `time_coarsening` ("auto" when absent, "off" or c) and its tolerance; resolved against N
@@ -259,13 +274,18 @@ impl Ctx<'_> {
             full_fields_every: r.full_fields_every.unwrap_or(d.full_fields_every),
             full_fields_auto: r.full_fields_every.is_none(),
         };
+        self.check_recording(&rec)?;
+        Ok(rec)
+    }
+
+    /// The `[recording]` settings, from the file or with the command line's `--record`.
+    pub(crate) fn check_recording(&self, rec: &Recording) -> Result<(), SceneError> {
         self.check(rec.full_fields_every >= 1, "recording.full_fields_every", || {
             "must be ≥ 1".to_string()
         })?;
         self.check(rec.topics.iter().all(|t| !t.is_empty()), "recording.topics", || {
             "topic patterns must not be empty strings".to_string()
-        })?;
-        Ok(rec)
+        })
     }
 
     pub(crate) fn network(&self, r: &RawNetwork) -> Result<Network, SceneError> {

@@ -69,62 +69,95 @@ fn replaced(from: &str, to: &str) -> String {
     TWO_BLOCKS.replacen(from, to, 1)
 }
 
-/// Command-line overrides of the solver's tolerance and iteration cap go into the scene
-/// text: the text alone (what node processes and recordings get) builds the overridden
-/// model, and its fingerprint is not the original's.
+/// Command-line overrides of the solver's accuracy, tolerance and iteration cap set the model as
+/// the same keys in the file would, leave the text as written and change the fingerprint; the
+/// text and the overrides (what node processes and recordings get) rebuild the same scene, and an
+/// invalid value is the error the file's key gives.
 #[test]
-fn solver_overrides_rewrite_the_scene_text() {
+fn solver_overrides_set_the_model_and_keep_the_text() {
+    const FILE: &str = "scenes/test.toml";
     let s = load(TWO_BLOCKS).unwrap();
+    assert!(s.overrides.is_none());
+    let same = s.with_overrides(FILE, &Overrides::default()).unwrap();
+    assert_eq!((&same.text, same.fingerprint), (&s.text, s.fingerprint));
     assert_eq!(
-        s.with_overrides("scenes/test.toml", &Overrides::default())
-            .unwrap()
-            .text,
-        s.text
+        s.fingerprint,
+        fingerprint(TWO_BLOCKS),
+        "no overrides: the text's fingerprint"
     );
-    let o = s
-        .with_overrides(
-            "scenes/test.toml",
-            &Overrides {
-                accuracy: Some(1e-4),
-                tolerance: Some(2.5e-9),
-                max_iterations: Some(7),
-                record: None,
-            },
-        )
-        .unwrap();
+    assert_eq!(
+        fingerprint_with(TWO_BLOCKS, &Overrides::default()),
+        fingerprint(TWO_BLOCKS)
+    );
+    let overrides = Overrides {
+        accuracy: Some(1e-4),
+        tolerance: Some(2.5e-9),
+        max_iterations: Some(7),
+        record: None,
+    };
+    let o = s.with_overrides(FILE, &overrides).unwrap();
+    assert_eq!(o.text, s.text, "the text stays as written");
+    assert_eq!(o.overrides, overrides);
     let solver = &o.model.solver;
     assert_eq!(
         (solver.accuracy, solver.tolerance, solver.max_iterations),
         (Some(1e-4), Some(2.5e-9), 7)
     );
+    // As if written in the file: the same model, everything else as written.
+    let written = load(&format!(
+        "{TWO_BLOCKS}[solver]\naccuracy = 1e-4\ntolerance = 2.5e-9\nmax_iterations = 7\n"
+    ))
+    .unwrap();
+    assert_eq!(format!("{:?}", o.model), format!("{:?}", written.model));
+    assert_eq!(o.recording, s.recording);
+    // The fingerprint covers the overrides: another value, another fingerprint.
     assert_ne!(o.fingerprint, s.fingerprint);
-    assert!(
-        o.text.starts_with(
-            "# scenes/test.toml with [solver] accuracy = 1e-4, [solver] tolerance = 2.5e-9, [solver] max_iterations = 7 set"
-        ),
-        "{}",
-        o.text
-    );
-    let again = load(&o.text).unwrap();
-    assert_eq!(
-        (again.model.solver.tolerance, again.model.solver.max_iterations),
-        (Some(2.5e-9), 7)
-    );
-    // Everything else is the scene as written.
-    assert_eq!(again.model.name, "two");
-    let unchanged = |m: &Model| {
-        let mut m = m.clone();
-        (m.solver.accuracy, m.solver.tolerance) = (None, None);
-        m.solver.max_iterations = 0;
-        format!("{m:?}")
+    assert_eq!(o.fingerprint, fingerprint_with(&s.text, &overrides));
+    let eight = Overrides {
+        max_iterations: Some(8),
+        ..overrides
     };
-    assert_eq!(unchanged(&again.model), unchanged(&s.model));
-    // A scene with a [solver] table keeps its other keys; an invalid value is the scene's
-    // own error.
+    assert_ne!(fingerprint_with(&s.text, &eight), o.fingerprint);
+    let only_accuracy = Overrides {
+        accuracy: Some(1e-4),
+        ..Default::default()
+    };
+    let only_tolerance = Overrides {
+        tolerance: Some(1e-4),
+        ..Default::default()
+    };
+    assert_ne!(
+        fingerprint_with(&s.text, &only_accuracy),
+        fingerprint_with(&s.text, &only_tolerance)
+    );
+    // (text, overrides) round-trip, the overrides through their serde form too.
+    let json = serde_json::to_string(&o.overrides).unwrap();
+    let back: Overrides = serde_json::from_str(&json).unwrap();
+    assert_eq!(back, overrides);
+    let again = load_with(&o.text, FILE, &back).unwrap();
+    assert_eq!(format!("{:?}", again.model), format!("{:?}", o.model));
+    assert_eq!((again.fingerprint, &again.overrides), (o.fingerprint, &o.overrides));
+    assert_eq!(again.recording, o.recording);
+    // Overrides on top of overrides: the later win, and the text with both rebuilds the result.
+    let later = Overrides {
+        max_iterations: Some(9),
+        ..Default::default()
+    };
+    let twice = o.with_overrides(FILE, &later).unwrap();
+    assert_eq!(
+        (twice.model.solver.accuracy, twice.model.solver.max_iterations),
+        (Some(1e-4), 9)
+    );
+    assert_eq!(twice.overrides, overrides.then(later));
+    assert_eq!(
+        twice.fingerprint,
+        load_with(&s.text, FILE, &twice.overrides).unwrap().fingerprint
+    );
+    // A scene with a [solver] table keeps its other keys.
     let with_solver = load(&format!("{TWO_BLOCKS}[solver]\nrelaxation = 0.5\n")).unwrap();
     let o = with_solver
         .with_overrides(
-            "scenes/test.toml",
+            FILE,
             &Overrides {
                 max_iterations: Some(3),
                 ..Default::default()
@@ -132,26 +165,35 @@ fn solver_overrides_rewrite_the_scene_text() {
         )
         .unwrap();
     assert_eq!((o.model.solver.relaxation, o.model.solver.max_iterations), (0.5, 3));
-    let e = s
-        .with_overrides(
-            "scenes/test.toml",
-            &Overrides {
+    // An invalid value is the error the file's own key gives, from either entry point.
+    for (bad, written) in [
+        (
+            Overrides {
                 max_iterations: Some(0),
                 ..Default::default()
             },
-        )
-        .unwrap_err();
-    assert_eq!(e.key, "solver.max_iterations", "{e}");
-    let e = s
-        .with_overrides(
-            "scenes/test.toml",
-            &Overrides {
+            "max_iterations = 0",
+        ),
+        (
+            Overrides {
                 tolerance: Some(-1.0),
                 ..Default::default()
             },
-        )
-        .unwrap_err();
-    assert_eq!(e.key, "solver.tolerance", "{e}");
+            "tolerance = -1.0",
+        ),
+        (
+            Overrides {
+                accuracy: Some(1.5),
+                ..Default::default()
+            },
+            "accuracy = 1.5",
+        ),
+    ] {
+        let from_file = load(&format!("{TWO_BLOCKS}[solver]\n{written}\n")).unwrap_err();
+        assert!(from_file.key.starts_with("solver."), "{from_file}");
+        assert_eq!(s.with_overrides(FILE, &bad).unwrap_err(), from_file);
+        assert_eq!(load_with(TWO_BLOCKS, FILE, &bad).unwrap_err(), from_file);
+    }
 }
 
 #[test]
