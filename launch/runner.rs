@@ -14,7 +14,7 @@ use glissade_mechanics::model::{Model, Side, TimeGrid};
 use glissade_messages::{Decision, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict};
 use glissade_reference::glued::solve_glued;
 use glissade_scene::LoadedScene;
-use glissade_subdomain::{LinearStageLog, LinearStageRecord};
+use glissade_subdomain::{LinearStageRecord, LinearStageRecords};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -152,7 +152,9 @@ pub fn run_in_process_observed(
 }
 
 /// As [`run_in_process_observed`], and returns every subdomain's linear-stage records (wall
-/// time, PGD basis size and criteria per iteration), sorted by (iteration, subdomain).
+/// time, PGD basis size and criteria per iteration), sorted by (iteration, subdomain): the
+/// subdomains' `linear_stage_stats` messages, each with the bus's time of its stage
+/// ([`LinearStageRecords`]).
 pub fn run_in_process_logged(
     scene: &LoadedScene,
     opts: &RunOptions,
@@ -174,10 +176,8 @@ pub fn run_in_process_logged_until(
     on_iteration: impl FnMut(&IterationRecord) -> bool,
     observe: impl FnMut(&Message) -> Duration,
 ) -> Result<(RunResult, Vec<LinearStageRecord>), RunError> {
-    let log = LinearStageLog::default();
-    let result = run_logged(scene, opts, on_iteration, observe, Some(log.clone()), None, None)?;
-    let mut records = log.lock().map(|v| v.clone()).unwrap_or_default();
-    records.sort_by_key(|r| (r.iteration, r.subdomain));
+    let mut records = Vec::new();
+    let result = run_logged(scene, opts, on_iteration, observe, Some(&mut records), None, None)?;
     Ok((result, records))
 }
 
@@ -198,7 +198,7 @@ fn run_logged(
     opts: &RunOptions,
     mut on_iteration: impl FnMut(&IterationRecord) -> bool,
     mut observe: impl FnMut(&Message) -> Duration,
-    log: Option<LinearStageLog>,
+    log: Option<&mut Vec<LinearStageRecord>>,
     timing: Option<&mut Vec<HandleTime>>,
     solvers: Option<Vec<SubdomainSolver>>,
 ) -> Result<RunResult, RunError> {
@@ -231,8 +231,7 @@ fn run_logged(
         run_id: opts.run_id.clone(),
         scene_fingerprint: scene.fingerprint,
     };
-    let mut plan = Plan::new(&model).with_scene(scene);
-    plan.log = log;
+    let plan = Plan::new(&model).with_scene(scene);
     let selection = Selection::everything(&plan);
     let solvers = match solvers {
         Some(s) => s,
@@ -254,10 +253,14 @@ fn run_logged(
     let mut iterations = Vec::new();
     let mut interfaces = Vec::new();
     let mut displacements = Vec::new();
-    let mut bus = InProcessBus::new(nodes).with_timing(timing.is_some());
+    let mut bus = InProcessBus::new(nodes)
+        .with_timing(timing.is_some())
+        .with_iteration_timing(log.is_some());
     let mut observer_time = Duration::ZERO;
+    let mut stages = LinearStageRecords::default();
     bus.run(|m| {
         observer_time += observe(m);
+        stages.observe(m);
         match &m.payload {
             Payload::Decision(d) => {
                 let rec = IterationRecord {
@@ -277,6 +280,9 @@ fn run_logged(
     })?;
     if let Some(times) = timing {
         *times = bus.handle_times();
+    }
+    if let Some(records) = log {
+        *records = stages.records(&bus.iteration_times());
     }
     // Several interface nodes publish their interfaces' solutions in node order.
     interfaces.sort_by_key(|s| s.interface);

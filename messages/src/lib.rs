@@ -30,12 +30,15 @@ pub use codec::{
 };
 pub use field::{BufferPool, DecodeBuffers, Field, HoldSource};
 pub use identity::{Envelope, NodeId, Role, Stage};
-pub use payload::{Decision, InterfaceIndicators, InterfaceSolution, Message, ParticularModes, Payload, Verdict};
+pub use payload::{
+    Decision, InterfaceIndicators, InterfaceSolution, LinearStageStats, Message, ParticularModes, Payload, Verdict,
+};
 pub use topic::{key_matches, role_field_topic, run_topics, topic, topic_field, Routes};
 pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 
 /// Version of the wire schema; decoding rejects any other. Version 2: `LocalDirections` names the
 /// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
 /// `BoundaryModes`, a PGD subdomain's state in mode form. Version 4: the decision carries the step
-/// of the contact forces and the error estimate, `InterfaceIndicators` the step's sums.
-pub const SCHEMA_VERSION: u32 = 4;
+/// of the contact forces and the error estimate, `InterfaceIndicators` the step's sums. Version 5:
+/// `LinearStageStats`, a subdomain's counters of its linear stage (flops, PGD basis, ξ).
+pub const SCHEMA_VERSION: u32 = 5;
