@@ -50,8 +50,14 @@ fn payload() -> impl Strategy<Value = Payload> {
 
 /// A subdomain's linear-stage counters: any values (no field, nothing sized).
 fn linear_stage_stats() -> impl Strategy<Value = Payload> {
-    (any::<u32>(), any::<u64>(), any::<[u32; 3]>(), any::<f64>(), any::<f64>()).prop_map(
-        |(subdomain, flops, [modes, new_modes, dropped_modes], xi1, xi2)| {
+    (
+        any::<u32>(),
+        any::<u64>(),
+        any::<[u32; 3]>(),
+        any::<f64>(),
+        any::<f64>(),
+    )
+        .prop_map(|(subdomain, flops, [modes, new_modes, dropped_modes], xi1, xi2)| {
             Payload::LinearStageStats(glissade_messages::LinearStageStats {
                 subdomain,
                 flops,
@@ -61,8 +67,7 @@ fn linear_stage_stats() -> impl Strategy<Value = Payload> {
                 xi1,
                 xi2,
             })
-        },
-    )
+        })
 }
 
 /// A PGD subdomain's state in mode form, valid as sent (λ has first_mode + new rows, G the shape

@@ -26,7 +26,12 @@ impl SubdomainNode {
     /// Takes the step of `msg` (coefficients `gamma`, or a plain step when empty; `restart`
     /// forgets the differences), checked in full first, and sends the state. With PGD the step
     /// is taken in coordinates (its flops go to the stage's counters).
-    pub(crate) fn anderson_step(&mut self, msg: &Message, gamma: &[f64], restart: bool) -> Result<Vec<Message>, NodeError> {
+    pub(crate) fn anderson_step(
+        &mut self,
+        msg: &Message,
+        gamma: &[f64],
+        restart: bool,
+    ) -> Result<Vec<Message>, NodeError> {
         let it = msg.envelope.iteration;
         expect_origin(self.id, msg, Role::Interface, Some(0))?;
         if it != self.iteration || self.phase != Phase::Step {

@@ -157,11 +157,18 @@ mod tests {
             time(interface, 1, Some("boundary_state"), 100.0),
         ];
         let r = collected.records(&times);
-        let got: Vec<(u32, u32, f64, u64, usize)> =
-            r.iter().map(|r| (r.iteration, r.subdomain, r.seconds, r.flops, r.modes)).collect();
+        let got: Vec<(u32, u32, f64, u64, usize)> = r
+            .iter()
+            .map(|r| (r.iteration, r.subdomain, r.seconds, r.flops, r.modes))
+            .collect();
         assert_eq!(
             got,
-            [(0, 0, 3.0, 5, 3), (0, 1, 16.0, 10, 3), (1, 0, 12.0, 20, 4), (1, 1, 32.0, 30, 4)]
+            [
+                (0, 0, 3.0, 5, 3),
+                (0, 1, 16.0, 10, 3),
+                (1, 0, 12.0, 20, 4),
+                (1, 1, 32.0, 30, 4)
+            ]
         );
         assert_eq!((r[0].xi1, r[0].xi2, r[0].new_modes), (0.5, 0.25, 1));
         // Without times: the counters, untimed.
