@@ -46,7 +46,9 @@ pub struct ReportPoint {
     pub contraction: Option<f64>,
     /// Relative step of the contact forces since the previous iteration.
     pub force_step: f64,
-    /// Wall time of this iteration's linear stages, summed over the subdomains (s).
+    /// Wall time of this iteration's linear stages, summed over the subdomains (s): the
+    /// in-process bus's time of each subdomain's handling of the stage's inputs
+    /// (`glissade_subdomain::LinearStageRecords`).
     pub linear_s: f64,
     /// Floating-point operations of this iteration's linear stages, summed over the subdomains,
     /// as the stages' kernels count them (`SubdomainSolver::flops`, `PgdStage::flops`).

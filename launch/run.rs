@@ -14,7 +14,7 @@ use crate::runner::{run_logged, IterationRecord, RunError, RunOptions, RunResult
 use glissade_bus::HandleTime;
 use glissade_messages::Message;
 use glissade_scene::LoadedScene;
-use glissade_subdomain::{LinearStageLog, LinearStageRecord};
+use glissade_subdomain::LinearStageRecord;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -50,8 +50,9 @@ pub struct Run<'a> {
 #[derive(Debug)]
 pub struct Outcome {
     pub result: RunResult,
-    /// Every subdomain's linear-stage records (wall time, flops, PGD basis per iteration), sorted
-    /// by (iteration, subdomain), when asked for with [`Run::linear_stages`].
+    /// Every subdomain's linear-stage records (flops, PGD basis per iteration from its
+    /// `linear_stage_stats` messages, the time the bus spent on its stage), sorted by (iteration,
+    /// subdomain), when asked for with [`Run::linear_stages`].
     pub linear_stages: Vec<LinearStageRecord>,
     /// Every node's handling time summed per (role, message field), when asked for with
     /// [`Run::handle_times`] (what `glissade bench` splits an iteration by).
@@ -140,12 +141,13 @@ impl<'a> Run<'a> {
             handle_times,
         } = self;
         let mut observe: Observer = observe.unwrap_or_else(|| Box::new(|_| Duration::ZERO));
-        let log = linear_stages.then(LinearStageLog::default);
+        let mut records = Vec::new();
+        let log = linear_stages.then_some(&mut records);
         let mut times = Vec::new();
         let timing = handle_times.then_some(&mut times);
         let (result, recording) = match &recording {
             None => (
-                run_logged(scene, &opts, on_iteration, observe, log.clone(), timing, None)?,
+                run_logged(scene, &opts, on_iteration, observe, log, timing, None)?,
                 None,
             ),
             Some(path) => {
@@ -168,7 +170,7 @@ impl<'a> Run<'a> {
                         }
                         spent
                     },
-                    log.clone(),
+                    log,
                     timing,
                     None,
                 )?;
@@ -186,10 +188,6 @@ impl<'a> Run<'a> {
                 (result, Some(outcome))
             }
         };
-        let mut records = log
-            .map(|log| log.lock().map(|v| v.clone()).unwrap_or_default())
-            .unwrap_or_default();
-        records.sort_by_key(|r| (r.iteration, r.subdomain));
         Ok(Outcome {
             result,
             linear_stages: records,

@@ -14,7 +14,7 @@ use glissade_mechanics::model::{Model, Side, TimeGrid};
 use glissade_messages::{Decision, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict};
 use glissade_reference::glued::solve_glued;
 use glissade_scene::LoadedScene;
-use glissade_subdomain::LinearStageLog;
+use glissade_subdomain::{LinearStageRecord, LinearStageRecords};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -138,7 +138,7 @@ pub(crate) fn run_logged(
     opts: &RunOptions,
     mut on_iteration: impl FnMut(&IterationRecord) -> bool,
     mut observe: impl FnMut(&Message) -> Duration,
-    log: Option<LinearStageLog>,
+    log: Option<&mut Vec<LinearStageRecord>>,
     timing: Option<&mut Vec<HandleTime>>,
     solvers: Option<Vec<SubdomainSolver>>,
 ) -> Result<RunResult, RunError> {
@@ -171,8 +171,7 @@ pub(crate) fn run_logged(
         run_id: opts.run_id.clone(),
         scene_fingerprint: scene.fingerprint,
     };
-    let mut plan = Plan::new(&model).with_scene(scene);
-    plan.log = log;
+    let plan = Plan::new(&model).with_scene(scene);
     let selection = Selection::everything(&plan);
     let solvers = match solvers {
         Some(s) => s,
@@ -194,10 +193,14 @@ pub(crate) fn run_logged(
     let mut iterations = Vec::new();
     let mut interfaces = Vec::new();
     let mut displacements = Vec::new();
-    let mut bus = InProcessBus::new(nodes).with_timing(timing.is_some());
+    let mut bus = InProcessBus::new(nodes)
+        .with_timing(timing.is_some())
+        .with_iteration_timing(log.is_some());
     let mut observer_time = Duration::ZERO;
+    let mut stages = LinearStageRecords::default();
     bus.run(|m| {
         observer_time += observe(m);
+        stages.observe(m);
         match &m.payload {
             Payload::Decision(d) => {
                 let rec = IterationRecord {
@@ -217,6 +220,9 @@ pub(crate) fn run_logged(
     })?;
     if let Some(times) = timing {
         *times = bus.handle_times();
+    }
+    if let Some(records) = log {
+        *records = stages.records(&bus.iteration_times());
     }
     // Several interface nodes publish their interfaces' solutions in node order.
     interfaces.sort_by_key(|s| s.interface);

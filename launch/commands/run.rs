@@ -128,7 +128,8 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             t0.elapsed()
         });
     }
-    // Linear-stage totals per linear stage: in process only (a node process keeps its records).
+    // Linear-stage totals per linear stage: in process only (the in-process bus times the stages;
+    // the counters are in every run's `linear_stage_stats` messages).
     let mut linear_stages = None;
     let mut bus = None;
     let result = if args.in_process {
@@ -200,7 +201,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     run_summary["linear_stages"] = match &linear_stages {
         Some(totals) => serde_json::json!(totals.iter().map(|t| t.json()).collect::<Vec<_>>()),
         None => {
-            serde_json::json!("not measured: a multi-process run's subdomain nodes keep their linear-stage records")
+            serde_json::json!("not measured: only the in-process bus times linear stages (a multi-process run's flops and PGD basis sizes are in its recording's linear_stage_stats)")
         }
     };
     if let Some(traffic) = &bus {

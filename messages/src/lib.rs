@@ -33,7 +33,9 @@ pub use codec::{
 pub use field::{BufferPool, DecodeBuffers, Field, HoldSource};
 pub use identity::{Envelope, NodeId, Role, Stage};
 pub use overrides::{Overrides, RecordOverride};
-pub use payload::{Decision, InterfaceIndicators, InterfaceSolution, Message, ParticularModes, Payload, Verdict};
+pub use payload::{
+    Decision, InterfaceIndicators, InterfaceSolution, LinearStageStats, Message, ParticularModes, Payload, Verdict,
+};
 pub use topic::{key_matches, role_field_topic, run_topics, topic, topic_field, Routes};
 pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 
@@ -41,5 +43,6 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 /// interfaces it covers (several interface nodes), `IndicatorPartials` added. Version 3:
 /// `BoundaryModes`, a PGD subdomain's state in mode form. Version 4: the decision carries the step
 /// of the contact forces and the error estimate, `InterfaceIndicators` the step's sums. Version 5:
-/// `Scene` carries the command-line [`Overrides`] beside the text (the text is the file as written).
+/// `Scene` carries the command-line [`Overrides`] beside the text (the text is the file as written),
+/// and `LinearStageStats`, a subdomain's counters of its linear stage (flops, PGD basis, ξ).
 pub const SCHEMA_VERSION: u32 = 5;

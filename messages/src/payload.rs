@@ -1,6 +1,7 @@
 //! What a message carries: the [`Payload`]s of DESIGN §4 and their structs ([`Decision`],
-//! [`Verdict`], [`InterfaceIndicators`], [`ParticularModes`], [`InterfaceSolution`]), the checks
-//! of their sizes after decoding, and the [`Message`] (envelope + payload).
+//! [`Verdict`], [`InterfaceIndicators`], [`ParticularModes`], [`InterfaceSolution`],
+//! [`LinearStageStats`]), the checks of their sizes after decoding, and the [`Message`]
+//! (envelope + payload).
 
 use crate::{DecodeBuffers, DecodeError, Envelope, Field, Overrides, Role};
 use serde::{Deserialize, Serialize};
@@ -100,6 +101,27 @@ pub struct InterfaceSolution {
     pub status: Vec<u8>,
 }
 
+/// What one subdomain's linear stage of one iteration did, counted by the subdomain itself (the
+/// iteration is the envelope's): its kernels' floating-point operations and, with the PGD stage,
+/// its basis and criteria. Counters only, no time: the message is as deterministic as the
+/// numbers it describes (a bus times a node's handling of its inputs, not the node).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct LinearStageStats {
+    pub subdomain: u32,
+    /// Floating-point operations of the stage (micro 1, macro forces, micro 2; with PGD the
+    /// compression, update, enrichment, expansion and the relaxation or mixing in coordinates),
+    /// as the kernels count them (`SubdomainSolver::flops`, `PgdStage::flops`).
+    pub flops: u64,
+    /// PGD basis size after the stage, frozen macro modes included (0 without PGD).
+    pub modes: u32,
+    /// Modes added in this stage (micro 1 + micro 2) and dropped by its compression.
+    pub new_modes: u32,
+    pub dropped_modes: u32,
+    /// ξ at the end of micro 1 and micro 2 (0 without PGD, or for a micro problem not solved).
+    pub xi1: f64,
+    pub xi2: f64,
+}
+
 /// The payloads of DESIGN §4.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 #[bincode(decode_context = "DecodeBuffers")]
@@ -185,6 +207,9 @@ pub enum Payload {
         interfaces: Vec<InterfaceIndicators>,
         diverged: Option<String>,
     },
+    /// A subdomain's counters of its linear stage, once per iteration after its state: recorded
+    /// for whoever needs them (a report, a replay), taken by no node.
+    LinearStageStats(LinearStageStats),
 }
 
 /// The fields of a payload (`$p`), in wire order, each passed to `$visit` as `&` or `&mut`.
@@ -195,7 +220,8 @@ macro_rules! for_each_field {
             Payload::Scene { .. }
             | Payload::AndersonStep { .. }
             | Payload::Decision(_)
-            | Payload::IndicatorPartials { .. } => {}
+            | Payload::IndicatorPartials { .. }
+            | Payload::LinearStageStats(_) => {}
             Payload::HomogenizedOperator { l_e, .. } => $visit(l_e),
             Payload::MacroForces { forces, .. } => $visit(forces),
             Payload::MacroDisplacements { w_tilde, .. } => $visit(w_tilde),
@@ -260,6 +286,7 @@ impl Payload {
             Payload::InterfaceSolution(_) => "interface_solution",
             Payload::Displacement { .. } => "displacement",
             Payload::IndicatorPartials { .. } => "indicator_partials",
+            Payload::LinearStageStats(_) => "linear_stage_stats",
         }
     }
 
@@ -273,7 +300,8 @@ impl Payload {
             | Payload::BoundaryState { .. }
             | Payload::BoundaryModes { .. }
             | Payload::AndersonGram { .. }
-            | Payload::Displacement { .. } => &[Role::Subdomain],
+            | Payload::Displacement { .. }
+            | Payload::LinearStageStats(_) => &[Role::Subdomain],
             Payload::MacroDisplacements { .. } => &[Role::Coarse],
             Payload::LocalDirections { .. } => &[Role::Interface, Role::Launcher],
             Payload::AndersonStep { .. }
@@ -411,6 +439,8 @@ impl Payload {
                 Ok(())
             }
             Payload::Displacement { u, .. } => u.check("u"),
+            // Counters of fixed width: nothing sized to check.
+            Payload::LinearStageStats(_) => Ok(()),
         }
     }
 }
@@ -451,7 +481,8 @@ impl Message {
             | Payload::BoundaryState { subdomain, .. }
             | Payload::BoundaryModes { subdomain, .. }
             | Payload::AndersonGram { subdomain, .. }
-            | Payload::Displacement { subdomain, .. } => Some(*subdomain),
+            | Payload::Displacement { subdomain, .. }
+            | Payload::LinearStageStats(LinearStageStats { subdomain, .. }) => Some(*subdomain),
             _ => None,
         };
         own.filter(|&s| s != self.envelope.sender.index).map(|s| {
@@ -487,6 +518,37 @@ mod tests {
         other.envelope.sender.index = 3;
         let why = other.not_from_its_sender(&other.topic()).unwrap();
         assert_eq!(why, "subdomain 3's boundary_state is about subdomain 2");
+    }
+
+    /// A subdomain's linear-stage counters: on its own key, from itself only, decoded as sent.
+    #[test]
+    fn linear_stage_stats_are_their_subdomains() {
+        let mut m = msg();
+        m.payload = Payload::LinearStageStats(LinearStageStats {
+            subdomain: 2,
+            flops: 123_456_789_012,
+            modes: 7,
+            new_modes: 2,
+            dropped_modes: 1,
+            xi1: 0.25,
+            xi2: -0.0,
+        });
+        assert_eq!(m.topic(), "glissade/r1/subdomain/2/linear_stage_stats");
+        assert!(crate::key_matches(&crate::topic::linear_stage_stats("r1"), &m.topic()));
+        assert_eq!(m.not_from_its_sender(&m.topic()), None);
+        let back = decode(&encode(&m), &expected()).unwrap();
+        assert_eq!(back, m);
+        let mut forged = m.clone();
+        forged.envelope.sender.role = Role::Interface;
+        let why = forged.not_from_its_sender(&forged.topic()).unwrap();
+        assert_eq!(why, "a interface node does not send linear_stage_stats");
+        let mut other = m.clone();
+        other.envelope.sender.index = 5;
+        let why = other.not_from_its_sender(&other.topic()).unwrap();
+        assert_eq!(why, "subdomain 5's linear_stage_stats is about subdomain 2");
+        let mut none = Vec::new();
+        m.payload.into_buffers(|b| none.push(b));
+        assert!(none.is_empty(), "no field");
     }
 
     #[test]

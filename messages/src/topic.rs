@@ -52,6 +52,13 @@ pub fn role_field_topic(run_id: &str, role: Role, field: &str, destination: Opti
     }
 }
 
+/// Key expression of every subdomain's linear-stage counters (`LinearStageStats`) in run
+/// `run_id`: `glissade/<run>/subdomain/*/linear_stage_stats` (what a report or a replay reads;
+/// no node takes them).
+pub fn linear_stage_stats(run_id: &str) -> String {
+    role_field_topic(run_id, Role::Subdomain, "linear_stage_stats", None)
+}
+
 /// Everything node `id` publishes: `glissade/<run>/<role>/<id>/**`.
 pub fn sent_by(run_id: &str, id: NodeId) -> String {
     within_run(run_id, format_args!("{}/{}/**", id.role.key(), id.index))

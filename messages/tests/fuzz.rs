@@ -36,14 +36,38 @@ fn field() -> impl Strategy<Value = Field> {
     })
 }
 
-/// Every payload kind: `prop_oneof!` takes at most ten arms unboxed, so the two Anderson payloads
-/// and the mode-form state form groups of their own, drawn in proportion (of 13 kinds).
+/// Every payload kind: `prop_oneof!` takes at most ten arms unboxed, so the two Anderson payloads,
+/// the mode-form state and the linear-stage counters form groups of their own, drawn in
+/// proportion (of 14 kinds).
 fn payload() -> impl Strategy<Value = Payload> {
     prop_oneof![
         10 => other_payload().boxed(),
         2 => anderson_payload().boxed(),
-        1 => boundary_modes().boxed()
+        1 => boundary_modes().boxed(),
+        1 => linear_stage_stats().boxed()
     ]
+}
+
+/// A subdomain's linear-stage counters: any values (no field, nothing sized).
+fn linear_stage_stats() -> impl Strategy<Value = Payload> {
+    (
+        any::<u32>(),
+        any::<u64>(),
+        any::<[u32; 3]>(),
+        any::<f64>(),
+        any::<f64>(),
+    )
+        .prop_map(|(subdomain, flops, [modes, new_modes, dropped_modes], xi1, xi2)| {
+            Payload::LinearStageStats(glissade_messages::LinearStageStats {
+                subdomain,
+                flops,
+                modes,
+                new_modes,
+                dropped_modes,
+                xi1,
+                xi2,
+            })
+        })
 }
 
 /// A PGD subdomain's state in mode form, valid as sent (λ has first_mode + new rows, G the shape

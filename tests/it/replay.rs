@@ -3,6 +3,7 @@
 //! message and field; a recording thinned by `full_fields_every` still replays into Rerun but
 //! refuses to re-execute the nodes that need the thinned fields; `glissade replay` writes an .rrd
 //! the pinned Rerun CLI accepts, and `glissade run --rerun <file.rrd>` streams a live run's view.
+//! A run's linear-stage counters are recorded messages, sent again bit for bit on re-execution.
 
 use crate::common::{glissade_ok, python_with, scene, scene_text, scratch, Scratch};
 use glissade::run::Run;
@@ -456,6 +457,74 @@ fn replay_logs_the_error_against_the_reference_as_the_report_measures_it() {
         assert_eq!(e_f.to_bits(), p.traction_error.to_bits(), "iteration {}", p.iteration);
         assert_eq!(e_w.to_bits(), p.jump_error.to_bits(), "iteration {}", p.iteration);
     }
+}
+
+/// Subdomain nodes read no clock and hold no log: their linear-stage counters (flops, PGD basis
+/// size, new and dropped modes, ξ) go out as `linear_stage_stats`, once per subdomain and
+/// iteration. On a PGD run with compression and Anderson: the recorded counters are exactly the
+/// run's linear-stage records (each timed by the bus, > 0 s), their basis sizes those of the
+/// recorded mode-form states, and a subdomain re-executed from the recording sends them again
+/// bit for bit (its records untimed).
+#[test]
+fn linear_stage_counters_are_recorded_messages() {
+    use glissade_replay::reexecute::{recorded_basis_sizes, recorded_linear_stage_stats};
+    let dir = temp_dir("stage-stats");
+    let text = scene_text("small-three-layer").replace("[solver]\n", "[solver]\nlinear_stage = \"pgd\"\n")
+        + "\n[solver.pgd]\ncriterion = \"increment-svd\"\n";
+    let sc = scene(&text);
+    assert!(matches!(
+        sc.model.solver.acceleration,
+        glissade_mechanics::model::Acceleration::Anderson { .. }
+    ));
+    let path = dir.join("stage-stats.mcap");
+    let opts = RunOptions {
+        run_id: "stage-stats".into(),
+        interior: false,
+    };
+    let outcome = Run::new(&sc, &opts)
+        .recorded(Some(path.as_path()))
+        .linear_stages()
+        .in_process()
+        .unwrap();
+    let (result, records, outcome) = (outcome.result, outcome.linear_stages, outcome.recording);
+    assert!(outcome.is_some());
+    // One record per subdomain (6) and iteration, each timed by the bus.
+    assert_eq!(records.len(), 6 * result.iterations.len());
+    assert!(records.iter().all(|r| r.seconds > 0.0 && r.flops > 0), "{records:?}");
+    assert!(records.iter().any(|r| r.modes > 2 && r.new_modes > 0));
+    let counters = |r: &glissade_subdomain::LinearStageRecord| {
+        (
+            r.iteration,
+            r.subdomain,
+            r.flops,
+            r.modes,
+            r.new_modes,
+            r.dropped_modes,
+            r.xi1.to_bits(),
+            r.xi2.to_bits(),
+        )
+    };
+    let recording = Recording::open(&path).unwrap();
+    let recorded = recorded_linear_stage_stats(&recording).unwrap();
+    let recorded: Vec<_> = recorded
+        .iter()
+        .map(|(it, s)| counters(&glissade_subdomain::LinearStageRecord::new(*it, s, 0.0)))
+        .collect();
+    assert_eq!(recorded, records.iter().map(counters).collect::<Vec<_>>());
+    let sizes: Vec<(u32, u32, usize)> = records.iter().map(|r| (r.iteration, r.subdomain, r.modes)).collect();
+    assert_eq!(recorded_basis_sizes(&recording).unwrap(), Some(sizes));
+    let id = parse_node("subdomain:3").unwrap();
+    let r = reexecute(&recording, id).unwrap();
+    assert_eq!(r.mismatch, None);
+    assert!(r.linear_stages.iter().all(|r| r.seconds == 0.0));
+    assert_eq!(
+        r.linear_stages.iter().map(counters).collect::<Vec<_>>(),
+        records
+            .iter()
+            .filter(|r| r.subdomain == 3)
+            .map(counters)
+            .collect::<Vec<_>>()
+    );
 }
 
 /// A PGD run's basis sizes come back from its recorded mode-form states (the time functions'

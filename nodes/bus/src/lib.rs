@@ -3,6 +3,10 @@
 //! messages between nodes: [`InProcessBus`] runs every node in one process, delivering in rounds
 //! (all messages of a round are handled, nodes in parallel on a rayon pool, outputs collected in
 //! node order), so a run is deterministic whatever the thread count.
+//!
+//! The bus is what times a run's work, when asked: each node's handling of what it is delivered,
+//! summed per (role, message field) ([`HandleTime`]) or per (node, iteration, message field)
+//! ([`IterationTime`]). A node counts its own work (e.g. flops) and says so in messages.
 
 use glissade_messages::{topic_field, Envelope, Field, Message, NodeId, Payload, Role, Routes, Stage, SCHEMA_VERSION};
 use rayon::prelude::*;
@@ -132,12 +136,53 @@ pub struct HandleTime {
     pub seconds: f64,
 }
 
+/// Time one node spent on the work of one iteration: its [`Node::handle`] calls on the messages of
+/// that iteration (by their envelope) of one field, or its [`Node::start`] (iteration 0). The
+/// linear stage of a subdomain in an iteration, e.g., is its handling of that iteration's
+/// `local_directions` (micro problem 1), `macro_displacements` (micro problem 2) and
+/// `anderson_step`, and at iteration 0 its start (micro problem 1 from ŝ = 0).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IterationTime {
+    pub node: NodeId,
+    pub iteration: u32,
+    /// The field of the messages handled (the last key-expression chunk before any destination),
+    /// or None for the node's [`Node::start`].
+    pub field: Option<String>,
+    pub calls: u64,
+    /// Wall time of the calls (each call runs on one thread).
+    pub seconds: f64,
+}
+
+/// Handling times per (node index, iteration, field index into `fields`; None: start).
+#[derive(Default)]
+struct IterationTiming {
+    fields: Vec<String>,
+    times: BTreeMap<(usize, u32, Option<usize>), (u64, Duration)>,
+}
+
+impl IterationTiming {
+    fn add(&mut self, node: usize, iteration: u32, field: Option<&str>, d: Duration) {
+        let field = field.map(|f| match self.fields.iter().position(|g| g == f) {
+            Some(k) => k,
+            None => {
+                self.fields.push(f.to_string());
+                self.fields.len() - 1
+            }
+        });
+        let e = self.times.entry((node, iteration, field)).or_default();
+        e.0 += 1;
+        e.1 += d;
+    }
+}
+
 /// Runs nodes in one process.
 pub struct InProcessBus {
     nodes: Vec<Box<dyn Node>>,
     routes: Routes,
     /// (role, field) → (calls, time), when timing is on.
     timing: Option<BTreeMap<(Role, String), (u64, Duration)>>,
+    /// Per (node, iteration, field), when timing per iteration is on.
+    iteration_timing: Option<IterationTiming>,
 }
 
 impl InProcessBus {
@@ -147,6 +192,7 @@ impl InProcessBus {
             nodes,
             routes,
             timing: None,
+            iteration_timing: None,
         }
     }
 
@@ -154,6 +200,31 @@ impl InProcessBus {
     pub fn with_timing(mut self, on: bool) -> Self {
         self.timing = on.then(BTreeMap::new);
         self
+    }
+
+    /// Times every [`Node::start`] and [`Node::handle`] call per (node, iteration, field)
+    /// ([`Self::iteration_times`]; two clock reads per call; off by default).
+    pub fn with_iteration_timing(mut self, on: bool) -> Self {
+        self.iteration_timing = on.then(IterationTiming::default);
+        self
+    }
+
+    /// The handling times per (node, iteration, field) gathered so far (empty when timing per
+    /// iteration is off), in node order (the order the bus was given them), then by iteration.
+    pub fn iteration_times(&self) -> Vec<IterationTime> {
+        let Some(t) = &self.iteration_timing else {
+            return Vec::new();
+        };
+        t.times
+            .iter()
+            .map(|(&(node, iteration, field), &(calls, d))| IterationTime {
+                node: self.nodes[node].id(),
+                iteration,
+                field: field.map(|k| t.fields[k].clone()),
+                calls,
+                seconds: d.as_secs_f64(),
+            })
+            .collect()
     }
 
     /// The handling times gathered so far (empty when timing is off), ordered by role and field.
@@ -176,9 +247,13 @@ impl InProcessBus {
     pub fn run(&mut self, mut observe: impl FnMut(&Message) -> bool) -> Result<(), BusError> {
         let ids: Vec<NodeId> = self.nodes.iter().map(|n| n.id()).collect();
         let mut queue = Vec::new();
-        for node in &mut self.nodes {
+        for (k, node) in self.nodes.iter_mut().enumerate() {
+            let t0 = self.iteration_timing.is_some().then(Instant::now);
             queue.extend(node.start()?);
             queue.extend(std::iter::from_fn(|| node.next_output()));
+            if let (Some(t0), Some(timing)) = (t0, &mut self.iteration_timing) {
+                timing.add(k, 0, None, t0.elapsed());
+            }
         }
         while !queue.is_empty() {
             for m in &queue {
@@ -189,7 +264,7 @@ impl InProcessBus {
             let topics: Vec<String> = queue.iter().map(Message::topic).collect();
             let deliveries = self.routes.deliveries(topics.iter().map(String::as_str));
             let queue_ref = &queue;
-            let timed = self.timing.is_some();
+            let timed = self.timing.is_some() || self.iteration_timing.is_some();
             type Timed = Vec<(usize, Duration)>;
             let results: Vec<Result<(Vec<Message>, Timed), NodeError>> = self
                 .nodes
@@ -209,17 +284,19 @@ impl InProcessBus {
                 })
                 .collect();
             let mut next = Vec::new();
-            for (node, r) in self.nodes.iter().zip(results) {
+            for (j, (node, r)) in self.nodes.iter().zip(results).enumerate() {
                 let (out, times) = r?;
                 next.extend(out);
-                if let Some(timing) = &mut self.timing {
-                    let role = node.id().role;
-                    for (k, d) in times {
-                        let e = timing
-                            .entry((role, topic_field(&topics[k]).unwrap_or(&topics[k]).to_string()))
-                            .or_default();
+                let role = node.id().role;
+                for (k, d) in times {
+                    let field = topic_field(&topics[k]).unwrap_or(&topics[k]);
+                    if let Some(timing) = &mut self.timing {
+                        let e = timing.entry((role, field.to_string())).or_default();
                         e.0 += 1;
                         e.1 += d;
+                    }
+                    if let Some(timing) = &mut self.iteration_timing {
+                        timing.add(j, queue[k].envelope.iteration, Some(field), d);
                     }
                 }
             }
@@ -287,7 +364,8 @@ pub fn stage_of(payload: &Payload) -> Stage {
         Payload::BoundaryState { .. }
         | Payload::BoundaryModes { .. }
         | Payload::AndersonGram { .. }
-        | Payload::AndersonStep { .. } => Stage::Linear,
+        | Payload::AndersonStep { .. }
+        | Payload::LinearStageStats(_) => Stage::Linear,
         Payload::LocalDirections { .. } | Payload::Decision(_) | Payload::IndicatorPartials { .. } => Stage::Local,
         Payload::InterfaceSolution(_) | Payload::Displacement { .. } => Stage::Final,
     }
@@ -321,4 +399,113 @@ pub fn expect_origin(node: NodeId, msg: &Message, role: Role, index: Option<u32>
         ));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glissade_messages::role_field_topic;
+
+    fn ctx() -> RunContext {
+        RunContext {
+            run_id: "t".into(),
+            scene_fingerprint: 1,
+        }
+    }
+
+    /// Sends one message when started (after `start_ms`) and handles what it subscribes to in
+    /// `handle_ms` each, finishing after the first.
+    struct Toy {
+        id: NodeId,
+        subs: Vec<String>,
+        out: Vec<Message>,
+        start_ms: u64,
+        handle_ms: u64,
+        handled: bool,
+    }
+
+    impl Node for Toy {
+        fn id(&self) -> NodeId {
+            self.id
+        }
+        fn subscriptions(&self) -> Vec<String> {
+            self.subs.clone()
+        }
+        fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+            std::thread::sleep(Duration::from_millis(self.start_ms));
+            Ok(std::mem::take(&mut self.out))
+        }
+        fn handle(&mut self, _msg: &Message) -> Result<Vec<Message>, NodeError> {
+            std::thread::sleep(Duration::from_millis(self.handle_ms));
+            self.handled = true;
+            Ok(Vec::new())
+        }
+        fn is_finished(&self) -> bool {
+            self.handled || self.subs.is_empty()
+        }
+    }
+
+    fn nodes() -> Vec<Box<dyn Node>> {
+        let launcher = NodeId {
+            role: Role::Launcher,
+            index: 0,
+        };
+        let subdomain = NodeId {
+            role: Role::Subdomain,
+            index: 0,
+        };
+        let q = Message {
+            envelope: ctx().envelope(launcher, 3, Stage::Local),
+            payload: Payload::LocalDirections {
+                subdomain: 0,
+                interfaces: vec![0],
+                q_hat: Field::zeros(2, 1),
+            },
+        };
+        vec![
+            Box::new(Toy {
+                id: launcher,
+                subs: Vec::new(),
+                out: vec![q],
+                start_ms: 0,
+                handle_ms: 0,
+                handled: false,
+            }),
+            Box::new(Toy {
+                id: subdomain,
+                subs: vec![role_field_topic("t", Role::Launcher, "local_directions", Some(0))],
+                out: Vec::new(),
+                start_ms: 20,
+                handle_ms: 30,
+                handled: false,
+            }),
+        ]
+    }
+
+    /// Timing per iteration gives each node's start (iteration 0) and its handling of each
+    /// iteration's messages per field, in node order; off, nothing.
+    #[test]
+    fn the_bus_times_each_nodes_work_per_iteration() {
+        let mut bus = InProcessBus::new(nodes()).with_iteration_timing(true);
+        bus.run(|_| true).unwrap();
+        let times = bus.iteration_times();
+        let got: Vec<(Role, u32, Option<&str>, u64)> = times
+            .iter()
+            .map(|t| (t.node.role, t.iteration, t.field.as_deref(), t.calls))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (Role::Launcher, 0, None, 1),
+                (Role::Subdomain, 0, None, 1),
+                (Role::Subdomain, 3, Some("local_directions"), 1)
+            ]
+        );
+        assert!(times[1].seconds >= 0.02, "{times:?}");
+        assert!(times[2].seconds >= 0.03, "{times:?}");
+        assert!(bus.handle_times().is_empty(), "timing per (role, field) is off");
+        let mut untimed = InProcessBus::new(nodes());
+        untimed.run(|_| true).unwrap();
+        assert!(untimed.iteration_times().is_empty());
+    }
 }

@@ -13,7 +13,7 @@ use glissade_mechanics::linear::{default_k0, macro_bases, LinearStage, Subdomain
 use glissade_mechanics::model::Model;
 use glissade_mechanics::pgd::PgdParams;
 use glissade_scene::LoadedScene;
-use glissade_subdomain::{LinearStageLog, SubdomainNode, SubdomainOptions};
+use glissade_subdomain::{SubdomainNode, SubdomainOptions};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -37,8 +37,6 @@ pub struct Plan {
     /// The scene's linear stage (resolved per subdomain when `Auto`) and PGD settings.
     pub linear_stage: LinearStage,
     pub pgd: PgdParams,
-    /// Where subdomain nodes log their linear stages, when asked.
-    pub log: Option<LinearStageLog>,
     /// The interfaces each interface node owns (the scene's deployment; one node owning every
     /// interface by default).
     pub interface_groups: Vec<Vec<usize>>,
@@ -59,7 +57,6 @@ impl Plan {
             coarse: model.solver.coarse && !model.interfaces.is_empty(),
             linear_stage: LinearStage::Condensed,
             pgd: PgdParams::default(),
-            log: None,
             interface_groups: vec![(0..model.interfaces.len()).collect()],
         }
     }
@@ -232,9 +229,6 @@ pub fn build_nodes_with(
         if stage == LinearStage::Pgd {
             node = node.with_pgd(plan.pgd.settings());
         }
-        if let Some(log) = &plan.log {
-            node = node.with_log(log.clone());
-        }
         nodes.push(Box::new(node));
     }
     if selection.interface {
@@ -266,7 +260,6 @@ mod tests {
             coarse: false,
             linear_stage: LinearStage::Condensed,
             pgd: PgdParams::default(),
-            log: None,
             interface_groups: Vec::new(),
         }
     }

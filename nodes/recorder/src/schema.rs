@@ -3,7 +3,7 @@
 use glissade_messages::SCHEMA_VERSION;
 
 /// (field chunk of the key expression, schema name `glissade.<Payload type>`, payload layout).
-pub const PAYLOAD_FIELDS: [(&str, &str, &str); 13] = [
+pub const PAYLOAD_FIELDS: [(&str, &str, &str); 14] = [
     (
         "scene",
         "glissade.Scene",
@@ -73,6 +73,12 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 13] = [
          force_den: f64, jump_num: f64, jump_den: f64, counts: [u64; 3], status_changes: u64, direction_updated: bool, step_num: f64, \
          step_den: f64 }>, \
          diverged: Option<String> }",
+    ),
+    (
+        "linear_stage_stats",
+        "glissade.LinearStageStats",
+        "(LinearStageStats { subdomain: u32, flops: u64, modes: u32, new_modes: u32, dropped_modes: u32, \
+         xi1: f64, xi2: f64 })",
     ),
 ];
 

@@ -11,7 +11,7 @@ use glissade_deploy::{build_nodes, BuildError, Plan, Selection};
 use glissade_messages::{encode, key_matches, DecodeError, Message, NodeId, Role};
 use glissade_recorder::{Recording, THINNED_FIELDS};
 use glissade_scene::{load_with, SceneError};
-use glissade_subdomain::{LinearStageLog, LinearStageRecord};
+use glissade_subdomain::{LinearStageRecord, LinearStageRecords};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -97,7 +97,8 @@ pub struct Reexecution {
     pub bytes: u64,
     /// None: every output is bit-identical to the recorded one.
     pub mismatch: Option<Mismatch>,
-    /// A subdomain node's linear stages, iteration by iteration (PGD basis sizes among them).
+    /// A subdomain node's linear stages, iteration by iteration (PGD basis sizes among them), from
+    /// the `linear_stage_stats` it published; untimed (seconds 0: no bus ran it).
     pub linear_stages: Vec<LinearStageRecord>,
     /// Recorded messages that are not the run's, not fed to the node.
     pub skipped: Skipped,
@@ -187,9 +188,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
         run_id: recording.run_id().to_string(),
         scene_fingerprint: scene.fingerprint,
     };
-    let mut plan = Plan::new(&model).with_scene(&scene);
-    let log = LinearStageLog::default();
-    plan.log = Some(log.clone());
+    let plan = Plan::new(&model).with_scene(&scene);
     let interior = recording.channels().iter().any(|c| c.topic.ends_with("/displacement"));
     let selection = match id.role {
         Role::Subdomain => Selection {
@@ -253,9 +252,11 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
     // Drive the node.
     let mut produced: BTreeMap<String, Vec<Message>> = BTreeMap::new();
     let mut outputs = 0;
+    let mut stages = LinearStageRecords::default();
     let mut keep = |out: Vec<Message>| {
         for o in out {
             outputs += 1;
+            stages.observe(&o);
             produced.entry(o.topic()).or_default().push(o);
         }
     };
@@ -339,7 +340,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
         recorded_outputs,
         bytes,
         mismatch: first,
-        linear_stages: log.lock().map(|v| v.clone()).unwrap_or_default(),
+        linear_stages: stages.records(&[]),
         skipped,
     })
 }
@@ -470,6 +471,28 @@ pub fn recorded_basis_sizes(recording: &Recording) -> Result<Option<Vec<BasisSiz
     }
     sizes.sort_unstable();
     Ok(Some(sizes))
+}
+
+/// The linear-stage counters of a recorded run, (iteration, counters) sorted by (iteration,
+/// subdomain): every subdomain's `linear_stage_stats` messages ([`glissade_messages::topic::linear_stage_stats`]).
+pub fn recorded_linear_stage_stats(
+    recording: &Recording,
+) -> Result<Vec<(u32, glissade_messages::LinearStageStats)>, ReexecuteError> {
+    let key = glissade_messages::topic::linear_stage_stats(recording.run_id());
+    let mut stats = Vec::new();
+    for m in recording.messages() {
+        if !key_matches(&key, m.topic) {
+            continue;
+        }
+        let msg = recording
+            .decode(&m)
+            .map_err(|source| decode_error(recording, m.topic, source))?;
+        if let glissade_messages::Payload::LinearStageStats(s) = msg.payload {
+            stats.push((msg.envelope.iteration, s));
+        }
+    }
+    stats.sort_by_key(|(it, s)| (*it, s.subdomain));
+    Ok(stats)
 }
 
 /// A recorded message on `topic` that does not decode.

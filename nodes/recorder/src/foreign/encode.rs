@@ -311,5 +311,14 @@ pub fn encode_into(m: &Message, out: &mut Vec<u8>) {
                 bytes(out, 3, d.as_bytes());
             }
         }
+        Payload::LinearStageStats(st) => {
+            uint(out, 2, st.subdomain as u64);
+            uint(out, 3, st.flops);
+            uint(out, 4, st.modes as u64);
+            uint(out, 5, st.new_modes as u64);
+            uint(out, 6, st.dropped_modes as u64);
+            double(out, 7, st.xi1);
+            double(out, 8, st.xi2);
+        }
     }
 }

@@ -405,6 +405,51 @@ pub const MESSAGES: &[MessageDef] = &[
         ],
     },
     MessageDef {
+        name: "LinearStageStats",
+        doc: "What a subdomain's linear stage of the envelope's iteration did, counted by the subdomain \
+              (no time: a bus times the handling of its inputs).",
+        fields: &[
+            ENVELOPE,
+            f("subdomain", 2, Ty::Uint32, SUBDOMAIN),
+            f(
+                "flops",
+                3,
+                Ty::Uint64,
+                "floating-point operations of the stage, as its kernels count them",
+            ),
+            f(
+                "modes",
+                4,
+                Ty::Uint32,
+                "PGD basis size after the stage, frozen macro modes included (0 without PGD)",
+            ),
+            f(
+                "new_modes",
+                5,
+                Ty::Uint32,
+                "PGD modes added in the stage (micro 1 + micro 2)",
+            ),
+            f(
+                "dropped_modes",
+                6,
+                Ty::Uint32,
+                "PGD modes dropped by the stage's compression",
+            ),
+            f(
+                "xi1",
+                7,
+                Ty::Double,
+                "PGD criterion xi at the end of micro problem 1 (0 without PGD)",
+            ),
+            f(
+                "xi2",
+                8,
+                Ty::Double,
+                "PGD criterion xi at the end of micro problem 2 (0 without PGD)",
+            ),
+        ],
+    },
+    MessageDef {
         name: "Envelope",
         doc: "Header of every message.",
         fields: &[

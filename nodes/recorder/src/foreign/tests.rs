@@ -4,8 +4,8 @@
 
 use super::*;
 use glissade_messages::{
-    Decision, Envelope, Field, InterfaceIndicators, InterfaceSolution, Message, NodeId, Overrides, ParticularModes,
-    RecordOverride, Role, Stage, Verdict,
+    Decision, Envelope, Field, InterfaceIndicators, InterfaceSolution, LinearStageStats, Message, NodeId, Overrides,
+    ParticularModes, RecordOverride, Role, Stage, Verdict,
 };
 use prost::Message as _;
 use prost_reflect::{DescriptorPool, DynamicMessage, ReflectMessage, Value};
@@ -214,6 +214,16 @@ fn samples() -> Vec<Message> {
             interfaces: vec![],
             diverged: Some("inf from subdomain 2".into()),
         },
+        Payload::LinearStageStats(LinearStageStats {
+            subdomain: 3,
+            flops: 12_345_678_901_234,
+            modes: 17,
+            new_modes: 2,
+            dropped_modes: 1,
+            xi1: 0.0625,
+            xi2: -0.0,
+        }),
+        Payload::LinearStageStats(LinearStageStats::default()),
     ];
     payloads
         .into_iter()
@@ -432,6 +442,15 @@ fn from_proto(m: &DynamicMessage) -> Message {
                 .collect(),
             diverged: m.has_field_by_name("diverged").then(|| string(m, "diverged")),
         },
+        "LinearStageStats" => Payload::LinearStageStats(LinearStageStats {
+            subdomain: u32_(m, "subdomain"),
+            flops: u64_(m, "flops"),
+            modes: u32_(m, "modes"),
+            new_modes: u32_(m, "new_modes"),
+            dropped_modes: u32_(m, "dropped_modes"),
+            xi1: f64_(m, "xi1"),
+            xi2: f64_(m, "xi2"),
+        }),
         other => panic!("no payload message {other}"),
     };
     Message { envelope, payload }

@@ -1,0 +1,254 @@
+//! The linear stage of a subdomain node, full or PGD (DESIGN §3): micro problems 1 and 2 (into
+//! full fields, or through the PGD basis), the relaxation (in coordinates with PGD), the state
+//! sent (`BoundaryState`, or `BoundaryModes` in mode form) followed by the stage's counters
+//! (`LinearStageStats`), and the displacement field recovered from the state at the end. The
+//! counters are the kernels' own (flops, basis size, ξ): nothing here reads a clock.
+
+use crate::{Phase, SubdomainNode};
+use faer::Mat;
+use glissade_bus::convert::field_of;
+use glissade_mechanics::linear::{relax_into, sum_into, sum_relax_into};
+use glissade_mechanics::pgd::PgdStage;
+use glissade_messages::{LinearStageStats, Message, Payload, Stage};
+
+impl SubdomainNode {
+    /// Micro problem 1 into (w1, f1) or, with PGD, into the basis' time functions (expanded
+    /// here only without the coarse problem) and the macro forces when the coarse problem is on.
+    /// Starts the counters of this iteration's linear stage.
+    fn solve_micro1(&mut self, coarse: bool) {
+        self.stats = LinearStageStats {
+            subdomain: self.subdomain(),
+            ..LinearStageStats::default()
+        };
+        let flops0 = self.flops();
+        let compress = self
+            .pgd
+            .as_ref()
+            .is_some_and(|p| self.iteration >= 1 && p.settings.criterion.compresses());
+        if compress {
+            // The compression works on the state's fields.
+            self.expand_state();
+        }
+        match self.pgd.as_mut() {
+            None => {
+                self.solver
+                    .micro1_into(self.q_hat.as_ref(), self.w1.as_mut(), self.f1.as_mut());
+                if coarse {
+                    self.solver
+                        .macro_forces_into(self.f1.as_ref(), self.macro_forces.as_mut());
+                }
+            }
+            Some(pgd) => {
+                if self.iteration >= 1 && pgd.settings.criterion.compresses() {
+                    self.stats.dropped_modes =
+                        pgd.compress(self.w.as_mut(), self.f.as_mut(), self.anderson.as_mut()) as u32;
+                }
+                let report = pgd.micro1(&mut self.solver, self.q_hat.as_ref());
+                self.stats.new_modes = report.new_modes as u32;
+                self.stats.xi1 = report.xi;
+                if coarse {
+                    pgd.macro_forces_into(self.macro_forces.as_mut());
+                }
+                self.stats.modes = pgd.n_modes() as u32;
+            }
+        }
+        self.stats.flops += self.flops() - flops0;
+    }
+
+    /// Floating-point operations of the linear-stage kernels so far (solver and PGD stage).
+    pub(crate) fn flops(&self) -> u64 {
+        self.solver.flops() + self.pgd.as_ref().map_or(0, PgdStage::flops)
+    }
+
+    /// Micro problem 2 into (w2, f2), or with PGD into the basis' time functions λ².
+    fn solve_micro2(&mut self) {
+        let flops0 = self.flops();
+        match self.pgd.as_mut() {
+            None => self
+                .solver
+                .micro2_into(self.w_tilde.as_ref(), self.w2.as_mut(), self.f2.as_mut()),
+            Some(pgd) => {
+                let report = pgd.micro2(&mut self.solver, self.w_tilde.as_ref());
+                self.stats.new_modes += report.new_modes as u32;
+                self.stats.xi2 = report.xi;
+                self.stats.modes = pgd.n_modes() as u32;
+            }
+        }
+        self.stats.flops += self.flops() - flops0;
+    }
+
+    /// Micro problem 1 from the stored q̂; returns the macro forces message or, without the coarse
+    /// problem, finishes the linear stage at once.
+    pub(crate) fn micro1(&mut self) -> Vec<Message> {
+        let coarse = self.options.coarse && self.solver.n_macro() > 0;
+        self.solve_micro1(coarse);
+        if coarse {
+            self.phase = Phase::Macro;
+            let payload = Payload::MacroForces {
+                subdomain: self.subdomain(),
+                forces: self.pool.field_of(self.macro_forces.as_ref()),
+            };
+            vec![self.msg(Stage::Micro1, payload)]
+        } else {
+            self.w2.fill(0.0);
+            self.f2.fill(0.0);
+            self.finish_linear_stage()
+        }
+    }
+
+    /// Micro problem 2 from the stored w̃, then the end of the linear stage.
+    pub(crate) fn micro2(&mut self) -> Vec<Message> {
+        self.solve_micro2();
+        self.finish_linear_stage()
+    }
+
+    /// s_new = s₁ + s₂, relaxed: s ← μ s_new + (1 − μ) s (μ = 1 for iterations 0 and 1). With
+    /// Anderson acceleration from iteration 2 on: records (s, s_new) and returns the Gram
+    /// partials instead; the step comes with `AndersonStep`.
+    fn finish_linear_stage(&mut self) -> Vec<Message> {
+        let mu = if self.iteration <= 1 {
+            1.0
+        } else {
+            self.options.relaxation
+        };
+        if self.pgd.is_some() {
+            return self.finish_pgd(mu);
+        }
+        let Some(history) = self.anderson.as_mut() else {
+            // s₁ + s₂ and the relaxation in one pass.
+            sum_relax_into(
+                mu,
+                self.w1.as_mut(),
+                self.f1.as_mut(),
+                self.w2.as_ref(),
+                self.f2.as_ref(),
+                self.w.as_mut(),
+                self.f.as_mut(),
+            );
+            self.phase = Phase::Directions;
+            return self.boundary_state();
+        };
+        if self.iteration >= 2 {
+            // s₁ + s₂ is only recorded: summed inside the history's pass.
+            history.record_sum(&self.w, &self.f, [&self.w1, &self.w2], [&self.f1, &self.f2]);
+        } else {
+            sum_into(self.w1.as_mut(), self.f1.as_mut(), self.w2.as_ref(), self.f2.as_ref());
+            if self.iteration >= 1 {
+                history.record(&self.w, &self.f, &self.w1, &self.f1);
+            }
+        }
+        if self.iteration >= 2 {
+            let p = history.partials();
+            return vec![self.anderson_gram(p)];
+        }
+        relax_into(mu, self.w1.as_ref(), self.f1.as_ref(), self.w.as_mut(), self.f.as_mut());
+        self.phase = Phase::Directions;
+        self.boundary_state()
+    }
+
+    /// [`Self::finish_linear_stage`] in mode form: the relaxation in coordinates, or with
+    /// Anderson from iteration 1 on the record of the iterate (its force residual
+    /// G(λ¹ + λ² − λˢ) for the least-squares problem, its coordinates for the step) and from
+    /// iteration 2 on its Gram partials. Neither the state nor its image is expanded.
+    fn finish_pgd(&mut self, mu: f64) -> Vec<Message> {
+        let flops0 = self.flops();
+        let pgd = self.pgd.as_mut().expect("PGD stage");
+        match self.anderson.as_mut() {
+            Some(history) if self.iteration >= 1 => {
+                pgd.residual_forces_into(self.f1.as_mut());
+                history.record_residual(&self.f1);
+                pgd.record_coordinates(history);
+                if self.iteration >= 2 {
+                    let p = history.partials();
+                    self.stats.flops += self.flops() - flops0;
+                    return vec![self.anderson_gram(p)];
+                }
+                pgd.relax_state(mu);
+            }
+            _ => pgd.relax_state(mu),
+        }
+        self.stats.flops += self.flops() - flops0;
+        self.phase = Phase::Directions;
+        self.boundary_modes()
+    }
+
+    /// The state in mode form: the basis columns changed since the last message, λˢ, and the
+    /// particular part in the first message; the node's own (W, F) are expanded from the same
+    /// mode form as a receiver's. Then the stage's counters.
+    pub(crate) fn boundary_modes(&mut self) -> Vec<Message> {
+        let pgd = self.pgd.as_mut().expect("PGD stage");
+        let form = self.modes.as_mut().expect("mode form with PGD");
+        let first = pgd.take_changed();
+        let p = pgd.n_modes();
+        let z = field_of(pgd.z().subcols(first, p - first));
+        let g = field_of(pgd.g().subcols(first, p - first));
+        let lambda = field_of(pgd.state());
+        form.update(first, &z.data, &g.data, &lambda.data)
+            .expect("the subdomain's own basis fits its mode form");
+        self.fields_stale = true;
+        let particular = self.particular.take();
+        let state = self.msg(
+            Stage::Linear,
+            Payload::BoundaryModes {
+                subdomain: self.subdomain(),
+                particular,
+                first_mode: first as u32,
+                z,
+                g,
+                lambda,
+            },
+        );
+        vec![state, self.stats_message()]
+    }
+
+    /// With PGD, (w, f) from the mode form when they lag behind it (the flops go to the current
+    /// linear stage's counters).
+    pub(crate) fn expand_state(&mut self) {
+        if let (true, Some(form)) = (self.fields_stale, self.modes.as_ref()) {
+            form.expand_into(self.w.as_mut(), self.f.as_mut());
+            self.stats.flops += form.expand_flops();
+            self.fields_stale = false;
+        }
+    }
+
+    /// The state s = (W, F), then the stage's counters.
+    pub(crate) fn boundary_state(&mut self) -> Vec<Message> {
+        let payload = Payload::BoundaryState {
+            subdomain: self.subdomain(),
+            w: self.pool.field_of(self.w.as_ref()),
+            f: self.pool.field_of(self.f.as_ref()),
+        };
+        vec![self.msg(Stage::Linear, payload), self.stats_message()]
+    }
+
+    /// The counters of this iteration's linear stage, sent once, after its state.
+    fn stats_message(&self) -> Message {
+        self.msg(Stage::Linear, Payload::LinearStageStats(self.stats))
+    }
+
+    /// The full displacement field u of every time point, recovered from the state s.
+    pub(crate) fn displacement(&mut self) -> Message {
+        self.expand_state();
+        let sub = &self.model.subdomains[self.solver.subdomain];
+        let layout = &self.solver.op.layout;
+        let nt = self.model.time.n_points();
+        let mut u = Mat::<f64>::zeros(sub.n_dofs(), nt);
+        let mut q = vec![0.0; layout.len()];
+        for i in 0..nt {
+            for (r, qr) in q.iter_mut().enumerate() {
+                *qr = self.f[(r, i)] + layout.k[r] * self.w[(r, i)];
+            }
+            let phi: Vec<f64> = sub.loads.iter().map(|c| c.time.eval(self.model.time.t(i))).collect();
+            for (d, v) in self.solver.op.recover(&q, &phi).into_iter().enumerate() {
+                u[(d, i)] = v;
+            }
+        }
+        self.msg(
+            Stage::Final,
+            Payload::Displacement {
+                subdomain: self.subdomain(),
+                u: field_of(u.as_ref()),
+            },
+        )
+    }
+}
