@@ -97,7 +97,7 @@ pub fn check_report(name: &str, report: &Report) -> AccuracyCheck {
 
 /// Solves the reference of `scene` and runs it past the smallest accuracy checked (accuracy
 /// 1e-5, the scene's other stop rules and iteration cap kept), then checks it.
-pub fn check_scene(name: &str, scene: &LoadedScene, reference: &ReferenceOptions) -> anyhow::Result<AccuracyCheck> {
+pub fn check_scene(name: &str, scene: &LoadedScene, reference: &ReferenceOptions) -> crate::Result<AccuracyCheck> {
     let mut sc = scene.clone();
     sc.model.solver.accuracy = Some(ACCURACIES[ACCURACIES.len() - 1] * 0.1);
     let t0 = Instant::now();
@@ -182,7 +182,7 @@ pub fn check_cases(
         .filter_map(|c| {
             let opts = c.reference.as_ref()?;
             let checked = glissade_scene::load_str(&c.accelerated, &format!("{}.toml", c.name))
-                .map_err(anyhow::Error::from)
+                .map_err(crate::Error::from)
                 .and_then(|sc| check_scene(c.name, &sc, opts))
                 .map_err(|e| format!("{}: {e:#}", c.name));
             on_check(&checked);

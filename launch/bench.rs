@@ -17,6 +17,7 @@
 //!   compute and memory-traffic bounds the iteration time is compared to.
 
 use crate::distributed::Network;
+use crate::error::{failed, invalid};
 use crate::run::Run;
 use crate::runner::{RunOptions, RunResult};
 use faer::{Accum, Mat, Par};
@@ -183,13 +184,14 @@ pub fn machine_rates(m: usize, n: usize) -> MachineRates {
 }
 
 /// Runs the benchmark of `scene`.
-pub fn bench(scene: &LoadedScene, run_id: &str) -> anyhow::Result<BenchReport> {
+pub fn bench(scene: &LoadedScene, run_id: &str) -> crate::Result<BenchReport> {
     let model = &scene.model;
-    anyhow::ensure!(
-        !model.interfaces.is_empty(),
-        "scene `{}` has no interface: there is no iteration to benchmark",
-        model.name
-    );
+    if model.interfaces.is_empty() {
+        invalid!(
+            "scene `{}` has no interface: there is no iteration to benchmark",
+            model.name
+        );
+    }
     let plan = Plan::new(model).with_scene(scene);
     let nt = model.time.n_points();
     // Boundary sizes and macro sizes of the subdomains that iterate.
@@ -472,24 +474,27 @@ pub fn compare_processes(
     scene: &LoadedScene,
     exe: &Path,
     rounds: usize,
-    mut run_id: impl FnMut() -> anyhow::Result<String>,
-) -> anyhow::Result<ProcessComparison> {
-    anyhow::ensure!(rounds >= 1, "at least one round");
-    anyhow::ensure!(
-        !scene.model.interfaces.is_empty(),
-        "scene `{}` has no interface: it runs in one process only",
-        scene.model.name
-    );
+    mut run_id: impl FnMut() -> crate::Result<String>,
+) -> crate::Result<ProcessComparison> {
+    if rounds < 1 {
+        invalid!("at least one round");
+    }
+    if scene.model.interfaces.is_empty() {
+        invalid!(
+            "scene `{}` has no interface: it runs in one process only",
+            scene.model.name
+        );
+    }
     // The first run's decisions, as text (every value written out exactly, so the comparison is
     // bit for bit, NaN and the sign of zero included): every other run must repeat them.
     let mut reference: Option<Vec<String>> = None;
-    let mut same_run = |what: &str, r: RunResult| -> anyhow::Result<(f64, f64, Option<f64>)> {
+    let mut same_run = |what: &str, r: RunResult| -> crate::Result<(f64, f64, Option<f64>)> {
         let decisions: Vec<String> = r.iterations.iter().map(|i| format!("{:?}", i.decision)).collect();
         match &reference {
             None => reference = Some(decisions),
             Some(first) => {
                 if let Some(k) = (0..first.len().max(decisions.len())).find(|&k| first.get(k) != decisions.get(k)) {
-                    anyhow::bail!(
+                    failed!(
                         "the run {what} is not the first in-process run: its decision of iteration {k} is {} where the first \
                          run's is {} ({} against {} iterations)",
                         decisions.get(k).map_or("missing", String::as_str),

@@ -25,6 +25,9 @@ pub enum Error {
     /// A message that does not decode as one of the run's.
     #[error(transparent)]
     Decode(#[from] glissade_messages::DecodeError),
+    /// The monolithic reference that a report or check needs.
+    #[error(transparent)]
+    Reference(#[from] glissade_reference::ReferenceError),
     /// A recording that cannot be written or read.
     #[error(transparent)]
     Recorder(#[from] RecorderError),

@@ -6,7 +6,8 @@ use crate::bus::Joining;
 use crate::children::{NodeName, NodeRole};
 use crate::distributed::Supervision;
 use crate::distributed::{DEPARTURE_GRACE, DONE_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT};
-use anyhow::bail;
+use crate::error::{invalid, Error};
+use crate::runner::RunError;
 use glissade_bus::RunContext;
 use glissade_deploy::{build_interface_node, build_nodes, Plan, Selection};
 use glissade_messages::{decode, Expected, Payload};
@@ -26,11 +27,11 @@ pub fn run_node_process(
     subdomains: &[u32],
     index: u32,
     supervision: Supervision,
-) -> anyhow::Result<()> {
+) -> crate::Result<()> {
     let interior = supervision.interior;
     let name = NodeName { role, index };
     if role == NodeRole::Coarse && index != 0 {
-        bail!("node {name}: a run has one coarse node, index 0");
+        invalid!("node {name}: a run has one coarse node, index 0");
     }
     let session = bus.open(supervision.shared_memory)?;
     let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
@@ -41,13 +42,13 @@ pub fn run_node_process(
     };
     let msg = decode(&bytes, &expected)?;
     let Payload::Scene { text, overrides } = msg.payload else {
-        bail!(
+        invalid!(
             "the launcher's scene query returned a {} message",
             msg.payload.field_key()
         )
     };
     if fingerprint_with(&text, &overrides) != fp {
-        bail!("the scene received from the bus does not match its fingerprint {fp:016x}");
+        invalid!("the scene received from the bus does not match its fingerprint {fp:016x}");
     }
     // The scene as written with the launcher's command-line overrides: the run's model.
     let scene = load_with(&text, "<scene from the bus>", &overrides)?;
@@ -57,14 +58,16 @@ pub fn run_node_process(
         NodeRole::Subdomain => {
             let groups = plan.groups(scene.deployment.subdomain_nodes);
             let Some(group) = groups.get(index as usize) else {
-                bail!(
+                invalid!(
                     "node {name}: the scene's deployment has {} subdomain node(s), indices 0 to {}",
                     groups.len(),
                     groups.len().saturating_sub(1)
                 );
             };
             if !subdomains.is_empty() && subdomains != group.as_slice() {
-                bail!("node {name}: --subdomains {subdomains:?} differ from the deployment's group {index}, {group:?}");
+                invalid!(
+                    "node {name}: --subdomains {subdomains:?} differ from the deployment's group {index}, {group:?}"
+                );
             }
             Selection {
                 subdomains: group.clone(),
@@ -84,17 +87,17 @@ pub fn run_node_process(
         },
     };
     if role == NodeRole::Coarse && !plan.coarse {
-        bail!("node {name}: the scene needs no coarse node (its coarse problem is off)");
+        invalid!("node {name}: the scene needs no coarse node (its coarse problem is off)");
     }
     let ctx = RunContext {
         run_id: run_id.to_string(),
         scene_fingerprint: fp,
     };
-    let mut nodes = build_nodes(&model, &ctx, interior, &plan, &selection)?;
+    let mut nodes = build_nodes(&model, &ctx, interior, &plan, &selection).map_err(RunError::from)?;
     if role == NodeRole::Interface {
         nodes.push(
             build_interface_node(&model, &ctx, &plan, index as usize)
-                .map_err(|e| anyhow::anyhow!("node {name}: {e}"))?,
+                .map_err(|e| Error::Failed(format!("node {name}: {e}")))?,
         );
     }
     let run = transport::NodeRun {

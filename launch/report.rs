@@ -7,6 +7,7 @@
 //! iteration's messages on the bus and, with PGD, every subdomain's basis size per iteration
 //! (plotted under the errors).
 
+use crate::error::invalid;
 use crate::run::Run;
 use crate::runner::{AndersonTally, RunOptions, RunResult};
 use glissade_bus::convert::view;
@@ -119,7 +120,7 @@ pub fn build_report(
     scene: &LoadedScene,
     run_id: &str,
     stop_at: Option<f64>,
-) -> anyhow::Result<(Report, ReferenceRun, RunResult)> {
+) -> crate::Result<(Report, ReferenceRun, RunResult)> {
     build_report_with(scene, run_id, stop_at, &ReferenceOptions::default())
 }
 
@@ -129,7 +130,7 @@ pub fn build_report_with(
     run_id: &str,
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,
-) -> anyhow::Result<(Report, ReferenceRun, RunResult)> {
+) -> crate::Result<(Report, ReferenceRun, RunResult)> {
     let t0 = Instant::now();
     let reference = solve_reference_steps(&scene.model, reference_options)?;
     let reference_s = t0.elapsed().as_secs_f64();
@@ -295,7 +296,7 @@ impl std::str::FromStr for Variant {
 
 /// `scene` with a variant's linear stage, acceleration and start; an error names a start the
 /// scene cannot take (c must divide N; not with the PGD stage, as `solver.time_coarsening`).
-pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> anyhow::Result<LoadedScene> {
+pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> crate::Result<LoadedScene> {
     let mut sc = scene.clone();
     sc.linear_stage = v.stage;
     match (v.acceleration, scene.model.solver.acceleration) {
@@ -314,20 +315,18 @@ pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> anyhow::Result<LoadedS
         StartChoice::Zero => solver.time_start = None,
         StartChoice::Coarse(c) => {
             let n = sc.model.time.n_steps;
-            anyhow::ensure!(
-                n.is_multiple_of(c),
-                "+start{c}: {c} does not divide the scene's N = {n}"
-            );
+            if !n.is_multiple_of(c) {
+                invalid!("+start{c}: {c} does not divide the scene's N = {n}");
+            }
             solver.time_start = Some(TimeStart {
                 coarsening: c,
                 tolerance: solver.time_start.map_or(DEFAULT_TIME_START_TOLERANCE, |t| t.tolerance),
             });
         }
     }
-    anyhow::ensure!(
-        sc.model.solver.time_start.is_none() || v.stage != LinearStage::Pgd,
-        "a time-coarse start does not go with the PGD stage (use +zero, or another stage)"
-    );
+    if sc.model.solver.time_start.is_some() && v.stage == LinearStage::Pgd {
+        invalid!("a time-coarse start does not go with the PGD stage (use +zero, or another stage)");
+    }
     Ok(sc)
 }
 
@@ -341,7 +340,7 @@ pub fn build_reports(
     run_id: &str,
     variants: &[Variant],
     stop_at: Option<f64>,
-) -> anyhow::Result<(Vec<Report>, ReferenceRun)> {
+) -> crate::Result<(Vec<Report>, ReferenceRun)> {
     build_reports_with(scene, run_id, variants, stop_at, &ReferenceOptions::default())
 }
 
@@ -352,11 +351,11 @@ pub fn build_reports_with(
     variants: &[Variant],
     stop_at: Option<f64>,
     reference_options: &ReferenceOptions,
-) -> anyhow::Result<(Vec<Report>, ReferenceRun)> {
+) -> crate::Result<(Vec<Report>, ReferenceRun)> {
     let scenes = variants
         .iter()
         .map(|v| variant_scene(scene, v))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<crate::Result<Vec<_>>>()?;
     let t0 = Instant::now();
     let reference = solve_reference_steps(&scene.model, reference_options)?;
     let reference_s = t0.elapsed().as_secs_f64();
@@ -398,7 +397,7 @@ pub fn report_against(
     reference: &ReferenceRun,
     reference_s: f64,
     stop_at: Option<f64>,
-) -> anyhow::Result<(Report, RunResult)> {
+) -> crate::Result<(Report, RunResult)> {
     let model = &scene.model;
     let complete = reference.failure.is_none().then_some(&reference.solution);
     let mut tracker = ReferenceErrors::new(model);
@@ -450,7 +449,9 @@ pub fn report_against(
         .in_process()?;
     let (result, records) = (outcome.result, outcome.linear_stages);
     if let Some(e) = undecodable {
-        anyhow::bail!("the run's own boundary state could not be read: {e}");
+        return Err(crate::Error::Failed(format!(
+            "the run's own boundary state could not be read: {e}"
+        )));
     }
     let pgd = records.iter().any(|r| r.modes > 0);
     let points: Vec<ReportPoint> = result

@@ -18,6 +18,14 @@ use glissade_subdomain::LinearStageRecord;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+/// A run id nobody can guess: 128 bits from the operating system's random source, in hex.
+pub fn random_run_id() -> crate::Result<String> {
+    let mut bytes = [0u8; 16];
+    getrandom::fill(&mut bytes)
+        .map_err(|e| crate::Error::Failed(format!("cannot draw a random run id from the operating system: {e}")))?;
+    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}
+
 /// What watches every message of an in-process run, returning the wall time it spent.
 type Observer<'a> = Box<dyn FnMut(&Message) -> Duration + 'a>;
 

@@ -76,10 +76,7 @@ pub(crate) fn load_with_overrides(
     Ok(sc)
 }
 
-/// A random run id: 128 bits in hex.
-pub(crate) fn default_run_id() -> anyhow::Result<String> {
-    let mut bytes = [0u8; 16];
-    getrandom::fill(&mut bytes)
-        .map_err(|e| anyhow::anyhow!("cannot draw a random run id from the operating system: {e}"))?;
-    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+/// A random run id: 128 bits in hex ([`glissade::run::random_run_id`]).
+pub(crate) fn default_run_id() -> glissade::Result<String> {
+    glissade::run::random_run_id()
 }
