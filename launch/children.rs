@@ -139,7 +139,7 @@ pub(crate) fn forward(
     std::thread::spawn(move || {
         for line in BufReader::new(stream).lines().map_while(Result::ok) {
             if crate::console::shows_child_line(&line) {
-                eprintln!("[{prefix}] {line}");
+                crate::console::say(&format!("[{prefix}] {line}"));
             }
             if let Ok(mut l) = last.lock() {
                 l.push(line);

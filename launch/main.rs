@@ -3,6 +3,7 @@
 
 mod cli;
 mod commands;
+mod log;
 
 use anyhow::Context;
 use clap::Parser;
@@ -26,7 +27,7 @@ fn main() -> ExitCode {
     // Scenes too large for this machine are refused before anything is built.
     glissade_scene::set_machine_memory(glissade::machine_memory().unwrap_or(0));
     let cli = Cli::parse();
-    if let Err(e) = log_if_asked() {
+    if let Err(e) = log::install() {
         eprintln!("error: {e:#}");
         return ExitCode::from(2);
     }
@@ -37,30 +38,6 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
-}
-
-/// With `RUST_LOG` set (tracing's filter syntax, e.g. `zenoh=warn` or
-/// `zenoh_transport=debug`), prints the log lines of this process and its libraries (Zenoh) to
-/// stderr. Node processes inherit the variable, and the launcher forwards their lines. Without
-/// it nothing is installed and nothing is logged.
-fn log_if_asked() -> anyhow::Result<()> {
-    let Some(filter) = std::env::var_os("RUST_LOG") else {
-        return Ok(());
-    };
-    let filter = filter
-        .into_string()
-        .map_err(|v| anyhow::anyhow!("RUST_LOG = {v:?} is not UTF-8"))?;
-    // Zenoh logs a session's whole configuration, the bus password among it, at debug level
-    // when it opens: that module is held at info whatever RUST_LOG asks.
-    let filter = tracing_subscriber::EnvFilter::try_new(&filter)
-        .map_err(|e| anyhow::anyhow!("RUST_LOG = {filter:?} is not a tracing filter: {e}"))?
-        .add_directive("zenoh::api::session=info".parse().expect("a valid directive"));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(false)
-        .try_init()
-        .map_err(|e| anyhow::anyhow!("cannot install the log for RUST_LOG: {e}"))
 }
 
 /// Makes the allocator keep the memory a process frees for its next allocations instead of

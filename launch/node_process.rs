@@ -112,7 +112,7 @@ pub fn run_node_process(
         resume: supervision.resume,
         done_timeout: DONE_TIMEOUT,
     };
-    let outcome = transport::run_nodes(&session, &run, nodes, |l| eprintln!("{l}"));
+    let outcome = transport::run_nodes(&session, &run, nodes, crate::console::say);
     let _ = session.close().wait();
     Ok(outcome?)
 }

@@ -275,11 +275,11 @@ fn log_of(path: &Path, patterns: &str) -> Result<Vec<u8>, String> {
         .filter(|m| patterns.iter().any(|p| glissade_messages::key_matches(p, m.topic)))
         .map(|m| (m.topic.to_string(), m.data.into_owned()))
         .collect();
-    eprintln!(
+    crate::console::say(&format!(
         "log query: {} message(s) matching {} pattern(s) served",
         messages.len(),
         patterns.len()
-    );
+    ));
     Ok(glissade_zenoh::encode_log(&messages))
 }
 
@@ -308,12 +308,12 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
     // With the overrides: `--record full` and the iteration cap are the run's, not the file's.
     let scene = load_with(&text, "<scene from the bus>", &overrides)?;
     let mut recorder = create_recorder(&scene, run_id, path)?;
-    eprintln!(
+    crate::console::say(&format!(
         "{}recording to {} (pid {})",
         glissade_zenoh::NOTE,
         path.display(),
         std::process::id()
-    );
+    ));
     let (tx, rx) = mpsc::channel::<Heard>();
     let log_tx = tx.clone();
     let _sub = session
@@ -356,11 +356,11 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
     loop {
         if SIGNALLED.load(Ordering::SeqCst) {
             let stats = recorder.finish()?;
-            eprintln!(
+            crate::console::say(&format!(
                 "interrupted: recording finalised with {} messages: {}",
                 stats.messages,
                 path.display()
-            );
+            ));
             return Ok(());
         }
         if let Some((n, since)) = target {
@@ -389,12 +389,12 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
                 let sent = match answer {
                     Ok(bytes) => q.reply(q.key_expr().clone(), bytes).wait(),
                     Err(why) => {
-                        eprintln!("log query refused: {why}");
+                        crate::console::say(&format!("log query refused: {why}"));
                         q.reply_err(why.into_bytes()).wait()
                     }
                 };
                 if let Err(e) = sent {
-                    eprintln!("cannot answer a log query: {e}");
+                    crate::console::say(&format!("cannot answer a log query: {e}"));
                 }
             }
             Ok(Heard::Put(key, bytes, t)) => {
@@ -408,12 +408,12 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
                 }
                 if key == stop {
                     let stats = recorder.finish()?;
-                    eprintln!(
+                    crate::console::say(&format!(
                         "the run was stopped ({}): recording finalised with {} messages: {}",
                         String::from_utf8_lossy(&bytes),
                         stats.messages,
                         path.display()
-                    );
+                    ));
                     return Ok(());
                 }
                 // Control messages (start, …) carry no envelope: not part of the run's traffic.
@@ -450,16 +450,18 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
     }
     let stats = recorder.finish()?;
     if let Some(first) = &first_refused {
-        eprintln!("warning: {refused} message(s) on the run's keys were not the run's and were not recorded (the first {first})");
+        crate::console::warn(&format!(
+            "{refused} message(s) on the run's keys were not the run's and were not recorded (the first {first})"
+        ));
     }
-    eprintln!(
+    crate::console::say(&format!(
         "{}recorded {} messages on {} channels, {} bytes: {}",
         glissade_zenoh::NOTE,
         stats.messages,
         stats.channels,
         stats.file_bytes,
         path.display()
-    );
+    ));
     let _ = session.close().wait();
     Ok(())
 }

@@ -199,7 +199,7 @@ pub(crate) fn run_processes(
     if let Some(r) = spawned.recorder.take() {
         let seen = traffic.by_kind.values().map(|t| t.messages).sum();
         if let Some(problem) = r.finish(&set_up.bus.session, run_id, seen) {
-            eprintln!("warning: recording: {problem}");
+            crate::console::warn(&format!("recording: {problem}"));
             left_out.push(format!("recording: {problem}"));
         }
     }

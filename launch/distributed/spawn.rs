@@ -76,14 +76,14 @@ pub(super) fn spawn(
         } else {
             net.connect.clone()
         };
-        eprintln!(
+        crate::console::say(&format!(
             "waiting up to {} s for {} node(s) started by hand; on the other machine(s) run:",
             remote_timeout.as_secs(),
             net.remote.len()
-        );
+        ));
         let mut remote_tls = match &scene.network.tls {
             Some(t) => {
-                eprintln!(
+                crate::console::say(&format!(
                     "(TLS: copy {} to the other machine(s){})",
                     t.root_ca.display(),
                     if t.mutual {
@@ -91,7 +91,7 @@ pub(super) fn spawn(
                     } else {
                         ""
                     }
-                );
+                ));
                 let ca = Path::new(t.root_ca.file_name().unwrap_or(t.root_ca.as_os_str()));
                 let identity = (Path::new("<node-cert.pem>"), Path::new("<node-key.pem>"));
                 tls_args(ca, t.mutual.then_some(identity))
@@ -109,19 +109,19 @@ pub(super) fn spawn(
             if let Some(dir) = dir {
                 let cr = &bus.credentials[&r.id()];
                 let file = write_credentials(dir, run_id, r, cr)?;
-                eprintln!(
+                crate::console::say(&format!(
                     "(node {r}: copy {} to its machine, readable by its user only; it lets a process speak as {r} in \
                      this run and nothing else)",
                     file.display()
-                );
+                ));
                 hand_credentials.0.push(file.clone());
                 let name = file.file_name().map(PathBuf::from).unwrap_or(file);
                 args.extend(["--credentials".to_string(), name.display().to_string()]);
             }
-            eprintln!(
+            crate::console::say(&format!(
                 "  glissade {}",
                 with_supervision(set_up.supervised, node_args(r, run_id, &connect, opts.interior, &args)).join(" ")
-            );
+            ));
         }
     }
     Ok(Spawned {

@@ -303,10 +303,10 @@ impl<'r> Supervisor<'r> {
             )));
         }
         *count += 1;
-        eprintln!(
+        crate::console::say(&format!(
             "{why_short}; restarting it ({} of {restarts}): it resumes from the recording",
             *count
-        );
+        ));
         let p = &mut children.0[k];
         let _ = p.child.kill();
         let _ = p.child.wait();

@@ -555,13 +555,14 @@ impl Recorder {
 
 impl Drop for Recorder {
     /// Finalises the file (summary section) when a run ends without [`Recorder::finish`], e.g.
-    /// on an error path; a failure here can only be reported on stderr (once: a failure already
+    /// on an error path; a failure here can only be told (an error event of the launcher's
+    /// console target, which the `glissade` binary prints as "error: …"; once: a failure already
     /// returned by a call is not repeated).
     fn drop(&mut self) {
         let failed_before = self.failed.is_some();
         if let Err(e) = self.finish_inner() {
             if !failed_before {
-                eprintln!("error: {e}");
+                tracing::error!(target: "glissade::console", "{e}");
             }
         }
     }
