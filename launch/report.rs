@@ -267,7 +267,7 @@ impl std::str::FromStr for Variant {
                 }
                 "zero" => v.start = StartChoice::Zero,
                 p if p.contains('=') => {
-                    let (key, value) = p.split_once('=').expect("contains =");
+                    let (key, value) = p.split_once('=').expect("the arm's guard: p contains '='");
                     v.pgd.set(p, key, value)?
                 }
                 p if p.starts_with("start") => match p["start".len()..].parse::<usize>() {

@@ -192,7 +192,12 @@ fn write_vtu_files(
     let mut bytes = 0u64;
     let mut buf = Vec::new();
     let mut collection = String::new();
-    let dir_name = dir.file_name().expect("a folder name").to_string_lossy().into_owned();
+    // `dir` is `<out>/<stem>-vtu` (series_paths): it has a file name.
+    let dir_name = dir
+        .file_name()
+        .expect("series_paths names the folder <stem>-vtu")
+        .to_string_lossy()
+        .into_owned();
     for &i in times {
         let t = model.time.t(i);
         for (part, name) in [(0, format!("solid-{i:04}.vtu")), (1, format!("interfaces-{i:04}.vtu"))] {
