@@ -25,6 +25,7 @@ mod reference;
 mod reference_failure;
 mod replay;
 mod run_id;
+mod shared_router;
 mod stability;
 mod time_start;
 mod tls;
