@@ -5,7 +5,6 @@
 //! process joins it (`glissade node --connect --tls-* --credentials`).
 
 use crate::children::NodeName;
-use crate::distributed::Network;
 use crate::error::{invalid, Error, IoWhat, Result};
 use glissade_messages::{NodeId, Role};
 use glissade_scene::LoadedScene;
@@ -53,7 +52,7 @@ pub fn auto_shared_memory(scene: &LoadedScene, host: &Host) -> Result<String, St
     let restarts_off = if scene.deployment.restarts == 0 {
         Some("deployment.restarts = 0".to_string())
     } else {
-        crate::distributed::unresumable(scene, host.recorded)
+        unresumable(scene, host.recorded)
     };
     let Some(restarts_off) = restarts_off else {
         return Err("node restarts are on: they need fields that do not go through shared memory".into());
@@ -456,5 +455,33 @@ impl Joining<'_> {
                 source,
             }
         })
+    }
+}
+
+/// Where the run's bus is and which nodes the launcher leaves to be started elsewhere.
+#[derive(Debug, Clone, Default)]
+pub struct Network {
+    /// Endpoints the launcher's router listens on (e.g. `tcp/0.0.0.0:7447`); empty: a free
+    /// loopback port.
+    pub listen: Vec<String>,
+    /// Router endpoints (e.g. a `zenohd`) the launcher and its nodes connect to instead of the
+    /// launcher hosting the router.
+    pub connect: Vec<String>,
+    /// Nodes the launcher does not start: they are started by hand with `glissade node`.
+    pub remote: Vec<NodeName>,
+    /// Longest wait for the nodes started by hand to be ready (default: 300 s).
+    pub remote_timeout: Option<Duration>,
+    /// Folder where the credentials of the nodes started by hand (`remote`) are written, one
+    /// file each, readable by this user only, removed when the run ends (the run's `--out`).
+    pub credentials: Option<std::path::PathBuf>,
+}
+
+/// Why a dead node process could not resume from the recording of a run (`recorded` or not) of
+/// `scene`, whatever the transport: no recording, or an incomplete one.
+pub(crate) fn unresumable(scene: &LoadedScene, recorded: bool) -> Option<String> {
+    if recorded {
+        scene.recording.incomplete()
+    } else {
+        Some("the run is not recorded".to_string())
     }
 }

@@ -3,8 +3,7 @@
 //! the cause, when there is one, is its `source`, and the binary prints the chain
 //! ("what: cause").
 
-use crate::distributed::Interrupted;
-use crate::runner::RunError;
+use crate::runner::{RunError, RunResult};
 use glissade_recorder::RecorderError;
 use glissade_scene::SceneError;
 use glissade_zenoh::TransportError;
@@ -110,4 +109,12 @@ pub(crate) fn zenoh(what: &str, e: impl std::fmt::Display) -> Error {
         what: what.to_string(),
         detail: e.to_string(),
     })
+}
+
+/// The run was interrupted (SIGINT/SIGTERM); every node was stopped. `partial` holds the
+/// iterations done so far.
+#[derive(Debug, thiserror::Error)]
+#[error("interrupted after {} iteration(s); every node was stopped", .partial.iterations.len())]
+pub struct Interrupted {
+    pub partial: RunResult,
 }

@@ -8,6 +8,7 @@ pub mod children;
 pub mod console;
 pub mod distributed;
 pub mod error;
+pub mod files;
 pub mod generate;
 pub mod node_process;
 pub mod output;

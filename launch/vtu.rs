@@ -15,6 +15,7 @@
 
 use crate::error::{failed, Error, IoWhat, Result};
 use crate::output::pair_values;
+pub use crate::output::series_paths;
 use glissade_mechanics::model::Model;
 use glissade_mechanics::post::{nodal_stresses_into, von_mises, NodalStress};
 use glissade_messages::InterfaceSolution;
@@ -40,11 +41,6 @@ pub struct Series {
     pub dir: PathBuf,
     pub files: usize,
     pub bytes: u64,
-}
-
-/// The `.pvd` file and the `.vtu` folder of outputs named `stem` in `out`.
-pub fn series_paths(out: &Path, stem: &str) -> (PathBuf, PathBuf) {
-    (out.join(format!("{stem}.pvd")), out.join(format!("{stem}-vtu")))
 }
 
 /// The time points a series written every `every` time points holds: 0, every, 2·every, … and
@@ -152,16 +148,16 @@ pub fn write_series(
     let text = format!(
         "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"1.0\" byte_order=\"LittleEndian\">\n  <Collection>\n{collection}  </Collection>\n</VTKFile>\n"
     );
-    if let Err(e) = crate::output::rename_new(&partial, &dir) {
+    if let Err(e) = crate::files::rename_new(&partial, &dir) {
         let _ = std::fs::remove_dir_all(&partial);
         failed!(
             "cannot move {} to {}: {}",
             partial.display(),
             dir.display(),
-            crate::output::io_why(&e)
+            crate::files::io_why(&e)
         );
     }
-    if let Err(e) = crate::output::write_through_partial(&pvd, false, |w| w.write_all(text.as_bytes())) {
+    if let Err(e) = crate::files::write_through_partial(&pvd, false, |w| w.write_all(text.as_bytes())) {
         // The series' files without their index: removed with it.
         let _ = std::fs::remove_dir_all(&dir);
         return Err(Error::NotDone {
@@ -211,7 +207,7 @@ fn write_vtu_files(
                 Error::Failed(format!(
                     "cannot write {}: {}",
                     dir.join(&name).display(),
-                    crate::output::io_why(&e)
+                    crate::files::io_why(&e)
                 ))
             })?;
             bytes += buf.len() as u64;
@@ -497,7 +493,7 @@ pub fn write_new_file(path: &Path, data: &[u8]) -> Result<()> {
     if std::fs::symlink_metadata(path).is_ok() {
         return Err(Error::Exists(path.to_path_buf()));
     }
-    crate::output::write_through_partial(path, false, |w| w.write_all(data))
+    crate::files::write_through_partial(path, false, |w| w.write_all(data))
 }
 
 #[cfg(test)]

@@ -21,7 +21,10 @@ mod setup;
 mod spawn;
 mod supervise;
 
-use crate::children::NodeName;
+pub(crate) use crate::bus::unresumable;
+pub use crate::bus::Network;
+pub use crate::error::Interrupted;
+
 use crate::error::{Error, Result};
 use crate::runner::{IterationRecord, RunOptions, RunResult};
 use glissade_messages::{Message, Verdict};
@@ -83,24 +86,6 @@ pub fn interrupted() -> bool {
     INTERRUPTED.load(Ordering::SeqCst)
 }
 
-/// Where the run's bus is and which nodes the launcher leaves to be started elsewhere.
-#[derive(Debug, Clone, Default)]
-pub struct Network {
-    /// Endpoints the launcher's router listens on (e.g. `tcp/0.0.0.0:7447`); empty: a free
-    /// loopback port.
-    pub listen: Vec<String>,
-    /// Router endpoints (e.g. a `zenohd`) the launcher and its nodes connect to instead of the
-    /// launcher hosting the router.
-    pub connect: Vec<String>,
-    /// Nodes the launcher does not start: they are started by hand with `glissade node`.
-    pub remote: Vec<NodeName>,
-    /// Longest wait for the nodes started by hand to be ready (default: 300 s).
-    pub remote_timeout: Option<Duration>,
-    /// Folder where the credentials of the nodes started by hand (`remote`) are written, one
-    /// file each, readable by this user only, removed when the run ends (the run's `--out`).
-    pub credentials: Option<std::path::PathBuf>,
-}
-
 /// Messages and bytes of one kind seen on the bus.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct KindTraffic {
@@ -116,14 +101,6 @@ pub struct Traffic {
     pub iterations: u64,
 }
 
-/// The run was interrupted (SIGINT/SIGTERM); every node was stopped. `partial` holds the
-/// iterations done so far.
-#[derive(Debug, thiserror::Error)]
-#[error("interrupted after {} iteration(s); every node was stopped", .partial.iterations.len())]
-pub struct Interrupted {
-    pub partial: RunResult,
-}
-
 /// How a node process takes part in a run.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Supervision {
@@ -136,16 +113,6 @@ pub struct Supervision {
     /// Pass fields to processes on this machine through shared memory (`glissade node
     /// --shared-memory`, the scene's `network.shared_memory`).
     pub shared_memory: bool,
-}
-
-/// Why a dead node process could not resume from the recording of a run (`recorded` or not) of
-/// `scene`, whatever the transport: no recording, or an incomplete one.
-pub(crate) fn unresumable(scene: &LoadedScene, recorded: bool) -> Option<String> {
-    if recorded {
-        scene.recording.incomplete()
-    } else {
-        Some("the run is not recorded".to_string())
-    }
 }
 
 /// The run as processes behind [`crate::run::Run::processes`]: one process per node group on the

@@ -15,6 +15,7 @@ mod fuzz_nodes;
 mod generate;
 mod gmsh;
 mod latin_perfect;
+mod layout;
 mod monolithic;
 mod node_failures;
 mod pgd;
