@@ -184,7 +184,7 @@ pub fn check_cases(
             let checked = glissade_scene::load_str(&c.accelerated, &format!("{}.toml", c.name))
                 .map_err(crate::Error::from)
                 .and_then(|sc| check_scene(c.name, &sc, opts))
-                .map_err(|e| format!("{}: {e:#}", c.name));
+                .map_err(|e| format!("{}: {}", c.name, crate::error::chain(&e)));
             on_check(&checked);
             Some(checked)
         })

@@ -76,6 +76,17 @@ impl From<Interrupted> for Error {
 /// The launcher library's results.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
+/// `e` and its causes, as the binary prints them: "what: cause: cause's cause".
+pub fn chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        text += &format!(": {c}");
+        cause = c.source();
+    }
+    text
+}
+
 /// An I/O error with what was being done (`what`: e.g. "cannot read scene file x.toml").
 pub(crate) trait IoWhat<T> {
     fn what(self, what: impl FnOnce() -> String) -> Result<T>;

@@ -71,14 +71,18 @@ pub(crate) fn install() -> anyhow::Result<()> {
             )
         }
     };
-    // Only the console's own events reach the console: every other callsite stays disabled
-    // (cheap) unless RUST_LOG asks for it.
-    let console = Console.with_filter(tracing_subscriber::filter::filter_fn(|meta| {
-        meta.target() == glissade::console::TARGET
-    }));
-    tracing_subscriber::registry()
-        .with(console)
-        .with(log)
-        .try_init()
-        .map_err(|e| anyhow::anyhow!("cannot install the console and log: {e}"))
+    // Only the console's own events reach the console, at most at debug level: every other
+    // callsite stays disabled (a static level check, as with no subscriber) unless RUST_LOG asks
+    // for it.
+    let console = || {
+        Console.with_filter(
+            tracing_subscriber::filter::Targets::new()
+                .with_target(glissade::console::TARGET, tracing::level_filters::LevelFilter::DEBUG),
+        )
+    };
+    match log {
+        None => tracing_subscriber::registry().with(console()).try_init(),
+        Some(log) => tracing_subscriber::registry().with(console()).with(log).try_init(),
+    }
+    .map_err(|e| anyhow::anyhow!("cannot install the console and log: {e}"))
 }

@@ -46,9 +46,9 @@ pub struct Run<'a> {
     scene: &'a LoadedScene,
     opts: RunOptions,
     recording: Option<PathBuf>,
-    on_iteration: Box<dyn FnMut(&IterationRecord) -> bool + 'a>,
+    on_iteration: Option<Box<dyn FnMut(&IterationRecord) + 'a>>,
     /// The caller may stop the run early ([`Run::until`]).
-    stops_early: bool,
+    until: Option<Box<dyn FnMut(&IterationRecord) -> bool + 'a>>,
     observe: Option<Observer<'a>>,
     linear_stages: bool,
     handle_times: bool,
@@ -78,8 +78,8 @@ impl<'a> Run<'a> {
             scene,
             opts: opts.clone(),
             recording: None,
-            on_iteration: Box::new(|_| true),
-            stops_early: false,
+            on_iteration: None,
+            until: None,
             observe: None,
             linear_stages: false,
             handle_times: false,
@@ -94,22 +94,17 @@ impl<'a> Run<'a> {
         self
     }
 
-    /// `f` sees each iteration's decision as it is made.
-    pub fn on_iteration(mut self, mut f: impl FnMut(&IterationRecord) + 'a) -> Self {
-        self.on_iteration = Box::new(move |r| {
-            f(r);
-            true
-        });
-        self.stops_early = false;
+    /// `f` sees each iteration's decision as it is made (a second call replaces the first `f`).
+    pub fn on_iteration(mut self, f: impl FnMut(&IterationRecord) + 'a) -> Self {
+        self.on_iteration = Some(Box::new(f));
         self
     }
 
-    /// `keep_going` sees each iteration's decision; the run stops after the first iteration for
-    /// which it returns false (its verdict is then that iteration's, usually `Continue`).
-    /// In-process only.
+    /// `keep_going` sees each iteration's decision (after [`Run::on_iteration`]'s `f`); the run
+    /// stops after the first iteration for which it returns false (its verdict is then that
+    /// iteration's, usually `Continue`). In-process only.
     pub fn until(mut self, keep_going: impl FnMut(&IterationRecord) -> bool + 'a) -> Self {
-        self.on_iteration = Box::new(keep_going);
-        self.stops_early = true;
+        self.until = Some(Box::new(keep_going));
         self
     }
 
@@ -142,12 +137,18 @@ impl<'a> Run<'a> {
             scene,
             opts,
             recording,
-            mut on_iteration,
-            stops_early: _,
+            on_iteration: mut watch,
+            mut until,
             observe,
             linear_stages,
             handle_times,
         } = self;
+        let mut on_iteration = |r: &IterationRecord| {
+            if let Some(f) = watch.as_mut() {
+                f(r);
+            }
+            until.as_mut().is_none_or(|u| u(r))
+        };
         let mut observe: Observer = observe.unwrap_or_else(|| Box::new(|_| Duration::ZERO));
         let mut records = Vec::new();
         let log = linear_stages.then_some(&mut records);
@@ -182,10 +183,10 @@ impl<'a> Run<'a> {
                     timing,
                     None,
                 )?;
-                if let Some(source) = failure.into_inner() {
+                if let Some(cause) = failure.into_inner() {
                     return Err(RunError::RecordingStopped {
                         iterations: result.iterations.len(),
-                        source,
+                        cause,
                     });
                 }
                 let stats = recorder.finish().map_err(RunError::Recording)?;
@@ -209,18 +210,22 @@ impl<'a> Run<'a> {
     /// (by default a router hosted by this process on a free loopback port); nodes listed in
     /// `net.remote` are left to be started by hand. A recorded run starts a recorder process.
     pub fn processes(self, exe: &Path, net: &Network) -> crate::Result<Outcome> {
+        if self.scene.model.interfaces.is_empty() {
+            // Nothing to distribute: the direct solve, in this process (recorded if asked).
+            return self.in_process().map_err(crate::Error::from);
+        }
         let Run {
             scene,
             opts,
             recording,
             mut on_iteration,
-            stops_early,
+            until,
             observe,
             linear_stages,
             handle_times,
         } = self;
         for (asked, what) in [
-            (stops_early, "stopping a run early (until)"),
+            (until.is_some(), "stopping a run early (until)"),
             (linear_stages, "linear-stage records"),
             (handle_times, "handling times"),
         ] {
@@ -240,7 +245,9 @@ impl<'a> Run<'a> {
             net,
             recording.as_deref(),
             |r| {
-                on_iteration(r);
+                if let Some(f) = on_iteration.as_mut() {
+                    f(r);
+                }
             },
             observe,
         )?;

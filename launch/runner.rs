@@ -117,12 +117,15 @@ pub enum RunError {
     Glued(AssemblyError),
     #[error("time-coarse start (solver.time_coarsening): {0}")]
     TimeStart(String),
-    #[error("recording: {0}")]
+    /// The recording cannot be created or finished (the recorder's error names the file).
+    #[error(transparent)]
     Recording(glissade_recorder::RecorderError),
-    #[error("the run was stopped after {iterations} iteration(s): its recording could not be written: {source}")]
+    /// A write failed (e.g. a full disk): the run stopped at the end of that iteration. The
+    /// recorder's error is part of the message (not a separate cause, so it is printed once).
+    #[error("the run was stopped after {iterations} iteration(s): its recording could not be written: {cause}")]
     RecordingStopped {
         iterations: usize,
-        source: glissade_recorder::RecorderError,
+        cause: glissade_recorder::RecorderError,
     },
     #[error("{0} is available in-process only")]
     InProcessOnly(&'static str),

@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Compares the contact forces of two runs' fields.json (docs/outputs.md) of one scene.
 
-Each pair's f_n and f_t are weighted by its edge length and summed over the copies of one
-physical node pair (a pair at a subdomain corner belongs to two interfaces, and only the sum of
-its copies is determined), then compared over every time point:
+Each pair's force f_n n + f_t t (in the frame of its interface, or of the pair on a curved one)
+is weighted by its edge length and summed, as a vector, over the copies of one physical node pair
+(a pair at a subdomain corner belongs to two interfaces, and only the sum of its copies is
+determined); the x and y components are then compared over every time point:
 
     python3 docs/tools/compare_fields.py a.fields.json b.fields.json
 
@@ -23,10 +24,13 @@ def grouped(path):
     for itf in data["interfaces"]:
         if itf["kind"] == "perfect":
             continue
+        f_n, f_t = np.asarray(itf["f_n"]), np.asarray(itf["f_t"])
         for p, (xy, w) in enumerate(zip(itf["coords"], itf["weights"])):
+            n = np.asarray(itf["normals"][p] if "normals" in itf else itf["normal"], dtype=float)
+            t = np.array([-n[1], n[0]]) if "normals" in itf else np.asarray(itf["tangent"], dtype=float)
             at = (round(xy[0], 6), round(xy[1], 6))
-            for k in ("f_n", "f_t"):
-                forces[at + (k,)] = forces[at + (k,)] + np.asarray(itf[k])[:, p] * w
+            for c in (0, 1):
+                forces[at + (c,)] = forces[at + (c,)] + (f_n[:, p] * n[c] + f_t[:, p] * t[c]) * w
     return forces
 
 

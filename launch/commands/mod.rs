@@ -71,7 +71,21 @@ pub(crate) fn load_with_overrides(
     out: &std::path::Path,
     overrides: &Overrides,
 ) -> anyhow::Result<glissade_scene::LoadedScene> {
-    let sc = load_scene(scene)?.with_overrides(&scene.display().to_string(), overrides)?;
+    let sc = load_scene(scene)?
+        .with_overrides(&scene.display().to_string(), overrides)
+        .map_err(|e| {
+            // Name the flag that set the refused key, and its value.
+            let flag = match e.key.as_str() {
+                "solver.accuracy" => overrides.accuracy.map(|v| format!("--accuracy {v}")),
+                "solver.tolerance" => overrides.tolerance.map(|v| format!("--tolerance {v}")),
+                "solver.max_iterations" => overrides.max_iterations.map(|v| format!("--max-iterations {v}")),
+                _ => None,
+            };
+            match flag {
+                Some(flag) => anyhow::anyhow!("{flag}: {e}"),
+                None => e.into(),
+            }
+        })?;
     ensure_writable(out)?;
     Ok(sc)
 }

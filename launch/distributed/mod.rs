@@ -133,14 +133,11 @@ pub(crate) fn run_processes(
 ) -> Result<(RunResult, Traffic)> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
-        // Nothing to distribute: the in-process direct solve.
-        let keep_going = |r: &IterationRecord| {
-            on_iteration(r);
-            true
-        };
-        let no_observer = |_: &Message| Duration::ZERO;
-        let result = crate::runner::run_logged(scene, opts, keep_going, no_observer, None, None, None)?;
-        return Ok((result, Traffic::default()));
+        // `Run::processes` solves such a scene in-process: there is nothing to distribute.
+        return Err(Error::Invalid(format!(
+            "scene `{}` has no interface: nothing to run as processes",
+            model.name
+        )));
     }
     let run_id = &opts.run_id;
     let (set_up, presence) = setup::set_up(scene, opts, net, recording, observe.is_some())?;

@@ -200,7 +200,7 @@ impl<'r> Supervisor<'r> {
                 .recorder
                 .as_mut()
                 .and_then(|r| r.check().err())
-                .map(|e| format!("{e:#}"));
+                .map(|e| crate::error::chain(&e));
         }
         if self.got.started.is_none() && failure.is_none() {
             failure = self.start_when_ready(spawned)?;

@@ -53,12 +53,26 @@ fn launcher_modules() -> BTreeMap<String, BTreeSet<String>> {
         let text = code(&f);
         let uses = edges.entry(module.clone()).or_default();
         for (i, _) in text.match_indices("crate::") {
-            let name: String = text[i + "crate::".len()..]
-                .chars()
-                .take_while(|c| c.is_ascii_lowercase() || *c == '_')
-                .collect();
-            if !name.is_empty() && name != module {
-                uses.insert(name);
+            let rest = &text[i + "crate::".len()..];
+            // `crate::{a::X, b::Y}` names several modules.
+            let names: Vec<&str> = match rest.strip_prefix('{') {
+                Some(group) => group.split('}').next().unwrap_or("").split(',').collect(),
+                None => vec![rest],
+            };
+            for n in names {
+                let n = n.trim_start();
+                let name: String = n
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                // The crate root re-exports `error::{Error, Result}`.
+                let name = match name.as_str() {
+                    "Error" | "Result" => "error".to_string(),
+                    _ => name,
+                };
+                if !name.is_empty() && name.starts_with(|c: char| c.is_ascii_lowercase()) && name != module {
+                    uses.insert(name);
+                }
             }
         }
     }

@@ -25,22 +25,23 @@ pub enum ReexecuteError {
     /// The recording cannot serve a re-execution (unfinished, thinned, without a scene…).
     #[error("{path}: {problem}")]
     Recording { path: String, problem: String },
-    #[error("{path}: {what}: {source}")]
+    /// The cause is part of the message (not a separate `source`, so a chain prints it once).
+    #[error("{path}: {what}: {cause}")]
     Decode {
         path: String,
         what: String,
-        source: DecodeError,
+        cause: DecodeError,
     },
     #[error(transparent)]
     Scene(#[from] SceneError),
     #[error(transparent)]
     Build(#[from] BuildError),
     /// The node failed on its start or on a recorded input.
-    #[error("node {node} failed on {what}: {source}")]
+    #[error("node {node} failed on {what}: {cause}")]
     Node {
         node: NodeId,
         what: String,
-        source: NodeError,
+        cause: NodeError,
     },
 }
 
@@ -260,14 +261,14 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
             produced.entry(o.topic()).or_default().push(o);
         }
     };
-    keep(node.start().map_err(|source| ReexecuteError::Node {
+    keep(node.start().map_err(|cause| ReexecuteError::Node {
         node: id,
         what: "its start".into(),
-        source,
+        cause,
     })?);
     keep(std::iter::from_fn(|| node.next_output()).collect());
     for (i, msg) in &inputs {
-        let out = node.handle(msg).map_err(|source| ReexecuteError::Node {
+        let out = node.handle(msg).map_err(|cause| ReexecuteError::Node {
             node: id,
             what: format!(
                 "recorded message #{i} `{}` (iteration {}, stage {:?})",
@@ -275,7 +276,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
                 msg.envelope.iteration,
                 msg.envelope.stage
             ),
-            source,
+            cause,
         })?;
         keep(out);
         keep(std::iter::from_fn(|| node.next_output()).collect());
@@ -500,6 +501,6 @@ fn decode_error(recording: &Recording, topic: &str, source: DecodeError) -> Reex
     ReexecuteError::Decode {
         path: recording.path().display().to_string(),
         what: format!("message on `{topic}`"),
-        source,
+        cause: source,
     }
 }
