@@ -28,6 +28,10 @@ pub fn random_run_id() -> crate::Result<String> {
 
 /// What watches every message of an in-process run, returning the wall time it spent.
 type Observer<'a> = Box<dyn FnMut(&Message) -> Duration + 'a>;
+/// What sees each iteration's decision.
+type Watcher<'a> = Box<dyn FnMut(&IterationRecord) + 'a>;
+/// What sees each iteration's decision and says whether the run goes on.
+type Stopper<'a> = Box<dyn FnMut(&IterationRecord) -> bool + 'a>;
 
 /// A run of a scene, set up step by step, then run in one of the two modes.
 ///
@@ -46,9 +50,9 @@ pub struct Run<'a> {
     scene: &'a LoadedScene,
     opts: RunOptions,
     recording: Option<PathBuf>,
-    on_iteration: Option<Box<dyn FnMut(&IterationRecord) + 'a>>,
+    on_iteration: Option<Watcher<'a>>,
     /// The caller may stop the run early ([`Run::until`]).
-    until: Option<Box<dyn FnMut(&IterationRecord) -> bool + 'a>>,
+    until: Option<Stopper<'a>>,
     observe: Option<Observer<'a>>,
     linear_stages: bool,
     handle_times: bool,
