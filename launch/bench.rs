@@ -216,10 +216,7 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> crate::Result<BenchReport> {
     // records, and for every subdomain for each step (all of them take it).
     let mut record_passes = vec![0usize; model.subdomains.len()];
     let mut step_passes = 0usize;
-    let opts = RunOptions {
-        run_id: run_id.into(),
-        interior: false,
-    };
+    let opts = RunOptions::new(run_id);
     let outcome = Run::new(scene, &opts)
         .observe(|m| {
             match &m.payload {
@@ -510,10 +507,7 @@ pub fn compare_processes(
     };
     let mut out = Vec::with_capacity(rounds);
     for _ in 0..rounds {
-        let opts = |id: String| RunOptions {
-            run_id: id,
-            interior: false,
-        };
+        let opts = |id: String| RunOptions::new(id);
         give_back_freed_memory();
         let in_process = same_run("in-process", Run::new(scene, &opts(run_id()?)).in_process()?.result)?;
         let mut times = [(0.0, 0.0, None); 2];

@@ -406,10 +406,7 @@ pub fn report_against(
     let mut bytes: Vec<u64> = Vec::new();
     let mut states = BoundaryStates::new();
     let mut undecodable: Option<String> = None;
-    let opts = RunOptions {
-        run_id: run_id.to_string(),
-        interior: false,
-    };
+    let opts = RunOptions::new(run_id);
     // The smallest traction error measured so far (the observer sets it, the decisions read it).
     let best = Cell::new(f64::INFINITY);
     let outcome = Run::new(scene, &opts)

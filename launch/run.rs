@@ -39,7 +39,7 @@ type Stopper<'a> = Box<dyn FnMut(&IterationRecord) -> bool + 'a>;
 /// # fn f(scene: &glissade_scene::LoadedScene) -> Result<(), glissade::runner::RunError> {
 /// use glissade::run::Run;
 /// use glissade::runner::RunOptions;
-/// let opts = RunOptions { run_id: "r1".into(), interior: false };
+/// let opts = RunOptions::new("r1");
 /// let outcome = Run::new(scene, &opts)
 ///     .on_iteration(|r| println!("iteration {}: η = {:e}", r.iteration, r.decision.eta))
 ///     .in_process()?;

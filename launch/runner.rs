@@ -26,6 +26,16 @@ pub struct RunOptions {
     pub interior: bool,
 }
 
+impl RunOptions {
+    /// Run `run_id`, without the subdomains' displacement fields.
+    pub fn new(run_id: impl Into<String>) -> Self {
+        Self {
+            run_id: run_id.into(),
+            interior: false,
+        }
+    }
+}
+
 /// One LATIN iteration as seen by the launcher.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct IterationRecord {
@@ -301,10 +311,7 @@ pub fn time_start(
     (coarse.model.solver.accuracy, coarse.model.solver.tolerance) = (None, Some(ts.tolerance));
     coarse.model.solver.contact_tolerance = None;
     coarse.model.solver.time_start = None;
-    let opts = RunOptions {
-        run_id: format!("{}-coarse", ctx.run_id),
-        interior: false,
-    };
+    let opts = RunOptions::new(format!("{}-coarse", ctx.run_id));
     let on_iteration: fn(&IterationRecord) -> bool = |_| true;
     let observe: fn(&Message) -> Duration = |_| Duration::ZERO;
     let solvers = fine.map(|f| f.iter().map(|s| s.retimed(&coarse.model)).collect());

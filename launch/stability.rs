@@ -348,11 +348,7 @@ fn latin_run(case: &Case, scene: &str, accelerated: bool) -> (RunRow, Option<Sto
     );
     let t0 = Instant::now();
     let result = catch_unwind(AssertUnwindSafe(|| {
-        let opts = RunOptions {
-            run_id,
-            interior: false,
-        };
-        Run::new(&sc, &opts)
+        Run::new(&sc, &RunOptions::new(run_id))
             .observe(|m| {
                 if let Some(t) = tally.as_mut() {
                     t.observe(m);

@@ -14,13 +14,6 @@ use glissade_scene::LoadedScene;
 use std::path::Path;
 use std::time::Duration;
 
-fn opts(run_id: &str) -> RunOptions {
-    RunOptions {
-        run_id: run_id.into(),
-        interior: false,
-    }
-}
-
 /// Runs `sc` with `acceleration` to η ≤ `tolerance` (no stagnation stop); returns the result and
 /// the number of Anderson partials and steps seen on the bus.
 fn solve(sc: &LoadedScene, acceleration: Acceleration, tolerance: f64, k0_factor: f64) -> (RunResult, usize, usize) {
@@ -31,7 +24,7 @@ fn solve(sc: &LoadedScene, acceleration: Acceleration, tolerance: f64, k0_factor
     sc.model.solver.max_iterations = 20_000;
     sc.model.solver.stagnation_window = 20_000;
     let (mut grams, mut steps) = (0, 0);
-    let result = Run::new(&sc, &opts("acceleration"))
+    let result = Run::new(&sc, &RunOptions::new("acceleration"))
         .observe(|m| {
             match m.payload {
                 Payload::AndersonGram { .. } => grams += 1,
@@ -103,8 +96,11 @@ fn processes_match_in_process_bit_for_bit_with_anderson() {
     let sc = scene(&text);
     assert!(matches!(sc.model.solver.acceleration, Acceleration::Anderson { .. }));
     assert!(sc.deployment.subdomain_nodes >= 2);
-    let local = Run::new(&sc, &opts("local")).in_process().map(|o| o.result).unwrap();
-    let remote = Run::new(&sc, &opts("acceleration-distributed-1"))
+    let local = Run::new(&sc, &RunOptions::new("local"))
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
+    let remote = Run::new(&sc, &RunOptions::new("acceleration-distributed-1"))
         .processes(Path::new(env!("CARGO_BIN_EXE_glissade")), &Network::default())
         .map(|o| o.result)
         .unwrap();

@@ -57,10 +57,7 @@ fn field_allocations(iterations: u32) -> (u64, usize) {
     (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(1e-300));
     sc.model.solver.max_iterations = iterations as usize;
     sc.model.solver.stagnation_window = 100_000;
-    let opts = RunOptions {
-        run_id: "allocations".into(),
-        interior: false,
-    };
+    let opts = RunOptions::new("allocations");
     COUNT.store(0, Ordering::Relaxed);
     WATCH.store((N + 1) * std::mem::size_of::<f64>(), Ordering::Relaxed);
     let result = Run::new(&sc, &opts).in_process().map(|o| o.result);

@@ -84,16 +84,10 @@ fn solve(text: &str, tolerance: f64, k0_factor: f64) -> (LoadedScene, RunResult,
     sc.model.solver.max_iterations = 50_000;
     sc.model.solver.stagnation_window = 0;
     let clock = Instant::now();
-    let result = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "analytic".into(),
-            interior: false,
-        },
-    )
-    .in_process()
-    .map(|o| o.result)
-    .expect("run");
+    let result = Run::new(&sc, &RunOptions::new("analytic"))
+        .in_process()
+        .map(|o| o.result)
+        .expect("run");
     let secs = clock.elapsed().as_secs_f64();
     assert_eq!(
         result.verdict,

@@ -25,16 +25,10 @@ pub fn scene(text: &str) -> LoadedScene {
 }
 
 pub fn run(scene: &LoadedScene) -> RunResult {
-    Run::new(
-        scene,
-        &RunOptions {
-            run_id: "test".into(),
-            interior: false,
-        },
-    )
-    .in_process()
-    .map(|o| o.result)
-    .expect("run")
+    Run::new(scene, &RunOptions::new("test"))
+        .in_process()
+        .map(|o| o.result)
+        .expect("run")
 }
 
 /// max |a − b| / max |b| over two lists.

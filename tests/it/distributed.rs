@@ -46,10 +46,7 @@ pub(crate) fn assert_identical(a: &RunResult, b: &RunResult) {
 /// Runs `sc` in-process and as processes (run id `run_id`), asserts that both give the same bits,
 /// and returns the in-process result.
 pub(crate) fn in_process_equals_processes(sc: &glissade_scene::LoadedScene, run_id: &str) -> RunResult {
-    let opts = |id: &str| RunOptions {
-        run_id: id.into(),
-        interior: false,
-    };
+    let opts = |id: &str| RunOptions::new(id);
     let local = Run::new(sc, &opts("local")).in_process().map(|o| o.result).unwrap();
     let remote = Run::new(sc, &opts(run_id))
         .processes(exe(), &Network::default())
@@ -117,22 +114,16 @@ fn with_deployment(text: &str, lines: &str) -> String {
 /// An in-process run of `sc` and how many `indicator_partials` messages crossed its bus.
 fn in_process_with_partials(sc: &glissade_scene::LoadedScene) -> (RunResult, usize) {
     let mut partials = 0;
-    let result = Run::new(
-        sc,
-        &RunOptions {
-            run_id: "local".into(),
-            interior: false,
-        },
-    )
-    .observe(|m| {
-        if matches!(m.payload, glissade_messages::Payload::IndicatorPartials { .. }) {
-            partials += 1;
-        }
-        Duration::ZERO
-    })
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
+    let result = Run::new(sc, &RunOptions::new("local"))
+        .observe(|m| {
+            if matches!(m.payload, glissade_messages::Payload::IndicatorPartials { .. }) {
+                partials += 1;
+            }
+            Duration::ZERO
+        })
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
     (result, partials)
 }
 
@@ -187,16 +178,10 @@ fn several_interface_nodes_match_one_bit_for_bit() {
     }
     let sc = scene(&with_deployment(&base, "interface_nodes = 3"));
     let one = crate::common::run(&scene(&base));
-    let remote = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "distributed-test-3".into(),
-            interior: false,
-        },
-    )
-    .processes(exe(), &Network::default())
-    .map(|o| o.result)
-    .unwrap();
+    let remote = Run::new(&sc, &RunOptions::new("distributed-test-3"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     println!(
         "processes: {} iterations; nodes {:?}",
         remote.iterations.len(),
@@ -222,16 +207,10 @@ fn stratified_over_three_interface_processes() {
         "interfaces per node: {:?}",
         groups.iter().map(Vec::len).collect::<Vec<_>>()
     );
-    let remote = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "distributed-test-4".into(),
-            interior: false,
-        },
-    )
-    .processes(exe(), &Network::default())
-    .map(|o| o.result)
-    .unwrap();
+    let remote = Run::new(&sc, &RunOptions::new("distributed-test-4"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     println!(
         "stratified N = 10, 3 interface nodes: {} iterations; nodes {:?}",
         remote.iterations.len(),
@@ -255,26 +234,14 @@ fn processes_match_in_process_bit_for_bit() {
         sc.deployment.subdomain_nodes >= 2,
         "the scene spreads its subdomains over processes"
     );
-    let local = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "local".into(),
-            interior: false,
-        },
-    )
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
-    let remote = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "distributed-test-1".into(),
-            interior: false,
-        },
-    )
-    .processes(exe(), &Network::default())
-    .map(|o| o.result)
-    .unwrap();
+    let local = Run::new(&sc, &RunOptions::new("local"))
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
+    let remote = Run::new(&sc, &RunOptions::new("distributed-test-1"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     println!(
         "in-process {} iterations, processes {} iterations; nodes {:?}",
         local.iterations.len(),
@@ -301,43 +268,31 @@ fn pgd_mode_form_processes_match_in_process_bit_for_bit() {
     let sc = scene(&text);
     assert_eq!(sc.linear_stage, glissade_mechanics::linear::LinearStage::Pgd);
     let (mut held, mut rotations) = (BTreeMap::new(), 0);
-    let local = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "local-pgd".into(),
-            interior: false,
-        },
-    )
-    .observe(|m| {
-        if let Payload::BoundaryModes {
-            subdomain,
-            first_mode,
-            lambda,
-            ..
-        } = &m.payload
-        {
-            let before: usize = held.get(subdomain).copied().unwrap_or(0);
-            if (*first_mode as usize) < before {
-                rotations += 1;
+    let local = Run::new(&sc, &RunOptions::new("local-pgd"))
+        .observe(|m| {
+            if let Payload::BoundaryModes {
+                subdomain,
+                first_mode,
+                lambda,
+                ..
+            } = &m.payload
+            {
+                let before: usize = held.get(subdomain).copied().unwrap_or(0);
+                if (*first_mode as usize) < before {
+                    rotations += 1;
+                }
+                held.insert(*subdomain, lambda.rows());
             }
-            held.insert(*subdomain, lambda.rows());
-        }
-        Duration::ZERO
-    })
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
+            Duration::ZERO
+        })
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
     assert!(rotations > 0, "the compression rotated modes on the wire");
-    let remote = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "distributed-pgd".into(),
-            interior: false,
-        },
-    )
-    .processes(exe(), &Network::default())
-    .map(|o| o.result)
-    .unwrap();
+    let remote = Run::new(&sc, &RunOptions::new("distributed-pgd"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     println!(
         "PGD in mode form: {} iterations in-process and as processes, {rotations} messages with rotated modes",
         local.iterations.len()
@@ -352,26 +307,14 @@ fn stratified_over_three_subdomain_processes() {
     let text = scene_text("stratified").replace("N = 1000", "N = 10");
     let sc = scene(&text);
     assert_eq!(sc.deployment.subdomain_nodes, 3);
-    let local = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "local".into(),
-            interior: false,
-        },
-    )
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
-    let remote = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "distributed-test-2".into(),
-            interior: false,
-        },
-    )
-    .processes(exe(), &Network::default())
-    .map(|o| o.result)
-    .unwrap();
+    let local = Run::new(&sc, &RunOptions::new("local"))
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
+    let remote = Run::new(&sc, &RunOptions::new("distributed-test-2"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
     println!(
         "stratified N = 10: {} iterations; nodes {:?}",
         remote.iterations.len(),

@@ -193,19 +193,13 @@ fn gmsh_stratified_equals_the_block_scene() {
     let block = mesh_scene(&small(shipped("stratified")));
     let gmsh = mesh_scene(&small(shipped("stratified-gmsh")));
     let (rb, rg) = (run(&block), run(&gmsh));
-    let remote = glissade::run::Run::new(
-        &gmsh,
-        &glissade::runner::RunOptions {
-            run_id: "gmsh-stratified".into(),
-            interior: false,
-        },
-    )
-    .processes(
-        std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
-        &glissade::distributed::Network::default(),
-    )
-    .map(|o| o.result)
-    .unwrap();
+    let remote = glissade::run::Run::new(&gmsh, &glissade::runner::RunOptions::new("gmsh-stratified"))
+        .processes(
+            std::path::Path::new(env!("CARGO_BIN_EXE_glissade")),
+            &glissade::distributed::Network::default(),
+        )
+        .map(|o| o.result)
+        .unwrap();
     crate::distributed::assert_identical(&rg, &remote);
     assert_eq!(rb.iterations.len(), rg.iterations.len());
     let (mut worst, mut scale) = (0.0f64, 0.0f64);

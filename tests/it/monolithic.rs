@@ -17,16 +17,10 @@ fn latin_vs_reference(name: &str, tolerance: f64, k0_factor: f64) -> (f64, f64) 
     sc.model.solver.max_iterations = 20000;
     sc.model.solver.stagnation_window = 20000;
     let reference = solve_reference(&sc.model, &ReferenceOptions::default()).expect("reference");
-    let result = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "mono".into(),
-            interior: false,
-        },
-    )
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
+    let result = Run::new(&sc, &RunOptions::new("mono"))
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
     assert_eq!(result.verdict, Verdict::Converged, "{name}");
     let mut s: Vec<InterfaceFields> = Vec::new();
     let mut s_hat: Vec<InterfaceFields> = Vec::new();
@@ -89,16 +83,10 @@ fn accuracy_stop_meets_the_requested_accuracy() {
             (sc.model.solver.accuracy, sc.model.solver.tolerance) = (Some(accuracy), None);
             sc.model.solver.contact_tolerance = None;
             sc.model.solver.max_iterations = 2000;
-            let result = Run::new(
-                &sc,
-                &RunOptions {
-                    run_id: "accuracy".into(),
-                    interior: false,
-                },
-            )
-            .in_process()
-            .map(|o| o.result)
-            .unwrap();
+            let result = Run::new(&sc, &RunOptions::new("accuracy"))
+                .in_process()
+                .map(|o| o.result)
+                .unwrap();
             assert_eq!(result.verdict, Verdict::Converged, "{name} at {accuracy:e}");
             let last = &result.iterations.last().expect("iterations").decision;
             let estimate = last.estimate.expect("an estimate at the stop");
@@ -128,16 +116,10 @@ fn a_run_that_misses_the_accuracy_says_so() {
         sc.model.solver.max_iterations = max_iterations;
         sc.model.solver.accuracy = Some(accuracy);
         sc.model.solver.tolerance = Some(1e-2);
-        let result = Run::new(
-            &sc,
-            &RunOptions {
-                run_id: "outcome".into(),
-                interior: false,
-            },
-        )
-        .in_process()
-        .map(|o| o.result)
-        .unwrap();
+        let result = Run::new(&sc, &RunOptions::new("outcome"))
+            .in_process()
+            .map(|o| o.result)
+            .unwrap();
         glissade::output::outcome(&sc.model, &result)
     };
     let early = run_with(10, 1e-3);

@@ -393,10 +393,7 @@ fn reports_count_linear_stage_flops() {
     // The run summary's totals: the sum of the records, under the stage's name.
     let mut sparse = sc.clone();
     sparse.linear_stage = LinearStage::Sparse;
-    let opts = RunOptions {
-        run_id: "flops".into(),
-        interior: false,
-    };
+    let opts = RunOptions::new("flops");
     let (result, records) = Run::new(&sparse, &opts)
         .linear_stages()
         .in_process()
@@ -430,10 +427,7 @@ fn pgd_messages_carry_each_mode_once() {
     let mut held: BTreeMap<u32, usize> = BTreeMap::new();
     let (mut modes_bytes, mut full_bytes, mut messages, mut columns) = (0usize, 0usize, 0usize, 0usize);
     let mut states = glissade_replay::BoundaryStates::new();
-    let opts = RunOptions {
-        run_id: "modes".into(),
-        interior: false,
-    };
+    let opts = RunOptions::new("modes");
     let (result, records) = Run::new(&sc, &opts)
         .observe(|m| {
             match &m.payload {

@@ -22,20 +22,14 @@ fn temp_dir(tag: &str) -> Scratch {
 fn bus_messages(text: &str, run_id: &str) -> Messages {
     let sc = scene(text);
     let mut out = Vec::new();
-    Run::new(
-        &sc,
-        &RunOptions {
-            run_id: run_id.into(),
-            interior: false,
-        },
-    )
-    .observe(|m| {
-        out.push((m.topic(), glissade_messages::encode(m)));
-        Duration::ZERO
-    })
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
+    Run::new(&sc, &RunOptions::new(run_id))
+        .observe(|m| {
+            out.push((m.topic(), glissade_messages::encode(m)));
+            Duration::ZERO
+        })
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
     out
 }
 
@@ -120,10 +114,7 @@ fn in_process_recording_reads_back_with_both_readers() {
     let sc = scene(&text);
     let dir = temp_dir("in-process");
     let path = dir.join("small.mcap");
-    let opts = RunOptions {
-        run_id: "rec-1".into(),
-        interior: false,
-    };
+    let opts = RunOptions::new("rec-1");
     let (result, outcome) = Run::new(&sc, &opts)
         .recorded(Some(&path))
         .in_process()
@@ -169,10 +160,7 @@ fn in_process_recording_reads_back_with_both_readers() {
 fn recording_off_restricted_and_unwritable() {
     let dir = temp_dir("options");
     let text = scene_text("small-three-layer");
-    let opts = RunOptions {
-        run_id: "rec-2".into(),
-        interior: false,
-    };
+    let opts = RunOptions::new("rec-2");
     let off = scene(&format!("{text}\n[recording]\nenabled = false\n"));
     assert_eq!(glissade::recording::recording_path(&off, "rec-2", &dir), None);
 

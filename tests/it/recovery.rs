@@ -21,13 +21,6 @@ fn small_three_layer(deployment: &str) -> String {
     text.replacen("\n[deployment]\n", &format!("\n[deployment]\n{deployment}\n"), 1)
 }
 
-fn options(run_id: &str) -> RunOptions {
-    RunOptions {
-        run_id: run_id.to_string(),
-        interior: false,
-    }
-}
-
 /// A scratch folder, a run id, and the recording file of run `name` in that folder (`run.mcap`).
 fn recorded_run(name: &str) -> (Scratch, String, PathBuf) {
     let dir = scratch(name);
@@ -71,7 +64,7 @@ fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
 /// (itself bit-identical to a multi-process run, tests/it/distributed.rs).
 #[test]
 fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
-    let undisturbed = Run::new(&scene(&small_three_layer("")), &options("undisturbed"))
+    let undisturbed = Run::new(&scene(&small_three_layer("")), &RunOptions::new("undisturbed"))
         .in_process()
         .map(|o| o.result)
         .expect("undisturbed run");
@@ -95,7 +88,7 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
         let at = 1 + rng.below(n - 3) as u32;
         println!("seed {seed:#x}: kill {role}:{index} at iteration {at} of {n}");
         let (dir, run_id, recording) = recorded_run(&format!("recovery-{role}-{index}"));
-        let opts = options(&run_id);
+        let opts = RunOptions::new(run_id.as_str());
         let mut killed = None;
         let (result, _) = Run::new(&sc, &opts)
             .recorded(Some(&recording))
@@ -131,7 +124,7 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
 fn a_node_that_keeps_dying_stops_the_run_after_its_restarts() {
     let sc = scene(&small_three_layer("restarts = 1"));
     let (_dir, run_id, recording) = recorded_run("recovery-again");
-    let opts = options(&run_id);
+    let opts = RunOptions::new(run_id.as_str());
     let mut kills = Vec::new();
     let err = Run::new(&sc, &opts)
         .recorded(Some(&recording))
@@ -167,7 +160,7 @@ fn restarts_need_a_complete_recording() {
         Some("recording.full_fields_every = 5 leaves full fields out")
     );
     let (_dir, run_id, recording) = recorded_run("recovery-thinned");
-    let opts = options(&run_id);
+    let opts = RunOptions::new(run_id.as_str());
     let mut killed = false;
     let err = Run::new(&sc, &opts)
         .recorded(Some(&recording))

@@ -29,16 +29,10 @@ fn compare_with(
     (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(tolerance));
     sc.model.solver.max_iterations = 20000;
     sc.model.solver.stagnation_window = 0;
-    let result = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "ref".into(),
-            interior: false,
-        },
-    )
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
+    let result = Run::new(&sc, &RunOptions::new("ref"))
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
     assert_eq!(
         result.verdict,
         Verdict::Converged,

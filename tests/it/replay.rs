@@ -27,10 +27,7 @@ fn record(text: &str, dir: &Path, run_id: &str) -> PathBuf {
 /// Records an in-process run of `sc` into `dir`; returns the file.
 fn record_scene(sc: &LoadedScene, dir: &Path, run_id: &str) -> PathBuf {
     let path = dir.join(format!("{}-{run_id}.mcap", sc.model.name));
-    let opts = RunOptions {
-        run_id: run_id.into(),
-        interior: false,
-    };
+    let opts = RunOptions::new(run_id);
     let (result, outcome) = Run::new(sc, &opts)
         .recorded(Some(path.as_path()))
         .in_process()
@@ -477,10 +474,7 @@ fn linear_stage_counters_are_recorded_messages() {
         glissade_mechanics::model::Acceleration::Anderson { .. }
     ));
     let path = dir.join("stage-stats.mcap");
-    let opts = RunOptions {
-        run_id: "stage-stats".into(),
-        interior: false,
-    };
+    let opts = RunOptions::new("stage-stats");
     let outcome = Run::new(&sc, &opts)
         .recorded(Some(path.as_path()))
         .linear_stages()
@@ -537,10 +531,7 @@ fn a_pgd_recording_replays_with_the_runs_basis_sizes() {
     assert!(text.contains("[solver]\n"));
     let text = text.replace("[solver]\n", "[solver]\nlinear_stage = \"pgd\"\n");
     let path = record(&text, &dir, "rx-pgd");
-    let opts = RunOptions {
-        run_id: "rx-pgd-log".into(),
-        interior: false,
-    };
+    let opts = RunOptions::new("rx-pgd-log");
     let (_, records) = Run::new(&scene(&text), &opts)
         .linear_stages()
         .in_process()

@@ -26,16 +26,10 @@ fn messages_of_another_run_are_ignored() {
     use std::sync::Arc;
 
     let sc = scene(&scene_text("small-three-layer"));
-    let local = Run::new(
-        &sc,
-        &RunOptions {
-            run_id: "local".into(),
-            interior: false,
-        },
-    )
-    .in_process()
-    .map(|o| o.result)
-    .unwrap();
+    let local = Run::new(&sc, &RunOptions::new("local"))
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
     let port = transport::free_loopback_port().unwrap();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let _router =
@@ -140,27 +134,15 @@ fn messages_of_another_run_are_ignored() {
     };
     let (a, b) = std::thread::scope(|s| {
         let a = s.spawn(|| {
-            Run::new(
-                &sc,
-                &RunOptions {
-                    run_id: victim.into(),
-                    interior: false,
-                },
-            )
-            .recorded(Some(&recording))
-            .processes(exe(), &net)
-            .map(|o| (o.result, o.traffic.unwrap_or_default()))
+            Run::new(&sc, &RunOptions::new(victim))
+                .recorded(Some(&recording))
+                .processes(exe(), &net)
+                .map(|o| (o.result, o.traffic.unwrap_or_default()))
         });
         let b = s.spawn(|| {
-            Run::new(
-                &sc,
-                &RunOptions {
-                    run_id: "shared-bus-b".into(),
-                    interior: false,
-                },
-            )
-            .processes(exe(), &net)
-            .map(|o| (o.result, o.traffic.unwrap_or_default()))
+            Run::new(&sc, &RunOptions::new("shared-bus-b"))
+                .processes(exe(), &net)
+                .map(|o| (o.result, o.traffic.unwrap_or_default()))
         });
         (a.join().unwrap(), b.join().unwrap())
     });

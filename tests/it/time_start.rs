@@ -14,13 +14,6 @@ use glissade_scene::LoadedScene;
 use std::path::Path;
 use std::time::Duration;
 
-fn opts(run_id: &str) -> RunOptions {
-    RunOptions {
-        run_id: run_id.into(),
-        interior: false,
-    }
-}
-
 /// Runs `sc` to η ≤ `tolerance` (no stagnation stop) with or without a time-coarse start; returns
 /// the result and the launcher's messages seen on the bus (subdomain, first q̂ value).
 fn solve(sc: &LoadedScene, start: Option<TimeStart>, tolerance: f64, k0_factor: f64) -> (RunResult, Vec<u32>) {
@@ -31,7 +24,7 @@ fn solve(sc: &LoadedScene, start: Option<TimeStart>, tolerance: f64, k0_factor: 
     sc.model.solver.max_iterations = 20_000;
     sc.model.solver.stagnation_window = 20_000;
     let mut from_launcher = Vec::new();
-    let result = Run::new(&sc, &opts("time-start"))
+    let result = Run::new(&sc, &RunOptions::new("time-start"))
         .observe(|m| {
             if let (Role::Launcher, Payload::LocalDirections { subdomain, q_hat, .. }) =
                 (m.envelope.sender.role, &m.payload)
@@ -119,8 +112,11 @@ fn time_coarse_start_processes_match_in_process_bit_for_bit() {
     let sc = scene(&text);
     assert!(sc.model.solver.time_start.is_some());
     assert!(sc.deployment.subdomain_nodes >= 2);
-    let local = Run::new(&sc, &opts("local")).in_process().map(|o| o.result).unwrap();
-    let remote = Run::new(&sc, &opts("time-start-distributed-1"))
+    let local = Run::new(&sc, &RunOptions::new("local"))
+        .in_process()
+        .map(|o| o.result)
+        .unwrap();
+    let remote = Run::new(&sc, &RunOptions::new("time-start-distributed-1"))
         .processes(Path::new(env!("CARGO_BIN_EXE_glissade")), &Network::default())
         .map(|o| o.result)
         .unwrap();

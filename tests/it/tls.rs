@@ -96,10 +96,7 @@ fn three_layers_over_mutual_tls_with_access_control_match_in_process() {
         text.replace("allow = [\"glissade-node\"]", "allow = [\"node-b\"]"),
     )
     .unwrap();
-    let options = RunOptions {
-        run_id: "tls-test-0".into(),
-        interior: false,
-    };
+    let options = RunOptions::new("tls-test-0");
     let exe = Path::new(env!("CARGO_BIN_EXE_glissade"));
     let e = Run::new(&glissade::load_scene(&path).unwrap(), &options)
         .processes(exe, &Network::default())
