@@ -76,14 +76,16 @@ pub(super) fn spawn(
         } else {
             net.connect.clone()
         };
-        crate::console::say(&format!(
+        // Every credentials file is written before a word is printed: whoever reads the
+        // instructions finds the files they name.
+        let mut lines = vec![format!(
             "waiting up to {} s for {} node(s) started by hand; on the other machine(s) run:",
             remote_timeout.as_secs(),
             net.remote.len()
-        ));
+        )];
         let mut remote_tls = match &scene.network.tls {
             Some(t) => {
-                crate::console::say(&format!(
+                lines.push(format!(
                     "(TLS: copy {} to the other machine(s){})",
                     t.root_ca.display(),
                     if t.mutual {
@@ -109,7 +111,7 @@ pub(super) fn spawn(
             if let Some(dir) = dir {
                 let cr = &bus.credentials[&r.id()];
                 let file = write_credentials(dir, run_id, r, cr)?;
-                crate::console::say(&format!(
+                lines.push(format!(
                     "(node {r}: copy {} to its machine, readable by its user only; it lets a process speak as {r} in \
                      this run and nothing else)",
                     file.display()
@@ -118,10 +120,13 @@ pub(super) fn spawn(
                 let name = file.file_name().map(PathBuf::from).unwrap_or(file);
                 args.extend(["--credentials".to_string(), name.display().to_string()]);
             }
-            crate::console::say(&format!(
+            lines.push(format!(
                 "  glissade {}",
                 with_supervision(set_up.supervised, node_args(r, run_id, &connect, opts.interior, &args)).join(" ")
             ));
+        }
+        for line in lines {
+            crate::console::say(&line);
         }
     }
     Ok(Spawned {
