@@ -1,4 +1,6 @@
-//! Recording runs to MCAP (DESIGN §4, "recorder").
+//! Recording runs to MCAP (DESIGN §4, "recorder"). Both run modes feed one front-end,
+//! [`glissade_recorder::RunRecorder`], which decides what is the run's and keeps the first failed
+//! write; what differs is only how messages reach it:
 //!
 //! - In-process runs: the launcher records every message the in-process bus delivers, encoded as
 //!   on the wire and on the key expression it would have over Zenoh.
@@ -16,9 +18,9 @@
 
 use crate::children::ChildOutput;
 use crate::error::{failed, invalid, zenoh, Error, IoWhat, Result};
-use glissade_messages::{decode, peek_envelope, run_topics, Expected, Payload};
+use glissade_messages::{decode, run_topics, Expected, Payload};
 use glissade_recorder::{
-    log_time_now, recording_file_name, Recorder, RecorderError, RecorderOptions, RecordingStats, RunInfo,
+    log_time_now, recording_file_name, RecorderError, RecorderOptions, RecordingStats, RunInfo, RunRecorder,
 };
 use glissade_scene::{fingerprint_with, load_with, LoadedScene};
 use std::path::{Path, PathBuf};
@@ -89,28 +91,30 @@ pub fn recording_path(scene: &LoadedScene, run_id: &str, out: &Path) -> Option<P
         .then(|| out.join(recording_file_name(&scene.model.name, run_id)))
 }
 
-fn recorder_options(scene: &LoadedScene) -> RecorderOptions {
-    RecorderOptions {
-        topics: scene.recording.topics.clone(),
-        full_fields_every: scene.recording.full_fields_every.min(u32::MAX as usize) as u32,
-        ..RecorderOptions::default()
-    }
-}
-
-fn run_info(scene: &LoadedScene, run_id: &str) -> RunInfo {
-    RunInfo {
+/// What the recording of run `run_id` of `scene` is of ([`RunInfo`]) and what it keeps
+/// ([`RecorderOptions`]: the scene's `[recording]` topics and thinning).
+pub fn recorder_settings(scene: &LoadedScene, run_id: &str) -> (RunInfo, RecorderOptions) {
+    let info = RunInfo {
         run_id: run_id.to_string(),
         scene_name: scene.model.name.clone(),
         scene_fingerprint: scene.fingerprint,
         scene_text: scene.text.clone(),
         scene_overrides: scene.overrides,
         software: software(),
-    }
+    };
+    let options = RecorderOptions {
+        topics: scene.recording.topics.clone(),
+        full_fields_every: scene.recording.full_fields_every.min(u32::MAX as usize) as u32,
+        ..RecorderOptions::default()
+    };
+    (info, options)
 }
 
-/// Creates the recorder of a run (the file exists and holds the scene when this returns).
-pub fn create_recorder(scene: &LoadedScene, run_id: &str, path: &Path) -> Result<Recorder, RecorderError> {
-    Recorder::create(path, &run_info(scene, run_id), &recorder_options(scene))
+/// Creates the recorder of a run, in either run mode (the file exists and holds the scene when
+/// this returns).
+pub fn create_recorder(scene: &LoadedScene, run_id: &str, path: &Path) -> Result<RunRecorder, RecorderError> {
+    let (info, options) = recorder_settings(scene, run_id);
+    RunRecorder::create(path, &info, &options)
 }
 
 /// What a recording holds once finished.
@@ -347,27 +351,28 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
         glissade_messages::topic::end(run_id),
         glissade_messages::topic::stop(run_id),
     );
-    let mut seen: u64 = 0;
-    // Messages with the run's envelope that are not the run's (another scene, malformed, on a
-    // key not theirs): counted and left out.
-    let (mut refused, mut first_refused): (u64, Option<String>) = (0, None);
     let mut target: Option<(u64, Instant)> = None;
     let mut last = Instant::now();
     loop {
         if SIGNALLED.load(Ordering::SeqCst) {
-            let stats = recorder.finish()?;
+            let finished = recorder.finish()?;
             crate::console::say(&format!(
                 "interrupted: recording finalised with {} messages: {}",
-                stats.messages,
+                finished.stats.messages,
                 path.display()
             ));
             return Ok(());
         }
+        if recorder.failure().is_some() {
+            // `finish` returns the first failed write; the file is readable up to its last chunk.
+            return recorder.finish().map(drop).map_err(Error::from);
+        }
         if let Some((n, since)) = target {
-            if seen >= n {
+            if recorder.seen() >= n {
                 break;
             }
             if since.elapsed() > DRAIN_TIMEOUT {
+                let seen = recorder.seen();
                 recorder.finish()?;
                 failed!(
                     "received {seen} of the {n} messages the launcher saw within {DRAIN_TIMEOUT:?} after the stop; {} is finalised without the rest",
@@ -404,37 +409,17 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
                         .map(u64::from_le_bytes)
                         .map_err(|_| Error::Invalid(format!("malformed end message ({} bytes)", bytes.len())))?;
                     target = Some((n, Instant::now()));
-                    continue;
-                }
-                if key == stop {
-                    let stats = recorder.finish()?;
+                } else if key == stop {
+                    let finished = recorder.finish()?;
                     crate::console::say(&format!(
                         "the run was stopped ({}): recording finalised with {} messages: {}",
                         String::from_utf8_lossy(&bytes),
-                        stats.messages,
+                        finished.stats.messages,
                         path.display()
                     ));
                     return Ok(());
-                }
-                // Control messages (start, …) carry no envelope: not part of the run's traffic.
-                if peek_envelope(&bytes, run_id).is_ok() {
-                    seen += 1;
-                    // Only what decodes as a message of this run and scene, on its own key, of a
-                    // kind its sender sends, is kept: anything else on the run's keys is not the
-                    // run's.
-                    let refusal = match decode(&bytes, &expected) {
-                        Ok(m) => m.not_from_its_sender(&key),
-                        Err(e) => Some(e.to_string()),
-                    };
-                    match refusal {
-                        None => {
-                            recorder.record(&key, t, &bytes)?;
-                        }
-                        Some(why) => {
-                            refused += 1;
-                            first_refused.get_or_insert_with(|| format!("on {key}: {why}"));
-                        }
-                    }
+                } else {
+                    recorder.heard(&key, &bytes, t);
                 }
             }
             Err(mpsc::RecvTimeoutError::Timeout) if last.elapsed() > IDLE_TIMEOUT => {
@@ -448,18 +433,19 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
             Err(mpsc::RecvTimeoutError::Disconnected) => return Err(Error::Failed("the subscriber closed".into())),
         }
     }
-    let stats = recorder.finish()?;
-    if let Some(first) = &first_refused {
+    let finished = recorder.finish()?;
+    if let Some(first) = &finished.first_refused {
         crate::console::warn(&format!(
-            "{refused} message(s) on the run's keys were not the run's and were not recorded (the first {first})"
+            "{} message(s) on the run's keys were not the run's and were not recorded (the first {first})",
+            finished.refused
         ));
     }
     crate::console::say(&format!(
         "{}recorded {} messages on {} channels, {} bytes: {}",
         glissade_zenoh::NOTE,
-        stats.messages,
-        stats.channels,
-        stats.file_bytes,
+        finished.stats.messages,
+        finished.stats.channels,
+        finished.stats.file_bytes,
         path.display()
     ));
     let _ = session.close().wait();

@@ -164,36 +164,37 @@ impl<'a> Run<'a> {
                 None,
             ),
             Some(path) => {
-                let mut recorder = create_recorder(scene, &opts.run_id, path).map_err(RunError::Recording)?;
+                let recorder = create_recorder(scene, &opts.run_id, path).map_err(RunError::Recording)?;
                 // The first failed write (e.g. a full disk) stops the run at the end of that
                 // iteration.
-                let failure = std::cell::RefCell::new(None);
-                let keep_going = |r: &IterationRecord| on_iteration(r) && failure.borrow().is_none();
+                let recorder = std::cell::RefCell::new(recorder);
+                let keep_going = |r: &IterationRecord| on_iteration(r) && recorder.borrow().failure().is_none();
                 let result = run_logged(
                     scene,
                     &opts,
                     keep_going,
                     |m| {
                         let spent = observe(m);
-                        if failure.borrow().is_none() {
-                            let bytes = glissade_messages::encode(m);
-                            if let Err(e) = recorder.record(&m.topic(), glissade_recorder::log_time_now(), &bytes) {
-                                *failure.borrow_mut() = Some(e);
-                            }
-                        }
+                        recorder.borrow_mut().delivered(m);
                         spent
                     },
                     log,
                     timing,
                     None,
                 )?;
-                if let Some(cause) = failure.into_inner() {
-                    return Err(RunError::RecordingStopped {
-                        iterations: result.iterations.len(),
-                        cause,
-                    });
-                }
-                let stats = recorder.finish().map_err(RunError::Recording)?;
+                let recorder = recorder.into_inner();
+                let stopped = recorder.failure().is_some();
+                let stats = match recorder.finish() {
+                    Ok(finished) => finished.stats,
+                    // The write that stopped the run.
+                    Err(cause) if stopped => {
+                        return Err(RunError::RecordingStopped {
+                            iterations: result.iterations.len(),
+                            cause,
+                        })
+                    }
+                    Err(e) => return Err(RunError::Recording(e)),
+                };
                 let outcome = RecordingOutcome {
                     path: path.clone(),
                     stats: Some(stats),

@@ -467,7 +467,8 @@ fn replay_skips_and_reports_what_is_not_the_runs() {
     )
     .unwrap();
     let forged_path = dir.join("forged.mcap");
-    let mut out = glissade::recording::create_recorder(&loaded, "fr", &forged_path).unwrap();
+    let (info, options) = glissade::recording::recorder_settings(&loaded, "fr");
+    let mut out = glissade_recorder::Recorder::create(&forged_path, &info, &options).unwrap();
     let mut forged = 0;
     for (i, m) in original.messages().enumerate() {
         out.record(m.topic, m.log_time, &m.data).unwrap();

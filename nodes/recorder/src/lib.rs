@@ -26,9 +26,11 @@
 
 mod durable;
 pub mod foreign;
+mod front;
 mod reader;
 mod schema;
 
+pub use front::{Finished, RunRecorder};
 pub use reader::{ChannelInfo, RecordedMessage, Recording};
 pub use schema::{payload_schema, PAYLOAD_FIELDS};
 
