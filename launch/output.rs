@@ -211,7 +211,9 @@ pub struct LinearStageTotals {
     pub subdomains: usize,
     /// Iterations with a linear stage of this kind (the initial one from ŝ = 0 included).
     pub iterations: usize,
-    pub seconds: f64,
+    /// Wall time of these linear stages, summed over subdomains and iterations: measured by the
+    /// in-process bus; None as processes (each node process's bus does not report its times).
+    pub seconds: Option<f64>,
     pub flops: u64,
 }
 
@@ -223,18 +225,18 @@ impl LinearStageTotals {
 
     /// Flops over linear-stage wall time, in 10⁹ per second (None without a measured time).
     pub fn gflops_per_s(&self) -> Option<f64> {
-        crate::report::gflops_per_s(self.flops, self.seconds)
+        crate::report::gflops_per_s(self.flops, self.seconds?)
     }
 
     /// One line for the console: flops per iteration and rate.
     pub fn line(&self) -> String {
         format!(
-            "linear stage `{}` ({} subdomain(s)): {:.4} GFLOP per iteration over {} iterations, {:.3} s, {} GFLOP/s ({} build)",
+            "linear stage `{}` ({} subdomain(s)): {:.4} GFLOP per iteration over {} iterations, {}, {} GFLOP/s ({} build)",
             self.stage,
             self.subdomains,
             self.flops_per_iteration() * 1e-9,
             self.iterations,
-            self.seconds,
+            self.seconds.map_or("time not measured as processes".to_string(), |s| format!("{s:.3} s")),
             self.gflops_per_s().map_or("-".to_string(), |g| format!("{g:.2}")),
             if cfg!(debug_assertions) { "debug" } else { "release" }
         )
@@ -254,8 +256,8 @@ impl LinearStageTotals {
 }
 
 /// Linear-stage totals per linear stage (condensed, sparse, pgd; those the run used) from the
-/// subdomain nodes' records of an in-process run.
-pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord]) -> Vec<LinearStageTotals> {
+/// subdomain nodes' records; `timed`: the records' times were measured (an in-process run).
+pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord], timed: bool) -> Vec<LinearStageTotals> {
     let plan = Plan::new(&scene.model).with_scene(scene);
     let names: Vec<&str> = (0..scene.model.subdomains.len())
         .map(|s| match plan.stage_of(&scene.model, s) {
@@ -280,7 +282,7 @@ pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord]) -
             stage,
             subdomains: subdomains.len(),
             iterations: iterations.len(),
-            seconds: of.iter().map(|r| r.seconds).sum(),
+            seconds: timed.then(|| of.iter().map(|r| r.seconds).sum()),
             flops: of.iter().map(|r| r.flops).sum(),
         });
     }

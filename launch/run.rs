@@ -63,8 +63,8 @@ pub struct Run<'a> {
 pub struct Outcome {
     pub result: RunResult,
     /// Every subdomain's linear-stage records (flops, PGD basis per iteration from its
-    /// `linear_stage_stats` messages, the time the bus spent on its stage), sorted by (iteration,
-    /// subdomain), when asked for with [`Run::linear_stages`].
+    /// `linear_stage_stats` messages, and in-process the time the bus spent on its stage; 0 as
+    /// processes), sorted by (iteration, subdomain), when asked for with [`Run::linear_stages`].
     pub linear_stages: Vec<LinearStageRecord>,
     /// Every node's handling time summed per (role, message field), when asked for with
     /// [`Run::handle_times`] (what `glissade bench` splits an iteration by).
@@ -121,7 +121,8 @@ impl<'a> Run<'a> {
         self
     }
 
-    /// Keeps every subdomain's linear-stage records ([`Outcome::linear_stages`]). In-process only.
+    /// Keeps every subdomain's linear-stage records ([`Outcome::linear_stages`]): timed in-process,
+    /// the counters alone as processes.
     pub fn linear_stages(mut self) -> Self {
         self.linear_stages = true;
         self
@@ -231,7 +232,6 @@ impl<'a> Run<'a> {
         } = self;
         for (asked, what) in [
             (until.is_some(), "stopping a run early (until)"),
-            (linear_stages, "linear-stage records"),
             (handle_times, "handling times"),
         ] {
             if asked {
@@ -243,7 +243,7 @@ impl<'a> Run<'a> {
                 o(m);
             }
         });
-        let (result, traffic) = crate::distributed::run_processes(
+        let (result, traffic, records) = crate::distributed::run_processes(
             scene,
             &opts,
             exe,
@@ -258,7 +258,7 @@ impl<'a> Run<'a> {
         )?;
         Ok(Outcome {
             result,
-            linear_stages: Vec::new(),
+            linear_stages: if linear_stages { records } else { Vec::new() },
             handle_times: Vec::new(),
             recording: recording.map(|path| RecordingOutcome { path, stats: None }),
             traffic: Some(traffic),

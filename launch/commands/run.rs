@@ -128,13 +128,14 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             t0.elapsed()
         });
     }
-    // Linear-stage totals per linear stage: in process only (the in-process bus times the stages;
-    // the counters are in every run's `linear_stage_stats` messages).
-    let mut linear_stages = None;
+    // Linear-stage totals per linear stage: the counters of every run's `linear_stage_stats`
+    // messages; their time in-process only (the in-process bus times the stages).
+    let run = run.linear_stages();
+    let linear_stages;
     let mut bus = None;
     let result = if args.in_process {
-        let outcome = run.linear_stages().in_process()?;
-        linear_stages = Some(glissade::output::linear_stage_totals(&sc, &outcome.linear_stages));
+        let outcome = run.in_process()?;
+        linear_stages = glissade::output::linear_stage_totals(&sc, &outcome.linear_stages, true);
         live.finish()?;
         if let Some(st) = outcome.recording.and_then(|o| o.stats) {
             glissade::console::note(&format!(
@@ -171,6 +172,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                     ));
                 }
                 bus = Some(traffic);
+                linear_stages = glissade::output::linear_stage_totals(&sc, &outcome.linear_stages, false);
                 outcome.result
             }
             Err(e) => {
@@ -198,12 +200,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         println!("left out: {l}");
     }
     let mut run_summary = summary(&sc, &result, &run_id);
-    run_summary["linear_stages"] = match &linear_stages {
-        Some(totals) => serde_json::json!(totals.iter().map(|t| t.json()).collect::<Vec<_>>()),
-        None => {
-            serde_json::json!("not measured: only the in-process bus times linear stages (a multi-process run's flops and PGD basis sizes are in its recording's linear_stage_stats)")
-        }
-    };
+    run_summary["linear_stages"] = serde_json::json!(linear_stages.iter().map(|t| t.json()).collect::<Vec<_>>());
     if let Some(traffic) = &bus {
         run_summary["bus"] = serde_json::json!(traffic);
     }
@@ -254,8 +251,12 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         result.setup_s,
         result.solve_s
     );
-    for t in linear_stages.iter().flatten() {
-        println!("{}", t.line());
+    for t in &linear_stages {
+        // Untimed (as processes), the counters alone are a note (`--verbose`).
+        match t.seconds {
+            Some(_) => println!("{}", t.line()),
+            None => glissade::console::note(&t.line()),
+        }
     }
     if let Some(size) = recording
         .as_deref()

@@ -29,6 +29,7 @@ use crate::error::{Error, Result};
 use crate::runner::{IterationRecord, RunOptions, RunResult};
 use glissade_messages::{Message, Verdict};
 use glissade_scene::LoadedScene;
+use glissade_subdomain::LinearStageRecord;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -120,8 +121,8 @@ pub struct Supervision {
 /// process writing `recording` when given. `observe`, when given, sees every message of the run
 /// the launcher receives, in arrival order (the live Rerun view of a multi-process run). Without
 /// it, the launcher copies and decodes only the messages it keeps (decisions, interface
-/// solutions, displacements) and just counts the others, most of the bus's bytes. Returns the
-/// result and the bus traffic.
+/// solutions, displacements, linear-stage counters) and just counts the others, most of the bus's
+/// bytes. Returns the result, the bus traffic and the subdomains' linear-stage counters (untimed).
 pub(crate) fn run_processes(
     scene: &LoadedScene,
     opts: &RunOptions,
@@ -130,7 +131,7 @@ pub(crate) fn run_processes(
     recording: Option<&Path>,
     mut on_iteration: impl FnMut(&IterationRecord),
     mut observe: Option<impl FnMut(&Message)>,
-) -> Result<(RunResult, Traffic)> {
+) -> Result<(RunResult, Traffic, Vec<LinearStageRecord>)> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
         // `Run::processes` solves such a scene in-process: there is nothing to distribute.
@@ -173,8 +174,10 @@ pub(crate) fn run_processes(
             net.remote.iter().map(|r| r.to_string()).collect::<Vec<_>>().join(", ")
         ));
     }
+    let linear_stages = got.linear_stages.records(&[]);
     Ok((
         got.into_result(&set_up.plan, Verdict::MaxIterations, names, left_out),
         traffic,
+        linear_stages,
     ))
 }

@@ -16,6 +16,7 @@ use crate::runner::{IterationRecord, RunResult};
 use glissade_deploy::Plan;
 use glissade_messages::{Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Verdict};
 use glissade_scene::LoadedScene;
+use glissade_subdomain::LinearStageRecords;
 use glissade_zenoh as transport;
 use std::collections::{BTreeMap, HashSet};
 use std::path::Path;
@@ -488,6 +489,8 @@ pub(super) struct Collected {
     /// N = 1000), which is not counted, as an in-process run's release of its nodes' memory is
     /// not.
     finished: Option<Instant>,
+    /// The subdomains' linear-stage counters (flops, PGD basis), untimed.
+    pub(super) linear_stages: LinearStageRecords,
 }
 impl Collected {
     /// Keeps the results of message `m` (already checked to be its sender's kind, on its key); a
@@ -499,6 +502,13 @@ impl Collected {
                 .get(from.index as usize)
                 .is_some_and(|g| g.contains(&(i as usize)))
         };
+        if let Payload::LinearStageStats(s) = &m.payload {
+            // A subdomain's own counters, each (iteration, subdomain) once.
+            if from.role == Role::Subdomain && s.subdomain == from.index {
+                self.linear_stages.observe(&m);
+            }
+            return None;
+        }
         match m.payload {
             // Decisions come from interface node 0, one per iteration, in order; anything else on
             // that key is not the run's.
@@ -591,7 +601,11 @@ impl Arrival {
         let first = payload.slices().next().unwrap_or(&[]);
         let ours = glissade_messages::peek_envelope(first, run_id).is_ok()
             || (first.len() < payload.len() && glissade_messages::peek_envelope(&payload.to_bytes(), run_id).is_ok());
-        let kept = keep_all || matches!(kind_of(key), "decision" | "interface_solution" | "displacement");
+        let kept = keep_all
+            || matches!(
+                kind_of(key),
+                "decision" | "interface_solution" | "displacement" | "linear_stage_stats"
+            );
         Self {
             key: key.to_string(),
             size: payload.len(),

@@ -97,13 +97,29 @@ fn processes_match_in_process_bit_for_bit_with_anderson() {
     assert!(matches!(sc.model.solver.acceleration, Acceleration::Anderson { .. }));
     assert!(sc.deployment.subdomain_nodes >= 2);
     let local = Run::new(&sc, &RunOptions::new("local"))
+        .linear_stages()
         .in_process()
-        .map(|o| o.result)
         .unwrap();
     let remote = Run::new(&sc, &RunOptions::new("acceleration-distributed-1"))
+        .linear_stages()
         .processes(Path::new(env!("CARGO_BIN_EXE_glissade")), &Network::default())
-        .map(|o| o.result)
         .unwrap();
+    // The linear stages' counters as processes are the in-process ones (untimed), one per
+    // subdomain and iteration: the launcher keeps every subdomain's `linear_stage_stats` once.
+    let counters = |o: &glissade::run::Outcome| -> Vec<(u32, u32, u64)> {
+        o.linear_stages
+            .iter()
+            .map(|r| (r.iteration, r.subdomain, r.flops))
+            .collect()
+    };
+    assert_eq!(
+        local.linear_stages.len(),
+        sc.model.subdomains.len() * local.result.iterations.len()
+    );
+    assert_eq!(counters(&local), counters(&remote));
+    assert!(local.linear_stages.iter().all(|r| r.seconds > 0.0 && r.flops > 0));
+    assert!(remote.linear_stages.iter().all(|r| r.seconds == 0.0));
+    let (local, remote) = (local.result, remote.result);
     println!(
         "Anderson: in-process {} iterations, processes {} iterations",
         local.iterations.len(),

@@ -570,10 +570,23 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
         "{}",
         summary["bus"]
     );
+    // The linear stages' flops, from the subdomains' counters; their time is not measured as
+    // processes.
+    let stages = summary["linear_stages"].as_array().unwrap();
+    assert_eq!(stages.len(), 1, "{stages:?}");
+    assert!(stages[0]["flops"].as_u64().unwrap() > 0, "{stages:?}");
+    assert!(
+        stages[0]["seconds"].is_null() && stages[0]["gflops_per_s"].is_null(),
+        "{stages:?}"
+    );
 
     let (out, err) = run("verbose", true);
     assert!(err.contains("node(s) ready, iterating"), "{err}");
     assert!(err.contains("[recorder:0] note: recorded "), "{err}");
     assert!(err.contains("bus: boundary_state: "), "{err}");
+    assert!(
+        err.contains("GFLOP per iteration over ") && err.contains("time not measured as processes"),
+        "{err}"
+    );
     assert!(out.contains("summary: "), "{out}");
 }

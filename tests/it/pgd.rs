@@ -399,7 +399,7 @@ fn reports_count_linear_stage_flops() {
         .in_process()
         .map(|o| (o.result, o.linear_stages))
         .expect("run");
-    let totals = linear_stage_totals(&sparse, &records);
+    let totals = linear_stage_totals(&sparse, &records, true);
     assert_eq!(totals.len(), 1);
     let t = &totals[0];
     assert_eq!((t.stage, t.subdomains), ("sparse", plan.participants.len()));
