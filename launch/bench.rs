@@ -17,7 +17,7 @@
 //!   compute and memory-traffic bounds the iteration time is compared to.
 
 use crate::distributed::Network;
-use crate::error::{failed, invalid};
+use crate::error::failed;
 use crate::run::Run;
 use crate::runner::{RunOptions, RunResult};
 use faer::{Accum, Mat, Par};
@@ -187,10 +187,10 @@ pub fn machine_rates(m: usize, n: usize) -> MachineRates {
 pub fn bench(scene: &LoadedScene, run_id: &str) -> crate::Result<BenchReport> {
     let model = &scene.model;
     if model.interfaces.is_empty() {
-        invalid!(
-            "scene `{}` has no interface: there is no iteration to benchmark",
-            model.name
-        );
+        return Err(crate::Error::NoInterface {
+            scene: model.name.clone(),
+            consequence: "there is no iteration to benchmark",
+        });
     }
     let plan = Plan::new(model).with_scene(scene);
     let nt = model.time.n_points();
@@ -474,13 +474,16 @@ pub fn compare_processes(
     mut run_id: impl FnMut() -> crate::Result<String>,
 ) -> crate::Result<ProcessComparison> {
     if rounds < 1 {
-        invalid!("at least one round");
+        return Err(crate::Error::Option {
+            option: "--rounds 0".into(),
+            why: "at least one round".into(),
+        });
     }
     if scene.model.interfaces.is_empty() {
-        invalid!(
-            "scene `{}` has no interface: it runs in one process only",
-            scene.model.name
-        );
+        return Err(crate::Error::NoInterface {
+            scene: scene.model.name.clone(),
+            consequence: "it runs in one process only",
+        });
     }
     // The first run's decisions, as text (every value written out exactly, so the comparison is
     // bit for bit, NaN and the sign of zero included): every other run must repeat them.

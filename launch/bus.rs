@@ -5,7 +5,7 @@
 //! process joins it (`glissade node --connect --tls-* --credentials`).
 
 use crate::children::NodeName;
-use crate::error::{invalid, Error, IoWhat, Result};
+use crate::error::{Error, IoWhat, Result};
 use glissade_messages::{NodeId, Role};
 use glissade_scene::LoadedScene;
 use glissade_zenoh as transport;
@@ -96,11 +96,14 @@ pub(crate) fn tls_args(root_ca: &Path, identity: Option<(&Path, &Path)>) -> Vec<
 /// The common name of the (first) certificate in PEM file `path`, if it has one.
 pub(crate) fn cert_common_name(path: &Path) -> Result<Option<String>> {
     let bytes = std::fs::read(path).what(|| format!("cannot read {}", path.display()))?;
-    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
-        .map_err(|e| Error::Invalid(format!("{}: not a PEM certificate: {e}", path.display())))?;
-    let cert = pem
-        .parse_x509()
-        .map_err(|e| Error::Invalid(format!("{}: not an X.509 certificate: {e}", path.display())))?;
+    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes).map_err(|e| Error::Option {
+        option: path.display().to_string(),
+        why: format!("not a PEM certificate: {e}"),
+    })?;
+    let cert = pem.parse_x509().map_err(|e| Error::Option {
+        option: path.display().to_string(),
+        why: format!("not an X.509 certificate: {e}"),
+    })?;
     let cn = cert.subject().iter_common_name().next().and_then(|cn| cn.as_str().ok());
     Ok(cn.map(str::to_string))
 }
@@ -111,11 +114,19 @@ pub fn node_tls(root_ca: Option<&Path>, cert: Option<&Path>, key: Option<&Path>)
     let identity = match (cert, key) {
         (Some(c), Some(k)) => Some((c.to_path_buf(), k.to_path_buf())),
         (None, None) => None,
-        _ => invalid!("--tls-cert and --tls-key go together (a certificate and its private key)"),
+        _ => {
+            return Err(Error::Option {
+                option: "--tls-cert, --tls-key".into(),
+                why: "they go together (a certificate and its private key)".into(),
+            })
+        }
     };
     let Some(root_ca) = root_ca else {
         if identity.is_some() {
-            invalid!("--tls-cert needs --tls-root-ca (the certificate authority of the run)");
+            return Err(Error::Option {
+                option: "--tls-cert".into(),
+                why: "it needs --tls-root-ca (the certificate authority of the run)".into(),
+            });
         }
         return Ok(None);
     };
@@ -159,23 +170,29 @@ pub fn node_credentials(arg: Option<&Path>, id: NodeId) -> Result<Option<transpo
         let meta = std::fs::metadata(path).what(|| format!("--credentials {}: cannot read it", path.display()))?;
         let mode = meta.permissions().mode() & 0o777;
         if mode & 0o077 != 0 {
-            invalid!(
-                "--credentials {}: readable by others (mode {mode:03o}); whoever reads it can speak for this node \
-                 in the run: `chmod 600` it",
-                path.display()
-            );
+            return Err(Error::Option {
+                option: format!("--credentials {}", path.display()),
+                why: format!(
+                    "readable by others (mode {mode:03o}); whoever reads it can speak for this node in the run: \
+                     `chmod 600` it"
+                ),
+            });
         }
         std::fs::read_to_string(path).what(|| format!("--credentials {}: cannot read it", path.display()))?
     };
-    let credentials = transport::Credentials::parse(&text)
-        .map_err(|e| Error::Invalid(format!("--credentials {}: {e}", path.display())))?;
+    let credentials = transport::Credentials::parse(&text).map_err(|e| Error::Option {
+        option: format!("--credentials {}", path.display()),
+        why: e.to_string(),
+    })?;
     let own = transport::user_of(id);
     if credentials.user != own {
-        invalid!(
-            "--credentials {}: they are {}'s, not this node's ({own}); each node has its own",
-            path.display(),
-            credentials.user
-        );
+        return Err(Error::Option {
+            option: format!("--credentials {}", path.display()),
+            why: format!(
+                "they are {}'s, not this node's ({own}); each node has its own",
+                credentials.user
+            ),
+        });
     }
     Ok(Some(credentials))
 }
@@ -243,11 +260,17 @@ pub(crate) fn join_bus(
 ) -> Result<Bus> {
     for l in &net.listen {
         if l.ends_with(":0") {
-            invalid!("--listen {l}: give an explicit port (nodes started elsewhere must know it)");
+            return Err(Error::Option {
+                option: format!("--listen {l}"),
+                why: "give an explicit port (nodes started elsewhere must know it)".into(),
+            });
         }
     }
     if !net.connect.is_empty() && !net.listen.is_empty() {
-        invalid!("--listen and --connect exclude each other: the launcher either hosts the router or connects to one");
+        return Err(Error::Option {
+            option: "--listen, --connect".into(),
+            why: "they exclude each other: the launcher either hosts the router or connects to one".into(),
+        });
     }
     // TLS and access control as the scene's [network] says.
     let tls = scene.network.tls.as_ref().map(|t| transport::Tls {
@@ -301,22 +324,28 @@ pub(crate) fn join_bus(
         None
     };
     if scene.network.allow.is_some() && !hosting {
-        invalid!(
-            "network.allow: access control is enforced by the router this launcher hosts; with --connect {}, \
-             configure it on that router",
-            net.connect.join(", ")
-        );
+        return Err(Error::Option {
+            option: "network.allow".into(),
+            why: format!(
+                "access control is enforced by the router this launcher hosts; with --connect {}, configure it on \
+                 that router",
+                net.connect.join(", ")
+            ),
+        });
     }
     if let (Some(allow), Some(t)) = (&scene.network.allow, &scene.network.tls) {
         // The nodes this launcher starts present its certificate.
         let cn = cert_common_name(&t.cert)?;
         if all_nodes.iter().any(|n| !net.remote.contains(n)) && !cn.as_ref().is_some_and(|cn| allow.contains(cn)) {
-            invalid!(
-                "network.allow: the launcher's certificate {} has common name {}, which the list does not allow; \
-                 the nodes it starts present that certificate (list it, or start every node by hand)",
-                t.cert.display(),
-                cn.map_or("(none)".to_string(), |cn| format!("`{cn}`"))
-            );
+            return Err(Error::Option {
+                option: "network.allow".into(),
+                why: format!(
+                    "the launcher's certificate {} has common name {}, which the list does not allow; the nodes it \
+                     starts present that certificate (list it, or start every node by hand)",
+                    t.cert.display(),
+                    cn.map_or("(none)".to_string(), |cn| format!("`{cn}`"))
+                ),
+            });
         }
     }
     let shared_memory = match scene.network.shared_memory {
@@ -339,9 +368,10 @@ pub(crate) fn join_bus(
         let access = if mode == "router" { access.as_ref() } else { None };
         let mut c =
             transport::secure_config(mode, listen, connect, false, tls.as_ref(), auth, access).map_err(|e| {
-                Error::Invalid(format!(
-                    "the bus (the scene's [network] section, --listen, --connect): {e}"
-                ))
+                Error::Option {
+                    option: "the bus (the scene's [network] section, --listen, --connect)".into(),
+                    why: e.to_string(),
+                }
             })?;
         transport::set_shared_memory(&mut c, shared_memory)?;
         Ok::<_, Error>(c)
@@ -399,11 +429,11 @@ pub(crate) fn join_bus(
     if !net.connect.is_empty() {
         let taken = transport::tokens_alive(&session, run_id, RUN_ID_PROBE)?;
         if !taken.is_empty() {
-            invalid!(
-                "run id {run_id} is already in use on {description}: {} alive there; nothing was started: choose \
-                 another --run-id (or leave it out for a new random one)",
-                taken.join(", ")
-            );
+            return Err(Error::RunIdTaken {
+                run_id: run_id.to_string(),
+                bus: description,
+                alive: taken,
+            });
         }
     }
     Ok(Bus {
@@ -430,7 +460,10 @@ impl Joining<'_> {
     pub fn open(&self, shared_memory: bool) -> Result<zenoh::Session> {
         let auth = self.credentials.cloned().map(transport::Auth::Client);
         let mut config = transport::secure_config("client", &[], self.connect, false, self.tls, auth.as_ref(), None)
-            .map_err(|e| Error::Invalid(format!("--connect, --tls-*: {e}")))?;
+            .map_err(|e| Error::Option {
+                option: "--connect, --tls-*".into(),
+                why: e.to_string(),
+            })?;
         transport::set_shared_memory(&mut config, shared_memory)?;
         transport::open(config).map_err(|source| {
             let mut hints = Vec::new();

@@ -47,15 +47,67 @@ pub enum Error {
         #[source]
         source: TransportError,
     },
+    /// A command-line option or a setting that cannot be used: `option` names it as the user
+    /// wrote it (`--listen tcp/…`, `--credentials <file>`, `network.allow`, `+start4`).
+    #[error("{option}: {why}")]
+    Option { option: String, why: String },
+    /// Another launcher's run with this id is on the bus (`alive`: its liveliness tokens there).
+    #[error(
+        "run id {run_id} is already in use on {bus}: {} alive there; nothing was started: choose another --run-id \
+         (or leave it out for a new random one)",
+        .alive.join(", ")
+    )]
+    RunIdTaken {
+        run_id: String,
+        bus: String,
+        alive: Vec<String>,
+    },
+    /// A node process's own arguments that do not fit the run's scene.
+    #[error("node {node}: {why}")]
+    Node { node: String, why: String },
+    /// What the bus gave as the run's scene is not it.
+    #[error("the scene received from the bus does not match its fingerprint {fingerprint:016x}")]
+    SceneMismatch { fingerprint: u64 },
+    /// The launcher's scene query answered with another kind of message.
+    #[error("the launcher's scene query returned a {kind} message")]
+    NotAScene { kind: String },
+    /// A scene without interface asked for what only interfaces give.
+    #[error("scene `{scene}` has no interface: {consequence}")]
+    NoInterface { scene: String, consequence: &'static str },
+    /// Results (a run's, a recording's) that do not fit the scene: `what` is the result and its
+    /// shape, `scene` what the scene gives.
+    #[error("{what}, the scene gives {scene}")]
+    ResultShape { what: String, scene: String },
+    /// A result the run did not give.
+    #[error("the run returned no {what}")]
+    ResultMissing { what: String },
+    /// A file that could not be written: nothing of it was kept.
+    #[error("cannot write {}: {why}", .path.display())]
+    Write { path: PathBuf, why: String },
+    /// A finished file or folder that could not be moved to its name.
+    #[error("cannot move {} to {}: {why}", .from.display(), .to.display())]
+    Move { from: PathBuf, to: PathBuf, why: String },
+    /// Nothing came on the bus for `idle`: `what` happened then.
+    #[error("no message on the bus for {} s: {what}", .idle.as_secs())]
+    Silent { idle: std::time::Duration, what: String },
+    /// Node processes that did not leave after the run ended.
+    #[error("node(s) {} did not leave within {} s after the run ended", .nodes.join(", "), .timeout.as_secs())]
+    NotLeaving {
+        nodes: Vec<String>,
+        timeout: std::time::Duration,
+    },
+    /// The run ended without every interface's solution.
+    #[error("the run ended with {got} of the {expected} interface solutions on the bus")]
+    MissingSolutions { got: usize, expected: usize },
     /// A file that is there already: nothing was overwritten.
     #[error("{} already exists; nothing was overwritten", .0.display())]
     Exists(PathBuf),
-    /// An argument, a setting or an input that cannot be used: the message names it and says why.
+    /// Another input that cannot be used (a combination of options, a bus message the launcher
+    /// cannot take): the message names it and says why.
     #[error("{0}")]
     Invalid(String),
-    /// Something that failed and why: a run as processes (the node, how it failed and its last
-    /// lines; or why the run stopped: stalled, nodes not ready, a recorder that failed), a file
-    /// that could not be written (nothing of it kept), results that do not fit the scene.
+    /// Another failure and why: a node process that failed (how, and its last lines), a recorder
+    /// process that failed, a benchmark's runs that disagree.
     #[error("{0}")]
     Failed(String),
     /// What was not done (`what`) because of `source`.
@@ -97,14 +149,6 @@ impl<T> IoWhat<T> for std::io::Result<T> {
         self.map_err(|source| Error::Io { what: what(), source })
     }
 }
-
-/// An `Error::Invalid` with this message.
-macro_rules! invalid {
-    ($($arg:tt)*) => {
-        return Err($crate::error::Error::Invalid(format!($($arg)*)))
-    };
-}
-pub(crate) use invalid;
 
 /// An `Error::Failed` with this message.
 macro_rules! failed {

@@ -2,7 +2,7 @@
 //! file goes through a partial file beside it and is renamed into place, never over an existing
 //! file unless asked; I/O errors in words (a full disk named as such).
 
-use crate::error::{failed, Error, Result};
+use crate::error::{Error, Result};
 use std::path::Path;
 
 /// An I/O error in words, a full disk named as such.
@@ -25,7 +25,10 @@ pub fn write_through_partial(
 ) -> Result<()> {
     let name = path
         .file_name()
-        .ok_or_else(|| Error::Invalid(format!("{}: not a file name", path.display())))?
+        .ok_or_else(|| Error::Write {
+            path: path.to_path_buf(),
+            why: "not a file name".into(),
+        })?
         .to_string_lossy();
     let tmp = path.with_file_name(format!(".{name}.partial"));
     // A stale partial file of a run's output is refused (a run never starts over one); others
@@ -43,11 +46,10 @@ pub fn write_through_partial(
     });
     if let Err(e) = written {
         let _ = std::fs::remove_file(&tmp);
-        failed!(
-            "cannot write {}: {} (nothing of it was kept)",
-            path.display(),
-            io_why(&e)
-        );
+        return Err(Error::Write {
+            path: path.to_path_buf(),
+            why: format!("{} (nothing of it was kept)", io_why(&e)),
+        });
     }
     let published = if replace {
         std::fs::rename(&tmp, path)
@@ -59,7 +61,11 @@ pub fn write_through_partial(
         if e.kind() == std::io::ErrorKind::AlreadyExists {
             return Err(Error::Exists(path.to_path_buf()));
         }
-        failed!("cannot move {} to {}: {}", tmp.display(), path.display(), io_why(&e));
+        return Err(Error::Move {
+            from: tmp,
+            to: path.to_path_buf(),
+            why: io_why(&e),
+        });
     }
     Ok(())
 }

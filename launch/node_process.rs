@@ -6,7 +6,7 @@ use crate::bus::Joining;
 use crate::children::{NodeName, NodeRole};
 use crate::distributed::Supervision;
 use crate::distributed::{DEPARTURE_GRACE, DONE_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT};
-use crate::error::{invalid, Error};
+use crate::error::Error;
 use crate::runner::RunError;
 use glissade_bus::RunContext;
 use glissade_deploy::{build_interface_node, build_nodes, Plan, Selection};
@@ -31,7 +31,10 @@ pub fn run_node_process(
     let interior = supervision.interior;
     let name = NodeName { role, index };
     if role == NodeRole::Coarse && index != 0 {
-        invalid!("node {name}: a run has one coarse node, index 0");
+        return Err(Error::Node {
+            node: name.to_string(),
+            why: "a run has one coarse node, index 0".into(),
+        });
     }
     let session = bus.open(supervision.shared_memory)?;
     let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
@@ -42,13 +45,12 @@ pub fn run_node_process(
     };
     let msg = decode(&bytes, &expected)?;
     let Payload::Scene { text, overrides } = msg.payload else {
-        invalid!(
-            "the launcher's scene query returned a {} message",
-            msg.payload.field_key()
-        )
+        return Err(Error::NotAScene {
+            kind: msg.payload.field_key().to_string(),
+        });
     };
     if fingerprint_with(&text, &overrides) != fp {
-        invalid!("the scene received from the bus does not match its fingerprint {fp:016x}");
+        return Err(Error::SceneMismatch { fingerprint: fp });
     }
     // The scene as written with the launcher's command-line overrides: the run's model.
     let scene = load_with(&text, "<scene from the bus>", &overrides)?;
@@ -58,16 +60,20 @@ pub fn run_node_process(
         NodeRole::Subdomain => {
             let groups = plan.groups(scene.deployment.subdomain_nodes);
             let Some(group) = groups.get(index as usize) else {
-                invalid!(
-                    "node {name}: the scene's deployment has {} subdomain node(s), indices 0 to {}",
-                    groups.len(),
-                    groups.len().saturating_sub(1)
-                );
+                return Err(Error::Node {
+                    node: name.to_string(),
+                    why: format!(
+                        "the scene's deployment has {} subdomain node(s), indices 0 to {}",
+                        groups.len(),
+                        groups.len().saturating_sub(1)
+                    ),
+                });
             };
             if !subdomains.is_empty() && subdomains != group.as_slice() {
-                invalid!(
-                    "node {name}: --subdomains {subdomains:?} differ from the deployment's group {index}, {group:?}"
-                );
+                return Err(Error::Node {
+                    node: name.to_string(),
+                    why: format!("--subdomains {subdomains:?} differ from the deployment's group {index}, {group:?}"),
+                });
             }
             Selection {
                 subdomains: group.clone(),
@@ -87,7 +93,10 @@ pub fn run_node_process(
         },
     };
     if role == NodeRole::Coarse && !plan.coarse {
-        invalid!("node {name}: the scene needs no coarse node (its coarse problem is off)");
+        return Err(Error::Node {
+            node: name.to_string(),
+            why: "the scene needs no coarse node (its coarse problem is off)".into(),
+        });
     }
     let ctx = RunContext {
         run_id: run_id.to_string(),
@@ -96,8 +105,10 @@ pub fn run_node_process(
     let mut nodes = build_nodes(&model, &ctx, interior, &plan, &selection).map_err(RunError::from)?;
     if role == NodeRole::Interface {
         nodes.push(
-            build_interface_node(&model, &ctx, &plan, index as usize)
-                .map_err(|e| Error::Failed(format!("node {name}: {e}")))?,
+            build_interface_node(&model, &ctx, &plan, index as usize).map_err(|e| Error::Node {
+                node: name.to_string(),
+                why: e.to_string(),
+            })?,
         );
     }
     let run = transport::NodeRun {

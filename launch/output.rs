@@ -1,6 +1,6 @@
 //! Run outputs: the JSON summary and the interface fields, written under an output folder.
 
-use crate::error::{failed, Error, IoWhat, Result};
+use crate::error::{Error, IoWhat, Result};
 pub use crate::files::{io_why, rename_new, write_through_partial};
 use crate::runner::RunResult;
 use glissade_deploy::Plan;
@@ -380,17 +380,18 @@ pub fn displacement_slices<'a>(
     (0..model.subdomains.len())
         .map(|s| {
             let sub = &model.subdomains[s];
-            let (_, f) = displacements.iter().find(|(k, _)| *k as usize == s).ok_or_else(|| {
-                Error::Failed(format!("the run returned no displacement of subdomain `{}`", sub.name))
-            })?;
+            let (_, f) = displacements
+                .iter()
+                .find(|(k, _)| *k as usize == s)
+                .ok_or_else(|| Error::ResultMissing {
+                    what: format!("displacement of subdomain `{}`", sub.name),
+                })?;
             let rows = f.rows();
             if rows != sub.n_dofs() || f.cols() != nt {
-                failed!(
-                    "displacement of subdomain `{}` is {rows} × {}, the scene gives {} × {nt}",
-                    sub.name,
-                    f.cols(),
-                    sub.n_dofs()
-                );
+                return Err(Error::ResultShape {
+                    what: format!("displacement of subdomain `{}` is {rows} × {}", sub.name, f.cols()),
+                    scene: format!("{} × {nt}", sub.n_dofs()),
+                });
             }
             Ok((0..nt).map(|i| &f.data[i * rows..(i + 1) * rows]).collect())
         })
@@ -462,33 +463,37 @@ pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<
     for i in 0..nt {
         let t = model.time.t(i);
         for sol in interfaces {
-            let itf = model.interfaces.get(sol.interface as usize).ok_or_else(|| {
-                Error::Failed(format!(
-                    "solution of interface {}, which the scene does not have",
-                    sol.interface
-                ))
-            })?;
+            let itf = model
+                .interfaces
+                .get(sol.interface as usize)
+                .ok_or_else(|| Error::ResultShape {
+                    what: format!("a solution of interface {}", sol.interface),
+                    scene: format!("{} interface(s)", model.interfaces.len()),
+                })?;
             let np = itf.n_pairs();
             if sol.f_a_hat.rows() != 2 * np || sol.f_a_hat.cols() != nt {
-                failed!(
-                    "interface {}: F̂_a is {} × {}, the scene gives {} × {nt}",
-                    sol.interface,
-                    sol.f_a_hat.rows(),
-                    sol.f_a_hat.cols(),
-                    2 * np
-                );
+                return Err(Error::ResultShape {
+                    what: format!(
+                        "interface {}: F̂_a is {} × {}",
+                        sol.interface,
+                        sol.f_a_hat.rows(),
+                        sol.f_a_hat.cols()
+                    ),
+                    scene: format!("{} × {nt}", 2 * np),
+                });
             }
             let (a, b) = (&model.subdomains[itf.a].name, &model.subdomains[itf.b].name);
             for p in 0..np {
                 let [f_n, f_t, jump_n, jump_t] = pair_values(itf, sol, i, p);
                 let status = if itf.is_contact() {
-                    let code = *sol
-                        .status
-                        .get(i * np + p)
-                        .ok_or_else(|| Error::Failed(format!("interface {}: statuses missing", sol.interface)))?;
-                    *STATUS_NAMES
-                        .get(code as usize)
-                        .ok_or_else(|| Error::Failed(format!("interface {}: status code {code}", sol.interface)))?
+                    let code = *sol.status.get(i * np + p).ok_or_else(|| Error::ResultShape {
+                        what: format!("interface {}: {} statuses", sol.interface, sol.status.len()),
+                        scene: format!("{}", np * nt),
+                    })?;
+                    *STATUS_NAMES.get(code as usize).ok_or_else(|| Error::ResultShape {
+                        what: format!("interface {}: status code {code}", sol.interface),
+                        scene: format!("codes 0 to {}", STATUS_NAMES.len() - 1),
+                    })?
                 } else {
                     "perfect"
                 };

@@ -17,7 +17,7 @@
 //! before anything is solved, so an unwritable folder fails the run at once, naming the path.
 
 use crate::children::ChildOutput;
-use crate::error::{failed, invalid, zenoh, Error, IoWhat, Result};
+use crate::error::{failed, zenoh, Error, IoWhat, Result};
 use glissade_messages::{decode, run_topics, Expected, Payload};
 use glissade_recorder::{
     log_time_now, recording_file_name, RecorderError, RecorderOptions, RecordingStats, RunInfo, RunRecorder,
@@ -304,10 +304,10 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
         scene_fingerprint: fp,
     };
     let Payload::Scene { text, overrides } = decode(&bytes, &expected)?.payload else {
-        invalid!("the launcher's scene query returned another payload");
+        return Err(Error::NotAScene { kind: "another".into() });
     };
     if fingerprint_with(&text, &overrides) != fp {
-        invalid!("the scene received from the bus does not match its fingerprint {fp:016x}");
+        return Err(Error::SceneMismatch { fingerprint: fp });
     }
     // With the overrides: `--record full` and the iteration cap are the run's, not the file's.
     let scene = load_with(&text, "<scene from the bus>", &overrides)?;
@@ -424,10 +424,10 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
             }
             Err(mpsc::RecvTimeoutError::Timeout) if last.elapsed() > IDLE_TIMEOUT => {
                 recorder.finish()?;
-                failed!(
-                    "no message on the bus for {IDLE_TIMEOUT:?}; {} is finalised",
-                    path.display()
-                );
+                return Err(Error::Silent {
+                    idle: IDLE_TIMEOUT,
+                    what: format!("{} is finalised", path.display()),
+                });
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {}
             Err(mpsc::RecvTimeoutError::Disconnected) => return Err(Error::Failed("the subscriber closed".into())),

@@ -7,7 +7,6 @@
 //! iteration's messages on the bus and, with PGD, every subdomain's basis size per iteration
 //! (plotted under the errors).
 
-use crate::error::invalid;
 use crate::run::Run;
 use crate::runner::{AndersonTally, RunOptions, RunResult};
 use glissade_bus::convert::view;
@@ -316,7 +315,10 @@ pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> crate::Result<LoadedSc
         StartChoice::Coarse(c) => {
             let n = sc.model.time.n_steps;
             if !n.is_multiple_of(c) {
-                invalid!("+start{c}: {c} does not divide the scene's N = {n}");
+                return Err(crate::Error::Option {
+                    option: format!("+start{c}"),
+                    why: format!("{c} does not divide the scene's N = {n}"),
+                });
             }
             solver.time_start = Some(TimeStart {
                 coarsening: c,
@@ -325,7 +327,10 @@ pub fn variant_scene(scene: &LoadedScene, v: &Variant) -> crate::Result<LoadedSc
         }
     }
     if sc.model.solver.time_start.is_some() && v.stage == LinearStage::Pgd {
-        invalid!("a time-coarse start does not go with the PGD stage (use +zero, or another stage)");
+        return Err(crate::Error::Option {
+            option: "+start".into(),
+            why: "a time-coarse start does not go with the PGD stage (use +zero, or another stage)".into(),
+        });
     }
     Ok(sc)
 }

@@ -13,7 +13,7 @@
 //!   −1 on perfect interfaces, −2 at an edge end clamped on both sides, which is no pair), `normal`
 //!   and `tangent`; cell data `interface` and `contact` (1 on contact interfaces).
 
-use crate::error::{failed, Error, IoWhat, Result};
+use crate::error::{Error, IoWhat, Result};
 use crate::output::pair_values;
 pub use crate::output::series_paths;
 use glissade_mechanics::model::Model;
@@ -67,58 +67,58 @@ pub fn write_series(
 ) -> Result<Series> {
     let nt = model.time.n_points();
     if u.len() != model.subdomains.len() {
-        failed!(
-            "displacements of {} subdomains, the scene has {}",
-            u.len(),
-            model.subdomains.len()
-        );
+        return Err(Error::ResultShape {
+            what: format!("displacements of {} subdomains", u.len()),
+            scene: format!("{}", model.subdomains.len()),
+        });
     }
     for (s, per_time) in u.iter().enumerate() {
         let sub = &model.subdomains[s];
         if per_time.len() != nt || per_time.iter().any(|v| v.len() != sub.n_dofs()) {
-            failed!(
-                "displacement of subdomain `{}`: {} time points of {:?} values, the scene gives {nt} of {}",
-                sub.name,
-                per_time.len(),
-                per_time.first().map(|v| v.len()),
-                sub.n_dofs()
-            );
+            return Err(Error::ResultShape {
+                what: format!(
+                    "displacement of subdomain `{}`: {} time points of {:?} values",
+                    sub.name,
+                    per_time.len(),
+                    per_time.first().map(|v| v.len())
+                ),
+                scene: format!("{nt} of {}", sub.n_dofs()),
+            });
         }
     }
     let mut by_interface: Vec<Option<&InterfaceSolution>> = vec![None; model.interfaces.len()];
     for sol in interfaces {
-        let slot = by_interface.get_mut(sol.interface as usize).ok_or_else(|| {
-            Error::Failed(format!(
-                "solution of interface {}, which the scene does not have",
-                sol.interface
-            ))
-        })?;
+        let slot = by_interface
+            .get_mut(sol.interface as usize)
+            .ok_or_else(|| Error::ResultShape {
+                what: format!("a solution of interface {}", sol.interface),
+                scene: format!("{} interface(s)", model.interfaces.len()),
+            })?;
         *slot = Some(sol);
     }
     for (i, itf) in model.interfaces.iter().enumerate() {
         let Some(sol) = by_interface[i] else {
-            failed!(
-                "no solution of interface {i} ({} | {})",
-                model.subdomains[itf.a].name,
-                model.subdomains[itf.b].name
-            );
+            return Err(Error::ResultMissing {
+                what: format!(
+                    "solution of interface {i} ({} | {})",
+                    model.subdomains[itf.a].name, model.subdomains[itf.b].name
+                ),
+            });
         };
         let rows = 2 * itf.n_pairs();
         for (name, f) in [("F̂_a", &sol.f_a_hat), ("Ŵ_a", &sol.w_a_hat), ("Ŵ_b", &sol.w_b_hat)] {
             if f.rows() != rows || f.cols() != nt {
-                failed!(
-                    "interface {i}: {name} is {} × {}, the scene gives {rows} × {nt}",
-                    f.rows(),
-                    f.cols()
-                );
+                return Err(Error::ResultShape {
+                    what: format!("interface {i}: {name} is {} × {}", f.rows(), f.cols()),
+                    scene: format!("{rows} × {nt}"),
+                });
             }
         }
         if itf.is_contact() && sol.status.len() != itf.n_pairs() * nt {
-            failed!(
-                "interface {i}: {} statuses, the scene gives {}",
-                sol.status.len(),
-                itf.n_pairs() * nt
-            );
+            return Err(Error::ResultShape {
+                what: format!("interface {i}: {} statuses", sol.status.len()),
+                scene: format!("{}", itf.n_pairs() * nt),
+            });
         }
     }
     let (pvd, dir) = series_paths(out, stem);
@@ -150,12 +150,11 @@ pub fn write_series(
     );
     if let Err(e) = crate::files::rename_new(&partial, &dir) {
         let _ = std::fs::remove_dir_all(&partial);
-        failed!(
-            "cannot move {} to {}: {}",
-            partial.display(),
-            dir.display(),
-            crate::files::io_why(&e)
-        );
+        return Err(Error::Move {
+            from: partial,
+            to: dir,
+            why: crate::files::io_why(&e),
+        });
     }
     if let Err(e) = crate::files::write_through_partial(&pvd, false, |w| w.write_all(text.as_bytes())) {
         // The series' files without their index: removed with it.
@@ -203,12 +202,9 @@ fn write_vtu_files(
             } else {
                 edges.write(model, by_interface, i, &mut buf);
             }
-            std::fs::write(folder.join(&name), &buf).map_err(|e| {
-                Error::Failed(format!(
-                    "cannot write {}: {}",
-                    dir.join(&name).display(),
-                    crate::files::io_why(&e)
-                ))
+            std::fs::write(folder.join(&name), &buf).map_err(|e| Error::Write {
+                path: dir.join(&name),
+                why: crate::files::io_why(&e),
             })?;
             bytes += buf.len() as u64;
             let _ = writeln!(
@@ -299,8 +295,10 @@ impl SolidGrid {
             let n = sub.mesh.coords.len();
             nodal.resize(n, [0.0; 4]);
             count.resize(n, 0);
-            nodal_stresses_into(sub, model.plane, v, &mut nodal, &mut count)
-                .map_err(|e| Error::Failed(format!("stresses of subdomain `{}`: {e}", sub.name)))?;
+            nodal_stresses_into(sub, model.plane, v, &mut nodal, &mut count).map_err(|e| Error::ResultShape {
+                what: format!("displacement of subdomain `{}` gives no stresses ({e})", sub.name),
+                scene: "a field on its mesh".into(),
+            })?;
             for k in 0..n {
                 put_f64(&mut displacement, &[v[2 * k], v[2 * k + 1], 0.0]);
                 let [sx, sy, sz, txy] = nodal[k];

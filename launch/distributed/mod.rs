@@ -135,10 +135,10 @@ pub(crate) fn run_processes(
     let model = &scene.model;
     if model.interfaces.is_empty() {
         // `Run::processes` solves such a scene in-process: there is nothing to distribute.
-        return Err(Error::Invalid(format!(
-            "scene `{}` has no interface: nothing to run as processes",
-            model.name
-        )));
+        return Err(Error::NoInterface {
+            scene: model.name.clone(),
+            consequence: "nothing to run as processes",
+        });
     }
     let run_id = &opts.run_id;
     let (set_up, presence) = setup::set_up(scene, opts, net, recording, observe.is_some())?;
@@ -148,11 +148,10 @@ pub(crate) fn run_processes(
     supervisor.drain(&mut on_iteration, &mut observe);
     let (got, mut traffic) = (supervisor.got, supervisor.traffic);
     if got.interfaces.len() != model.interfaces.len() {
-        return Err(Error::Failed(format!(
-            "the run ended with {} of the {} interface solutions on the bus",
-            got.interfaces.len(),
-            model.interfaces.len()
-        )));
+        return Err(Error::MissingSolutions {
+            got: got.interfaces.len(),
+            expected: model.interfaces.len(),
+        });
     }
     traffic.iterations = got.iterations.len() as u64;
     let (mut names, mut left_out) = set_up.plan.describe(model, set_up.groups.len());

@@ -6,7 +6,7 @@ use super::supervise::Arrival;
 use super::unresumable;
 use crate::bus::{join_bus, Bus, RECORDER};
 use crate::children::{NodeName, NodeRole};
-use crate::error::{invalid, zenoh, Result};
+use crate::error::{zenoh, Error, Result};
 use crate::runner::{RunOptions, TimeStartRun};
 use glissade_bus::RunContext;
 use glissade_deploy::Plan;
@@ -88,10 +88,13 @@ pub(super) fn set_up(
     let all_nodes = run_nodes_of(&plan, groups.len());
     for r in &net.remote {
         if !all_nodes.contains(r) {
-            invalid!(
-                "--remote {r}: this run has no such node (its nodes: {})",
-                all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
-            );
+            return Err(Error::Option {
+                option: format!("--remote {r}"),
+                why: format!(
+                    "this run has no such node (its nodes: {})",
+                    all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
+                ),
+            });
         }
     }
     let bus = join_bus(scene, run_id, net, recording.is_some(), &all_nodes, &groups)?;

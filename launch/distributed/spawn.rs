@@ -6,7 +6,7 @@ use super::setup::{node_args, SetUp};
 use super::READY_TIMEOUT;
 use crate::bus::{tls_args, write_credentials, CredentialFiles};
 use crate::children::{spawn_node, Children};
-use crate::error::{invalid, Result};
+use crate::error::{Error, Result};
 use crate::recording::RecorderProcess;
 use crate::runner::RunOptions;
 use glissade_scene::LoadedScene;
@@ -103,7 +103,12 @@ pub(super) fn spawn(
         remote_tls.extend(bus.shared_memory.then(|| "--shared-memory".to_string()));
         let dir = match (&net.credentials, bus.hosting) {
             (Some(d), true) => Some(d),
-            (None, true) => invalid!("nodes started by hand need their credentials written to a folder (none given)"),
+            (None, true) => {
+                return Err(Error::Option {
+                    option: "--remote".into(),
+                    why: "nodes started by hand need their credentials written to a folder (none given)".into(),
+                })
+            }
             (_, false) => None,
         };
         for &r in &net.remote {

@@ -432,19 +432,18 @@ impl<'r> Supervisor<'r> {
                     .map(|r| r.to_string())
                     .collect();
                 self.stop_all(children, "the run is over");
-                return Err(Error::Failed(format!(
-                    "node(s) {} did not leave within {} s after the run ended",
-                    late.join(", "),
-                    FINISH_TIMEOUT.as_secs()
-                )));
+                return Err(Error::NotLeaving {
+                    nodes: late,
+                    timeout: FINISH_TIMEOUT,
+                });
             }
         }
         if self.last_message.elapsed() > IDLE_TIMEOUT {
             self.stop_all(children, "the run stalled");
-            return Err(Error::Failed(format!(
-                "no message on the bus for {} s: the run stalled",
-                IDLE_TIMEOUT.as_secs()
-            )));
+            return Err(Error::Silent {
+                idle: IDLE_TIMEOUT,
+                what: "the run stalled".into(),
+            });
         }
         Ok(false)
     }
