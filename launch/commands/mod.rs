@@ -63,7 +63,7 @@ pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
 
 /// The scene with the command line's `--accuracy`, `--tolerance`, `--max-iterations` and
 /// `--record` applied (each checked as the scene's own key is, and refused with that key's
-/// error), after checking that the output folder is writable (before anything is solved). The
+/// error, said of the flag), after checking that the output folder is writable (before anything is solved). The
 /// overrides stay beside the scene text: node processes get both over the bus, and recordings
 /// attach both.
 pub(crate) fn load_with_overrides(
@@ -71,21 +71,7 @@ pub(crate) fn load_with_overrides(
     out: &std::path::Path,
     overrides: &Overrides,
 ) -> anyhow::Result<glissade_scene::LoadedScene> {
-    let sc = load_scene(scene)?
-        .with_overrides(&scene.display().to_string(), overrides)
-        .map_err(|e| {
-            // Name the flag that set the refused key, and its value.
-            let flag = match e.key.as_str() {
-                "solver.accuracy" => overrides.accuracy.map(|v| format!("--accuracy {v}")),
-                "solver.tolerance" => overrides.tolerance.map(|v| format!("--tolerance {v}")),
-                "solver.max_iterations" => overrides.max_iterations.map(|v| format!("--max-iterations {v}")),
-                _ => None,
-            };
-            match flag {
-                Some(flag) => anyhow::anyhow!("{flag}: {e}"),
-                None => e.into(),
-            }
-        })?;
+    let sc = load_scene(scene)?.with_overrides(&scene.display().to_string(), overrides)?;
     ensure_writable(out)?;
     Ok(sc)
 }

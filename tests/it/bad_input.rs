@@ -54,6 +54,18 @@ const CASES: &[Case] = &[
         error: "bad.toml: time.N: line 10, column 5: invalid type: string \"forty\", expected usize",
     },
     Case {
+        name: "an override the scene's rule refuses",
+        args: &["report", "--max-iterations", "0", "--out", "{out}", "{scene}"],
+        edits: &[],
+        error: "--max-iterations 0: {dir}/bad.toml: solver.max_iterations: must be ≥ 1",
+    },
+    Case {
+        name: "an accuracy out of range",
+        args: &["run", "--in-process", "--accuracy", "2", "--out", "{out}", "{scene}"],
+        edits: &[],
+        error: "--accuracy 2: {dir}/bad.toml: solver.accuracy: ",
+    },
+    Case {
         name: "run id too long",
         args: &["run", "--in-process", "--run-id", "rrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrrr", "--out", "{out}", "{scene}"],
         edits: &[],

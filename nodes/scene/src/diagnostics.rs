@@ -39,6 +39,7 @@ pub(crate) fn toml_error(text: &str, file: &str, e: &toml::de::Error, syntax: bo
         file: file.to_string(),
         key,
         problem: format!("{place}{message}"),
+        set_by: None,
     }
 }
 

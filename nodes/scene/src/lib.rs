@@ -75,14 +75,25 @@ pub struct LoadedScene {
     pub network: Network,
 }
 
-/// A problem in a scene file: `file: key: problem`.
+/// A problem in a scene file: `file: key: problem`, or `flag: file: key: problem` when a
+/// command-line flag set the key.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{file}: {key}: {problem}")]
+#[error("{}{file}: {key}: {problem}", .set_by.as_ref().map_or(String::new(), |f| format!("{f}: ")))]
 pub struct SceneError {
     pub file: String,
     /// The TOML key at fault, e.g. `block[2].nx`; `(syntax)` when no key applies.
     pub key: String,
     pub problem: String,
+    /// The command-line flag and value that set the key (`--max-iterations 0`), if one did.
+    pub set_by: Option<String>,
+}
+
+impl SceneError {
+    /// This error, said of the value the command line's `flag` gave.
+    fn set_by(mut self, flag: String) -> Self {
+        self.set_by = Some(flag);
+        self
+    }
 }
 
 /// FNV-1a 64-bit hash of the bytes of `text` (stable across platforms and runs).
@@ -175,6 +186,7 @@ fn embed_mesh(text: &str, file: &str, mesh_file: &str, bytes: &[u8]) -> Result<S
         file: file.to_string(),
         key: "mesh".to_string(),
         problem,
+        set_by: None,
     };
     let mesh = table
         .get_mut("mesh")
@@ -217,16 +229,19 @@ impl LoadedScene {
         debug_assert!(self.overrides.is_none());
         let ctx = Ctx { file };
         let solver = &mut self.model.solver;
+        // A refused value is said of the flag that gave it.
         if let Some(a) = overrides.accuracy {
-            ctx.check_accuracy(a)?;
+            ctx.check_accuracy(a).map_err(|e| e.set_by(format!("--accuracy {a}")))?;
             solver.accuracy = Some(a);
         }
         if let Some(t) = overrides.tolerance {
-            ctx.check_tolerance(t)?;
+            ctx.check_tolerance(t)
+                .map_err(|e| e.set_by(format!("--tolerance {t}")))?;
             solver.tolerance = Some(t);
         }
         if let Some(m) = overrides.max_iterations {
-            ctx.check_max_iterations(m)?;
+            ctx.check_max_iterations(m)
+                .map_err(|e| e.set_by(format!("--max-iterations {m}")))?;
             solver.max_iterations = m;
         }
         if let Some(record) = overrides.record {

@@ -48,6 +48,7 @@ impl Network {
                 file: scene_file.display().to_string(),
                 key: key.to_string(),
                 problem,
+                set_by: None,
             };
             let bytes = std::fs::read(&*path).map_err(|e| err(format!("cannot read {}: {e}", path.display())))?;
             if !bytes.windows(11).any(|w| w == b"-----BEGIN ") {

@@ -172,6 +172,7 @@ impl Ctx<'_> {
             file: self.file.to_string(),
             key: key.into(),
             problem: problem.into(),
+            set_by: None,
         }
     }
 

@@ -165,14 +165,16 @@ fn solver_overrides_set_the_model_and_keep_the_text() {
         )
         .unwrap();
     assert_eq!((o.model.solver.relaxation, o.model.solver.max_iterations), (0.5, 3));
-    // An invalid value is the error the file's own key gives, from either entry point.
-    for (bad, written) in [
+    // An invalid value is the error the file's own key gives, from either entry point, said of
+    // the flag that gave it.
+    for (bad, written, flag) in [
         (
             Overrides {
                 max_iterations: Some(0),
                 ..Default::default()
             },
             "max_iterations = 0",
+            "--max-iterations 0",
         ),
         (
             Overrides {
@@ -180,6 +182,7 @@ fn solver_overrides_set_the_model_and_keep_the_text() {
                 ..Default::default()
             },
             "tolerance = -1.0",
+            "--tolerance -1",
         ),
         (
             Overrides {
@@ -187,12 +190,19 @@ fn solver_overrides_set_the_model_and_keep_the_text() {
                 ..Default::default()
             },
             "accuracy = 1.5",
+            "--accuracy 1.5",
         ),
     ] {
         let from_file = load(&format!("{TWO_BLOCKS}[solver]\n{written}\n")).unwrap_err();
         assert!(from_file.key.starts_with("solver."), "{from_file}");
-        assert_eq!(s.with_overrides(FILE, &bad).unwrap_err(), from_file);
-        assert_eq!(load_with(TWO_BLOCKS, FILE, &bad).unwrap_err(), from_file);
+        assert_eq!(from_file.set_by, None);
+        let said = SceneError {
+            set_by: Some(flag.to_string()),
+            ..from_file.clone()
+        };
+        assert_eq!(s.with_overrides(FILE, &bad).unwrap_err(), said);
+        assert_eq!(load_with(TWO_BLOCKS, FILE, &bad).unwrap_err(), said);
+        assert_eq!(said.to_string(), format!("{flag}: {from_file}"));
     }
 }
 
