@@ -100,23 +100,16 @@ impl CoarseNode {
             .as_mut()
             .expect("both callers solve once assemble has set the problem");
         let rhs = &mut self.rhs;
-        rhs.fill(0.0);
-        for (s, f) in &self.forces {
-            for (r, &g) in self.columns[s].iter().enumerate() {
-                for j in 0..self.n_times {
-                    rhs[(g, j)] -= f[(r, j)];
-                }
-            }
-        }
+        let columns = &self.columns;
+        MacroProblem::rhs_into(
+            rhs,
+            self.forces.iter().map(|(s, f)| (columns[s].as_slice(), f.as_ref())),
+        );
         problem.solve_in_place(rhs);
         let mut out = Vec::with_capacity(self.columns.len());
         for (s, cols) in &self.columns {
-            let w_tilde = self.pool.field_with(cols.len(), self.n_times, |mut w| {
-                for j in 0..w.ncols() {
-                    for (r, &g) in cols.iter().enumerate() {
-                        w[(r, j)] = rhs[(g, j)];
-                    }
-                }
+            let w_tilde = self.pool.field_with(cols.len(), self.n_times, |w| {
+                MacroProblem::subdomain_part_into(rhs.as_ref(), cols, w)
             });
             out.push(Message {
                 envelope: self.ctx.envelope(self.id, self.iteration, Stage::Macro),

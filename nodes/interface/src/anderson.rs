@@ -85,18 +85,14 @@ impl InterfaceNode {
         if d.grams.len() < d.anderson_participants.len() {
             return Ok(Vec::new());
         }
-        let mut sum = GramPartials::zeros(k);
-        for p in d.grams.values() {
-            sum.add(p);
-        }
-        d.grams.clear();
         d.stepped = Some(at);
         let changed = std::mem::take(&mut d.directions_changed);
         let step = d
             .anderson
             .as_mut()
             .expect("checked on entry: a decider with Anderson")
-            .decide(&sum, changed);
+            .step(d.grams.values(), changed);
+        d.grams.clear();
         let (gamma, restart) = match step {
             AndersonStep::Mix(g) => (g, false),
             AndersonStep::Plain => (Vec::new(), false),

@@ -23,13 +23,12 @@ impl InterfaceNode {
             .zip(self.steps.par_iter_mut())
             .map(|(((local, fields), &i), step)| {
                 let itf = &model.interfaces[i];
-                let mut sums = local.local_stage_with_sums(itf, weights, fields, n == 0);
+                let (mut sums, updated) = local.local_iteration(itf, &model.solver, weights, fields, n == 0);
+                // The step of the forces, summed as the subdomains' states arrived.
                 if let Some((num, den)) = step {
                     (sums.step_num, sums.step_den) = (*num, *den);
                     (*num, *den) = (0.0, 0.0);
                 }
-                let updated = model.solver.search_direction_update
-                    && local.update_directions(itf, model.solver.alpha, model.solver.i0);
                 indicators_of(i, &sums, updated)
             })
             .collect();

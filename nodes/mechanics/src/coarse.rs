@@ -13,7 +13,7 @@
 use crate::assembly::SparseSpd;
 use faer::dyn_stack::MemBuffer;
 use faer::linalg::solvers::Solve;
-use faer::{Mat, MatRef, Side};
+use faer::{Mat, MatMut, MatRef, Side};
 
 /// Macro unknowns up to which the macro operator is factorised dense.
 pub const DENSE_UP_TO: usize = 600;
@@ -194,6 +194,30 @@ impl MacroProblem {
                     }
                 };
                 f.solve_view_in_place_with(rhs.as_mut(), scratch);
+            }
+        }
+    }
+
+    /// The right-hand side of one iteration, rhs = −Σ_E F̂ᴹ_{E,d}, into `rhs` (n × (N+1)):
+    /// each subdomain's macro forces (n_m × (N+1)) subtracted over its global unknowns
+    /// ([`Self::columns_of`]), subdomain by subdomain in the order given.
+    pub fn rhs_into<'a>(rhs: &mut Mat<f64>, forces: impl IntoIterator<Item = (&'a [usize], MatRef<'a, f64>)>) {
+        rhs.fill(0.0);
+        for (columns, f) in forces {
+            for (r, &g) in columns.iter().enumerate() {
+                for j in 0..rhs.ncols() {
+                    rhs[(g, j)] -= f[(r, j)];
+                }
+            }
+        }
+    }
+
+    /// One subdomain's w̃ (n_m × (N+1)): the rows of its global unknowns `columns` of the macro
+    /// problem's solution `w` (n × (N+1)).
+    pub fn subdomain_part_into(w: MatRef<'_, f64>, columns: &[usize], mut w_tilde: MatMut<'_, f64>) {
+        for j in 0..w_tilde.ncols() {
+            for (r, &g) in columns.iter().enumerate() {
+                w_tilde[(r, j)] = w[(g, j)];
             }
         }
     }

@@ -5,7 +5,7 @@
 //! 2p + c is pair p, component c (global x, y); column i is time point t_i.
 
 use crate::laws::{self, ContactPoint, PairState, Status};
-use crate::model::{Interface, InterfaceKind};
+use crate::model::{Interface, InterfaceKind, SolverParams};
 use faer::reborrow::ReborrowMut;
 use faer::{Mat, MatMut, MatRef};
 
@@ -564,6 +564,23 @@ impl InterfaceLocal {
                 }
             }
         }
+    }
+
+    /// One iteration's local stage on this interface, as the interface node runs it:
+    /// [`Self::local_stage_with_sums`] (`first` at iteration 0), then, when `solver` asks for it,
+    /// [`Self::update_directions`]. Returns the indicator sums and whether the directions were
+    /// updated.
+    pub fn local_iteration(
+        &mut self,
+        itf: &Interface,
+        solver: &SolverParams,
+        time_weights: &[f64],
+        s: &InterfaceFields,
+        first: bool,
+    ) -> (IndicatorSums, bool) {
+        let sums = self.local_stage_with_sums(itf, time_weights, s, first);
+        let updated = solver.search_direction_update && self.update_directions(itf, solver.alpha, solver.i0);
+        (sums, updated)
     }
 
     /// Search-direction update (paper eq. 6, DESIGN §3), done once per contact interface: when the

@@ -37,7 +37,7 @@ impl SubdomainNode {
         if it != self.iteration || self.phase != Phase::Step {
             return Err(self.out_of_turn("Anderson step", it));
         }
-        let history = self.anderson.as_mut().expect("checked by the caller");
+        let history = self.fields.anderson.as_mut().expect("checked by the caller");
         let step = match (restart, gamma.is_empty()) {
             (true, _) => AndersonStep::Restart,
             (false, true) => AndersonStep::Plain,
@@ -68,7 +68,7 @@ impl SubdomainNode {
             self.stats.flops += pgd.flops() - flops0;
             return Ok(self.boundary_modes());
         }
-        history.apply(&step, &mut self.w, &mut self.f);
+        self.fields.take_step(&step);
         Ok(self.boundary_state())
     }
 }

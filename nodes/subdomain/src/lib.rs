@@ -34,11 +34,10 @@
 //! - `records`: the launcher's view, a [`LinearStageRecord`] per subdomain and iteration from the
 //!   counters' messages and the bus's handling times.
 
-use faer::Mat;
 use glissade_bus::convert::{field_of, FieldPool};
 use glissade_bus::RunContext;
 use glissade_mechanics::anderson::AndersonHistory;
-use glissade_mechanics::linear::SubdomainSolver;
+use glissade_mechanics::linear::{SubdomainFields, SubdomainSolver};
 use glissade_mechanics::model::{Acceleration, Model};
 use glissade_mechanics::modes::ModeForm;
 use glissade_mechanics::pgd::{PgdSettings, PgdStage};
@@ -83,17 +82,8 @@ pub struct SubdomainNode {
     solver: SubdomainSolver,
     options: SubdomainOptions,
     iteration: u32,
-    q_hat: Mat<f64>,
-    w1: Mat<f64>,
-    f1: Mat<f64>,
-    w2: Mat<f64>,
-    f2: Mat<f64>,
-    w: Mat<f64>,
-    f: Mat<f64>,
-    w_tilde: Mat<f64>,
-    macro_forces: Mat<f64>,
-    /// Anderson history (acceleration on) and whether the node waits for its step.
-    anderson: Option<AndersonHistory>,
+    /// q̂, s₁, s₂, s, w̃, the macro forces and the Anderson history (acceleration on).
+    fields: SubdomainFields,
     phase: Phase,
     /// The last iteration whose decision arrived.
     decided: Option<u32>,
@@ -124,10 +114,14 @@ pub struct SubdomainNode {
 impl SubdomainNode {
     pub fn new(ctx: RunContext, model: Arc<Model>, solver: SubdomainSolver, options: SubdomainOptions) -> Self {
         let s = solver.subdomain;
-        let (n_b, n_m, nt) = (solver.n_boundary(), solver.n_macro(), model.time.n_points());
+        let (n_b, nt) = (solver.n_boundary(), model.time.n_points());
         let n_slots = solver.op.layout.slots.len();
-        let z = |r: usize| Mat::<f64>::zeros(r, nt);
+        let anderson = match options.acceleration {
+            Acceleration::None => None,
+            Acceleration::Anderson { window } => Some(AndersonHistory::new(window, options.relaxation, n_b, nt)),
+        };
         Self {
+            fields: SubdomainFields::new(&solver, nt, anderson),
             id: NodeId {
                 role: Role::Subdomain,
                 index: s as u32,
@@ -137,19 +131,6 @@ impl SubdomainNode {
             solver,
             options,
             iteration: 0,
-            q_hat: z(n_b),
-            w1: z(n_b),
-            f1: z(n_b),
-            w2: z(n_b),
-            f2: z(n_b),
-            w: z(n_b),
-            f: z(n_b),
-            w_tilde: z(n_m),
-            macro_forces: z(n_m),
-            anderson: match options.acceleration {
-                Acceleration::None => None,
-                Acceleration::Anderson { window } => Some(AndersonHistory::new(window, options.relaxation, n_b, nt)),
-            },
             phase: Phase::Directions,
             decided: None,
             directions_in: vec![false; n_slots],
@@ -205,7 +186,7 @@ impl SubdomainNode {
         .expect("the particular part has the subdomain's sizes");
         self.modes = Some(form);
         self.particular = Some(particular);
-        self.anderson = self.anderson.take().map(|h| h.with_coordinates(n_b));
+        self.fields.anderson = self.fields.anderson.take().map(|h| h.with_coordinates(n_b));
         self
     }
 

@@ -54,9 +54,10 @@ impl SubdomainNode {
                 ),
             ));
         }
-        expect_shape(self.id, "q_hat", q_hat, self.q_hat.nrows(), self.q_hat.ncols())?;
+        let (rows, cols) = self.fields.q_hat.shape();
+        expect_shape(self.id, "q_hat", q_hat, rows, cols)?;
         expect_finite(self.id, "q_hat", "launcher:0", q_hat)?;
-        copy_into(q_hat, &mut self.q_hat);
+        copy_into(q_hat, &mut self.fields.q_hat);
         self.started = true;
         Ok(self.micro1())
     }
@@ -106,7 +107,7 @@ impl Node for SubdomainNode {
             role_field_topic(run, Role::Coarse, "macro_displacements", s),
             role_field_topic(run, Role::Interface, "decision", None),
         ];
-        if self.anderson.is_some() {
+        if self.fields.anderson.is_some() {
             subs.push(role_field_topic(run, Role::Interface, "anderson_step", None));
         }
         if self.time_start() {
@@ -136,7 +137,7 @@ impl Node for SubdomainNode {
         // Iteration 0: linear stage from ŝ = 0, or, with a time-coarse start, from the q̂ the
         // launcher sends (`initial_directions`).
         if !self.time_start() {
-            self.q_hat.fill(0.0);
+            self.fields.q_hat.fill(0.0);
             self.started = true;
             out.extend(self.micro1());
         }
@@ -208,14 +209,15 @@ impl Node for SubdomainNode {
                     at.push(k);
                 }
                 let rows = at.iter().map(|&k| 2 * slots[k].n_pairs).sum();
-                expect_shape(self.id, "q_hat", q_hat, rows, self.q_hat.ncols())?;
+                expect_shape(self.id, "q_hat", q_hat, rows, self.fields.q_hat.ncols())?;
                 expect_finite(self.id, "q_hat", &msg.envelope.sender.to_string(), q_hat)?;
                 let mut r0 = 0;
                 for &k in &at {
                     let (offset, n) = (slots[k].offset, 2 * slots[k].n_pairs);
                     if n > 0 {
                         for (j, column) in q_hat.data.chunks_exact(rows).enumerate() {
-                            self.q_hat.col_as_slice_mut(j)[offset..offset + n].copy_from_slice(&column[r0..r0 + n]);
+                            self.fields.q_hat.col_as_slice_mut(j)[offset..offset + n]
+                                .copy_from_slice(&column[r0..r0 + n]);
                         }
                     }
                     r0 += n;
@@ -234,12 +236,13 @@ impl Node for SubdomainNode {
                 if it != self.iteration || self.phase != Phase::Macro {
                     return Err(self.out_of_turn("macro displacements", it));
                 }
-                expect_shape(self.id, "w_tilde", w_tilde, self.w_tilde.nrows(), self.w_tilde.ncols())?;
+                let (rows, cols) = self.fields.w_tilde.shape();
+                expect_shape(self.id, "w_tilde", w_tilde, rows, cols)?;
                 expect_finite(self.id, "w_tilde", "coarse:0", w_tilde)?;
-                copy_into(w_tilde, &mut self.w_tilde);
+                copy_into(w_tilde, &mut self.fields.w_tilde);
                 Ok(self.micro2())
             }
-            Payload::AndersonStep { gamma, restart } if self.anderson.is_some() => {
+            Payload::AndersonStep { gamma, restart } if self.fields.anderson.is_some() => {
                 self.anderson_step(msg, gamma, *restart)
             }
             Payload::Decision(d) => {

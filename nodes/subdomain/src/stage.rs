@@ -7,7 +7,7 @@
 use crate::{Phase, SubdomainNode};
 use faer::Mat;
 use glissade_bus::convert::field_of;
-use glissade_mechanics::linear::{relax_into, sum_into, sum_relax_into};
+use glissade_mechanics::linear::{relaxation_at, LinearEnd};
 use glissade_mechanics::pgd::PgdStage;
 use glissade_messages::{LinearStageStats, Message, Payload, Stage};
 
@@ -29,25 +29,23 @@ impl SubdomainNode {
             // The compression works on the state's fields.
             self.expand_state();
         }
+        let x = &mut self.fields;
         match self.pgd.as_mut() {
             None => {
-                self.solver
-                    .micro1_into(self.q_hat.as_ref(), self.w1.as_mut(), self.f1.as_mut());
+                x.micro1(&mut self.solver);
                 if coarse {
-                    self.solver
-                        .macro_forces_into(self.f1.as_ref(), self.macro_forces.as_mut());
+                    x.macro_forces(&mut self.solver);
                 }
             }
             Some(pgd) => {
                 if self.iteration >= 1 && pgd.settings.criterion.compresses() {
-                    self.stats.dropped_modes =
-                        pgd.compress(self.w.as_mut(), self.f.as_mut(), self.anderson.as_mut()) as u32;
+                    self.stats.dropped_modes = pgd.compress(x.w.as_mut(), x.f.as_mut(), x.anderson.as_mut()) as u32;
                 }
-                let report = pgd.micro1(&mut self.solver, self.q_hat.as_ref());
+                let report = pgd.micro1(&mut self.solver, x.q_hat.as_ref());
                 self.stats.new_modes = report.new_modes as u32;
                 self.stats.xi1 = report.xi;
                 if coarse {
-                    pgd.macro_forces_into(self.macro_forces.as_mut());
+                    pgd.macro_forces_into(x.macro_forces.as_mut());
                 }
                 self.stats.modes = pgd.n_modes() as u32;
             }
@@ -64,11 +62,9 @@ impl SubdomainNode {
     fn solve_micro2(&mut self) {
         let flops0 = self.flops();
         match self.pgd.as_mut() {
-            None => self
-                .solver
-                .micro2_into(self.w_tilde.as_ref(), self.w2.as_mut(), self.f2.as_mut()),
+            None => self.fields.micro2(&mut self.solver),
             Some(pgd) => {
-                let report = pgd.micro2(&mut self.solver, self.w_tilde.as_ref());
+                let report = pgd.micro2(&mut self.solver, self.fields.w_tilde.as_ref());
                 self.stats.new_modes += report.new_modes as u32;
                 self.stats.xi2 = report.xi;
                 self.stats.modes = pgd.n_modes() as u32;
@@ -86,12 +82,11 @@ impl SubdomainNode {
             self.phase = Phase::Macro;
             let payload = Payload::MacroForces {
                 subdomain: self.subdomain(),
-                forces: self.pool.field_of(self.macro_forces.as_ref()),
+                forces: self.pool.field_of(self.fields.macro_forces.as_ref()),
             };
             vec![self.msg(Stage::Micro1, payload)]
         } else {
-            self.w2.fill(0.0);
-            self.f2.fill(0.0);
+            self.fields.skip_micro2();
             self.finish_linear_stage()
         }
     }
@@ -104,46 +99,20 @@ impl SubdomainNode {
 
     /// s_new = s₁ + s₂, relaxed: s ← μ s_new + (1 − μ) s (μ = 1 for iterations 0 and 1). With
     /// Anderson acceleration from iteration 2 on: records (s, s_new) and returns the Gram
-    /// partials instead; the step comes with `AndersonStep`.
+    /// partials instead; the step comes with `AndersonStep` ([`SubdomainFields::finish`]).
+    ///
+    /// [`SubdomainFields::finish`]: glissade_mechanics::linear::SubdomainFields::finish
     fn finish_linear_stage(&mut self) -> Vec<Message> {
-        let mu = if self.iteration <= 1 {
-            1.0
-        } else {
-            self.options.relaxation
-        };
         if self.pgd.is_some() {
-            return self.finish_pgd(mu);
+            return self.finish_pgd(relaxation_at(self.iteration, self.options.relaxation));
         }
-        let Some(history) = self.anderson.as_mut() else {
-            // s₁ + s₂ and the relaxation in one pass.
-            sum_relax_into(
-                mu,
-                self.w1.as_mut(),
-                self.f1.as_mut(),
-                self.w2.as_ref(),
-                self.f2.as_ref(),
-                self.w.as_mut(),
-                self.f.as_mut(),
-            );
-            self.phase = Phase::Directions;
-            return self.boundary_state();
-        };
-        if self.iteration >= 2 {
-            // s₁ + s₂ is only recorded: summed inside the history's pass.
-            history.record_sum(&self.w, &self.f, [&self.w1, &self.w2], [&self.f1, &self.f2]);
-        } else {
-            sum_into(self.w1.as_mut(), self.f1.as_mut(), self.w2.as_ref(), self.f2.as_ref());
-            if self.iteration >= 1 {
-                history.record(&self.w, &self.f, &self.w1, &self.f1);
+        match self.fields.finish(self.iteration, self.options.relaxation) {
+            LinearEnd::Partials(p) => vec![self.anderson_gram(p)],
+            LinearEnd::State => {
+                self.phase = Phase::Directions;
+                self.boundary_state()
             }
         }
-        if self.iteration >= 2 {
-            let p = history.partials();
-            return vec![self.anderson_gram(p)];
-        }
-        relax_into(mu, self.w1.as_ref(), self.f1.as_ref(), self.w.as_mut(), self.f.as_mut());
-        self.phase = Phase::Directions;
-        self.boundary_state()
     }
 
     /// [`Self::finish_linear_stage`] in mode form: the relaxation in coordinates, or with
@@ -153,10 +122,11 @@ impl SubdomainNode {
     fn finish_pgd(&mut self, mu: f64) -> Vec<Message> {
         let flops0 = self.flops();
         let pgd = self.pgd.as_mut().expect("PGD stage");
-        match self.anderson.as_mut() {
+        let x = &mut self.fields;
+        match x.anderson.as_mut() {
             Some(history) if self.iteration >= 1 => {
-                pgd.residual_forces_into(self.f1.as_mut());
-                history.record_residual(&self.f1);
+                pgd.residual_forces_into(x.f1.as_mut());
+                history.record_residual(&x.f1);
                 pgd.record_coordinates(history);
                 if self.iteration >= 2 {
                     let p = history.partials();
@@ -205,7 +175,7 @@ impl SubdomainNode {
     /// linear stage's counters).
     pub(crate) fn expand_state(&mut self) {
         if let (true, Some(form)) = (self.fields_stale, self.modes.as_ref()) {
-            form.expand_into(self.w.as_mut(), self.f.as_mut());
+            form.expand_into(self.fields.w.as_mut(), self.fields.f.as_mut());
             self.stats.flops += form.expand_flops();
             self.fields_stale = false;
         }
@@ -215,8 +185,8 @@ impl SubdomainNode {
     pub(crate) fn boundary_state(&mut self) -> Vec<Message> {
         let payload = Payload::BoundaryState {
             subdomain: self.subdomain(),
-            w: self.pool.field_of(self.w.as_ref()),
-            f: self.pool.field_of(self.f.as_ref()),
+            w: self.pool.field_of(self.fields.w.as_ref()),
+            f: self.pool.field_of(self.fields.f.as_ref()),
         };
         vec![self.msg(Stage::Linear, payload), self.stats_message()]
     }
@@ -236,7 +206,7 @@ impl SubdomainNode {
         let mut q = vec![0.0; layout.len()];
         for i in 0..nt {
             for (r, qr) in q.iter_mut().enumerate() {
-                *qr = self.f[(r, i)] + layout.k[r] * self.w[(r, i)];
+                *qr = self.fields.f[(r, i)] + layout.k[r] * self.fields.w[(r, i)];
             }
             let phi: Vec<f64> = sub.loads.iter().map(|c| c.time.eval(self.model.time.t(i))).collect();
             for (d, v) in self.solver.op.recover(&q, &phi).into_iter().enumerate() {

@@ -30,6 +30,22 @@ impl AndersonCoordinator {
         }
     }
 
+    /// The step for every part's `partials` (the same k), summed from zero in the order given (a
+    /// fixed order, so that the sum is the same bit for bit on every run): [`Self::decide`] on
+    /// the sum.
+    pub fn step<'a>(
+        &mut self,
+        partials: impl IntoIterator<Item = &'a GramPartials>,
+        map_changed: bool,
+    ) -> AndersonStep {
+        let mut partials = partials.into_iter().peekable();
+        let mut sum = GramPartials::zeros(partials.peek().map_or(0, |p| p.k));
+        for p in partials {
+            sum.add(p);
+        }
+        self.decide(&sum, map_changed)
+    }
+
     /// The step for the summed partials `p`. `map_changed` (e.g. after a search-direction update)
     /// restarts the histories: differences taken before belong to another fixed-point map.
     pub fn decide(&mut self, p: &GramPartials, map_changed: bool) -> AndersonStep {

@@ -8,17 +8,21 @@
 //! - [`LinearStage`] and the default search direction [`default_k0`] (this file);
 //! - `macro_basis`: the macro basis of an interface and its degree;
 //! - `solver`: [`SubdomainSolver`], the micro and macro problems of one subdomain;
-//! - `fields`: passes over whole boundary fields (the sum and relaxation ending the stage).
+//! - `fields`: passes over whole boundary fields (the sum and relaxation ending the stage);
+//! - `state`: [`SubdomainFields`], one subdomain's fields and the stage's steps on them, as the
+//!   subdomain node and the crate's one-thread iteration call them.
 
 mod fields;
 #[cfg(test)]
 pub(crate) mod flop_tests;
 mod macro_basis;
 mod solver;
+mod state;
 
 pub use fields::{relax_into, sum_into, sum_relax_into};
 pub use macro_basis::{macro_bases, macro_basis, macro_degree, SLENDER};
 pub use solver::{MacroSlot, SubdomainSolver};
+pub use state::{relaxation_at, LinearEnd, SubdomainFields};
 
 use crate::model::Model;
 
