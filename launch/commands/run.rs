@@ -159,6 +159,12 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 bar.finish_and_clear();
                 live.finish()?;
                 let traffic = outcome.traffic.unwrap_or_default();
+                if traffic.counted == glissade::distributed::Counted::Kept {
+                    glissade::console::note(
+                        "bus: only the messages the launcher keeps are counted: through a router outside its process, \
+                         an unrecorded run's fields do not reach it",
+                    );
+                }
                 let per = traffic.iterations.max(1) as f64;
                 for (kind, t) in &traffic.by_kind {
                     let rate = if t.messages >= traffic.iterations {

@@ -100,6 +100,22 @@ pub struct Traffic {
     pub by_kind: BTreeMap<String, KindTraffic>,
     /// Iterations (decisions) of the run, to express the traffic per iteration.
     pub iterations: u64,
+    /// Which messages `by_kind` counts.
+    pub counted: Counted,
+}
+
+/// Which of a run's messages the launcher hears, and so counts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Counted {
+    /// Every message of the run: the router is in the launcher's process, or the run is
+    /// recorded or observed.
+    #[default]
+    Every,
+    /// Only what the launcher keeps (decisions, final solutions and displacements, linear-stage
+    /// counters): an unrecorded run through a router outside the launcher's process, whose fields
+    /// the launcher does not receive.
+    Kept,
 }
 
 /// How a node process takes part in a run.
@@ -154,6 +170,7 @@ pub(crate) fn run_processes(
         });
     }
     traffic.iterations = got.iterations.len() as u64;
+    traffic.counted = set_up.counted;
     let (mut names, mut left_out) = set_up.plan.describe(model, set_up.groups.len());
     names.push(format!(
         "processes: {} (+ {})",

@@ -2,8 +2,9 @@
 //! solve, the bus the launcher joins (or hosts), the scene served to the nodes and the launcher's
 //! subscription to the run, and whether dead node processes are restarted.
 
-use super::supervise::Arrival;
+use super::supervise::{Arrival, KEPT};
 use super::unresumable;
+use super::Counted;
 use crate::bus::{join_bus, Bus, RECORDER};
 use crate::children::{NodeName, NodeRole};
 use crate::error::{zenoh, Error, Result};
@@ -25,11 +26,13 @@ use zenoh::Wait;
 pub(super) struct SetUp {
     // Fields drop in this order: the subscriptions, the scene's queryable and the launcher's
     // token before the session they were declared on (in `bus`).
-    _watch: zenoh::pubsub::Subscriber<()>,
+    _watch: Vec<zenoh::pubsub::Subscriber<()>>,
     _scene: zenoh::query::Queryable<()>,
     _launcher_token: zenoh::liveliness::LivelinessToken,
-    /// What the launcher's subscription to the run hears.
+    /// What the launcher's subscriptions to the run hear.
     pub(super) arrivals: mpsc::Receiver<Arrival>,
+    /// What they are: every message of the run, or only what the launcher keeps.
+    pub(super) counted: Counted,
     pub(super) plan: Plan,
     /// The subdomains of each subdomain process.
     pub(super) groups: Vec<Vec<u32>>,
@@ -113,15 +116,35 @@ pub(super) fn set_up(
         },
     };
     let queryable = transport::serve_scene(session, run_id, encode(&scene_msg))?;
+    // The launcher hears every message of the run where that costs no socket (the router is in
+    // its process), where an observer wants them, or where the recorder's end needs their count.
+    // Through a router outside its process, an unrecorded run's fields would cross one more
+    // socket each only to be counted: the launcher then subscribes to what it keeps.
+    let counted = if bus.hosting || keep_all || recording.is_some() {
+        Counted::Every
+    } else {
+        Counted::Kept
+    };
+    let patterns: Vec<String> = match counted {
+        Counted::Every => vec![glissade_messages::run_topics(run_id)],
+        Counted::Kept => KEPT
+            .iter()
+            .map(|(role, kind)| glissade_messages::role_field_topic(run_id, *role, kind, None))
+            .collect(),
+    };
     let (tx, arrivals) = mpsc::channel::<Arrival>();
-    let watched_run = run_id.clone();
-    let watch = session
-        .declare_subscriber(glissade_messages::run_topics(run_id))
-        .callback(move |s| {
-            let _ = tx.send(Arrival::of(s.key_expr().as_str(), s.payload(), &watched_run, keep_all));
-        })
-        .wait()
-        .map_err(|e| zenoh("subscribe to the run", e))?;
+    let mut watch = Vec::with_capacity(patterns.len());
+    for pattern in patterns {
+        let (tx, watched_run) = (tx.clone(), run_id.clone());
+        let subscriber = session
+            .declare_subscriber(pattern)
+            .callback(move |s| {
+                let _ = tx.send(Arrival::of(s.key_expr().as_str(), s.payload(), &watched_run, keep_all));
+            })
+            .wait()
+            .map_err(|e| zenoh("subscribe to the run", e))?;
+        watch.push(subscriber);
+    }
 
     // Node processes that die mid-run are restarted (they resume from the recorder's log) when
     // the scene allows restarts, the run is recorded completely and its fields do not go through
@@ -153,6 +176,7 @@ pub(super) fn set_up(
         bus,
         time_start,
         arrivals,
+        counted,
         supervised,
         t0,
         _launcher_token: launcher_token,

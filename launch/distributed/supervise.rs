@@ -588,8 +588,7 @@ pub(super) struct Arrival {
 
 impl Arrival {
     /// A message of run `run_id` seen on `key`: Zenoh's buffers are kept (shared, not copied)
-    /// only if it is the run's and it is a decision, an interface solution or a displacement
-    /// (what the launcher keeps), or `keep_all`; the multi-MB fields in between are only
+    /// only if it is the run's and of a kind the launcher keeps ([`KEPT`]), or `keep_all`; the multi-MB fields in between are only
     /// counted. The launcher's main thread decodes the kept ones straight from those buffers:
     /// a copy made here, on Zenoh's receiving thread, took its memory from that thread's
     /// allocator arena, fresh pages from the kernel for the 141 MB of final solutions at
@@ -600,11 +599,7 @@ impl Arrival {
         let first = payload.slices().next().unwrap_or(&[]);
         let ours = glissade_messages::peek_envelope(first, run_id).is_ok()
             || (first.len() < payload.len() && glissade_messages::peek_envelope(&payload.to_bytes(), run_id).is_ok());
-        let kept = keep_all
-            || matches!(
-                kind_of(key),
-                "decision" | "interface_solution" | "displacement" | "linear_stage_stats"
-            );
+        let kept = keep_all || KEPT.iter().any(|(_, kind)| *kind == kind_of(key));
         Self {
             key: key.to_string(),
             size: payload.len(),
@@ -613,6 +608,15 @@ impl Arrival {
         }
     }
 }
+
+/// What the launcher keeps of a run, by sender role and field: the decisions, the final
+/// interface solutions and displacements, and the linear stages' counters.
+pub(super) const KEPT: [(Role, &str); 4] = [
+    (Role::Interface, "decision"),
+    (Role::Interface, "interface_solution"),
+    (Role::Subdomain, "displacement"),
+    (Role::Subdomain, "linear_stage_stats"),
+];
 
 /// The field of a key ("?" if it has none).
 fn kind_of(key: &str) -> &str {

@@ -65,4 +65,15 @@ fn a_run_through_a_router_of_its_own_gives_the_in_process_bits() {
         through_router == in_process,
         "interface fields through the router differ from in-process"
     );
+    // Unrecorded, through a router outside its process, the launcher subscribes to what it
+    // keeps only: the fields go from their sender to their receivers and not to it.
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("via-router").join("small-three-layer-via-router.summary.json")).unwrap(),
+    )
+    .unwrap();
+    let bus = &summary["bus"];
+    assert_eq!(bus["counted"], "kept", "{bus}");
+    let kinds: Vec<&str> = bus["by_kind"].as_object().unwrap().keys().map(String::as_str).collect();
+    assert_eq!(kinds, ["decision", "interface_solution", "linear_stage_stats"], "{bus}");
+    assert_eq!(bus["by_kind"]["decision"]["messages"], summary["iterations"], "{bus}");
 }
