@@ -44,9 +44,17 @@ pub fn config(mode: &str, listen: &[String], connect: &[String], multicast: bool
         c.insert_json5("scouting/delay", "0")
             .map_err(|e| zerr("config scouting delay", e))?;
     }
+    // Fields are multi-MB messages of data priority, cut into 64 KiB batches: with Zenoh's
+    // default queue of 2 batches a publisher waits on the link's sender thread after every
+    // 128 KiB; 16 (the most Zenoh allows, allocated as needed) lets it run ahead by 1 MiB.
+    c.insert_json5("transport/link/tx/queue/size/data", &TX_QUEUE_BATCHES.to_string())
+        .map_err(|e| zerr("config tx queue", e))?;
     set_shared_memory(&mut c, false)?;
     Ok(c)
 }
+
+/// Batches in each link's transmission queue of data priority ([`config`]).
+pub const TX_QUEUE_BATCHES: usize = 16;
 
 /// Turns Zenoh's shared-memory transport on or off in `c` (off in [`config`]). On, between two
 /// sessions on one machine that both have it on, every payload of 3 KiB or more is copied into a
@@ -429,4 +437,37 @@ fn json_string(s: &str) -> String {
 
 pub fn open(config: Config) -> Result<Session, TransportError> {
     zenoh::open(config).wait().map_err(|e| zerr("open session", e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every session of a run (node, recorder, the launcher's router) queues up to
+    /// [`TX_QUEUE_BATCHES`] batches of data per link, not Zenoh's default of 2.
+    #[test]
+    fn every_session_queues_sixteen_data_batches_per_link() {
+        for mode in ["router", "client", "peer"] {
+            let c = config(mode, &[], &[], false).unwrap();
+            assert_eq!(
+                c.get_json("transport/link/tx/queue/size/data").unwrap(),
+                TX_QUEUE_BATCHES.to_string(),
+                "{mode}"
+            );
+        }
+        let c = secure_config(
+            "client",
+            &[],
+            &["tcp/127.0.0.1:7447".to_string()],
+            false,
+            None,
+            None,
+            None,
+        )
+        .unwrap();
+        assert_eq!(
+            c.get_json("transport/link/tx/queue/size/data").unwrap(),
+            TX_QUEUE_BATCHES.to_string()
+        );
+    }
 }
