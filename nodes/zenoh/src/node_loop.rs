@@ -346,8 +346,12 @@ fn run_until_finished(
             }
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
             Ok(Event::Alive(key, false)) if run.supervised && key != own_token && key != launcher_token => {
+                // A note: the launcher says it when it restarts a node, and at the end of a run a
+                // peer that got the launcher's `done` may leave before this process has handled
+                // the messages still queued for it (its token's removal overtakes them).
                 log(&format!(
-                    "peer {} left the run; waiting for the launcher to restart it",
+                    "{}peer {} left the run; waiting for the launcher to restart it",
+                    crate::NOTE,
                     topic::node_of_alive(&key)
                 ));
             }
