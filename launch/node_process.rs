@@ -5,7 +5,6 @@
 use crate::bus::Joining;
 use crate::children::{NodeName, NodeRole};
 use crate::distributed::Supervision;
-use crate::distributed::{DEPARTURE_GRACE, DONE_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT};
 use crate::error::Error;
 use crate::runner::RunError;
 use glissade_bus::RunContext;
@@ -111,18 +110,7 @@ pub fn run_node_process(
             })?,
         );
     }
-    let run = transport::NodeRun {
-        run_id: run_id.to_string(),
-        expected,
-        token_role: role.key().to_string(),
-        token_index: index,
-        start_timeout: READY_TIMEOUT,
-        idle_timeout: IDLE_TIMEOUT,
-        departure_grace: DEPARTURE_GRACE,
-        supervised: supervision.supervised,
-        resume: supervision.resume,
-        done_timeout: DONE_TIMEOUT,
-    };
+    let run = crate::distributed::node_run(name, expected, supervision);
     let outcome = transport::run_nodes(&session, &run, nodes, crate::console::say);
     let _ = session.close().wait();
     Ok(outcome?)

@@ -17,6 +17,7 @@
 //! processes started ([`spawn`]), supervised until they exit ([`supervise`]), and its result put
 //! together here.
 
+mod hosted;
 mod setup;
 mod spawn;
 mod supervise;
@@ -24,6 +25,7 @@ mod supervise;
 pub(crate) use crate::bus::unresumable;
 pub use crate::bus::Network;
 pub use crate::error::Interrupted;
+pub(crate) use hosted::node_run;
 
 use crate::error::{Error, Result};
 use crate::runner::{IterationRecord, RunOptions, RunResult};
@@ -174,9 +176,20 @@ pub(crate) fn run_processes(
     let (mut names, mut left_out) = set_up.plan.describe(model, set_up.groups.len());
     names.push(format!(
         "processes: {} (+ {})",
-        set_up.all_nodes.len(),
+        set_up.all_nodes.len() - set_up.hosted.len(),
         set_up.bus.description
     ));
+    if !set_up.hosted.is_empty() {
+        names.push(format!(
+            "in the launcher's process: {}",
+            set_up
+                .hosted
+                .iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
     if let Some(r) = spawned.recorder.take() {
         let seen = traffic.by_kind.values().map(|t| t.messages).sum();
         if let Some(problem) = r.finish(&set_up.bus.session, run_id, seen) {

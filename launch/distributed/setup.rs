@@ -38,6 +38,8 @@ pub(super) struct SetUp {
     pub(super) groups: Vec<Vec<u32>>,
     /// Every node process of the run, started here or by hand.
     pub(super) all_nodes: Vec<NodeName>,
+    /// The nodes that run in the launcher's process, on its session (the router's).
+    pub(super) hosted: Vec<NodeName>,
     pub(super) time_start: Option<TimeStartRun>,
     /// Dead node processes are restarted (they resume from the recording).
     pub(super) supervised: bool,
@@ -164,6 +166,18 @@ pub(super) fn set_up(
         })
     });
     let supervised = restarts > 0 && no_resume.is_none();
+    // The interface nodes run in this process, beside the router, where nothing calls for a
+    // process of their own: fields between them and the subdomain processes then cross one
+    // socket instead of two.
+    let hosted: Vec<NodeName> = if bus.hosting && !supervised && scene.deployment.interfaces_in_launcher {
+        all_nodes
+            .iter()
+            .copied()
+            .filter(|n| n.role == NodeRole::Interface && !net.remote.contains(n))
+            .collect()
+    } else {
+        Vec::new()
+    };
     if let (true, Some(why)) = (restarts > 0, &no_resume) {
         crate::console::note(&format!(
             "node restarts off ({why}): a node process that dies stops the run"
@@ -173,6 +187,7 @@ pub(super) fn set_up(
         plan,
         groups,
         all_nodes,
+        hosted,
         bus,
         time_start,
         arrivals,

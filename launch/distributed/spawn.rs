@@ -2,10 +2,11 @@
 //! launcher, each with its credentials on standard input), the recorder process, and the
 //! commands, and credentials files, of the nodes left to be started by hand elsewhere.
 
+use super::hosted::HostedNode;
 use super::setup::{node_args, SetUp};
 use super::READY_TIMEOUT;
 use crate::bus::{tls_args, write_credentials, CredentialFiles};
-use crate::children::{spawn_node, Children};
+use crate::children::{spawn_node, Children, NodeName};
 use crate::error::{Error, Result};
 use crate::recording::RecorderProcess;
 use crate::runner::RunOptions;
@@ -16,6 +17,8 @@ use std::time::Duration;
 /// The processes of a run once started.
 pub(super) struct Spawned {
     pub(super) children: Children,
+    /// The nodes the launcher runs in its own process.
+    pub(super) hosted: Vec<HostedNode>,
     pub(super) recorder: Option<RecorderProcess>,
     /// How long the nodes started by hand may take to be ready.
     pub(super) remote_timeout: Duration,
@@ -44,7 +47,18 @@ pub(super) fn spawn(
     let run_id = &opts.run_id;
     let bus = &set_up.bus;
     let mut children = Children(Vec::new());
-    for &name in set_up.all_nodes.iter().filter(|n| !net.remote.contains(n)) {
+    let mut hosted = Vec::with_capacity(set_up.hosted.len());
+    for name in &set_up.hosted {
+        hosted.push(HostedNode::start_interface(
+            &bus.session,
+            scene,
+            &set_up.plan,
+            run_id,
+            name.index,
+        )?);
+    }
+    let own_process = |n: &NodeName| !net.remote.contains(n) && !set_up.hosted.contains(n);
+    for &name in set_up.all_nodes.iter().filter(|n| own_process(n)) {
         let args = with_supervision(
             set_up.supervised,
             node_args(name, run_id, &bus.node_connect, opts.interior, &bus.node_args),
@@ -136,6 +150,7 @@ pub(super) fn spawn(
     }
     Ok(Spawned {
         children,
+        hosted,
         recorder,
         remote_timeout,
         _hand_credentials: hand_credentials,

@@ -4,6 +4,7 @@
 //! (decisions, interface solutions, displacements), tells the nodes to leave once it holds them
 //! all, and stops every node when one fails, when the run stalls or when it is interrupted.
 
+use super::hosted::HostedNode;
 use super::setup::{token_of, SetUp};
 use super::spawn::Spawned;
 use super::{
@@ -92,9 +93,13 @@ impl<'r> Supervisor<'r> {
     }
 
     /// Stops every node (`stop` on the bus, then kills what is left after [`STOP_TIMEOUT`]).
-    fn stop_all(&self, children: &mut Children, reason: &str) {
+    fn stop_all(&self, spawned: &mut Spawned, reason: &str) {
         let _ = transport::publish_stop(&self.set_up.bus.session, self.run_id, reason);
-        children.wait_all(STOP_TIMEOUT);
+        let deadline = Instant::now() + STOP_TIMEOUT;
+        spawned.children.wait_all(STOP_TIMEOUT);
+        for h in &mut spawned.hosted {
+            h.wait(deadline.saturating_duration_since(Instant::now()));
+        }
     }
 
     /// Supervises the run until every node process has exited (or fails): the launcher's main
@@ -107,7 +112,7 @@ impl<'r> Supervisor<'r> {
     ) -> Result<()> {
         loop {
             if interrupted() {
-                self.stop_all(&mut spawned.children, "the launcher was interrupted");
+                self.stop_all(spawned, "the launcher was interrupted");
                 let (nodes, left_out) = self.set_up.plan.describe(&self.scene.model, self.set_up.groups.len());
                 let got = std::mem::take(&mut self.got);
                 return Err(Interrupted {
@@ -118,7 +123,7 @@ impl<'r> Supervisor<'r> {
             self.watch_presence(&mut spawned.children);
             if let Some(f) = self.failure(spawned)? {
                 self.stop_all(
-                    &mut spawned.children,
+                    spawned,
                     &format!("the run failed: {}", f.split("; its last lines").next().unwrap_or("")),
                 );
                 return Err(Error::Failed(f));
@@ -144,7 +149,7 @@ impl<'r> Supervisor<'r> {
                     self.receive(&a, &mut on_iteration, observe)?;
                 }
                 Err(_) => {
-                    if self.idle(&mut spawned.children)? {
+                    if self.idle(spawned)? {
                         return Ok(());
                     }
                 }
@@ -163,7 +168,7 @@ impl<'r> Supervisor<'r> {
                 } else if p.status.is_none() && p.token_seen {
                     p.token_lost = Some(Instant::now());
                 }
-            } else if !up {
+            } else if !up && !self.set_up.hosted.contains(&name) {
                 self.remote_lost.entry(name).or_insert_with(Instant::now);
             }
         }
@@ -174,6 +179,9 @@ impl<'r> Supervisor<'r> {
     /// ready in time. Starts the iterations once every node is ready.
     fn failure(&mut self, spawned: &mut Spawned) -> Result<Option<String>> {
         let (mut child_failure, dead) = self.child_failure(&mut spawned.children)?;
+        if child_failure.is_none() {
+            child_failure = self.hosted_failure(&mut spawned.hosted);
+        }
         // A node process that died mid-run: a replacement resumes from the recorder's log, up to
         // `restarts` times per node.
         if let (Some(k), Some(why), true) = (
@@ -289,6 +297,20 @@ impl<'r> Supervisor<'r> {
             }
         }
         Ok((child_failure, dead))
+    }
+
+    /// The first node run in the launcher's process that failed (or ended before the run
+    /// started).
+    fn hosted_failure(&self, hosted: &mut [HostedNode]) -> Option<String> {
+        let started = self.got.started.is_some();
+        hosted.iter_mut().find_map(|h| {
+            let name = h.name;
+            match h.outcome()? {
+                Err(e) => Some(format!("node {name} (in the launcher's process) failed: {e}")),
+                Ok(()) if !started => Some(format!("node {name} ended before the run started")),
+                Ok(()) => None,
+            }
+        })
     }
 
     /// Restarts dead node process `k` (it resumes from the recording) if it has restarts left;
@@ -415,10 +437,11 @@ impl<'r> Supervisor<'r> {
     /// Nothing arrived for a while: true once every node process has exited and every node
     /// started by hand has left; fails when nodes started by hand do not leave after the end or
     /// when the bus has been silent for [`IDLE_TIMEOUT`].
-    fn idle(&mut self, children: &mut Children) -> Result<bool> {
+    fn idle(&mut self, spawned: &mut Spawned) -> Result<bool> {
         let presence = &self.presence;
         let remote = &self.net.remote;
-        let locals_done = children.0.iter().all(|p| p.status.is_some());
+        let locals_done = spawned.children.0.iter().all(|p| p.status.is_some())
+            && spawned.hosted.iter_mut().all(|h| h.outcome().is_some());
         let remotes_gone = remote.iter().all(|&r| !presence.is_alive(&token_of(self.run_id, r)));
         if locals_done && remotes_gone {
             return Ok(true);
@@ -431,7 +454,7 @@ impl<'r> Supervisor<'r> {
                     .filter(|&&r| presence.is_alive(&token_of(self.run_id, r)))
                     .map(|r| r.to_string())
                     .collect();
-                self.stop_all(children, "the run is over");
+                self.stop_all(spawned, "the run is over");
                 return Err(Error::NotLeaving {
                     nodes: late,
                     timeout: FINISH_TIMEOUT,
@@ -439,7 +462,7 @@ impl<'r> Supervisor<'r> {
             }
         }
         if self.last_message.elapsed() > IDLE_TIMEOUT {
-            self.stop_all(children, "the run stalled");
+            self.stop_all(spawned, "the run stalled");
             return Err(Error::Silent {
                 idle: IDLE_TIMEOUT,
                 what: "the run stalled".into(),

@@ -188,6 +188,28 @@ fn several_interface_nodes_match_one_bit_for_bit() {
         remote.nodes
     );
     assert!(
+        remote.nodes.iter().any(|n| n.starts_with("processes: 3 ")),
+        "2 subdomain + 1 coarse processes: {:?}",
+        remote.nodes
+    );
+    assert!(
+        remote
+            .nodes
+            .contains(&"in the launcher's process: interface:0, interface:1, interface:2".to_string()),
+        "the interface nodes run beside the router: {:?}",
+        remote.nodes
+    );
+    assert_identical(&one, &remote);
+    // The same with the interface nodes in processes of their own.
+    let sc = scene(&with_deployment(
+        &base,
+        "interface_nodes = 3\ninterfaces_in_launcher = false",
+    ));
+    let remote = Run::new(&sc, &RunOptions::new("distributed-test-3b"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
+    assert!(
         remote.nodes.iter().any(|n| n.starts_with("processes: 6 ")),
         "2 subdomain + 3 interface + 1 coarse processes: {:?}",
         remote.nodes

@@ -246,17 +246,50 @@ fn killing_a_subdomain_node_stops_the_run() {
     kill_one("subdomain", Some("1"));
 }
 
+/// Without restarts the interface nodes run in the launcher's process unless the scene says
+/// otherwise (`interfaces_in_launcher = false`): here they run in processes of their own.
 #[test]
 fn killing_the_interface_node_stops_the_run() {
-    kill_one("interface", None);
+    kill_one_of("interface", None, "interfaces_in_launcher = false");
 }
 
 /// With three interface nodes, killing one that does not decide (node 1 only sends its
 /// indicators to node 0) stops the run naming it; so does killing the deciding node 0.
 #[test]
 fn killing_one_of_several_interface_nodes_stops_the_run() {
-    kill_one_of("interface", Some("1"), "interface_nodes = 3");
-    kill_one_of("interface", Some("0"), "interface_nodes = 3");
+    let processes = "interface_nodes = 3\ninterfaces_in_launcher = false";
+    kill_one_of("interface", Some("1"), processes);
+    kill_one_of("interface", Some("0"), processes);
+}
+
+/// Where no node restarts are possible (here `restarts = 0`) the launcher runs the interface
+/// nodes in its own process, beside the router: no interface process runs, the subdomain and
+/// coarse processes do, and on Ctrl-C the interface node leaves on the launcher's stop as the
+/// node processes do, its lines under its name.
+#[test]
+fn without_restarts_the_interface_node_runs_in_the_launcher() {
+    let (mut launcher, run_id, _dir) = launch_endless_with("hosted-interface", "restarts = 0", "");
+    assert!(
+        processes_with(&run_id, &["node", "interface"]).is_empty(),
+        "an interface process runs"
+    );
+    for role in ["subdomain", "coarse"] {
+        assert!(
+            !processes_with(&run_id, &["node", role]).is_empty(),
+            "no {role} process runs"
+        );
+    }
+    // SAFETY: a plain kill(2) of the launcher this test started.
+    assert_eq!(unsafe { libc::kill(launcher.child.id() as i32, libc::SIGINT) }, 0);
+    let status = launcher.wait_exit(Duration::from_secs(60));
+    let out = launcher.output();
+    assert_eq!(status.code(), Some(130), "{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("[interface:0] ") && l.contains("stopped by the launcher")),
+        "the interface node says it was stopped:\n{out}"
+    );
+    assert_no_process_left(&run_id);
 }
 
 #[test]

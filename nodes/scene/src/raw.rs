@@ -212,6 +212,7 @@ pub(crate) struct RawDeployment {
     pub(crate) interface_nodes: Option<usize>,
     pub(crate) interface_groups: Option<Vec<Vec<RawInterfaceRef>>>,
     pub(crate) restarts: Option<usize>,
+    pub(crate) interfaces_in_launcher: Option<bool>,
     pub(crate) memory_limit_gb: Option<f64>,
 }
 

@@ -72,6 +72,10 @@ pub struct Deployment {
     pub interface_groups: Option<Vec<Vec<usize>>>,
     /// How many times the launcher restarts each node process that dies mid-run.
     pub restarts: usize,
+    /// The launcher runs the interface nodes in its own process, beside the router it hosts,
+    /// when no node restarts are possible and they are not started by hand: fields between them
+    /// and the subdomain processes then cross one socket instead of two.
+    pub interfaces_in_launcher: bool,
 }
 
 impl Default for Deployment {
@@ -81,6 +85,7 @@ impl Default for Deployment {
             interface_nodes: 1,
             interface_groups: None,
             restarts: 3,
+            interfaces_in_launcher: true,
         }
     }
 }

@@ -344,6 +344,7 @@ impl Ctx<'_> {
                 .unwrap_or(d.interface_nodes),
             interface_groups: None,
             restarts: r.restarts.unwrap_or(d.restarts),
+            interfaces_in_launcher: r.interfaces_in_launcher.unwrap_or(d.interfaces_in_launcher),
         };
         self.check(dep.restarts <= 100, "deployment.restarts", || {
             format!(

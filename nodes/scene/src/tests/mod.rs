@@ -400,6 +400,16 @@ fn interface_nodes_own_balanced_or_assigned_groups() {
     assert_eq!(pairs, [5, 8, 9, 5, 8, 9, 5]);
     assert_eq!(s.deployment.interface_groups(&s.model), [vec![0, 1, 2, 3, 4, 5, 6]]);
     // 49 pairs over 3 nodes: cuts nearest to 16.3 and 32.7 pairs (13 and 35).
+    assert!(
+        s.deployment.interfaces_in_launcher,
+        "by default, where the launcher can"
+    );
+    assert!(
+        !three_layers("interfaces_in_launcher = false")
+            .unwrap()
+            .deployment
+            .interfaces_in_launcher
+    );
     let s = three_layers("interface_nodes = 3").unwrap();
     assert_eq!(s.deployment.interface_groups, None);
     assert_eq!(
