@@ -7,14 +7,21 @@
 # iterations and the bytes on the bus per iteration. Needs root (namespaces); every namespace is
 # removed at the end, also on failure.
 #
-#   docs/tools/shaped_link.sh [glissade binary] [scene] [rates...]
+#   [DELAYS="none 0 0.1 0.5"] docs/tools/shaped_link.sh [glissade binary] [scene] [rates...]
 #
 # e.g. docs/tools/shaped_link.sh target/release/glissade launch/scenes/stratified.toml 10gbit 1gbit
+#
+# DELAYS (default "none"): for each value but "none", the subdomain processes reach the router
+# through docs/tools/delay_proxy.py in their namespace, which delays every byte by that many
+# milliseconds each way (for kernels without netem); "0" is the proxy without delay, the control
+# for its own cost.
 set -euo pipefail
 glissade=$(realpath "${1:-target/release/glissade}")
 scene=$(realpath "${2:-launch/scenes/stratified.toml}")
 shift $(($# < 2 ? $# : 2))
 rates=("${@:-10gbit 1gbit}")
+delays=(${DELAYS:-none})
+proxy_py=$(realpath "$(dirname "$0")/delay_proxy.py")
 [[ $(id -u) == 0 ]] || { echo "needs root to create network namespaces" >&2; exit 1; }
 work=$(mktemp -d)
 a=glissade-link-a-$$ b=glissade-link-b-$$ va=gla$$ vb=glb$$
@@ -54,8 +61,8 @@ tc_bits() {
     esac
 }
 
-echo "| link | linear stage | iterations | wall time (s) | per iteration (ms) | bus bytes per iteration (MB) |"
-echo "|---|---|---:|---:|---:|---:|"
+echo "| link | added delay each way (ms) | linear stage | iterations | wall time (s) | per iteration (ms) | bus bytes per iteration (MB) |"
+echo "|---|---|---|---:|---:|---:|---:|"
 for rate in ${rates[*]}; do
     # The bucket holds 1 ms at the rate; packets wait at most 100 ms for tokens.
     bits=$(tc_bits "$rate")
@@ -63,6 +70,7 @@ for rate in ${rates[*]}; do
         set -- $pair
         tc -n "$1" qdisc replace dev "$2" root tbf rate "$rate" burst $((bits / 8000)) latency 100ms
     done
+    for delay in ${delays[*]}; do
     for stage in condensed pgd; do
         sc="$work/$stage.toml"
         # Every field over the link: no shared memory (the namespaces share /dev/shm).
@@ -75,9 +83,19 @@ for rate in ${rates[*]}; do
         fi
         grep -q '^\[network\]' "$sc" && { echo "$scene has a [network] table: leave it out" >&2; exit 1; }
         printf '\n[network]\nshared_memory = false\n' >>"$sc"
-        run=link-$stage-$rate-$$
+        run=link-$stage-$rate-${delay/./_}-$$
         out="$work/out-$run"
         mkdir -p "$out"
+        connect=$endpoint
+        proxy=
+        if [[ $delay != none ]]; then
+            ip netns exec "$b" python3 "$proxy_py" --listen 127.0.0.1:17448 --to "${endpoint#tcp/}" \
+                --delay-ms "$delay" >"$out/proxy.log" 2>&1 &
+            proxy=$!
+            for _ in $(seq 100); do grep -q listening "$out/proxy.log" && break; sleep 0.1; done
+            grep -q listening "$out/proxy.log" || { echo "the delay proxy did not start:" >&2; cat "$out/proxy.log" >&2; exit 1; }
+            connect=tcp/127.0.0.1:17448
+        fi
         start=$(date +%s.%N)
         ip netns exec "$a" "$glissade" run "$sc" --no-record --quiet --verbose --run-id "$run" --out "$out" \
             --listen "$endpoint" --remote subdomain:0,subdomain:1,subdomain:2 >"$out/launcher.log" 2>&1 &
@@ -87,23 +105,25 @@ for rate in ${rates[*]}; do
             cred="$out/$run-subdomain-$i.credentials"
             for _ in $(seq 600); do [[ -e $cred ]] && break; sleep 0.1; done
             [[ -e $cred ]] || { echo "no credentials for subdomain node $i" >&2; cat "$out/launcher.log" >&2; exit 1; }
-            ip netns exec "$b" "$glissade" node subdomain --run "$run" --connect "$endpoint" --index "$i" \
+            ip netns exec "$b" "$glissade" node subdomain --run "$run" --connect "$connect" --index "$i" \
                 --credentials "$cred" >"$out/node-$i.log" 2>&1 &
             nodes+=($!)
         done
         wait "$launcher" || { echo "the run failed:" >&2; cat "$out/launcher.log" >&2; exit 1; }
         for n in "${nodes[@]}"; do wait "$n"; done
         end=$(date +%s.%N)
-        python3 - "$out" "$rate" "$stage" "$start" "$end" <<'EOF'
+        if [[ -n $proxy ]]; then kill "$proxy"; wait "$proxy" 2>/dev/null || true; fi
+        python3 - "$out" "$rate" "$delay" "$stage" "$start" "$end" <<'EOF'
 import glob, json, re, sys
-out, rate, stage, start, end = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4]), float(sys.argv[5])
+out, rate, delay, stage, start, end = sys.argv[1:5] + [float(t) for t in sys.argv[5:7]]
 d = json.load(open(glob.glob(out + "/*.summary.json")[0]))
 log = open(out + "/launcher.log").read()
 per_iteration = sum(int(b) for line in log.splitlines() if "homogenized_operator" not in line
                     and "interface_solution" not in line for b in re.findall(r"(\d+) bytes per iteration", line))
 n = d["iterations"]
-print(f"| {rate} | {stage} | {n} ({d['verdict']}) | {end - start:.1f} | {d['solve_s'] / max(n, 1) * 1e3:.0f} | {per_iteration / 1e6:.1f} |")
+print(f"| {rate} | {delay} | {stage} | {n} ({d['verdict']}) | {end - start:.1f} | {d['solve_s'] / max(n, 1) * 1e3:.0f} | {per_iteration / 1e6:.1f} |")
 EOF
+    done
     done
 done
 keep_logs=0
