@@ -518,3 +518,32 @@ pub(crate) fn unresumable(scene: &LoadedScene, recorded: bool) -> Option<String>
         Some("the run is not recorded".to_string())
     }
 }
+
+/// The scene of run `run_id` as its launcher serves it on the bus (a node or recorder process
+/// needs no scene file): fetched (bounded), checked against the fingerprint its envelope
+/// carries, and loaded with the launcher's command-line overrides, so that it is the run's model
+/// and not the file's. Also returns what every message of the run carries ([`Expected`]).
+pub(crate) fn fetch_run_scene(
+    session: &zenoh::Session,
+    run_id: &str,
+) -> Result<(LoadedScene, glissade_messages::Expected)> {
+    let bytes = transport::fetch_scene(session, run_id, std::time::Duration::from_secs(60))?;
+    let fingerprint = transport::scene_fingerprint_of(&bytes, run_id)?;
+    let expected = glissade_messages::Expected {
+        run_id: run_id.to_string(),
+        scene_fingerprint: fingerprint,
+    };
+    let msg = glissade_messages::decode(&bytes, &expected)?;
+    let glissade_messages::Payload::Scene { text, overrides } = msg.payload else {
+        return Err(Error::NotAScene {
+            kind: msg.payload.field_key().to_string(),
+        });
+    };
+    if glissade_scene::fingerprint_with(&text, &overrides) != fingerprint {
+        return Err(Error::SceneMismatch { fingerprint });
+    }
+    Ok((
+        glissade_scene::load_with(&text, "<scene from the bus>", &overrides)?,
+        expected,
+    ))
+}

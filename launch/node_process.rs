@@ -9,11 +9,8 @@ use crate::error::Error;
 use crate::runner::RunError;
 use glissade_bus::RunContext;
 use glissade_deploy::{build_interface_node, build_nodes, Plan, Selection};
-use glissade_messages::{decode, Expected, Payload};
-use glissade_scene::{fingerprint_with, load_with};
 use glissade_zenoh as transport;
 use std::sync::Arc;
-use std::time::Duration;
 use zenoh::Wait;
 
 /// Runs one node process: joins the bus, fetches the scene of run `run_id` over it, builds its
@@ -36,23 +33,8 @@ pub fn run_node_process(
         });
     }
     let session = bus.open(supervision.shared_memory)?;
-    let bytes = transport::fetch_scene(&session, run_id, Duration::from_secs(60))?;
-    let fp = transport::scene_fingerprint_of(&bytes, run_id)?;
-    let expected = Expected {
-        run_id: run_id.to_string(),
-        scene_fingerprint: fp,
-    };
-    let msg = decode(&bytes, &expected)?;
-    let Payload::Scene { text, overrides } = msg.payload else {
-        return Err(Error::NotAScene {
-            kind: msg.payload.field_key().to_string(),
-        });
-    };
-    if fingerprint_with(&text, &overrides) != fp {
-        return Err(Error::SceneMismatch { fingerprint: fp });
-    }
-    // The scene as written with the launcher's command-line overrides: the run's model.
-    let scene = load_with(&text, "<scene from the bus>", &overrides)?;
+    let (scene, expected) = crate::bus::fetch_run_scene(&session, run_id)?;
+    let fp = expected.scene_fingerprint;
     let model = Arc::new(scene.model.clone());
     let plan = Plan::new(&model).with_scene(&scene);
     let selection = match role {

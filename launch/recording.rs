@@ -18,11 +18,11 @@
 
 use crate::children::ChildOutput;
 use crate::error::{failed, zenoh, Error, IoWhat, Result};
-use glissade_messages::{decode, run_topics, Expected, Payload};
+use glissade_messages::run_topics;
 use glissade_recorder::{
     log_time_now, recording_file_name, RecorderError, RecorderOptions, RecordingStats, RunInfo, RunRecorder,
 };
-use glissade_scene::{fingerprint_with, load_with, LoadedScene};
+use glissade_scene::LoadedScene;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -297,20 +297,8 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
         libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
     }
     let session = bus.open(shared_memory)?;
-    let bytes = glissade_zenoh::fetch_scene(&session, run_id, Duration::from_secs(60))?;
-    let fp = glissade_zenoh::scene_fingerprint_of(&bytes, run_id)?;
-    let expected = Expected {
-        run_id: run_id.to_string(),
-        scene_fingerprint: fp,
-    };
-    let Payload::Scene { text, overrides } = decode(&bytes, &expected)?.payload else {
-        return Err(Error::NotAScene { kind: "another".into() });
-    };
-    if fingerprint_with(&text, &overrides) != fp {
-        return Err(Error::SceneMismatch { fingerprint: fp });
-    }
     // With the overrides: `--record full` and the iteration cap are the run's, not the file's.
-    let scene = load_with(&text, "<scene from the bus>", &overrides)?;
+    let (scene, _) = crate::bus::fetch_run_scene(&session, run_id)?;
     let mut recorder = create_recorder(&scene, run_id, path)?;
     crate::console::say(&format!(
         "{}recording to {} (pid {})",
