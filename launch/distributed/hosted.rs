@@ -6,6 +6,7 @@ use crate::children::{NodeName, NodeRole};
 use crate::error::Error;
 use glissade_bus::RunContext;
 use glissade_deploy::{build_interface_node, Plan};
+use glissade_mechanics::model::Model;
 use glissade_messages::Expected;
 use glissade_zenoh as transport;
 use std::sync::Arc;
@@ -38,32 +39,27 @@ pub(crate) struct HostedNode {
 }
 
 impl HostedNode {
-    /// Builds interface node `index` of the run of `scene` (planned as `plan`) and starts it on
-    /// `session`. Its log lines go to the console under `[interface:<index>]`, as a node
-    /// process's do.
+    /// Builds interface node `index` of the run `ctx` names, of `model` (planned as `plan`), and
+    /// starts it on `session`. Its log lines go to the console under `[interface:<index>]`, as a
+    /// node process's do.
     pub(crate) fn start_interface(
         session: &zenoh::Session,
-        scene: &glissade_scene::LoadedScene,
+        model: &Arc<Model>,
+        ctx: &RunContext,
         plan: &Plan,
-        run_id: &str,
         index: u32,
     ) -> crate::Result<Self> {
         let name = NodeName {
             role: NodeRole::Interface,
             index,
         };
-        let ctx = RunContext {
-            run_id: run_id.to_string(),
-            scene_fingerprint: scene.fingerprint,
-        };
-        let model = Arc::new(scene.model.clone());
-        let node = build_interface_node(&model, &ctx, plan, index as usize).map_err(|e| Error::Node {
+        let node = build_interface_node(model, ctx, plan, index as usize).map_err(|e| Error::Node {
             node: name.to_string(),
             why: e.to_string(),
         })?;
         let expected = Expected {
-            run_id: run_id.to_string(),
-            scene_fingerprint: scene.fingerprint,
+            run_id: ctx.run_id.clone(),
+            scene_fingerprint: ctx.scene_fingerprint,
         };
         let run = node_run(name, expected, Supervision::default());
         let session = session.clone();

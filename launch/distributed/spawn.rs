@@ -48,14 +48,22 @@ pub(super) fn spawn(
     let bus = &set_up.bus;
     let mut children = Children(Vec::new());
     let mut hosted = Vec::with_capacity(set_up.hosted.len());
-    for name in &set_up.hosted {
-        hosted.push(HostedNode::start_interface(
-            &bus.session,
-            scene,
-            &set_up.plan,
-            run_id,
-            name.index,
-        )?);
+    if !set_up.hosted.is_empty() {
+        // One model for every node this process runs.
+        let model = std::sync::Arc::new(scene.model.clone());
+        let ctx = glissade_bus::RunContext {
+            run_id: run_id.clone(),
+            scene_fingerprint: scene.fingerprint,
+        };
+        for name in &set_up.hosted {
+            hosted.push(HostedNode::start_interface(
+                &bus.session,
+                &model,
+                &ctx,
+                &set_up.plan,
+                name.index,
+            )?);
+        }
     }
     let own_process = |n: &NodeName| !net.remote.contains(n) && !set_up.hosted.contains(n);
     for &name in set_up.all_nodes.iter().filter(|n| own_process(n)) {

@@ -399,7 +399,6 @@ fn interface_nodes_own_balanced_or_assigned_groups() {
     let pairs: Vec<usize> = s.model.interfaces.iter().map(Interface::n_pairs).collect();
     assert_eq!(pairs, [5, 8, 9, 5, 8, 9, 5]);
     assert_eq!(s.deployment.interface_groups(&s.model), [vec![0, 1, 2, 3, 4, 5, 6]]);
-    // 49 pairs over 3 nodes: cuts nearest to 16.3 and 32.7 pairs (13 and 35).
     assert!(
         s.deployment.interfaces_in_launcher,
         "by default, where the launcher can"
@@ -410,6 +409,7 @@ fn interface_nodes_own_balanced_or_assigned_groups() {
             .deployment
             .interfaces_in_launcher
     );
+    // 49 pairs over 3 nodes: cuts nearest to 16.3 and 32.7 pairs (13 and 35).
     let s = three_layers("interface_nodes = 3").unwrap();
     assert_eq!(s.deployment.interface_groups, None);
     assert_eq!(
