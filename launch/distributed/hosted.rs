@@ -94,16 +94,11 @@ impl HostedNode {
     pub(crate) fn outcome(&mut self) -> Option<&Result<(), String>> {
         if self.thread.as_ref().is_some_and(|t| t.is_finished()) {
             let thread = self.thread.take().expect("checked just above");
-            self.outcome = Some(thread.join().unwrap_or_else(|panic| {
-                Err(format!(
-                    "it panicked: {}",
-                    panic
-                        .downcast_ref::<String>()
-                        .map(String::as_str)
-                        .or_else(|| panic.downcast_ref::<&str>().copied())
-                        .unwrap_or("(no message)")
-                ))
-            }));
+            self.outcome = Some(
+                thread
+                    .join()
+                    .unwrap_or_else(|panic| Err(format!("it panicked: {}", panic_message(panic.as_ref())))),
+            );
         }
         self.outcome.as_ref()
     }
@@ -115,4 +110,13 @@ impl HostedNode {
             std::thread::sleep(Duration::from_millis(5));
         }
     }
+}
+
+/// The message of a thread's panic (what `panic!` was given), or "(no message)".
+pub(super) fn panic_message(panic: &(dyn std::any::Any + Send)) -> &str {
+    panic
+        .downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| panic.downcast_ref::<&str>().copied())
+        .unwrap_or("(no message)")
 }

@@ -159,9 +159,9 @@ pub(crate) fn run_processes(
         });
     }
     let run_id = &opts.run_id;
-    let (set_up, presence) = setup::set_up(scene, opts, net, recording, observe.is_some())?;
+    let (set_up, handover) = setup::set_up(scene, opts, net, recording, observe.is_some())?;
     let mut spawned = spawn::spawn(&set_up, scene, opts, exe, net, recording)?;
-    let mut supervisor = supervise::Supervisor::new(run_id, scene, &set_up, presence, net, exe, opts.interior);
+    let mut supervisor = supervise::Supervisor::new(run_id, scene, &set_up, handover, net, exe, opts.interior);
     supervisor.supervise(&mut spawned, &mut on_iteration, &mut observe)?;
     supervisor.drain(&mut on_iteration, &mut observe);
     let (got, mut traffic) = (supervisor.got, supervisor.traffic);

@@ -8,7 +8,7 @@ use super::Counted;
 use crate::bus::{join_bus, Bus, RECORDER};
 use crate::children::{NodeName, NodeRole};
 use crate::error::{zenoh, Error, Result};
-use crate::runner::{RunOptions, TimeStartRun};
+use crate::runner::{RunError, RunOptions, TimeStartRun};
 use glissade_bus::RunContext;
 use glissade_deploy::Plan;
 use glissade_messages::{encode, Message, NodeId, Payload, Role, Stage};
@@ -22,7 +22,8 @@ use zenoh::Wait;
 
 /// A run as processes, set up and not yet started: what the launcher holds while its nodes
 /// start. Its subscriptions and the scene's queryable live as long as it does; the watch on the
-/// nodes' liveliness tokens ([`transport::Presence`]) is handed to the supervisor.
+/// nodes' liveliness tokens ([`transport::Presence`]) and the time-coarse start's solve are handed
+/// to the supervisor ([`Handover`]).
 pub(super) struct SetUp {
     // Fields drop in this order: the subscriptions, the scene's queryable and the launcher's
     // token before the session they were declared on (in `bus`).
@@ -40,7 +41,6 @@ pub(super) struct SetUp {
     pub(super) all_nodes: Vec<NodeName>,
     /// The nodes that run in the launcher's process, on its session (the router's).
     pub(super) hosted: Vec<NodeName>,
-    pub(super) time_start: Option<TimeStartRun>,
     /// Dead node processes are restarted (they resume from the recording).
     pub(super) supervised: bool,
     /// When the launcher began to set the run up (its set-up time counts from here).
@@ -65,10 +65,79 @@ pub(super) fn token_of(run_id: &str, n: NodeName) -> String {
     glissade_messages::topic::alive(run_id, n.role.key(), n.index)
 }
 
-/// Sets the run of `scene` up: plans it, runs a time-coarse start's coarse solve (in-process,
-/// before the nodes start; its initial local directions follow `start` on the bus), checks
-/// `net.remote` names nodes of the run, joins the bus, serves the scene and subscribes to the
-/// run (`keep_all`: the launcher keeps every message, not only the ones it needs, for an
+/// What the supervisor takes over from the set-up: the watch on the nodes' liveliness tokens and
+/// the time-coarse start's coarse solve under way.
+pub(super) struct Handover {
+    pub(super) presence: transport::Presence,
+    pub(super) time_start: TimeStartSolve,
+}
+
+/// A time-coarse start's coarse solve, run in a thread of the launcher while the node processes
+/// start and build their operators: its initial local directions are needed only after `start`.
+pub(super) enum TimeStartSolve {
+    Solving(std::thread::JoinHandle<std::result::Result<Option<TimeStartRun>, RunError>>),
+    /// Solved (None: the scene asks for no time-coarse start).
+    Solved(Option<TimeStartRun>),
+    /// [`Self::take`] took the result.
+    Taken,
+}
+
+impl TimeStartSolve {
+    /// Starts the coarse solve of `scene`, if it asks for one.
+    fn start(scene: &LoadedScene, ctx: &RunContext, plan: &Plan) -> Result<Self> {
+        if scene.model.solver.time_start.is_none() {
+            return Ok(Self::Solved(None));
+        }
+        let (scene, ctx, plan) = (scene.clone(), ctx.clone(), plan.clone());
+        // Unnamed: the launcher's compute threads, created on first use by this one, would take
+        // its name.
+        std::thread::Builder::new()
+            .spawn(move || crate::runner::time_start(&scene, &ctx, &plan, None))
+            .map(Self::Solving)
+            .map_err(|source| Error::Io {
+                what: "cannot start the thread of the time-coarse start's coarse solve".into(),
+                source,
+            })
+    }
+
+    /// Whether the solve is over, without waiting for it; its failure (or panic) is the error.
+    pub(super) fn poll(&mut self) -> Result<bool> {
+        match self {
+            Self::Solving(h) if !h.is_finished() => Ok(false),
+            Self::Solving(_) => {
+                let Self::Solving(h) = std::mem::replace(self, Self::Taken) else {
+                    unreachable!("matched above")
+                };
+                let solved = h.join().map_err(|panic| {
+                    Error::Failed(format!(
+                        "the time-coarse start's coarse solve panicked: {}",
+                        super::hosted::panic_message(panic.as_ref())
+                    ))
+                })??;
+                *self = Self::Solved(solved);
+                Ok(true)
+            }
+            Self::Solved(_) | Self::Taken => Ok(true),
+        }
+    }
+
+    /// The solve's result once [`Self::poll`] said it is over, once (None: no time-coarse start,
+    /// or taken already).
+    pub(super) fn take(&mut self) -> Option<TimeStartRun> {
+        match std::mem::replace(self, Self::Taken) {
+            Self::Solved(solved) => solved,
+            other => {
+                *self = other;
+                None
+            }
+        }
+    }
+}
+
+/// Sets the run of `scene` up: plans it, starts a time-coarse start's coarse solve (in-process,
+/// in a thread, while the nodes start; its initial local directions follow `start` on the bus),
+/// checks `net.remote` names nodes of the run, joins the bus, serves the scene and subscribes to
+/// the run (`keep_all`: the launcher keeps every message, not only the ones it needs, for an
 /// observer), and decides whether dead node processes are restarted.
 pub(super) fn set_up(
     scene: &LoadedScene,
@@ -76,7 +145,7 @@ pub(super) fn set_up(
     net: &super::Network,
     recording: Option<&Path>,
     keep_all: bool,
-) -> Result<(SetUp, transport::Presence)> {
+) -> Result<(SetUp, Handover)> {
     let t0 = Instant::now();
     let model = &scene.model;
     let run_id = &opts.run_id;
@@ -85,10 +154,7 @@ pub(super) fn set_up(
         run_id: run_id.clone(),
         scene_fingerprint: scene.fingerprint,
     };
-    let time_start = crate::runner::time_start(scene, &ctx, &plan, None)?;
-    if let Some(t) = &time_start {
-        crate::console::note(&format!("run {run_id}: {}", t.describe()));
-    }
+    let time_start = TimeStartSolve::start(scene, &ctx, &plan)?;
     let groups = plan.groups(scene.deployment.subdomain_nodes);
     let all_nodes = run_nodes_of(&plan, groups.len());
     for r in &net.remote {
@@ -189,7 +255,6 @@ pub(super) fn set_up(
         all_nodes,
         hosted,
         bus,
-        time_start,
         arrivals,
         counted,
         supervised,
@@ -198,7 +263,7 @@ pub(super) fn set_up(
         _scene: queryable,
         _watch: watch,
     };
-    Ok((set_up, presence))
+    Ok((set_up, Handover { presence, time_start }))
 }
 
 /// The `glissade node` arguments of node `name` (after the executable); `tls`: its `--tls-*`
@@ -249,4 +314,52 @@ fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
         });
     }
     names
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    /// Polls `solve` until it is over (at most 10 s): its result or its error.
+    fn settle(solve: &mut TimeStartSolve) -> Result<Option<TimeStartRun>> {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !solve.poll()? {
+            assert!(Instant::now() < deadline, "the solve's thread did not end");
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        Ok(solve.take())
+    }
+
+    /// A coarse solve that fails or panics in its thread is the run's error, named, as soon as
+    /// its thread ends; one that is still running is not over; a result is taken once.
+    #[test]
+    fn a_failed_coarse_solve_is_an_error_naming_it() {
+        let (tx, rx) = std::sync::mpsc::channel::<()>();
+        let mut failed = TimeStartSolve::Solving(std::thread::spawn(move || {
+            let _ = rx.recv();
+            Err(RunError::TimeStart(
+                "the coarse solve on 100 steps ended Diverged".into(),
+            ))
+        }));
+        assert!(!failed.poll().expect("still running"), "not over while its thread runs");
+        assert!(failed.take().is_none(), "nothing to take while it runs");
+        tx.send(()).expect("the thread waits");
+        let e = crate::error::chain(&settle(&mut failed).expect_err("a failed solve"));
+        assert!(
+            e.contains("time-coarse start (solver.time_coarsening): the coarse solve on 100 steps ended Diverged"),
+            "{e}"
+        );
+
+        let mut panicked = TimeStartSolve::Solving(std::thread::spawn(|| panic!("an index out of bounds")));
+        let e = crate::error::chain(&settle(&mut panicked).expect_err("a panicked solve"));
+        assert!(
+            e.contains("the time-coarse start's coarse solve panicked: an index out of bounds"),
+            "{e}"
+        );
+
+        let mut none = TimeStartSolve::Solving(std::thread::spawn(|| Ok(None)));
+        assert!(settle(&mut none).expect("solved").is_none());
+        assert!(none.poll().expect("over"), "taken: over");
+    }
 }

@@ -5,7 +5,7 @@
 //! all, and stops every node when one fails, when the run stalls or when it is interrupted.
 
 use super::hosted::HostedNode;
-use super::setup::{token_of, SetUp};
+use super::setup::{token_of, Handover, SetUp, TimeStartSolve};
 use super::spawn::Spawned;
 use super::{
     interrupted, Interrupted, Traffic, DEPARTURE_GRACE, EXIT_GRACE, FINISH_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT,
@@ -50,6 +50,8 @@ pub(super) struct Supervisor<'r> {
     done_sent: bool,
     ended_at: Option<Instant>,
     last_message: Instant,
+    /// The time-coarse start's coarse solve, until the start takes its result.
+    time_start: TimeStartSolve,
 }
 
 impl<'r> Supervisor<'r> {
@@ -57,11 +59,12 @@ impl<'r> Supervisor<'r> {
         run_id: &'r str,
         scene: &'r LoadedScene,
         set_up: &'r SetUp,
-        presence: transport::Presence,
+        handover: Handover,
         net: &'r super::Network,
         exe: &'r Path,
         interior: bool,
     ) -> Self {
+        let Handover { presence, time_start } = handover;
         Self {
             run_id,
             scene,
@@ -89,6 +92,7 @@ impl<'r> Supervisor<'r> {
             done_sent: false,
             ended_at: None,
             last_message: Instant::now(),
+            time_start,
         }
     }
 
@@ -343,7 +347,9 @@ impl<'r> Supervisor<'r> {
     }
 
     /// Starts the iterations (`start`, then a time-coarse start's local directions) once every
-    /// node's token is up and the recorder is ready; fails when nodes are not ready in time.
+    /// node's token is up, the recorder is ready and the time-coarse start's coarse solve is over;
+    /// fails when nodes are not ready in time, or (after stopping them) as soon as that solve
+    /// failed.
     fn start_when_ready(&mut self, spawned: &mut Spawned) -> Result<Option<String>> {
         let set_up = self.set_up;
         let recorder_ready = spawned.recorder.as_ref().is_none_or(|r| r.is_ready());
@@ -353,10 +359,21 @@ impl<'r> Supervisor<'r> {
             .filter(|(k, _)| !self.presence.is_alive(k))
             .map(|(_, &n)| n)
             .collect();
-        if missing.is_empty() && recorder_ready {
+        let solved = match self.time_start.poll() {
+            Ok(solved) => solved,
+            Err(e) => {
+                self.stop_all(spawned, "the time-coarse start failed");
+                return Err(e);
+            }
+        };
+        if solved && missing.is_empty() && recorder_ready {
+            let time_start = self.time_start.take();
+            if let Some(t) = &time_start {
+                crate::console::note(&format!("run {}: {}", self.run_id, t.describe()));
+            }
             let session = &set_up.bus.session;
             transport::publish_start(session, self.run_id)?;
-            for m in set_up.time_start.iter().flat_map(|t| &t.messages) {
+            for m in time_start.iter().flat_map(|t| &t.messages) {
                 transport::publish(session, m)?;
             }
             self.got.setup_s = self.set_up.t0.elapsed().as_secs_f64();
