@@ -265,7 +265,9 @@ extern "C" fn on_signal(_: libc::c_int) {
 /// What the recorder process hears: a message of the run (key, bytes, log time) or a query for
 /// its log.
 enum Heard {
-    Put(String, Vec<u8>, u64),
+    /// The payload as Zenoh holds it: in the sender's shared memory, not copied, where it came
+    /// that way (most messages are not written: full fields are thinned out).
+    Put(String, zenoh::bytes::ZBytes, u64),
     LogQuery(zenoh::query::Query),
 }
 
@@ -313,7 +315,7 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
         .callback(move |s| {
             let _ = tx.send(Heard::Put(
                 s.key_expr().as_str().to_string(),
-                s.payload().to_bytes().into_owned(),
+                s.payload().clone(),
                 log_time_now(),
             ));
         })
@@ -390,10 +392,13 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
                     crate::console::say(&format!("cannot answer a log query: {e}"));
                 }
             }
-            Ok(Heard::Put(key, bytes, t)) => {
+            Ok(Heard::Put(key, payload, t)) => {
                 last = Instant::now();
+                // Borrowed where the payload is one slice (shared memory, or a message that was
+                // not fragmented), copied otherwise.
+                let bytes = payload.to_bytes();
                 if key == end {
-                    let n = <[u8; 8]>::try_from(bytes.as_slice())
+                    let n = <[u8; 8]>::try_from(bytes.as_ref())
                         .map(u64::from_le_bytes)
                         .map_err(|_| Error::Invalid(format!("malformed end message ({} bytes)", bytes.len())))?;
                     target = Some((n, Instant::now()));

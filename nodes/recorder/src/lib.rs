@@ -35,7 +35,7 @@ pub use reader::{ChannelInfo, RecordedMessage, Recording};
 pub use schema::{payload_schema, PAYLOAD_FIELDS};
 
 use durable::{DurableFile, Index, Pending};
-use glissade_messages::{peek_envelope, Overrides, Stage, SCHEMA_VERSION};
+use glissade_messages::{peek_envelope, Envelope, Overrides, Stage, SCHEMA_VERSION};
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -382,6 +382,33 @@ impl Recorder {
         self.fail(detail)
     }
 
+    /// Whether [`Self::record`] leaves out a message of envelope `envelope` on `topic`, so that
+    /// a caller need not encode or decode it: a topic not recorded, or a full field of an
+    /// iteration that `full_fields_every` thins out (counted as such).
+    pub fn leaves_out(&mut self, topic: &str, envelope: &Envelope) -> Option<Recorded> {
+        if !self.selects(topic) {
+            self.stats.not_selected += 1;
+            return Some(Recorded::NotSelected);
+        }
+        let field = glissade_messages::topic_field(topic)?;
+        self.thins(field, envelope).then(|| {
+            self.stats.thinned += 1;
+            Recorded::Thinned
+        })
+    }
+
+    fn selects(&self, topic: &str) -> bool {
+        self.patterns.iter().any(|p| glissade_messages::key_matches(p, topic))
+    }
+
+    /// A full field of an iteration that `full_fields_every` leaves out.
+    fn thins(&self, field: &str, envelope: &Envelope) -> bool {
+        self.full_fields_every > 1
+            && THINNED_FIELDS.contains(&field)
+            && envelope.stage != Stage::Final
+            && !envelope.iteration.is_multiple_of(self.full_fields_every)
+    }
+
     /// Records the wire bytes `bytes` of a message published on `topic`, logged at `log_time_ns`
     /// (ns since the Unix epoch). The bytes must be a message of this run (its envelope is
     /// checked); a message of another run or of another schema version is an error. After a
@@ -393,7 +420,7 @@ impl Recorder {
             topic: topic.to_string(),
             detail,
         };
-        if !self.patterns.iter().any(|p| glissade_messages::key_matches(p, topic)) {
+        if !self.selects(topic) {
             self.stats.not_selected += 1;
             return Ok(Recorded::NotSelected);
         }
@@ -403,11 +430,7 @@ impl Recorder {
                 "not a message key expression (glissade/<run>/<role>/<id>/<field>)".into(),
             ));
         };
-        if self.full_fields_every > 1
-            && THINNED_FIELDS.contains(&field)
-            && envelope.stage != Stage::Final
-            && envelope.iteration % self.full_fields_every != 0
-        {
+        if self.thins(field, &envelope) {
             self.stats.thinned += 1;
             return Ok(Recorded::Thinned);
         }

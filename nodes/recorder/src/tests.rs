@@ -189,6 +189,15 @@ fn compressed_recordings_read_back() {
     }
 }
 
+/// The iterations of the boundary states recorded in `path`, in recorded order.
+fn state_iterations(path: &Path) -> Vec<u32> {
+    let r = Recording::open(path).unwrap();
+    r.messages()
+        .filter(|m| m.topic.ends_with("boundary_state"))
+        .map(|m| r.decode(&m).unwrap().envelope.iteration)
+        .collect()
+}
+
 #[test]
 fn topic_selection_and_thinning() {
     let dir = tempfile::tempdir().unwrap();
@@ -211,13 +220,48 @@ fn topic_selection_and_thinning() {
     assert_eq!(stats.thinned, 4);
     assert_eq!(stats.messages, 4 + 4);
     assert_eq!(outcomes.iter().filter(|o| **o == Recorded::Written).count(), 8);
-    let r = Recording::open(&path).unwrap();
-    let its: Vec<u32> = r
-        .messages()
-        .filter(|m| m.topic.ends_with("boundary_state"))
-        .map(|m| r.decode(&m).unwrap().envelope.iteration)
-        .collect();
-    assert_eq!(its, [0, 0, 2, 2]);
+    assert_eq!(state_iterations(&path), [0, 0, 2, 2]);
+}
+
+/// The run's front leaves thinned full fields out before encoding or decoding them: heard with a
+/// damaged payload behind a valid envelope, a thinned boundary state is counted as thinned (not
+/// refused: it is never decoded), while the same damage at a recorded iteration is refused; a
+/// thinned message the in-process bus delivers is not written either.
+#[test]
+fn the_front_leaves_thinned_fields_out_without_decoding_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("front.mcap");
+    let opts = RecorderOptions {
+        full_fields_every: 2,
+        ..RecorderOptions::default()
+    };
+    let mut rec = RunRecorder::create(&path, &run_info(), &opts).unwrap();
+    let damaged = |m: &Message| {
+        let mut b = encode(m);
+        b.truncate(b.len() - 8);
+        assert!(peek_envelope(&b, RUN).is_ok(), "the envelope is intact");
+        b
+    };
+    let thinned = &iteration(1)[0];
+    let kept = &iteration(2)[0];
+    rec.heard(&thinned.topic(), &damaged(thinned), 1);
+    rec.heard(&kept.topic(), &damaged(kept), 2);
+    rec.delivered(&iteration(3)[0]);
+    rec.delivered(&iteration(4)[0]);
+    assert_eq!(rec.seen(), 4);
+    let finished = rec.finish().unwrap();
+    assert_eq!(finished.refused, 1, "{:?}", finished.first_refused);
+    assert!(
+        finished
+            .first_refused
+            .as_deref()
+            .is_some_and(|f| f.contains("subdomain/0/boundary_state")),
+        "{:?}",
+        finished.first_refused
+    );
+    assert_eq!(finished.stats.thinned, 2);
+    assert_eq!(finished.stats.messages, 1, "only iteration 4's state is written");
+    assert_eq!(state_iterations(&path), [4]);
 }
 
 #[test]
