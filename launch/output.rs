@@ -299,18 +299,28 @@ pub fn interface_fields(model: &Model, interfaces: &[InterfaceSolution]) -> Valu
 /// [`interface_fields`] over the first `n_times` time points only (the steps a failed reference
 /// solved; its fields have that many columns).
 pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_times: usize) -> Value {
+    use rayon::prelude::*;
+    // Interfaces in parallel; every value is computed once and moved into the document (the
+    // `json!` macro would serialize a vector into a new one, value by value).
     let items: Vec<Value> = interfaces
-        .iter()
+        .par_iter()
         .map(|sol| {
             let itf = &model.interfaces[sol.interface as usize];
             let np = itf.n_pairs();
             let nt = n_times;
             // f_n, f_t, jump_n, jump_t: [quantity][time point][pair].
-            let values: [Vec<Vec<f64>>; 4] = std::array::from_fn(|q| {
-                (0..nt)
-                    .map(|i| (0..np).map(|p| pair_values(itf, sol, i, p)[q]).collect())
-                    .collect()
-            });
+            let mut values: [Vec<Value>; 4] = std::array::from_fn(|_| Vec::with_capacity(nt));
+            for i in 0..nt {
+                let mut rows: [Vec<Value>; 4] = std::array::from_fn(|_| Vec::with_capacity(np));
+                for p in 0..np {
+                    for (row, v) in rows.iter_mut().zip(pair_values(itf, sol, i, p)) {
+                        row.push(Value::from(v));
+                    }
+                }
+                for (q, row) in values.iter_mut().zip(rows) {
+                    q.push(Value::Array(row));
+                }
+            }
             let kind = match &itf.kind {
                 InterfaceKind::Perfect => json!("perfect"),
                 InterfaceKind::Contact { friction, .. } => json!({"contact": {"friction": friction}}),
@@ -325,17 +335,24 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
                 "tangent": tangent,
                 "coords": itf.coords,
                 "weights": itf.weights,
-                "f_n": values[0],
-                "f_t": values[1],
-                "jump_n": values[2],
-                "jump_t": values[3],
-                "status": if itf.is_contact() {
-                    (0..nt)
-                        .map(|i| sol.status[i * np..(i + 1) * np].iter().map(|&c| status_name(c)).collect())
-                        .collect::<Vec<Vec<String>>>()
-                } else {
-                    Vec::new()
-                },
+            });
+            let [f_n, f_t, jump_n, jump_t] = values;
+            for (key, q) in [("f_n", f_n), ("f_t", f_t), ("jump_n", jump_n), ("jump_t", jump_t)] {
+                entry[key] = Value::Array(q);
+            }
+            entry["status"] = Value::Array(if itf.is_contact() {
+                (0..nt)
+                    .map(|i| {
+                        Value::Array(
+                            sol.status[i * np..(i + 1) * np]
+                                .iter()
+                                .map(|&c| Value::String(status_name(c)))
+                                .collect(),
+                        )
+                    })
+                    .collect()
+            } else {
+                Vec::new()
             });
             if itf.straight_normal().is_none() {
                 entry["normals"] = json!(itf.normals);
