@@ -76,10 +76,8 @@ pub(super) struct Handover {
 /// start and build their operators: its initial local directions are needed only after `start`.
 pub(super) enum TimeStartSolve {
     Solving(std::thread::JoinHandle<std::result::Result<Option<TimeStartRun>, RunError>>),
-    /// Solved (None: the scene asks for no time-coarse start).
+    /// Solved (None: the scene asks for no time-coarse start, or [`Self::take`] took the result).
     Solved(Option<TimeStartRun>),
-    /// [`Self::take`] took the result.
-    Taken,
 }
 
 impl TimeStartSolve {
@@ -105,7 +103,7 @@ impl TimeStartSolve {
         match self {
             Self::Solving(h) if !h.is_finished() => Ok(false),
             Self::Solving(_) => {
-                let Self::Solving(h) = std::mem::replace(self, Self::Taken) else {
+                let Self::Solving(h) = std::mem::replace(self, Self::Solved(None)) else {
                     unreachable!("matched above")
                 };
                 let solved = h.join().map_err(|panic| {
@@ -117,19 +115,16 @@ impl TimeStartSolve {
                 *self = Self::Solved(solved);
                 Ok(true)
             }
-            Self::Solved(_) | Self::Taken => Ok(true),
+            Self::Solved(_) => Ok(true),
         }
     }
 
     /// The solve's result once [`Self::poll`] said it is over, once (None: no time-coarse start,
     /// or taken already).
     pub(super) fn take(&mut self) -> Option<TimeStartRun> {
-        match std::mem::replace(self, Self::Taken) {
-            Self::Solved(solved) => solved,
-            other => {
-                *self = other;
-                None
-            }
+        match self {
+            Self::Solved(solved) => solved.take(),
+            Self::Solving(_) => None,
         }
     }
 }

@@ -56,9 +56,10 @@ impl RunRecorder {
     /// it would have over Zenoh, logged now.
     pub fn delivered(&mut self, m: &Message) {
         self.seen += 1;
-        if self.failure.is_none() && self.recorder.leaves_out(&m.topic(), &m.envelope).is_none() {
+        let topic = m.topic();
+        if self.failure.is_none() && self.recorder.leaves_out(&topic, &m.envelope).is_none() {
             let bytes = encode(m);
-            let written = self.recorder.record(&m.topic(), crate::log_time_now(), &bytes);
+            let written = self.recorder.record(&topic, crate::log_time_now(), &bytes);
             self.keep_failure(written);
         }
     }
