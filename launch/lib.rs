@@ -38,6 +38,19 @@ pub fn machine_memory() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// The builder of the process's compute threads (rayon's global pool): `RAYON_NUM_THREADS` or one
+/// per core, named `compute-<i>`. Unnamed, each would take the name of the thread that first
+/// used the pool (in the launcher, an interface node's thread: profiles and `top -H` then showed
+/// every compute thread as that node).
+pub fn compute_threads() -> rayon::ThreadPoolBuilder {
+    rayon::ThreadPoolBuilder::new().thread_name(|i| format!("compute-{i}"))
+}
+
+/// Starts the process's compute threads ([`compute_threads`]); call it before anything uses rayon.
+pub fn start_compute_threads() -> std::result::Result<(), rayon::ThreadPoolBuildError> {
+    compute_threads().build_global()
+}
+
 /// Reads and validates a scene file; its TLS files (`network.tls`) become relative to its folder
 /// and must be readable.
 pub fn load_scene(path: &Path) -> Result<LoadedScene> {
@@ -45,4 +58,36 @@ pub fn load_scene(path: &Path) -> Result<LoadedScene> {
     let mut scene = load_str(&text, &path.display().to_string())?;
     scene.network.resolve_files(path)?;
     Ok(scene)
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every compute thread is named `compute-<i>`, also for the system (what profilers and
+    /// `top -H` show), whichever thread builds the pool.
+    #[test]
+    fn compute_threads_are_named_for_the_system() {
+        let pool = std::thread::Builder::new()
+            .name("node interface:0".into())
+            .spawn(|| super::compute_threads().num_threads(2).build().unwrap())
+            .unwrap()
+            .join()
+            .unwrap();
+        let mut names = pool.broadcast(|ctx| {
+            // SAFETY: gettid has no preconditions.
+            let tid = unsafe { libc::gettid() };
+            let comm = std::fs::read_to_string(format!("/proc/self/task/{tid}/comm")).unwrap();
+            (
+                ctx.index(),
+                std::thread::current().name().map(String::from),
+                comm.trim().to_string(),
+            )
+        });
+        names.sort();
+        assert_eq!(
+            names,
+            (0..2)
+                .map(|i| (i, Some(format!("compute-{i}")), format!("compute-{i}")))
+                .collect::<Vec<_>>()
+        );
+    }
 }

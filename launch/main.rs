@@ -31,6 +31,10 @@ fn main() -> ExitCode {
         eprintln!("error: {e:#}");
         return ExitCode::from(2);
     }
+    if let Err(e) = glissade::start_compute_threads() {
+        eprintln!("error: cannot start the compute threads: {e}");
+        return ExitCode::from(2);
+    }
     match dispatch(cli) {
         Ok(code) => code,
         Err(e) => {
