@@ -59,6 +59,7 @@ impl LiveView {
 }
 
 pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
+    let started = std::time::Instant::now();
     glissade::console::set_verbose(args.verbose);
     let overrides = Overrides {
         accuracy: args.accuracy,
@@ -202,6 +203,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         }
     };
     bar.finish_and_clear();
+    let outputs_started = std::time::Instant::now();
     for l in &result.left_out {
         println!("left out: {l}");
     }
@@ -250,12 +252,26 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         None
     };
+    let csv = if args.csv {
+        let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
+        glissade::vtu::write_new_file(
+            &path,
+            glissade::output::interface_csv(&sc.model, &result.interfaces)?.as_bytes(),
+        )
+        .map_err(|e| with_kept(e.into(), &kept))?;
+        kept.push(path.clone());
+        Some(path)
+    } else {
+        None
+    };
     println!(
-        "scene `{}`: {}; setup {:.2} s, iterations {:.2} s",
+        "scene `{}`: {}; setup {:.2} s, iterations {:.2} s, outputs {:.2} s ({:.2} s since the command started)",
         sc.model.name,
         glissade::output::outcome(&sc.model, &result),
         result.setup_s,
-        result.solve_s
+        result.solve_s,
+        outputs_started.elapsed().as_secs_f64(),
+        started.elapsed().as_secs_f64()
     );
     for t in &linear_stages {
         // Untimed (as processes), the counters alone are a note (`--verbose`).
@@ -273,13 +289,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         println!("recording: {path} ({:.1} MB)", size as f64 * 1e-6);
     }
     println!("summary: {}\nfields: {}", summary_path.display(), fields_path.display());
-    if args.csv {
-        let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
-        glissade::vtu::write_new_file(
-            &path,
-            glissade::output::interface_csv(&sc.model, &result.interfaces)?.as_bytes(),
-        )
-        .map_err(|e| with_kept(e.into(), &kept))?;
+    if let Some(path) = &csv {
         println!("csv: {}", path.display());
     }
     if let Some(v) = series {

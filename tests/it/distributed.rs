@@ -576,6 +576,22 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
         lines[1].starts_with("scene `small-three-layer`: Converged after "),
         "{out}"
     );
+    // The times of the verdict line: set-up, iterations and outputs, within the time since the
+    // command started (which also holds loading the scene, starting the recorder and its end).
+    let secs = |after: &str| -> f64 {
+        let rest = &lines[1][lines[1].find(after).unwrap_or_else(|| panic!("`{after}` in {out}")) + after.len()..];
+        rest[..rest.find(" s").expect("seconds")]
+            .parse()
+            .expect("a number of seconds")
+    };
+    let (setup, iterations, outputs, total) = (secs("setup "), secs("iterations "), secs("outputs "), secs("s ("));
+    assert!(lines[1].ends_with(" s since the command started)"), "{out}");
+    // Each printed to 0.01 s (a small scene writes its outputs in less): their sum may exceed the
+    // total by the rounding of the three.
+    assert!(
+        setup > 0.0 && iterations > 0.0 && outputs >= 0.0 && setup + iterations + outputs <= total + 0.015,
+        "{out}"
+    );
     assert!(
         lines[2].starts_with("recording: ") && lines[2].ends_with(" MB)"),
         "{out}"
