@@ -474,54 +474,86 @@ pub fn status_name(c: u8) -> String {
 /// position, the tractions on side a and the jumps in the interface's frame, and the status
 /// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface). docs/outputs.md.
 pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<String> {
+    use rayon::prelude::*;
     use std::fmt::Write as _;
     let nt = model.time.n_points();
-    let mut out = String::from("time,interface,a,b,pair,x,y,traction_n,traction_t,jump_n,jump_t,status\n");
-    for i in 0..nt {
-        let t = model.time.t(i);
-        for sol in interfaces {
-            let itf = model
-                .interfaces
-                .get(sol.interface as usize)
-                .ok_or_else(|| Error::ResultShape {
-                    what: format!("a solution of interface {}", sol.interface),
-                    scene: format!("{} interface(s)", model.interfaces.len()),
-                })?;
-            let np = itf.n_pairs();
-            if sol.f_a_hat.rows() != 2 * np || sol.f_a_hat.cols() != nt {
+    // Every solution checked first; then the rows of each time point written in parallel and
+    // joined in time order.
+    let mut checked = Vec::with_capacity(interfaces.len());
+    for sol in interfaces {
+        let itf = model
+            .interfaces
+            .get(sol.interface as usize)
+            .ok_or_else(|| Error::ResultShape {
+                what: format!("a solution of interface {}", sol.interface),
+                scene: format!("{} interface(s)", model.interfaces.len()),
+            })?;
+        let np = itf.n_pairs();
+        if sol.f_a_hat.rows() != 2 * np || sol.f_a_hat.cols() != nt {
+            return Err(Error::ResultShape {
+                what: format!(
+                    "interface {}: F̂_a is {} × {}",
+                    sol.interface,
+                    sol.f_a_hat.rows(),
+                    sol.f_a_hat.cols()
+                ),
+                scene: format!("{} × {nt}", 2 * np),
+            });
+        }
+        let statuses: Vec<&str> = if itf.is_contact() {
+            if sol.status.len() < np * nt {
                 return Err(Error::ResultShape {
-                    what: format!(
-                        "interface {}: F̂_a is {} × {}",
-                        sol.interface,
-                        sol.f_a_hat.rows(),
-                        sol.f_a_hat.cols()
-                    ),
-                    scene: format!("{} × {nt}", 2 * np),
+                    what: format!("interface {}: {} statuses", sol.interface, sol.status.len()),
+                    scene: format!("{}", np * nt),
                 });
             }
-            let (a, b) = (&model.subdomains[itf.a].name, &model.subdomains[itf.b].name);
-            for p in 0..np {
-                let [f_n, f_t, jump_n, jump_t] = pair_values(itf, sol, i, p);
-                let status = if itf.is_contact() {
-                    let code = *sol.status.get(i * np + p).ok_or_else(|| Error::ResultShape {
-                        what: format!("interface {}: {} statuses", sol.interface, sol.status.len()),
-                        scene: format!("{}", np * nt),
-                    })?;
-                    *STATUS_NAMES.get(code as usize).ok_or_else(|| Error::ResultShape {
-                        what: format!("interface {}: status code {code}", sol.interface),
-                        scene: format!("codes 0 to {}", STATUS_NAMES.len() - 1),
-                    })?
-                } else {
-                    "perfect"
-                };
-                let [x, y] = itf.coords[p];
-                let _ = writeln!(
-                    out,
-                    "{t:?},{},{a},{b},{p},{x:?},{y:?},{f_n:?},{f_t:?},{jump_n:?},{jump_t:?},{status}",
-                    sol.interface
-                );
+            sol.status[..np * nt]
+                .iter()
+                .map(|&code| {
+                    STATUS_NAMES
+                        .get(code as usize)
+                        .copied()
+                        .ok_or_else(|| Error::ResultShape {
+                            what: format!("interface {}: status code {code}", sol.interface),
+                            scene: format!("codes 0 to {}", STATUS_NAMES.len() - 1),
+                        })
+                })
+                .collect::<Result<_>>()?
+        } else {
+            Vec::new()
+        };
+        checked.push((sol, itf, statuses));
+    }
+    let rows: Vec<String> = (0..nt)
+        .into_par_iter()
+        .map(|i| {
+            let t = model.time.t(i);
+            let mut out = String::new();
+            for (sol, itf, statuses) in &checked {
+                let np = itf.n_pairs();
+                let (a, b) = (&model.subdomains[itf.a].name, &model.subdomains[itf.b].name);
+                for p in 0..np {
+                    let [f_n, f_t, jump_n, jump_t] = pair_values(itf, sol, i, p);
+                    let status = if itf.is_contact() {
+                        statuses[i * np + p]
+                    } else {
+                        "perfect"
+                    };
+                    let [x, y] = itf.coords[p];
+                    let _ = writeln!(
+                        out,
+                        "{t:?},{},{a},{b},{p},{x:?},{y:?},{f_n:?},{f_t:?},{jump_n:?},{jump_t:?},{status}",
+                        sol.interface
+                    );
+                }
             }
-        }
+            out
+        })
+        .collect();
+    let mut out = String::from("time,interface,a,b,pair,x,y,traction_n,traction_t,jump_n,jump_t,status\n");
+    out.reserve(rows.iter().map(String::len).sum());
+    for r in &rows {
+        out.push_str(r);
     }
     Ok(out)
 }
