@@ -12,6 +12,7 @@ use glissade_messages::{InterfaceSolution, Verdict};
 use glissade_reference::ReferenceSolution;
 use glissade_scene::LoadedScene;
 use glissade_subdomain::LinearStageRecord;
+use serde::Serialize;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -418,29 +419,75 @@ pub fn displacement_slices<'a>(
 /// The displacement file: per subdomain its mesh (node coordinates, QUA8 connectivity) and its
 /// displacement at every time point, `u[i·rows + 2·node + c]` (time point i, component c: 0 x,
 /// 1 y). docs/outputs.md.
-pub fn displacements(model: &Model, displacements: &[(u32, glissade_messages::Field)]) -> Value {
-    let items: Vec<Value> = displacements
-        .iter()
+pub fn displacements(model: &Model, displacements: &[(u32, glissade_messages::Field)]) -> Vec<Vec<u8>> {
+    use rayon::prelude::*;
+    /// One subdomain's entry, keys in the document's (alphabetical) order.
+    #[derive(Serialize)]
+    struct Entry<'a> {
+        cols: u32,
+        coords: &'a [[f64; 2]],
+        elements: &'a [[usize; 8]],
+        rows: u32,
+        subdomain: &'a str,
+        u: &'a [f64],
+    }
+    #[derive(Serialize)]
+    struct Units {
+        coords: &'static str,
+        times: &'static str,
+        u: &'static str,
+    }
+    // The subdomains' entries (most of the bytes) serialized in parallel, then joined in order.
+    let entries: Vec<Vec<u8>> = displacements
+        .par_iter()
         .map(|(s, f)| {
             let sub = &model.subdomains[*s as usize];
-            json!({
-                "subdomain": sub.name,
-                "coords": sub.mesh.coords,
-                "elements": sub.mesh.elements,
-                "rows": f.rows,
-                "cols": f.cols,
-                "u": *f.data,
-            })
+            let entry = Entry {
+                cols: f.cols,
+                coords: &sub.mesh.coords,
+                elements: &sub.mesh.elements,
+                rows: f.rows,
+                subdomain: &sub.name,
+                u: &f.data,
+            };
+            serde_json::to_vec(&entry).expect("a displacement entry serializes")
         })
         .collect();
-    json!({
-        "scene": model.name,
-        "units": {"times": "s", "coords": "mm", "u": "mm"},
-        "layout": "u[i·rows + 2·node + c]: time point i (column), node (0-based, order of coords), component c (0: x, 1: y); elements: 8 nodes each, corners counter-clockwise then mid-sides (VTK quadratic quad order)",
-        "times": (0..model.time.n_points()).map(|i| model.time.t(i)).collect::<Vec<_>>(),
-        "displacements": items,
-    })
+    // The document in pieces: the entries as they are, what joins them in between.
+    let mut pieces = vec![b"{\"displacements\":[".to_vec()];
+    for (k, e) in entries.into_iter().enumerate() {
+        if k > 0 {
+            pieces.push(b",".to_vec());
+        }
+        pieces.push(e);
+    }
+    let mut out = Vec::new();
+    let times: Vec<f64> = (0..model.time.n_points()).map(|i| model.time.t(i)).collect();
+    let tail = [
+        ("layout", serde_json::to_vec(DISPLACEMENT_LAYOUT)),
+        ("scene", serde_json::to_vec(&model.name)),
+        ("times", serde_json::to_vec(&times)),
+        (
+            "units",
+            serde_json::to_vec(&Units {
+                coords: "mm",
+                times: "s",
+                u: "mm",
+            }),
+        ),
+    ];
+    out.push(b']');
+    for (key, value) in tail {
+        out.extend_from_slice(format!(",\"{key}\":").as_bytes());
+        out.extend_from_slice(&value.expect("strings and numbers serialize"));
+    }
+    out.push(b'}');
+    pieces.push(out);
+    pieces
 }
+
+/// How `displacement.json` lays out `u` and `elements`.
+pub const DISPLACEMENT_LAYOUT: &str = "u[i·rows + 2·node + c]: time point i (column), node (0-based, order of coords), component c (0: x, 1: y); elements: 8 nodes each, corners counter-clockwise then mid-sides (VTK quadratic quad order)";
 
 /// The `.pvd` file and the `.vtu` folder of outputs named `stem` in `out`.
 pub fn series_paths(out: &Path, stem: &str) -> (PathBuf, PathBuf) {
@@ -569,6 +616,32 @@ pub fn write_json_new(dir: &Path, name: &str, value: &Value) -> Result<PathBuf> 
     write_json_as(dir, name, value, false)
 }
 
+/// As [`write_json_new`], for a document already serialized, in pieces written one after the
+/// other, in parallel (each at its place in the file).
+pub fn write_bytes_new(dir: &Path, name: &str, pieces: &[Vec<u8>]) -> Result<PathBuf> {
+    use rayon::prelude::*;
+    use std::os::unix::fs::FileExt;
+    std::fs::create_dir_all(dir).what(|| format!("cannot create output folder {}", dir.display()))?;
+    let path = dir.join(name);
+    let offsets: Vec<u64> = pieces
+        .iter()
+        .scan(0u64, |at, p| {
+            let start = *at;
+            *at += p.len() as u64;
+            Some(start)
+        })
+        .collect();
+    // Written past the buffer of `w`, which holds nothing and so writes nothing of its own.
+    write_through_partial(&path, false, |w| {
+        let file = w.get_ref();
+        pieces
+            .par_iter()
+            .zip(&offsets)
+            .try_for_each(|(p, &at)| file.write_all_at(p, at))
+    })?;
+    Ok(path)
+}
+
 fn write_json_as(dir: &Path, name: &str, value: &Value, replace: bool) -> Result<PathBuf> {
     std::fs::create_dir_all(dir).what(|| format!("cannot create output folder {}", dir.display()))?;
     let path = dir.join(name);
@@ -619,5 +692,53 @@ mod tests {
         assert_eq!(time_left(1e-4, 1e-3, 0.5, 0.25), Some(0.0));
         assert_eq!(time_left(1e-2, 1e-3, 1.0, 0.25), None);
         assert_eq!(time_left(1e-2, 1e-3, f64::NAN, 0.25), None);
+    }
+
+    /// `displacement.json`, written in pieces made in parallel, is byte for byte serde_json's
+    /// serialization of the document docs/outputs.md describes (keys in alphabetical order,
+    /// non-finite values as null), for every subdomain of a scene and values of every magnitude.
+    #[test]
+    fn the_displacement_file_is_the_documented_document() {
+        use serde_json::json;
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/launch/scenes/small-three-layer.toml");
+        let scene = glissade_scene::load_str(&std::fs::read_to_string(path).unwrap(), path).unwrap();
+        let model = &scene.model;
+        let nt = model.time.n_points();
+        let fields: Vec<(u32, glissade_messages::Field)> = model
+            .subdomains
+            .iter()
+            .enumerate()
+            .map(|(s, sub)| {
+                let mut f = glissade_messages::Field::zeros(sub.n_dofs(), nt);
+                for (k, v) in f.data.iter_mut().enumerate() {
+                    *v = ((k * 7919 + s * 104729) % 2003) as f64 * 10f64.powi((k % 41) as i32 - 20) - 1e-3;
+                }
+                f.data[s] = f64::NAN;
+                (s as u32, f)
+            })
+            .collect();
+        let written: Vec<u8> = super::displacements(model, &fields).concat();
+        let items: Vec<_> = fields
+            .iter()
+            .map(|(s, f)| {
+                let sub = &model.subdomains[*s as usize];
+                json!({
+                    "subdomain": sub.name,
+                    "coords": sub.mesh.coords,
+                    "elements": sub.mesh.elements,
+                    "rows": f.rows,
+                    "cols": f.cols,
+                    "u": *f.data,
+                })
+            })
+            .collect();
+        let doc = json!({
+            "scene": model.name,
+            "units": {"times": "s", "coords": "mm", "u": "mm"},
+            "layout": super::DISPLACEMENT_LAYOUT,
+            "times": (0..nt).map(|i| model.time.t(i)).collect::<Vec<_>>(),
+            "displacements": items,
+        });
+        assert!(written == serde_json::to_vec(&doc).unwrap());
     }
 }

@@ -11,7 +11,7 @@ pub(crate) use anyhow::Context;
 pub(crate) use glissade::distributed::{install_interrupt_handler, Interrupted, Network};
 pub(crate) use glissade::load_scene;
 pub(crate) use glissade::output::{
-    interface_fields, reference_interfaces, summary, write_json, write_json_new, RunFile,
+    interface_fields, reference_interfaces, summary, write_bytes_new, write_json, write_json_new, RunFile,
 };
 pub(crate) use glissade::report::{build_report_with, linear_stage_table, plot_svg, TimeAxis};
 pub(crate) use glissade::run::Run;

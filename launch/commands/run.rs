@@ -226,7 +226,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(fields_path.clone());
     if args.interior || (sc.model.interfaces.is_empty() && !args.vtu) {
-        let p = write_json_new(
+        let p = write_bytes_new(
             &args.out,
             &RunFile::Displacement.name(&sc.model.name, &run_id),
             &glissade::output::displacements(&sc.model, &result.displacements),
