@@ -616,6 +616,43 @@ pub fn write_json_new(dir: &Path, name: &str, value: &Value) -> Result<PathBuf> 
     write_json_as(dir, name, value, false)
 }
 
+/// `doc` serialized (compact, as serde_json writes it) in pieces whose concatenation is the
+/// document: the items of its top-level array `key` each a piece, serialized in parallel (a
+/// run's large documents are mostly one such array: the interfaces of `fields.json`).
+pub fn json_pieces(doc: &Value, key: &str) -> Vec<Vec<u8>> {
+    use rayon::prelude::*;
+    let to_vec = |v: &Value| serde_json::to_vec(v).expect("a JSON value serializes");
+    let Value::Object(map) = doc else {
+        return vec![to_vec(doc)];
+    };
+    let (mut pieces, mut head) = (Vec::new(), b"{".to_vec());
+    for (k, (name, value)) in map.iter().enumerate() {
+        if k > 0 {
+            head.push(b',');
+        }
+        head.extend_from_slice(&to_vec(&Value::String(name.clone())));
+        head.push(b':');
+        match value {
+            Value::Array(items) if name == key => {
+                head.push(b'[');
+                pieces.push(std::mem::take(&mut head));
+                let items: Vec<Vec<u8>> = items.par_iter().map(to_vec).collect();
+                for (i, item) in items.into_iter().enumerate() {
+                    if i > 0 {
+                        pieces.push(b",".to_vec());
+                    }
+                    pieces.push(item);
+                }
+                head.push(b']');
+            }
+            _ => head.extend_from_slice(&to_vec(value)),
+        }
+    }
+    head.push(b'}');
+    pieces.push(head);
+    pieces
+}
+
 /// As [`write_json_new`], for a document already serialized, in pieces written one after the
 /// other, in parallel (each at its place in the file).
 pub fn write_bytes_new(dir: &Path, name: &str, pieces: &[Vec<u8>]) -> Result<PathBuf> {
@@ -740,5 +777,25 @@ mod tests {
             "displacements": items,
         });
         assert!(written == serde_json::to_vec(&doc).unwrap());
+    }
+
+    /// The pieces of a document join into serde_json's serialization of it, with its large array
+    /// anywhere among the keys, empty, or missing.
+    #[test]
+    fn json_pieces_join_into_the_document() {
+        use serde_json::json;
+        let item = |k: usize| json!({"a \"quoted\" key": k, "x": [k as f64 * 0.1, -1e-300, f64::NAN], "s": "é\n"});
+        for doc in [
+            json!({"before": 1, "interfaces": (0..7).map(item).collect::<Vec<_>>(), "units": {"u": "mm"}}),
+            json!({"interfaces": [], "z": null}),
+            json!({"other": [1, 2, 3]}),
+            json!([1, 2]),
+        ] {
+            let pieces = super::json_pieces(&doc, "interfaces");
+            assert_eq!(
+                String::from_utf8(pieces.concat()).unwrap(),
+                serde_json::to_string(&doc).unwrap()
+            );
+        }
     }
 }

@@ -218,10 +218,10 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let summary_path = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)
         .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(summary_path.clone());
-    let fields_path = write_json_new(
+    let fields_path = write_bytes_new(
         &args.out,
         &RunFile::Fields.name(&sc.model.name, &run_id),
-        &interface_fields(&sc.model, &result.interfaces),
+        &glissade::output::json_pieces(&interface_fields(&sc.model, &result.interfaces), "interfaces"),
     )
     .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(fields_path.clone());
