@@ -450,40 +450,24 @@ pub fn displacements(model: &Model, displacements: &[(u32, glissade_messages::Fi
                 subdomain: &sub.name,
                 u: &f.data,
             };
-            serde_json::to_vec(&entry).expect("a displacement entry serializes")
+            json_bytes(&entry)
         })
         .collect();
-    // The document in pieces: the entries as they are, what joins them in between.
-    let mut pieces = vec![b"{\"displacements\":[".to_vec()];
-    for (k, e) in entries.into_iter().enumerate() {
-        if k > 0 {
-            pieces.push(b",".to_vec());
-        }
-        pieces.push(e);
-    }
-    let mut out = Vec::new();
     let times: Vec<f64> = (0..model.time.n_points()).map(|i| model.time.t(i)).collect();
-    let tail = [
-        ("layout", serde_json::to_vec(DISPLACEMENT_LAYOUT)),
-        ("scene", serde_json::to_vec(&model.name)),
-        ("times", serde_json::to_vec(&times)),
+    object_pieces([
+        ("displacements", Member::Items(entries)),
+        ("layout", Member::Value(json_bytes(&DISPLACEMENT_LAYOUT))),
+        ("scene", Member::Value(json_bytes(&model.name))),
+        ("times", Member::Value(json_bytes(&times))),
         (
             "units",
-            serde_json::to_vec(&Units {
+            Member::Value(json_bytes(&Units {
                 coords: "mm",
                 times: "s",
                 u: "mm",
-            }),
+            })),
         ),
-    ];
-    out.push(b']');
-    for (key, value) in tail {
-        out.extend_from_slice(format!(",\"{key}\":").as_bytes());
-        out.extend_from_slice(&value.expect("strings and numbers serialize"));
-    }
-    out.push(b'}');
-    pieces.push(out);
-    pieces
+    ])
 }
 
 /// How `displacement.json` lays out `u` and `elements`.
@@ -621,22 +605,40 @@ pub fn write_json_new(dir: &Path, name: &str, value: &Value) -> Result<PathBuf> 
 /// run's large documents are mostly one such array: the interfaces of `fields.json`).
 pub fn json_pieces(doc: &Value, key: &str) -> Vec<Vec<u8>> {
     use rayon::prelude::*;
-    let to_vec = |v: &Value| serde_json::to_vec(v).expect("a JSON value serializes");
     let Value::Object(map) = doc else {
-        return vec![to_vec(doc)];
+        return vec![json_bytes(doc)];
     };
+    object_pieces(map.iter().map(|(name, value)| {
+        let member = match value {
+            Value::Array(items) if name == key => Member::Items(items.par_iter().map(json_bytes).collect()),
+            _ => Member::Value(json_bytes(value)),
+        };
+        (name.as_str(), member)
+    }))
+}
+
+/// A member of a JSON object written in pieces ([`object_pieces`]): its value serialized, or the
+/// items of its array, each serialized.
+enum Member {
+    Value(Vec<u8>),
+    Items(Vec<Vec<u8>>),
+}
+
+/// The object of `members` (in the order given) in pieces whose concatenation is its compact
+/// serialization: each array item a piece of its own, the keys and separators between them.
+fn object_pieces<'k>(members: impl IntoIterator<Item = (&'k str, Member)>) -> Vec<Vec<u8>> {
     let (mut pieces, mut head) = (Vec::new(), b"{".to_vec());
-    for (k, (name, value)) in map.iter().enumerate() {
+    for (k, (name, member)) in members.into_iter().enumerate() {
         if k > 0 {
             head.push(b',');
         }
-        head.extend_from_slice(&to_vec(&Value::String(name.clone())));
+        head.extend_from_slice(&json_bytes(name));
         head.push(b':');
-        match value {
-            Value::Array(items) if name == key => {
+        match member {
+            Member::Value(bytes) => head.extend_from_slice(&bytes),
+            Member::Items(items) => {
                 head.push(b'[');
                 pieces.push(std::mem::take(&mut head));
-                let items: Vec<Vec<u8>> = items.par_iter().map(to_vec).collect();
                 for (i, item) in items.into_iter().enumerate() {
                     if i > 0 {
                         pieces.push(b",".to_vec());
@@ -645,12 +647,16 @@ pub fn json_pieces(doc: &Value, key: &str) -> Vec<Vec<u8>> {
                 }
                 head.push(b']');
             }
-            _ => head.extend_from_slice(&to_vec(value)),
         }
     }
     head.push(b'}');
     pieces.push(head);
     pieces
+}
+
+/// `v` serialized compactly (what serde_json writes).
+fn json_bytes<T: Serialize + ?Sized>(v: &T) -> Vec<u8> {
+    serde_json::to_vec(v).expect("a document of strings, numbers and arrays serializes")
 }
 
 /// As [`write_json_new`], for a document already serialized, in pieces written one after the
