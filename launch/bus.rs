@@ -257,6 +257,7 @@ pub(crate) fn join_bus(
     recorded: bool,
     all_nodes: &[NodeName],
     groups: &[Vec<u32>],
+    hosted_interfaces: &[Vec<usize>],
 ) -> Result<Bus> {
     for l in &net.listen {
         if l.ends_with(":0") {
@@ -303,17 +304,23 @@ pub(crate) fn join_bus(
                     .map(|&id| {
                         let mut m = transport::Member::node(run_id, id);
                         if id.role == Role::Subdomain {
-                            // A subdomain process speaks for the subdomains it hosts.
+                            // A subdomain process speaks for the subdomains it hosts, and for the
+                            // interface nodes it runs (`interfaces_with_subdomains`).
+                            let g = id.index as usize;
                             m.keys = vec![glissade_messages::topic::alive(run_id, id.role.key(), id.index)];
-                            m.keys.extend(groups[id.index as usize].iter().map(|&s| {
-                                glissade_messages::topic::sent_by(
-                                    run_id,
-                                    NodeId {
-                                        role: Role::Subdomain,
-                                        index: s,
-                                    },
-                                )
-                            }));
+                            let subdomains = groups[g].iter().map(|&s| NodeId {
+                                role: Role::Subdomain,
+                                index: s,
+                            });
+                            let interfaces = hosted_interfaces[g].iter().map(|&k| NodeId {
+                                role: Role::Interface,
+                                index: k as u32,
+                            });
+                            m.keys.extend(
+                                subdomains
+                                    .chain(interfaces)
+                                    .map(|n| glissade_messages::topic::sent_by(run_id, n)),
+                            );
                         }
                         m
                     })

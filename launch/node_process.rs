@@ -84,7 +84,25 @@ pub fn run_node_process(
         scene_fingerprint: fp,
     };
     let mut nodes = build_nodes(&model, &ctx, interior, &plan, &selection).map_err(RunError::from)?;
+    if role == NodeRole::Subdomain {
+        // The interface nodes of the interfaces between this process's subdomains
+        // (`deployment.interfaces_with_subdomains`).
+        for k in plan.interface_nodes_in(index as usize) {
+            nodes.push(build_interface_node(&model, &ctx, &plan, k).map_err(|e| Error::Node {
+                node: name.to_string(),
+                why: e.to_string(),
+            })?);
+        }
+    }
     if role == NodeRole::Interface {
+        if let Some(Some(g)) = plan.interface_hosts.get(index as usize) {
+            return Err(Error::Node {
+                node: name.to_string(),
+                why: format!(
+                    "interface node {index} runs in subdomain process {g} (deployment.interfaces_with_subdomains)"
+                ),
+            });
+        }
         nodes.push(
             build_interface_node(&model, &ctx, &plan, index as usize).map_err(|e| Error::Node {
                 node: name.to_string(),

@@ -409,7 +409,7 @@ pub fn report_against(
     let mut errors: Vec<(u32, f64, f64)> = Vec::new();
     let mut anderson = AndersonTally::default();
     let mut bytes: Vec<u64> = Vec::new();
-    let mut states = BoundaryStates::new();
+    let mut states = BoundaryStates::new(model);
     let mut undecodable: Option<String> = None;
     let opts = RunOptions::new(run_id);
     // The smallest traction error measured so far (the observer sets it, the decisions read it).

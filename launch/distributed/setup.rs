@@ -163,7 +163,16 @@ pub(super) fn set_up(
             });
         }
     }
-    let bus = join_bus(scene, run_id, net, recording.is_some(), &all_nodes, &groups)?;
+    let hosted_interfaces: Vec<Vec<usize>> = (0..groups.len()).map(|g| plan.interface_nodes_in(g)).collect();
+    let bus = join_bus(
+        scene,
+        run_id,
+        net,
+        recording.is_some(),
+        &all_nodes,
+        &groups,
+        &hosted_interfaces,
+    )?;
     let session = &bus.session;
     let launcher_token = transport::launcher_token(session, run_id)?;
     let presence = transport::Presence::watch(session, run_id)?;
@@ -180,10 +189,13 @@ pub(super) fn set_up(
     };
     let queryable = transport::serve_scene(session, run_id, encode(&scene_msg))?;
     // The launcher hears every message of the run where that costs no socket (the router is in
-    // its process), where an observer wants them, or where the recorder's end needs their count.
-    // Through a router outside its process, an unrecorded run's fields would cross one more
-    // socket each only to be counted: the launcher then subscribes to what it keeps.
-    let counted = if bus.hosting || keep_all || recording.is_some() {
+    // its process and every field crosses it anyway), where an observer wants them, or where
+    // the recorder's end needs their count. Through a router outside its process, an unrecorded
+    // run's fields would cross one more socket each only to be counted, and with interface nodes
+    // in the subdomain processes the fields between the nodes of one process would leave it only
+    // to be counted: the launcher then subscribes to what it keeps.
+    let own_fields_stay = plan.interface_hosts.iter().any(Option::is_some);
+    let counted = if (bus.hosting && !own_fields_stay) || keep_all || recording.is_some() {
         Counted::Every
     } else {
         Counted::Kept
@@ -289,8 +301,8 @@ pub(super) fn node_args(
     args
 }
 
-/// The node processes a run needs: one per subdomain group, one per interface group, the coarse
-/// node.
+/// The node processes a run needs: one per subdomain group, one per interface group not run by a
+/// subdomain process, the coarse node.
 fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
     let mut names: Vec<NodeName> = (0..groups as u32)
         .map(|index| NodeName {
@@ -298,10 +310,14 @@ fn run_nodes_of(plan: &Plan, groups: usize) -> Vec<NodeName> {
             index,
         })
         .collect();
-    names.extend((0..plan.interface_groups.len() as u32).map(|index| NodeName {
-        role: NodeRole::Interface,
-        index,
-    }));
+    names.extend(
+        (0..plan.interface_groups.len() as u32)
+            .filter(|&k| plan.interface_hosts[k as usize].is_none())
+            .map(|index| NodeName {
+                role: NodeRole::Interface,
+                index,
+            }),
+    );
     if plan.coarse {
         names.push(NodeName {
             role: NodeRole::Coarse,

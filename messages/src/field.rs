@@ -332,11 +332,11 @@ mod tests {
     fn a_damaged_field_length_is_refused_before_anything_is_allocated() {
         let m = msg();
         let mut bytes = encode(&m);
-        // The payload: variant (u32), subdomain (u32), then w's rows and cols (u32 each) and its
-        // value count (u64): claim 2^27 or 2^28 values (1 or 2 GiB) in a message of under 200
-        // bytes.
+        // The payload: variant (u32), subdomain (u32), `to` (None: one byte), `interfaces` (length
+        // u64 and one u32), then w's rows and cols (u32 each) and its value count (u64): claim
+        // 2^27 or 2^28 values (1 or 2 GiB) in a message of under 200 bytes.
         let envelope = bincode::serde::encode_to_vec(&m.envelope, config()).unwrap().len();
-        let at = envelope + 4 + 4 + 4 + 4;
+        let at = envelope + 4 + 4 + 1 + (8 + 4) + 4 + 4;
         assert_eq!(bytes[at..at + 8], 6u64.to_le_bytes());
         for claim in [1u64 << 27, 1 << 28] {
             bytes[at..at + 8].copy_from_slice(&claim.to_le_bytes());

@@ -18,6 +18,8 @@ pub fn msg() -> Message {
         },
         payload: Payload::BoundaryState {
             subdomain: 2,
+            to: None,
+            interfaces: vec![4],
             w: Field::from_fn(3, 2, |r, c| (r + 10 * c) as f64),
             f: Field::zeros(3, 2),
         },

@@ -148,9 +148,15 @@ pub enum Payload {
         subdomain: u32,
         w_tilde: Field,
     },
-    /// s = (W, F) of a subdomain's boundary after a linear stage (n_b × (N+1) each).
+    /// s = (W, F) of a subdomain's boundary after a linear stage: the rows of `interfaces`, one
+    /// after the other (2 × pairs rows each, in the subdomain's boundary layout), × (N+1).
     BoundaryState {
         subdomain: u32,
+        /// The interface node these rows are for, when the subdomain's interfaces belong to
+        /// several (each then gets the rows of its own; the key ends with its index). None: the
+        /// whole boundary, for every interface node owning one of its interfaces.
+        to: Option<u32>,
+        interfaces: Vec<u32>,
         w: Field,
         f: Field,
     },
@@ -338,6 +344,7 @@ impl Payload {
             Payload::MacroDisplacements { subdomain, .. } | Payload::LocalDirections { subdomain, .. } => {
                 Some(*subdomain)
             }
+            Payload::BoundaryState { to, .. } => *to,
             _ => None,
         }
     }

@@ -52,6 +52,11 @@ pub fn role_field_topic(run_id: &str, role: Role, field: &str, destination: Opti
     }
 }
 
+/// Key of one field from one sender (no destination): `glissade/<run>/<role>/<id>/<field>`.
+pub fn sender_field_topic(run_id: &str, sender: NodeId, field: &str) -> String {
+    within_run(run_id, format_args!("{}/{}/{field}", sender.role.key(), sender.index))
+}
+
 /// Key expression of every subdomain's linear-stage counters (`LinearStageStats`) in run
 /// `run_id`: `glissade/<run>/subdomain/*/linear_stage_stats` (what a report or a replay reads;
 /// no node takes them).

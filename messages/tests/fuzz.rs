@@ -173,14 +173,22 @@ fn other_payload() -> impl Strategy<Value = Payload> {
             .prop_map(|(subdomain, slots, l_e)| Payload::HomogenizedOperator { subdomain, slots, l_e }),
         (any::<u32>(), field()).prop_map(|(subdomain, forces)| Payload::MacroForces { subdomain, forces }),
         (any::<u32>(), field()).prop_map(|(subdomain, w_tilde)| Payload::MacroDisplacements { subdomain, w_tilde }),
-        (any::<u32>(), field()).prop_map(|(subdomain, w)| Payload::BoundaryState {
-            subdomain,
-            f: Field {
-                data: w.data.iter().map(|x| -x).collect(),
-                ..w.clone()
-            },
-            w,
-        }),
+        (
+            any::<u32>(),
+            proptest::option::of(any::<u32>()),
+            proptest::collection::vec(any::<u32>(), 0..4),
+            field()
+        )
+            .prop_map(|(subdomain, to, interfaces, w)| Payload::BoundaryState {
+                subdomain,
+                to,
+                interfaces,
+                f: Field {
+                    data: w.data.iter().map(|x| -x).collect(),
+                    ..w.clone()
+                },
+                w,
+            }),
         (any::<u32>(), proptest::collection::vec(any::<u32>(), 0..4), field()).prop_map(
             |(subdomain, interfaces, q_hat)| Payload::LocalDirections {
                 subdomain,

@@ -217,11 +217,123 @@ fn several_interface_nodes_match_one_bit_for_bit() {
     assert_identical(&one, &remote);
 }
 
+/// `interfaces_with_subdomains` (the stratified scene's deployment, one process per layer):
+/// interface node 0 owns the 12 contact interfaces and runs beside the router, nodes 1 to 3 the
+/// perfect interfaces inside each layer, in that layer's process. Each subdomain sends node 0
+/// the rows of its contact interfaces and its own layer's node the rows of its perfect ones, each
+/// on a key of its own, so that the perfect interfaces' fields never leave their process. The
+/// run is the one-interface-node run bit for bit, in-process and as processes.
+#[test]
+fn interfaces_with_their_subdomains_match_one_node_bit_for_bit() {
+    use glissade_messages::{Field, Payload};
+    use std::collections::BTreeMap;
+    let text = scene_text("stratified").replace("N = 1000", "N = 10");
+    let sc = scene(&text);
+    assert!(sc.deployment.interfaces_with_subdomains);
+    let one_node = scene(&text.replace("interfaces_with_subdomains = true\n", ""));
+    // Per (subdomain, recipient): the interfaces of its rows and their count; the keys; and every
+    // (iteration, subdomain)'s whole state as the replay puts it back together.
+    type States = BTreeMap<(u32, u32), (Field, Field)>;
+    let run_observed = |sc: &glissade_scene::LoadedScene,
+                        parts: &mut BTreeMap<(u32, Option<u32>), (Vec<u32>, usize)>,
+                        keys: &mut std::collections::BTreeSet<String>|
+     -> (RunResult, States) {
+        let mut states = glissade_replay::BoundaryStates::new(&sc.model);
+        let mut whole = States::new();
+        let result = Run::new(sc, &RunOptions::new("local"))
+            .observe(|m| {
+                if let Payload::BoundaryState {
+                    subdomain,
+                    to,
+                    interfaces,
+                    w,
+                    ..
+                } = &m.payload
+                {
+                    parts.insert((*subdomain, *to), (interfaces.clone(), w.rows()));
+                    keys.insert(m.topic());
+                }
+                if let Some(state) = states.fields(&m.payload) {
+                    let (s, w, f) = state.expect("a state that fits");
+                    whole.insert((m.envelope.iteration, s), (w.into_owned(), f.into_owned()));
+                }
+                Duration::ZERO
+            })
+            .in_process()
+            .map(|o| o.result)
+            .unwrap();
+        (result, whole)
+    };
+    let (mut parts, mut keys) = (BTreeMap::new(), std::collections::BTreeSet::new());
+    let (one, one_states) = run_observed(&one_node, &mut parts, &mut keys);
+    assert!(
+        parts.keys().all(|(_, to)| to.is_none()),
+        "one interface node: whole states"
+    );
+    let (mut parts, mut keys) = (BTreeMap::new(), std::collections::BTreeSet::new());
+    let (local, local_states) = run_observed(&sc, &mut parts, &mut keys);
+    assert!(local.nodes.contains(&"interface × 4".to_string()), "{:?}", local.nodes);
+    assert_identical(&one, &local);
+    // The parts put back together are the whole states, bit for bit, every iteration.
+    assert_eq!(local_states.len(), 18 * one.iterations.len());
+    let bits = |states: &States| -> Vec<((u32, u32), Vec<u64>, Vec<u64>)> {
+        let b = |f: &Field| f.data.iter().map(|x| x.to_bits()).collect();
+        states.iter().map(|(k, (w, f))| (*k, b(w), b(f))).collect()
+    };
+    assert!(
+        bits(&local_states) == bits(&one_states),
+        "the states put together differ from the whole ones"
+    );
+    // Every subdomain touches a contact interface (node 0) and a perfect one of its layer (node
+    // 1 + layer): two parts each, never a whole state.
+    assert_eq!(parts.len(), 36, "{parts:?}");
+    let n_pairs = |i: u32| sc.model.interfaces[i as usize].n_pairs();
+    for s in 0..18u32 {
+        let layer = s / 6;
+        let (contact, c_rows) = &parts[&(s, Some(0))];
+        let (perfect, p_rows) = &parts[&(s, Some(1 + layer))];
+        assert!(
+            contact.iter().all(|&i| sc.model.interfaces[i as usize].is_contact()),
+            "{contact:?}"
+        );
+        assert!(
+            perfect.iter().all(|&i| !sc.model.interfaces[i as usize].is_contact()),
+            "{perfect:?}"
+        );
+        assert_eq!(*c_rows, contact.iter().map(|&i| 2 * n_pairs(i)).sum::<usize>());
+        assert_eq!(*p_rows, perfect.iter().map(|&i| 2 * n_pairs(i)).sum::<usize>());
+    }
+    assert!(keys.contains("glissade/local/subdomain/7/boundary_state/2"), "{keys:?}");
+    let remote = Run::new(&sc, &RunOptions::new("distributed-test-owner"))
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+        .unwrap();
+    println!(
+        "stratified N = 10, interfaces with their subdomains: nodes {:?}",
+        remote.nodes
+    );
+    assert!(
+        remote.nodes.iter().any(|n| n.starts_with("processes: 4 ")),
+        "3 subdomain processes (with interface nodes 1 to 3) + 1 coarse: {:?}",
+        remote.nodes
+    );
+    assert!(
+        remote
+            .nodes
+            .contains(&"in the launcher's process: interface:0".to_string()),
+        "{:?}",
+        remote.nodes
+    );
+    assert_identical(&one, &remote);
+}
+
 /// The stratified scene (N = 10) over 3 subdomain processes and 3 interface-node processes gives
 /// the in-process one-interface-node run bit for bit.
 #[test]
 fn stratified_over_three_interface_processes() {
-    let text = scene_text("stratified").replace("N = 1000", "N = 10");
+    let text = scene_text("stratified")
+        .replace("N = 1000", "N = 10")
+        .replace("interfaces_with_subdomains = true\n", "");
     let one = crate::common::run(&scene(&text));
     let sc = scene(&with_deployment(&text, "interface_nodes = 3"));
     let groups = sc.deployment.interface_groups(&sc.model);
@@ -350,8 +462,8 @@ fn stratified_over_three_subdomain_processes() {
     assert_identical(&local, &remote);
 }
 
-/// `network.shared_memory = true`: the processes pass their fields (boundary states of about
-/// 160 kB at N = 30, every one above Zenoh's 3 KiB threshold) through shared memory, and the run,
+/// `network.shared_memory = true`: the processes pass their fields (a subdomain's boundary-state
+/// rows for one interface node, 20–40 kB at N = 30, every one above Zenoh's 3 KiB threshold) through shared memory, and the run,
 /// with the displacement fields sent at the end (`interior`: the launcher's `done` then also
 /// waits for them), is bit-identical to the in-process run.
 #[test]
@@ -448,7 +560,8 @@ fn shared_memory_is_chosen_when_restarts_are_off_anyway() {
 }
 
 /// With shared memory, `glissade run` as processes has its nodes write their large fields
-/// (at N = 30, most boundary fields are 64–81 kB; the macro data are far smaller) into
+/// (at N = 120 a subdomain's rows for one interface node are those of one or two faces of 41
+/// nodes, 82 or 164 × 121 values, 79–159 kB; the macro data are far smaller) into
 /// shared-memory blocks and send those: every node process that sends such fields says so at
 /// the end, with none copied for lack of room.
 #[test]
@@ -460,7 +573,7 @@ fn with_shared_memory_large_fields_are_sent_without_a_copy() {
     }
     let dir = crate::common::scratch("lent-fields");
     let scene_file = dir.join("stratified.toml");
-    let text = scene_text("stratified").replace("N = 1000", "N = 30") + "\n[network]\nshared_memory = true\n";
+    let text = scene_text("stratified").replace("N = 1000", "N = 120") + "\n[network]\nshared_memory = true\n";
     std::fs::write(&scene_file, text).expect("scene file");
     let output = std::process::Command::new(exe())
         .args(["run", "--quiet", "--verbose", "--out"])

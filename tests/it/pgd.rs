@@ -426,7 +426,8 @@ fn pgd_messages_carry_each_mode_once() {
     sc.pgd = default_pgd();
     let mut held: BTreeMap<u32, usize> = BTreeMap::new();
     let (mut modes_bytes, mut full_bytes, mut messages, mut columns) = (0usize, 0usize, 0usize, 0usize);
-    let mut states = glissade_replay::BoundaryStates::new();
+    let mut states = glissade_replay::BoundaryStates::new(&sc.model);
+    let k = vec![1.0; sc.model.interfaces.len()];
     let opts = RunOptions::new("modes");
     let (result, records) = Run::new(&sc, &opts)
         .observe(|m| {
@@ -461,6 +462,12 @@ fn pgd_messages_carry_each_mode_once() {
                         envelope: m.envelope.clone(),
                         payload: Payload::BoundaryState {
                             subdomain: s,
+                            to: None,
+                            interfaces: glissade_mechanics::condensed::BoundaryLayout::new(&sc.model, s as usize, &k)
+                                .slots
+                                .iter()
+                                .map(|sl| sl.interface as u32)
+                                .collect(),
                             w: w.into_owned(),
                             f: f.into_owned(),
                         },

@@ -75,19 +75,23 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
     );
     let seed = 0x9e37_79b9_7f4a_7c15;
     let mut rng = Rng(seed);
-    // The last case: one of three interface nodes, one that does not decide (it sends its
-    // indicator sums to node 0); several interface nodes are bit-identical to one.
+    // The fourth case: one of three interface nodes, one that does not decide (it sends its
+    // indicator sums to node 0); several interface nodes are bit-identical to one. The last: a
+    // subdomain process that also runs the interface node of the interfaces between its own
+    // subdomains (`interfaces_with_subdomains`): both resume.
     for (role, index, deployment) in [
         ("subdomain", "1", ""),
         ("interface", "0", ""),
         ("coarse", "0", ""),
         ("interface", "1", "interface_nodes = 3"),
+        ("subdomain", "1", "interfaces_with_subdomains = true"),
     ] {
         let sc = scene(&small_three_layer(deployment));
         // Not the last iteration: the kill must land while the run still needs the node.
         let at = 1 + rng.below(n - 3) as u32;
         println!("seed {seed:#x}: kill {role}:{index} at iteration {at} of {n}");
-        let (dir, run_id, recording) = recorded_run(&format!("recovery-{role}-{index}"));
+        let with = if deployment.is_empty() { "" } else { "-deployed" };
+        let (dir, run_id, recording) = recorded_run(&format!("recovery-{role}-{index}{with}"));
         let opts = RunOptions::new(run_id.as_str());
         let mut killed = None;
         let (result, _) = Run::new(&sc, &opts)

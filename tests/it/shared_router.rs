@@ -79,6 +79,8 @@ fn messages_of_another_run_are_ignored() {
                     envelope("intruder", fingerprint, Role::Subdomain, 0, Stage::Linear),
                     Payload::BoundaryState {
                         subdomain: 0,
+                        to: None,
+                        interfaces: vec![0],
                         w: Field::zeros(4, 11),
                         f: Field::zeros(4, 11),
                     },
@@ -102,6 +104,8 @@ fn messages_of_another_run_are_ignored() {
                     envelope(victim, fingerprint, Role::Subdomain, 0, Stage::Linear),
                     Payload::BoundaryState {
                         subdomain: 0,
+                        to: None,
+                        interfaces: vec![0],
                         w: Field::zeros(4, 11),
                         f: Field::zeros(4, 11),
                     },

@@ -288,6 +288,8 @@ mod tests {
         assert_eq!(lent, [true, true, true, true, false, false]);
         let mut got = got.into_iter();
         pool.recycle(message(Payload::BoundaryState {
+            to: None,
+            interfaces: vec![0],
             subdomain: 0,
             w: got.next().unwrap(),
             f: got.nth(3).unwrap(),
@@ -342,7 +344,13 @@ mod tests {
         let w = pool.field_of(big.as_ref());
         let f = pool.field_of(small.as_ref());
         let (w_at, f_at) = (w.data.as_ptr(), f.data.as_ptr());
-        pool.recycle(message(Payload::BoundaryState { subdomain: 0, w, f }));
+        pool.recycle(message(Payload::BoundaryState {
+            subdomain: 0,
+            to: None,
+            interfaces: vec![0],
+            w,
+            f,
+        }));
         assert_eq!(pool.len(), 2);
         // The small field takes the small buffer (the smallest that fits), the big one the other.
         let f2 = pool.field_of(small.as_ref());
@@ -370,7 +378,13 @@ mod tests {
         for _ in 0..2 * FieldPool::CAPACITY {
             let w = pool.field_with(2, 2, |_| {});
             let f = field_of(big.as_ref());
-            pool.recycle(message(Payload::BoundaryState { subdomain: 0, w, f }));
+            pool.recycle(message(Payload::BoundaryState {
+                subdomain: 0,
+                to: None,
+                interfaces: vec![0],
+                w,
+                f,
+            }));
         }
         assert_eq!(pool.len(), FieldPool::CAPACITY);
     }

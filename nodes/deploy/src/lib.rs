@@ -40,6 +40,9 @@ pub struct Plan {
     /// The interfaces each interface node owns (the scene's deployment; one node owning every
     /// interface by default).
     pub interface_groups: Vec<Vec<usize>>,
+    /// Per interface node, the subdomain process that runs it (`interfaces_with_subdomains`), or
+    /// None: a process of its own, or a thread of the launcher's.
+    pub interface_hosts: Vec<Option<usize>>,
 }
 
 impl Plan {
@@ -58,15 +61,29 @@ impl Plan {
             linear_stage: LinearStage::Condensed,
             pgd: PgdParams::default(),
             interface_groups: vec![(0..model.interfaces.len()).collect()],
+            interface_hosts: vec![None],
         }
     }
 
-    /// The plan with the scene's linear-stage settings.
+    /// The plan with the scene's linear-stage settings and deployment.
     pub fn with_scene(mut self, scene: &LoadedScene) -> Self {
         self.linear_stage = scene.linear_stage;
         self.pgd = scene.pgd.clone();
-        self.interface_groups = scene.deployment.interface_groups(&scene.model);
+        if scene.deployment.interfaces_with_subdomains {
+            let groups = self.groups(scene.deployment.subdomain_nodes);
+            (self.interface_groups, self.interface_hosts) = interfaces_with_subdomains(&scene.model, &groups);
+        } else {
+            self.interface_groups = scene.deployment.interface_groups(&scene.model);
+            self.interface_hosts = vec![None; self.interface_groups.len()];
+        }
         self
+    }
+
+    /// The interface nodes subdomain process `group` runs (`interfaces_with_subdomains`).
+    pub fn interface_nodes_in(&self, group: usize) -> Vec<usize> {
+        (0..self.interface_hosts.len())
+            .filter(|&k| self.interface_hosts[k] == Some(group))
+            .collect()
     }
 
     /// The linear stage subdomain `s` uses (`Auto` resolved from its boundary size).
@@ -121,6 +138,44 @@ impl Plan {
         }
         (names, left_out)
     }
+}
+
+/// The interface nodes of `interfaces_with_subdomains` for the subdomain processes `groups`: node
+/// 0 owns the interfaces between subdomains of different processes, then one node per process
+/// owns the interfaces between its own subdomains (processes without such an interface have
+/// none). When no interface joins two processes, the first process's node is node 0. Returns
+/// the groups of interfaces and, per node, the process that runs it (None: node 0 of the
+/// interfaces between processes, which runs where interface nodes run without this setting).
+pub fn interfaces_with_subdomains(model: &Model, groups: &[Vec<u32>]) -> (Vec<Vec<usize>>, Vec<Option<usize>>) {
+    let mut process = vec![usize::MAX; model.subdomains.len()];
+    for (g, group) in groups.iter().enumerate() {
+        for &s in group {
+            process[s as usize] = g;
+        }
+    }
+    let mut between = Vec::new();
+    let mut inside = vec![Vec::new(); groups.len()];
+    for (i, itf) in model.interfaces.iter().enumerate() {
+        let (ga, gb) = (process[itf.a], process[itf.b]);
+        if ga == gb {
+            inside[ga].push(i);
+        } else {
+            between.push(i);
+        }
+    }
+    let mut owned = Vec::new();
+    let mut hosts = Vec::new();
+    if !between.is_empty() {
+        owned.push(between);
+        hosts.push(None);
+    }
+    for (g, interfaces) in inside.into_iter().enumerate() {
+        if !interfaces.is_empty() {
+            owned.push(interfaces);
+            hosts.push(Some(g));
+        }
+    }
+    (owned, hosts)
 }
 
 /// Which nodes one process hosts.
@@ -261,6 +316,7 @@ mod tests {
             linear_stage: LinearStage::Condensed,
             pgd: PgdParams::default(),
             interface_groups: Vec::new(),
+            interface_hosts: Vec::new(),
         }
     }
 
@@ -283,5 +339,51 @@ mod tests {
         assert_eq!(sizes(3, 5), [1, 1, 1]);
         assert_eq!(sizes(4, 0), [4]);
         assert!(sizes(0, 3).is_empty());
+    }
+
+    /// `interfaces_with_subdomains` on the small three-layer scene: node 0 owns exactly the
+    /// interfaces between subdomains of different processes and runs where interface nodes run
+    /// otherwise; each other node owns the interfaces inside one process and runs in it; every
+    /// interface has one owner. With one process every interface is inside it (its node is node 0);
+    /// with a process per subdomain every interface is between two (node 0 alone).
+    #[test]
+    fn interfaces_follow_their_subdomains() {
+        let text = include_str!("../../../launch/scenes/small-three-layer.toml");
+        for processes in [1, 2, 3, 6] {
+            let text = text.replace(
+                "[deployment]\nsubdomain_nodes = 2\n",
+                &format!("[deployment]\nsubdomain_nodes = {processes}\ninterfaces_with_subdomains = true\n"),
+            );
+            let scene = glissade_scene::load_str(&text, "small.toml").unwrap();
+            let model = &scene.model;
+            let plan = Plan::new(model).with_scene(&scene);
+            let groups = plan.groups(processes);
+            let process_of = |s: usize| groups.iter().position(|g| g.contains(&(s as u32))).unwrap();
+            let (owned, hosts) = (&plan.interface_groups, &plan.interface_hosts);
+            println!("{processes} process(es): {owned:?} hosted by {hosts:?}");
+            assert_eq!(owned.len(), hosts.len());
+            let mut all: Vec<usize> = owned.concat();
+            all.sort_unstable();
+            assert_eq!(all, (0..model.interfaces.len()).collect::<Vec<_>>(), "a partition");
+            for (k, (interfaces, host)) in owned.iter().zip(hosts).enumerate() {
+                assert!(!interfaces.is_empty());
+                for &i in interfaces {
+                    let (pa, pb) = (process_of(model.interfaces[i].a), process_of(model.interfaces[i].b));
+                    match host {
+                        Some(g) => assert_eq!((pa, pb), (*g, *g), "node {k}, interface {i}"),
+                        None => assert!(k == 0 && pa != pb, "node {k}, interface {i}"),
+                    }
+                }
+                assert_eq!(
+                    plan.interface_nodes_in(host.unwrap_or(usize::MAX)).contains(&k),
+                    host.is_some()
+                );
+            }
+            match processes {
+                1 => assert_eq!(hosts, &[Some(0)]),
+                6 => assert_eq!(hosts, &[None]),
+                _ => assert_eq!(hosts[0], None, "interfaces between processes"),
+            }
+        }
     }
 }

@@ -4,7 +4,9 @@
 //! stop it publishes every interface's s and ŝ.
 //!
 //! A run may have several interface nodes, each owning a set of interfaces (the scene's
-//! deployment): each runs the local stage of its interfaces and sends q̂ for their rows only.
+//! deployment): each runs the local stage of its interfaces, receives from a subdomain whose
+//! interfaces belong to several nodes only the rows of its own (`StateRows`), and sends q̂ for
+//! their rows only.
 //! Node 0 decides: the others send it their per-interface indicator sums (`IndicatorPartials`),
 //! it adds every interface's in interface order (the additions of a one-node run, so the
 //! decision is bit for bit the same), applies the stop rule and publishes the `Decision` the
@@ -76,6 +78,8 @@ pub struct InterfaceNode {
     position: Vec<Option<usize>>,
     /// Subdomains with a side on an owned interface.
     participants: Vec<u32>,
+    /// Per subdomain, the boundary-state rows it sends this node (None: not a participant).
+    state_rows: Vec<Option<StateRows>>,
     locals: Vec<InterfaceLocal>,
     fields: Vec<InterfaceFields>,
     /// Per owned interface followed by the error estimate (contact interfaces; every interface
@@ -96,6 +100,18 @@ pub struct InterfaceNode {
     solutions_left: std::ops::Range<usize>,
     /// Buffers of the fields this node sent, back from the bus ([`Node::recycle`](glissade_bus::Node::recycle)).
     pool: FieldPool,
+}
+
+/// The rows of a subdomain's `BoundaryState` this node receives: its whole boundary (`to` None),
+/// or, when the subdomain's interfaces belong to several interface nodes, the rows of this node's
+/// interfaces only (`to` this node's index).
+struct StateRows {
+    to: Option<u32>,
+    interfaces: Vec<u32>,
+    /// Per slot of the subdomain's boundary layout, its first row in the message (slots of
+    /// other nodes' interfaces: not read).
+    at: Vec<usize>,
+    rows: usize,
 }
 
 /// A PGD subdomain's mode form as this node holds it, and its last state expanded.

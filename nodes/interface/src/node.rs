@@ -1,7 +1,7 @@
 //! Building the node, the `Node` implementation (subscriptions and message handling), the
 //! boundary states it stores (in full or in mode form) and the final solutions it publishes.
 
-use crate::{Decider, InterfaceNode, ModeReceiver, StopRule};
+use crate::{Decider, InterfaceNode, ModeReceiver, StateRows, StopRule};
 use faer::{Mat, MatRef};
 use glissade_bus::convert::{view, FieldPool};
 use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
@@ -10,6 +10,7 @@ use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::local::{force_step_sums, InterfaceFields, InterfaceLocal};
 use glissade_mechanics::model::{Acceleration, Model};
 use glissade_mechanics::modes::ModeForm;
+use glissade_messages::topic::sender_field_topic;
 use glissade_messages::{role_field_topic, InterfaceSolution, Message, NodeId, Payload, Role, Stage};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -58,6 +59,42 @@ impl InterfaceNode {
                 .collect()
         };
         let participants = with_slot(&|i| position[i].is_some());
+        // A subdomain whose interfaces belong to several nodes sends each the rows of its own
+        // (the owner of an interface: the group that holds it, as the subdomain reckons).
+        let owner = |i: usize| groups.iter().position(|g| g.contains(&i));
+        let state_rows = layouts
+            .iter()
+            .enumerate()
+            .map(|(s, l)| {
+                let l = l.as_ref()?;
+                if !participants.contains(&(s as u32)) {
+                    return None;
+                }
+                let owners: BTreeSet<Option<usize>> = l.slots.iter().map(|sl| owner(sl.interface)).collect();
+                if owners.len() <= 1 || owners.contains(&None) {
+                    return Some(StateRows {
+                        to: None,
+                        interfaces: l.slots.iter().map(|sl| sl.interface as u32).collect(),
+                        at: l.slots.iter().map(|sl| sl.offset).collect(),
+                        rows: l.len(),
+                    });
+                }
+                let (mut at, mut interfaces, mut rows) = (Vec::new(), Vec::new(), 0);
+                for sl in &l.slots {
+                    at.push(rows);
+                    if owner(sl.interface) == Some(index) {
+                        interfaces.push(sl.interface as u32);
+                        rows += 2 * sl.n_pairs;
+                    }
+                }
+                Some(StateRows {
+                    to: Some(index as u32),
+                    interfaces,
+                    at,
+                    rows,
+                })
+            })
+            .collect();
         let decider = (index == 0).then(|| Decider {
             rule: StopRule::new(&model.solver),
             n_nodes: groups.len() as u32,
@@ -110,6 +147,7 @@ impl InterfaceNode {
             owned,
             position,
             participants,
+            state_rows,
             locals,
             fields,
             steps,
@@ -182,20 +220,24 @@ impl InterfaceNode {
     /// thread and the forces on another (the other nodes wait for the local stage).
     /// The step of the forces since the previous iteration is summed on the way, on the
     /// interfaces the error estimate follows ([`force_step_sums`]).
-    fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
+    /// `whole`: W and F span the subdomain's whole boundary (mode form, or a state for every
+    /// node); otherwise they hold the rows of [`StateRows`].
+    fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>, whole: bool) {
         let layout = self.layouts[s as usize]
             .as_ref()
             .expect("handle refuses a subdomain without a boundary layout");
-        for slot in &layout.slots {
+        let rows = self.state_rows[s as usize].as_ref().filter(|_| !whole);
+        for (k, slot) in layout.slots.iter().enumerate() {
             if let Some(p) = self.position[slot.interface] {
+                let at = rows.map_or(slot.offset, |r| r.at[k]);
                 let (to_w, to_f) = self.fields[p].side_mut(slot.side);
                 let rows = to_w.nrows();
-                let new_f = f.subrows(slot.offset, rows);
+                let new_f = f.subrows(at, rows);
                 let step = &mut self.steps[p];
                 let pair_weights = &self.model.interfaces[slot.interface].weights;
                 let time_weights = &self.time_weights;
                 rayon::join(
-                    || to_w.copy_from(w.subrows(slot.offset, rows)),
+                    || to_w.copy_from(w.subrows(at, rows)),
                     || {
                         if let Some((num, den)) = step {
                             let (n, d) = force_step_sums(pair_weights, time_weights, to_f.as_ref(), new_f);
@@ -207,6 +249,22 @@ impl InterfaceNode {
                 );
             }
         }
+    }
+
+    /// The row of subdomain `s`'s boundary layout that row `r` of the rows it sends this node
+    /// ([`StateRows`]) is.
+    fn layout_row(&self, s: u32, r: usize) -> usize {
+        let layout = self.layouts[s as usize].as_ref().expect("a participant has a layout");
+        let rows = self.state_rows[s as usize]
+            .as_ref()
+            .expect("a participant has its state rows");
+        layout
+            .slots
+            .iter()
+            .enumerate()
+            .filter(|(_, sl)| self.position[sl.interface].is_some())
+            .find(|&(k, sl)| r >= rows.at[k] && r < rows.at[k] + 2 * sl.n_pairs)
+            .map_or(r, |(k, sl)| sl.offset + r - rows.at[k])
     }
 
     /// Where a non-finite value of subdomain `s`'s W or F sits, for the divergence diagnosis.
@@ -299,10 +357,33 @@ impl Node for InterfaceNode {
 
     fn subscriptions(&self) -> Vec<String> {
         let run = &self.ctx.run_id;
-        let mut subs = vec![
-            role_field_topic(run, Role::Subdomain, "boundary_state", None),
-            role_field_topic(run, Role::Subdomain, "boundary_modes", None),
-        ];
+        let fields = ["boundary_state", "boundary_modes"];
+        let with_boundary = self.layouts.iter().filter(|l| l.is_some()).count();
+        let whole = self.state_rows.iter().flatten().all(|r| r.to.is_none());
+        let mut subs: Vec<String> = if self.participants.len() == with_boundary && whole {
+            fields
+                .iter()
+                .map(|field| role_field_topic(run, Role::Subdomain, field, None))
+                .collect()
+        } else {
+            // The states of the subdomains on its interfaces only, and of each only its rows for
+            // this node: the others would cross the network to be dropped.
+            self.participants
+                .iter()
+                .flat_map(|&s| {
+                    let sender = NodeId {
+                        role: Role::Subdomain,
+                        index: s,
+                    };
+                    let state = sender_field_topic(run, sender, "boundary_state");
+                    let state = match self.state_rows[s as usize].as_ref().and_then(|r| r.to) {
+                        Some(k) => format!("{state}/{k}"),
+                        None => state,
+                    };
+                    [state, sender_field_topic(run, sender, "boundary_modes")]
+                })
+                .collect()
+        };
         match &self.decider {
             Some(d) => {
                 if d.n_nodes > 1 {
@@ -325,7 +406,7 @@ impl Node for InterfaceNode {
         if self.finished {
             return Ok(Vec::new());
         }
-        let (s, w, f) = match &msg.payload {
+        let (s, state) = match &msg.payload {
             Payload::AndersonGram {
                 subdomain,
                 gram,
@@ -336,8 +417,14 @@ impl Node for InterfaceNode {
                 return self.indicator_partials(msg, interfaces, diverged)
             }
             Payload::Decision(d) => return self.decision(msg, d),
-            Payload::BoundaryState { subdomain, w, f } => (*subdomain, Some(w), Some(f)),
-            Payload::BoundaryModes { subdomain, .. } => (*subdomain, None, None),
+            Payload::BoundaryState {
+                subdomain,
+                to,
+                interfaces,
+                w,
+                f,
+            } => (*subdomain, Some((to, interfaces, w, f))),
+            Payload::BoundaryModes { subdomain, .. } => (*subdomain, None),
             _ => return Err(self.not_taken(msg)),
         };
         if self.layouts.get(s as usize).is_none_or(Option::is_none) {
@@ -373,24 +460,39 @@ impl Node for InterfaceNode {
             // This iteration already diverged here: the decision is on its way.
             return Ok(Vec::new());
         }
-        if let (Some(w), Some(f)) = (w, f) {
-            let n_b = self.layouts[s as usize]
+        if let Some((to, interfaces, w, f)) = state {
+            let expected = self.state_rows[s as usize]
                 .as_ref()
-                .expect("handle refuses a subdomain without a boundary layout")
-                .len();
+                .expect("a participant has its state rows");
+            if *to != expected.to || *interfaces != expected.interfaces {
+                let name =
+                    |to: &Option<u32>| to.map_or("every interface node".to_string(), |k| format!("interface:{k}"));
+                return Err(NodeError::rejected(
+                    self.id,
+                    format!(
+                        "boundary state of subdomain {s} for {} over interfaces {interfaces:?}; this node takes the \
+                         rows of {:?} for {}",
+                        name(to),
+                        expected.interfaces,
+                        name(&expected.to)
+                    ),
+                ));
+            }
+            let (rows, whole) = (expected.rows, expected.to.is_none());
             let nt = self.model.time.n_points();
-            expect_shape(self.id, "w", w, n_b, nt)?;
-            expect_shape(self.id, "f", f, n_b, nt)?;
+            expect_shape(self.id, "w", w, rows, nt)?;
+            expect_shape(self.id, "f", f, rows, nt)?;
             self.received.insert(s);
             // Both fields checked on two threads; W's non-finite value is named first.
             let (bad_w, bad_f) = rayon::join(|| w.first_non_finite(), || f.first_non_finite());
             for (name, bad) in [("W", bad_w), ("F", bad_f)] {
-                if let Some(at) = bad {
-                    let detail = self.non_finite_detail(s, name, at);
+                if let Some((r, c, v)) = bad {
+                    let r = if whole { r } else { self.layout_row(s, r) };
+                    let detail = self.non_finite_detail(s, name, (r, c, v));
                     return Ok(self.report(Vec::new(), Some(detail)));
                 }
             }
-            self.store(s, view(w), view(f));
+            self.store(s, view(w), view(f), whole);
         } else {
             let receiver = self.take_modes(s, &msg.payload)?;
             self.received.insert(s);
@@ -402,7 +504,7 @@ impl Node for InterfaceNode {
                 self.modes[s as usize] = Some(receiver);
                 return Ok(self.report(Vec::new(), Some(detail)));
             }
-            self.store(s, receiver.w.as_ref(), receiver.f.as_ref());
+            self.store(s, receiver.w.as_ref(), receiver.f.as_ref(), true);
             self.modes[s as usize] = Some(receiver);
         }
         if self.received.len() == self.participants.len() {

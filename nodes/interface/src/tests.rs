@@ -162,9 +162,70 @@ fn states(model: &Model, ctx: &RunContext, k0: &[f64]) -> Vec<Message> {
                 role: Role::Subdomain,
                 index: s,
             };
-            message(ctx, sender, 0, Payload::BoundaryState { subdomain: s, w, f })
+            let layout = BoundaryLayout::new(model, s as usize, k0);
+            let interfaces = layout.slots.iter().map(|sl| sl.interface as u32).collect();
+            let state = Payload::BoundaryState {
+                subdomain: s,
+                to: None,
+                interfaces,
+                w,
+                f,
+            };
+            message(ctx, sender, 0, state)
         })
         .collect()
+}
+
+/// A whole boundary state cut as its subdomain sends it in a deployment whose interface nodes
+/// own `groups`: whole when one node owns its interfaces, else to each owner (ascending) the
+/// rows of its own interfaces, in layout order.
+fn cut(model: &Model, k0: &[f64], groups: &[Vec<usize>], m: &Message) -> Vec<Message> {
+    let Payload::BoundaryState { subdomain, w, f, .. } = &m.payload else {
+        panic!("a boundary state")
+    };
+    let layout = BoundaryLayout::new(model, *subdomain as usize, k0);
+    let owner = |i: usize| groups.iter().position(|g| g.contains(&i)).unwrap() as u32;
+    let mut owners: Vec<u32> = layout.slots.iter().map(|sl| owner(sl.interface)).collect();
+    owners.sort_unstable();
+    owners.dedup();
+    if owners.len() == 1 {
+        return vec![m.clone()];
+    }
+    owners
+        .into_iter()
+        .map(|to| {
+            let mine: Vec<_> = layout.slots.iter().filter(|sl| owner(sl.interface) == to).collect();
+            let rows: Vec<usize> = mine
+                .iter()
+                .flat_map(|sl| sl.offset..sl.offset + 2 * sl.n_pairs)
+                .collect();
+            let pick = |x: &Field| Field::from_fn(rows.len(), x.cols(), |r, c| x.data[c * x.rows() + rows[r]]);
+            Message {
+                envelope: m.envelope.clone(),
+                payload: Payload::BoundaryState {
+                    subdomain: *subdomain,
+                    to: Some(to),
+                    interfaces: mine.iter().map(|sl| sl.interface as u32).collect(),
+                    w: pick(w),
+                    f: pick(f),
+                },
+            }
+        })
+        .collect()
+}
+
+/// What `node` answers to `m`, if it subscribes to its key (as the bus delivers it).
+fn deliver(node: &mut InterfaceNode, m: &Message) -> Vec<Message> {
+    let key = m.topic();
+    if node
+        .subscriptions()
+        .iter()
+        .any(|s| glissade_messages::key_matches(s, &key))
+    {
+        node.handle(m).unwrap()
+    } else {
+        Vec::new()
+    }
 }
 
 #[test]
@@ -177,11 +238,43 @@ fn two_interface_nodes_decide_as_one() {
     let mut n0 = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0);
     let mut n1 = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 1);
     assert_eq!((n0.participants(), n1.participants()), (&[1, 2][..], &[0, 1][..]));
+    let groups_of_one = [vec![0, 1]];
     let (mut single, mut from0, mut from1) = (Vec::new(), Vec::new(), Vec::new());
+    let mut parts = Vec::new();
     for m in states(&model, &ctx, &k0) {
-        single.extend(one.handle(&m).unwrap());
-        from0.extend(n0.handle(&m).unwrap());
-        from1.extend(n1.handle(&m).unwrap());
+        assert_eq!(
+            cut(&model, &k0, &groups_of_one, &m),
+            std::slice::from_ref(&m),
+            "one node: whole states"
+        );
+        single.extend(deliver(&mut one, &m));
+        parts.extend(cut(&model, &k0, &groups, &m));
+    }
+    // Subdomains 0 and 2 have one interface each, subdomain 1 one of each node: its state comes
+    // in two parts, to each node the rows of its own interface on its own key.
+    let keys: Vec<String> = parts.iter().map(|m| m.topic()).collect();
+    assert_eq!(
+        keys,
+        [
+            "glissade/r/subdomain/0/boundary_state",
+            "glissade/r/subdomain/1/boundary_state/0",
+            "glissade/r/subdomain/1/boundary_state/1",
+            "glissade/r/subdomain/2/boundary_state"
+        ]
+    );
+    // A part for the other node is refused, naming both.
+    let err = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0)
+        .handle(&parts[2])
+        .unwrap_err();
+    assert!(
+        err.detail.contains(
+            "boundary state of subdomain 1 for interface:1 over interfaces [0]; this node takes the rows of [1] for interface:0"
+        ),
+        "{err}"
+    );
+    for m in &parts {
+        from0.extend(deliver(&mut n0, m));
+        from1.extend(deliver(&mut n1, m));
     }
     assert!(from0.is_empty(), "node 0 waits for node 1's indicators");
     let [partials] = &from1[..] else {
@@ -197,8 +290,8 @@ fn two_interface_nodes_decide_as_one() {
         interfaces[0].interface = 1;
     }
     let mut n0_copy = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0);
-    for m in states(&model, &ctx, &k0) {
-        n0_copy.handle(&m).unwrap();
+    for m in &parts {
+        deliver(&mut n0_copy, m);
     }
     let err = n0_copy.handle(&wrong).unwrap_err();
     assert!(
@@ -335,6 +428,8 @@ fn nan_stops_the_run_and_names_where() {
         },
         payload: Payload::BoundaryState {
             subdomain: 1,
+            to: None,
+            interfaces: vec![0],
             w,
             f: Field::zeros(n_b, 3),
         },
@@ -388,6 +483,12 @@ fn mode_form_states_give_the_full_fields() {
             0,
             Payload::BoundaryState {
                 subdomain: s,
+                to: None,
+                interfaces: BoundaryLayout::new(&model, s as usize, &k0)
+                    .slots
+                    .iter()
+                    .map(|sl| sl.interface as u32)
+                    .collect(),
                 w: field_of(w.as_ref()),
                 f: field_of(f.as_ref()),
             },

@@ -63,6 +63,8 @@ fn iteration_of(n: u32, rows: usize) -> Vec<Message> {
             sub(s),
             Payload::BoundaryState {
                 subdomain: s,
+                to: None,
+                interfaces: vec![0],
                 w: Field::from_fn(rows, 3, |r, c| {
                     (n * 100 + s * 10) as f64 + r as f64 * 0.1 + c as f64 * 1e-3
                 }),

@@ -1,33 +1,70 @@
-//! Full boundary fields from a run's messages: a `BoundaryState` as it was sent, a PGD
-//! subdomain's `BoundaryModes` expanded from the mode form its earlier messages built
-//! ([`ModeForm`], the same expansion the interface node makes).
+//! Full boundary fields from a run's messages: a `BoundaryState` of the whole boundary as it was
+//! sent, the rows a subdomain sent to several interface nodes put together, a PGD subdomain's
+//! `BoundaryModes` expanded from the mode form its earlier messages built ([`ModeForm`], the
+//! same expansion the interface node makes).
 
 use faer::Mat;
+use glissade_mechanics::condensed::BoundaryLayout;
+use glissade_mechanics::model::Model;
 use glissade_mechanics::modes::ModeForm;
 use glissade_messages::{Field, Payload};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 
-/// The mode forms of the PGD subdomains seen so far.
-#[derive(Default)]
+/// The boundary layouts of a model's subdomains, the mode forms of the PGD subdomains seen so
+/// far, and the states of subdomains whose rows came in part.
 pub struct BoundaryStates {
+    /// Per subdomain, its slots: (interface, first row, rows).
+    slots: Vec<Vec<(u32, usize, usize)>>,
     forms: BTreeMap<u32, ModeForm>,
+    /// Per subdomain whose state came in parts: W, F and which of its slots arrived.
+    parts: BTreeMap<u32, (Field, Field, Vec<bool>)>,
 }
 
 /// A subdomain's boundary state: (subdomain, W, F), each n_b × (N+1).
 pub type State<'a> = (u32, Cow<'a, Field>, Cow<'a, Field>);
 
 impl BoundaryStates {
-    pub fn new() -> Self {
-        Self::default()
+    /// For the states of a run of `model`.
+    pub fn new(model: &Model) -> Self {
+        let k = vec![1.0; model.interfaces.len()];
+        let slots = (0..model.subdomains.len())
+            .map(|s| {
+                BoundaryLayout::new(model, s, &k)
+                    .slots
+                    .iter()
+                    .map(|sl| (sl.interface as u32, sl.offset, 2 * sl.n_pairs))
+                    .collect()
+            })
+            .collect();
+        Self {
+            slots,
+            forms: BTreeMap::new(),
+            parts: BTreeMap::new(),
+        }
     }
 
-    /// The subdomain and full (W, F) of a boundary-state message, None for other payloads, or why
-    /// a mode-form message cannot be expanded (no particular part before it, sizes that do not fit
-    /// the held modes). Messages must come in the order the subdomain sent them.
+    /// The subdomain and full (W, F) of a boundary-state message, None for other payloads and
+    /// for a part of a state whose other parts are still to come, or why a message cannot be
+    /// taken (a part that does not fit the subdomain's boundary, a mode-form message without a
+    /// particular part before it or with sizes that do not fit the held modes). Messages must
+    /// come in the order the subdomain sent them.
     pub fn fields<'a>(&mut self, payload: &'a Payload) -> Option<Result<State<'a>, String>> {
         match payload {
-            Payload::BoundaryState { subdomain, w, f } => Some(Ok((*subdomain, Cow::Borrowed(w), Cow::Borrowed(f)))),
+            Payload::BoundaryState {
+                subdomain,
+                to: None,
+                w,
+                f,
+                ..
+            } => Some(Ok((*subdomain, Cow::Borrowed(w), Cow::Borrowed(f)))),
+            Payload::BoundaryState {
+                subdomain,
+                interfaces,
+                w,
+                f,
+                ..
+            } => self.part(*subdomain, interfaces, w, f).transpose(),
             Payload::BoundaryModes {
                 subdomain,
                 particular,
@@ -38,6 +75,58 @@ impl BoundaryStates {
             } => Some(self.expand(*subdomain, particular.as_ref(), *first_mode as usize, z, g, lambda)),
             _ => None,
         }
+    }
+
+    /// Puts the rows of `interfaces` into subdomain `s`'s state; the state once every slot came.
+    fn part<'a>(&mut self, s: u32, interfaces: &[u32], w: &Field, f: &Field) -> Result<Option<State<'a>>, String> {
+        let at = |e: String| format!("boundary state of subdomain {s}: {e}");
+        let slots = self
+            .slots
+            .get(s as usize)
+            .ok_or_else(|| at("no such subdomain".into()))?;
+        let n_b: usize = slots.iter().map(|&(_, _, n)| n).sum();
+        let nt = w.cols();
+        let mut picked = Vec::with_capacity(interfaces.len());
+        for &i in interfaces {
+            let k = slots
+                .iter()
+                .position(|&(j, _, _)| j == i)
+                .ok_or_else(|| at(format!("interface {i} is not on its boundary")))?;
+            picked.push(k);
+        }
+        let rows: usize = picked.iter().map(|&k| slots[k].2).sum();
+        if (w.rows(), f.rows(), f.cols()) != (rows, rows, nt) {
+            return Err(at(format!(
+                "W of {} × {nt} and F of {} × {} for interfaces {interfaces:?}, of {rows} rows",
+                w.rows(),
+                f.rows(),
+                f.cols()
+            )));
+        }
+        let (full_w, full_f, seen) = self
+            .parts
+            .entry(s)
+            .or_insert_with(|| (Field::zeros(n_b, nt), Field::zeros(n_b, nt), vec![false; slots.len()]));
+        if full_w.cols() != nt {
+            return Err(at(format!("parts of {} and {nt} time points", full_w.cols())));
+        }
+        let (to_w, to_f) = (full_w.data.vec_mut(), full_f.data.vec_mut());
+        let mut r0 = 0;
+        for &k in &picked {
+            let (_, offset, n) = slots[k];
+            for c in 0..nt {
+                let (from, to) = (c * rows + r0, c * n_b + offset);
+                to_w[to..to + n].copy_from_slice(&w.data[from..from + n]);
+                to_f[to..to + n].copy_from_slice(&f.data[from..from + n]);
+            }
+            seen[k] = true;
+            r0 += n;
+        }
+        if !seen.iter().all(|&b| b) {
+            return Ok(None);
+        }
+        let (w, f, _) = self.parts.remove(&s).expect("held just above");
+        Ok(Some((s, Cow::Owned(w), Cow::Owned(f))))
     }
 
     fn expand<'a>(

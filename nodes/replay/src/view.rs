@@ -115,6 +115,7 @@ impl View {
         } else {
             None
         };
+        let states = BoundaryStates::new(&model);
         Ok(Self {
             rec,
             errors,
@@ -127,7 +128,7 @@ impl View {
             frame,
             pending: BTreeMap::new(),
             last_states: BTreeMap::new(),
-            states: BoundaryStates::new(),
+            states,
             interfaces: Vec::new(),
             displacements: BTreeMap::new(),
             last_iteration: 0,

@@ -106,7 +106,7 @@ pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
     let mut displacements = BTreeMap::new();
     let mut last_states = BTreeMap::new();
     let mut first_w = None;
-    let mut states = BoundaryStates::new();
+    let mut states = BoundaryStates::new(&model);
     let mut skipped = Skipped::default();
     for (_, m, msg) in run_messages(recording, &mut skipped) {
         if let Some(state) = states.fields(&msg.payload) {

@@ -53,7 +53,8 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
     let iterations = 3;
     for n in 0..iterations {
         for s in 0..model.subdomains.len() {
-            let n_b = BoundaryLayout::new(model, s, &k0).len();
+            let layout = BoundaryLayout::new(model, s, &k0);
+            let n_b = layout.len();
             // A boundary displacement growing with time and iteration, and a traction.
             let w = Field::from_fn(n_b, nt, |r, i| {
                 1e-3 * (r % 2) as f64 * i as f64 / nt as f64 * (n + 1) as f64
@@ -63,6 +64,8 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
                 envelope: envelope(n, Stage::Linear, Role::Subdomain, s as u32),
                 payload: Payload::BoundaryState {
                     subdomain: s as u32,
+                    to: None,
+                    interfaces: layout.slots.iter().map(|sl| sl.interface as u32).collect(),
                     w,
                     f,
                 },

@@ -213,6 +213,7 @@ pub(crate) struct RawDeployment {
     pub(crate) interface_groups: Option<Vec<Vec<RawInterfaceRef>>>,
     pub(crate) restarts: Option<usize>,
     pub(crate) interfaces_in_launcher: Option<bool>,
+    pub(crate) interfaces_with_subdomains: Option<bool>,
     pub(crate) memory_limit_gb: Option<f64>,
 }
 

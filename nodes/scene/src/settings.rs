@@ -76,6 +76,12 @@ pub struct Deployment {
     /// when no node restarts are possible and they are not started by hand: fields between them
     /// and the subdomain processes then cross one socket instead of two.
     pub interfaces_in_launcher: bool,
+    /// Each subdomain process also runs the local stage of the interfaces between its own
+    /// subdomains (an interface node of its own); the interfaces between subdomains of different
+    /// processes belong to interface node 0. Fields of the interfaces inside a process then never
+    /// leave it. Set with neither `interface_nodes` nor `interface_groups` (the deployment's plan
+    /// makes the groups).
+    pub interfaces_with_subdomains: bool,
 }
 
 impl Default for Deployment {
@@ -86,6 +92,7 @@ impl Default for Deployment {
             interface_groups: None,
             restarts: 3,
             interfaces_in_launcher: true,
+            interfaces_with_subdomains: false,
         }
     }
 }

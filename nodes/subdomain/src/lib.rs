@@ -3,7 +3,9 @@
 //! Setup: builds A_E and sends L_E (when the coarse problem is on), then runs the first linear
 //! stage from ŝ = 0. Each iteration: `LocalDirections` (q̂, from every interface node owning one
 //! of its interfaces) → micro problem 1 → `MacroForces`;
-//! `MacroDisplacements` (w̃) → micro problem 2, relaxation → `BoundaryState` (s = (W, F)). Without
+//! `MacroDisplacements` (w̃) → micro problem 2, relaxation → `BoundaryState` (s = (W, F); when its
+//! interfaces belong to several interface nodes, one message per node with the rows of that
+//! node's interfaces, on a key of its own). Without
 //! the coarse problem micro 2 is skipped (w̃ = 0). A stop `Decision` ends the node, after sending
 //! the full displacement field when asked.
 //!
@@ -75,6 +77,13 @@ enum Phase {
     Step,
 }
 
+/// The rows of the state one interface node receives ([`SubdomainNode::state_parts`]).
+struct StatePart {
+    to: u32,
+    interfaces: Vec<u32>,
+    rows: Vec<(usize, usize)>,
+}
+
 pub struct SubdomainNode {
     id: NodeId,
     ctx: RunContext,
@@ -104,6 +113,10 @@ pub struct SubdomainNode {
     /// Per boundary slot, the index of the interface node that owns its interface (None: any
     /// interface node is taken).
     owners: Option<Vec<u32>>,
+    /// When its interfaces belong to several interface nodes: per node (ascending), its index,
+    /// its interfaces and their rows (offset, count) in the boundary layout. Each gets only
+    /// those rows of the state. Empty: the whole state, to every node.
+    state_parts: Vec<StatePart>,
     /// Buffers of the fields this node sent, back from the bus ([`glissade_bus::Node::recycle`]).
     pool: FieldPool,
     /// Iteration 0 has run (at once from ŝ = 0, or with a time-coarse start once the launcher's
@@ -141,6 +154,7 @@ impl SubdomainNode {
             fields_stale: false,
             stats: LinearStageStats::default(),
             owners: None,
+            state_parts: Vec::new(),
             pool: FieldPool::default(),
             started: false,
         }
@@ -158,6 +172,26 @@ impl SubdomainNode {
             .iter()
             .map(|sl| owner(sl.interface))
             .collect::<Option<Vec<u32>>>();
+        let slots = &self.solver.op.layout.slots;
+        let mut nodes: Vec<u32> = self.owners.clone().unwrap_or_default();
+        nodes.sort_unstable();
+        nodes.dedup();
+        self.state_parts = if nodes.len() > 1 {
+            let owners = self.owners.as_ref().expect("several owners");
+            nodes
+                .into_iter()
+                .map(|to| {
+                    let mine = (0..slots.len()).filter(|&k| owners[k] == to);
+                    StatePart {
+                        to,
+                        interfaces: mine.clone().map(|k| slots[k].interface as u32).collect(),
+                        rows: mine.map(|k| (slots[k].offset, 2 * slots[k].n_pairs)).collect(),
+                    }
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         self
     }
 
@@ -188,6 +222,17 @@ impl SubdomainNode {
         self.particular = Some(particular);
         self.fields.anderson = self.fields.anderson.take().map(|h| h.with_coordinates(n_b));
         self
+    }
+
+    /// The interfaces of this subdomain's boundary, in the order of its layout's slots.
+    fn boundary_interfaces(&self) -> Vec<u32> {
+        self.solver
+            .op
+            .layout
+            .slots
+            .iter()
+            .map(|sl| sl.interface as u32)
+            .collect()
     }
 
     fn subdomain(&self) -> u32 {

@@ -38,14 +38,7 @@ impl SubdomainNode {
         if self.started || msg.envelope.iteration != 0 || msg.envelope.stage != Stage::Local {
             return Err(self.out_of_turn("initial local directions", msg.envelope.iteration));
         }
-        let layout: Vec<u32> = self
-            .solver
-            .op
-            .layout
-            .slots
-            .iter()
-            .map(|sl| sl.interface as u32)
-            .collect();
+        let layout = self.boundary_interfaces();
         if interfaces != layout.as_slice() {
             return Err(NodeError::rejected(
                 self.id,

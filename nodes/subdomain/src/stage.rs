@@ -181,14 +181,45 @@ impl SubdomainNode {
         }
     }
 
-    /// The state s = (W, F), then the stage's counters.
+    /// The state s = (W, F) (to each interface node the rows of its interfaces, when they
+    /// belong to several), then the stage's counters.
     pub(crate) fn boundary_state(&mut self) -> Vec<Message> {
-        let payload = Payload::BoundaryState {
-            subdomain: self.subdomain(),
-            w: self.pool.field_of(self.fields.w.as_ref()),
-            f: self.pool.field_of(self.fields.f.as_ref()),
-        };
-        vec![self.msg(Stage::Linear, payload), self.stats_message()]
+        let subdomain = self.subdomain();
+        let mut out = Vec::with_capacity(self.state_parts.len().max(1) + 1);
+        if self.state_parts.is_empty() {
+            let payload = Payload::BoundaryState {
+                subdomain,
+                to: None,
+                interfaces: self.boundary_interfaces(),
+                w: self.pool.field_of(self.fields.w.as_ref()),
+                f: self.pool.field_of(self.fields.f.as_ref()),
+            };
+            out.push(self.msg(Stage::Linear, payload));
+        } else {
+            let nt = self.fields.w.ncols();
+            for part in &self.state_parts {
+                let n: usize = part.rows.iter().map(|&(_, n)| n).sum();
+                let rows_of = |from: faer::MatRef<'_, f64>, mut to: faer::MatMut<'_, f64>| {
+                    let mut r0 = 0;
+                    for &(offset, n) in &part.rows {
+                        to.as_mut().subrows_mut(r0, n).copy_from(from.subrows(offset, n));
+                        r0 += n;
+                    }
+                };
+                let w = self.pool.field_with(n, nt, |to| rows_of(self.fields.w.as_ref(), to));
+                let f = self.pool.field_with(n, nt, |to| rows_of(self.fields.f.as_ref(), to));
+                let payload = Payload::BoundaryState {
+                    subdomain,
+                    to: Some(part.to),
+                    interfaces: part.interfaces.clone(),
+                    w,
+                    f,
+                };
+                out.push(self.msg(Stage::Linear, payload));
+            }
+        }
+        out.push(self.stats_message());
+        out
     }
 
     /// The counters of this iteration's linear stage, sent once, after its state.

@@ -203,6 +203,8 @@ mod tests {
             envelope: expected.envelope.clone(),
             payload: Payload::BoundaryState {
                 subdomain: 0,
+                to: None,
+                interfaces: vec![0],
                 w: pool.field_of(w),
                 f: pool.field_of(f),
             },

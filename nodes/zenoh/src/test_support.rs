@@ -36,6 +36,8 @@ pub(crate) fn boundary_state(run_id: &str, scene_fingerprint: u64, rows: usize, 
         },
         payload: Payload::BoundaryState {
             subdomain: 0,
+            to: None,
+            interfaces: vec![0],
             w: Field::from_fn(rows, cols, |r, c| (r * cols + c) as f64 * 1e-3),
             f: Field::from_fn(rows, cols, |r, c| -((r + c) as f64)),
         },

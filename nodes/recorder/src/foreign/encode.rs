@@ -235,10 +235,20 @@ pub fn encode_into(m: &Message, out: &mut Vec<u8>) {
             uint(out, 2, *subdomain as u64);
             field(out, 3, w_tilde);
         }
-        Payload::BoundaryState { subdomain, w, f } => {
+        Payload::BoundaryState {
+            subdomain,
+            to,
+            interfaces,
+            w,
+            f,
+        } => {
             uint(out, 2, *subdomain as u64);
             field(out, 3, w);
             field(out, 4, f);
+            varints(out, 5, interfaces.iter().map(|&i| i as u64));
+            if let Some(k) = to {
+                uint(out, 6, *k as u64);
+            }
         }
         Payload::BoundaryModes {
             subdomain,

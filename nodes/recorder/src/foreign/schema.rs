@@ -214,12 +214,26 @@ pub const MESSAGES: &[MessageDef] = &[
     },
     MessageDef {
         name: "BoundaryState",
-        doc: "s = (W, F) of a subdomain's boundary after a linear stage (n_b x (N+1) each).",
+        doc: "s = (W, F) of a subdomain's boundary after a linear stage: the rows of the interfaces \
+              listed, one after the other, x (N+1).",
         fields: &[
             ENVELOPE,
             f("subdomain", 2, Ty::Uint32, SUBDOMAIN),
             f("w", 3, FIELD, "boundary displacements W (mm)"),
             f("f", 4, FIELD, "boundary forces F"),
+            rep(
+                "interfaces",
+                5,
+                Ty::Uint32,
+                "interfaces whose rows W and F hold, in the order of the subdomain's boundary layout",
+            ),
+            opt(
+                "to",
+                6,
+                Ty::Uint32,
+                "the interface node the rows are for, when the subdomain's interfaces belong to several \
+                 (absent: the whole boundary, for every interface node)",
+            ),
         ],
     },
     MessageDef {

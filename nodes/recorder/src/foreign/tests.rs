@@ -104,6 +104,15 @@ fn samples() -> Vec<Message> {
         },
         Payload::BoundaryState {
             subdomain: 4,
+            to: None,
+            interfaces: vec![0, 3],
+            w: field(6, 3, 1e-3),
+            f: field(6, 3, -7.0),
+        },
+        Payload::BoundaryState {
+            subdomain: 4,
+            to: Some(2),
+            interfaces: vec![3],
             w: field(6, 3, 1e-3),
             f: field(6, 3, -7.0),
         },
@@ -344,6 +353,8 @@ fn from_proto(m: &DynamicMessage) -> Message {
         },
         "BoundaryState" => Payload::BoundaryState {
             subdomain: u32_(m, "subdomain"),
+            to: m.has_field_by_name("to").then(|| u32_(m, "to")),
+            interfaces: u32s("interfaces"),
             w: field_of(m, "w"),
             f: field_of(m, "f"),
         },
@@ -523,6 +534,8 @@ fn values_are_carried_bit_for_bit() {
         envelope: envelope(0, Stage::Setup, Role::Subdomain, 0),
         payload: Payload::BoundaryState {
             subdomain: 0,
+            to: None,
+            interfaces: vec![0],
             w: Field {
                 rows: 2,
                 cols: 2,

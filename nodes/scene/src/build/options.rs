@@ -345,7 +345,22 @@ impl Ctx<'_> {
             interface_groups: None,
             restarts: r.restarts.unwrap_or(d.restarts),
             interfaces_in_launcher: r.interfaces_in_launcher.unwrap_or(d.interfaces_in_launcher),
+            interfaces_with_subdomains: r.interfaces_with_subdomains.unwrap_or(d.interfaces_with_subdomains),
         };
+        if dep.interfaces_with_subdomains {
+            let given = [
+                ("interface_nodes", r.interface_nodes.is_some()),
+                ("interface_groups", r.interface_groups.is_some()),
+            ];
+            for (key, set) in given {
+                self.check(!set, "deployment.interfaces_with_subdomains", || {
+                    format!(
+                        "excludes deployment.{key}: the interface nodes follow the subdomain processes (one per \
+                         process for the interfaces inside it, node 0 for the interfaces between processes)"
+                    )
+                })?;
+            }
+        }
         self.check(dep.restarts <= 100, "deployment.restarts", || {
             format!(
                 "{}: at most 100 (a node that keeps dying will not recover)",

@@ -409,6 +409,13 @@ fn interface_nodes_own_balanced_or_assigned_groups() {
             .deployment
             .interfaces_in_launcher
     );
+    assert!(!s.deployment.interfaces_with_subdomains, "off by default");
+    assert!(
+        three_layers("interfaces_with_subdomains = true")
+            .unwrap()
+            .deployment
+            .interfaces_with_subdomains
+    );
     // 49 pairs over 3 nodes: cuts nearest to 16.3 and 32.7 pairs (13 and 35).
     let s = three_layers("interface_nodes = 3").unwrap();
     assert_eq!(s.deployment.interface_groups, None);
@@ -479,6 +486,16 @@ fn rejects_bad_interface_deployments() {
             "interface_groups = [[0, 1, 2], [3, 6]]",
             key,
             "interface(s) 4 (core.1|top.1), 5 (core.2|top.2) are in no group",
+        ),
+        (
+            "interfaces_with_subdomains = true\ninterface_nodes = 2",
+            "deployment.interfaces_with_subdomains",
+            "excludes deployment.interface_nodes: the interface nodes follow the subdomain processes",
+        ),
+        (
+            "interfaces_with_subdomains = true\ninterface_groups = [[0, 1, 2], [3, 4, 5, 6]]",
+            "deployment.interfaces_with_subdomains",
+            "excludes deployment.interface_groups",
         ),
     ];
     for (deployment, k, part) in bad {
