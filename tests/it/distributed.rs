@@ -234,8 +234,10 @@ fn interfaces_with_their_subdomains_match_one_node_bit_for_bit() {
     // Per (subdomain, recipient): the interfaces of its rows and their count; the keys; and every
     // (iteration, subdomain)'s whole state as the replay puts it back together.
     type States = BTreeMap<(u32, u32), (Field, Field)>;
+    type Parts = BTreeMap<(u32, Option<u32>), (Vec<u32>, usize)>;
+    type Bits = Vec<((u32, u32), Vec<u64>, Vec<u64>)>;
     let run_observed = |sc: &glissade_scene::LoadedScene,
-                        parts: &mut BTreeMap<(u32, Option<u32>), (Vec<u32>, usize)>,
+                        parts: &mut Parts,
                         keys: &mut std::collections::BTreeSet<String>|
      -> (RunResult, States) {
         let mut states = glissade_replay::BoundaryStates::new(&sc.model);
@@ -276,7 +278,7 @@ fn interfaces_with_their_subdomains_match_one_node_bit_for_bit() {
     assert_identical(&one, &local);
     // The parts put back together are the whole states, bit for bit, every iteration.
     assert_eq!(local_states.len(), 18 * one.iterations.len());
-    let bits = |states: &States| -> Vec<((u32, u32), Vec<u64>, Vec<u64>)> {
+    let bits = |states: &States| -> Bits {
         let b = |f: &Field| f.data.iter().map(|x| x.to_bits()).collect();
         states.iter().map(|(k, (w, f))| (*k, b(w), b(f))).collect()
     };
