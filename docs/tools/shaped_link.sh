@@ -4,7 +4,8 @@
 # the launcher (its router, the interface and coarse nodes) in one, the three subdomain node
 # processes in the other, started by hand as on a second machine. For each link rate and each
 # linear stage (condensed, PGD), one run of the scene, recording off; prints wall time,
-# iterations and the bytes on the bus per iteration. Needs root (namespaces); every namespace is
+# iterations and the bytes that crossed the link per iteration (both directions, as the veth end
+# in the launcher's namespace counts them, headers included). Needs root (namespaces); every namespace is
 # removed at the end, also on failure.
 #
 #   [DELAYS="none 0 0.1 0.5"] docs/tools/shaped_link.sh [glissade binary] [scene] [rates...]
@@ -61,7 +62,7 @@ tc_bits() {
     esac
 }
 
-echo "| link | added delay each way (ms) | linear stage | iterations | wall time (s) | per iteration (ms) | bus bytes per iteration (MB) |"
+echo "| link | added delay each way (ms) | linear stage | iterations | wall time (s) | per iteration (ms) | link bytes per iteration (MB) |"
 echo "|---|---|---|---:|---:|---:|---:|"
 for rate in ${rates[*]}; do
     # The bucket holds 1 ms at the rate; packets wait at most 100 ms for tokens.
@@ -96,6 +97,11 @@ for rate in ${rates[*]}; do
             grep -q listening "$out/proxy.log" || { echo "the delay proxy did not start:" >&2; cat "$out/proxy.log" >&2; exit 1; }
             connect=tcp/127.0.0.1:17448
         fi
+        link_bytes() {
+            local d=/sys/class/net/$va/statistics
+            ip netns exec "$a" sh -c "echo \$((\$(cat $d/tx_bytes) + \$(cat $d/rx_bytes)))"
+        }
+        bytes0=$(link_bytes)
         start=$(date +%s.%N)
         ip netns exec "$a" "$glissade" run "$sc" --no-record --quiet --verbose --run-id "$run" --out "$out" \
             --listen "$endpoint" --remote subdomain:0,subdomain:1,subdomain:2 >"$out/launcher.log" 2>&1 &
@@ -112,16 +118,17 @@ for rate in ${rates[*]}; do
         wait "$launcher" || { echo "the run failed:" >&2; cat "$out/launcher.log" >&2; exit 1; }
         for n in "${nodes[@]}"; do wait "$n"; done
         end=$(date +%s.%N)
+        bytes=$(($(link_bytes) - bytes0))
         if [[ -n $proxy ]]; then kill "$proxy"; wait "$proxy" 2>/dev/null || true; fi
-        python3 - "$out" "$rate" "$delay" "$stage" "$start" "$end" <<'EOF'
-import glob, json, re, sys
-out, rate, delay, stage, start, end = sys.argv[1:5] + [float(t) for t in sys.argv[5:7]]
+        python3 - "$out" "$rate" "$delay" "$stage" "$start" "$end" "$bytes" <<'EOF'
+import glob, json, sys
+out, rate, delay, stage = sys.argv[1:5]
+start, end, link = (float(t) for t in sys.argv[5:8])
 d = json.load(open(glob.glob(out + "/*.summary.json")[0]))
-log = open(out + "/launcher.log").read()
-per_iteration = sum(int(b) for line in log.splitlines() if "homogenized_operator" not in line
-                    and "interface_solution" not in line for b in re.findall(r"(\d+) bytes per iteration", line))
 n = d["iterations"]
-print(f"| {rate} | {delay} | {stage} | {n} ({d['verdict']}) | {end - start:.1f} | {d['solve_s'] / max(n, 1) * 1e3:.0f} | {per_iteration / 1e6:.1f} |")
+# Everything that crossed the link during the run (set-up, the scene, the final solutions
+# included), per iteration.
+print(f"| {rate} | {delay} | {stage} | {n} ({d['verdict']}) | {end - start:.1f} | {d['solve_s'] / max(n, 1) * 1e3:.0f} | {link / max(n, 1) / 1e6:.1f} |")
 EOF
     done
     done
