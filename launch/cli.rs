@@ -385,4 +385,8 @@ pub(crate) struct GenerateArgs {
     /// Interface node processes of a multi-process run.
     #[arg(long, default_value_t = 1)]
     pub(crate) interface_nodes: usize,
+    /// The interface nodes follow the subdomain processes: each runs the interfaces inside its
+    /// group, interface node 0 those between groups (`[deployment] interfaces_with_subdomains`).
+    #[arg(long, conflicts_with = "interface_nodes")]
+    pub(crate) interfaces_with_subdomains: bool,
 }

@@ -216,6 +216,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 friction: args.friction,
                 subdomain_nodes: args.subdomain_nodes,
                 interface_nodes: args.interface_nodes,
+                interfaces_with_subdomains: args.interfaces_with_subdomains,
             };
             let text = laminate.scene_text()?;
             // Check what was generated as any scene is checked, before writing it; but not

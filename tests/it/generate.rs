@@ -37,9 +37,15 @@ fn the_laminate_at_the_stratified_parameters_is_the_stratified_scene() {
         per_ply: 6,
         elements: 20,
         steps: 1000,
+        interfaces_with_subdomains: true,
         ..Laminate::default()
     };
-    let ours = scene(&generated.scene_text().unwrap());
+    let text = generated.scene_text().unwrap();
+    assert!(
+        text.contains("--subdomain-nodes 3 --interfaces-with-subdomains`"),
+        "{text}"
+    );
+    let ours = scene(&text);
     let stratified = scene(&scene_text("stratified"));
     assert_eq!(ours.model.subdomains.len(), 18);
     assert_eq!(ours.model.interfaces.len(), generated.interfaces());
@@ -47,6 +53,8 @@ fn the_laminate_at_the_stratified_parameters_is_the_stratified_scene() {
         anonymous(&ours) == anonymous(&stratified),
         "the generated model differs from stratified.toml's"
     );
+    // And the same deployment: one process per ply, each with its ply's perfect interfaces.
+    assert_eq!(ours.deployment, stratified.deployment);
 }
 
 #[test]
@@ -86,6 +94,16 @@ fn a_generated_laminate_matches_the_reference_and_runs_alike_as_processes() {
     }
     let local = crate::distributed::in_process_equals_processes(&sc, "generate-processes");
     assert_eq!(local.verdict, Verdict::Converged);
+    // With the interface nodes in the two subdomain processes (groups that do not follow the
+    // plies: a process holds contact interfaces too), the same run bit for bit.
+    let with = Laminate {
+        interfaces_with_subdomains: true,
+        ..laminate
+    };
+    let sc = scene(&with.scene_text().unwrap());
+    assert!(sc.deployment.interfaces_with_subdomains);
+    let split = crate::distributed::in_process_equals_processes(&sc, "generate-processes-with");
+    crate::distributed::assert_identical(&local, &split);
 }
 
 #[test]
@@ -139,6 +157,10 @@ fn generate_writes_a_scene_that_checks_and_never_overwrites() {
                 "2",
             ],
             "interface-nodes = 2: must be at most 0",
+        ),
+        (
+            vec!["--interface-nodes", "2", "--interfaces-with-subdomains"],
+            "the argument '--interface-nodes <INTERFACE_NODES>' cannot be used with '--interfaces-with-subdomains'",
         ),
     ] {
         let bad = dir.join("bad.toml");
