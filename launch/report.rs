@@ -426,7 +426,7 @@ pub fn report_against(
                 bytes[it] += encode(m).len() as u64;
             }
             anderson.observe(m);
-            let state = match states.fields(&m.payload) {
+            let state = match states.fields(m) {
                 Some(Err(e)) => {
                     undecodable.get_or_insert(e);
                     None

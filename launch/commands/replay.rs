@@ -82,6 +82,14 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     if let Some(why) = s.skipped.describe() {
         eprintln!("warning: {}: {why}", args.recording.display());
     }
+    if let Some(&(sub, it)) = s.incomplete_states.first() {
+        eprintln!(
+            "warning: {}: {} boundary state(s) left out, some of their parts not recorded (the first: subdomain {sub} \
+             at iteration {it})",
+            args.recording.display(),
+            s.incomplete_states.len()
+        );
+    }
     let range = s
         .color_range
         .map_or_else(|| "no colour range".to_string(), |r| format!("colour range {r}"));

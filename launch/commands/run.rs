@@ -162,8 +162,9 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 let traffic = outcome.traffic.unwrap_or_default();
                 if traffic.counted == glissade::distributed::Counted::Kept {
                     glissade::console::note(
-                        "bus: only the messages the launcher keeps are counted: through a router outside its process, \
-                         an unrecorded run's fields do not reach it",
+                        "bus: only the messages the launcher keeps are counted: an unrecorded run's fields do not reach \
+                         it (through a router outside its process, or with the interface nodes in the subdomain \
+                         processes)",
                     );
                 }
                 let per = traffic.iterations.max(1) as f64;

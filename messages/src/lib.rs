@@ -45,6 +45,6 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 /// of the contact forces and the error estimate, `InterfaceIndicators` the step's sums. Version 5:
 /// `Scene` carries the command-line [`Overrides`] beside the text (the text is the file as written),
 /// and `LinearStageStats`, a subdomain's counters of its linear stage (flops, PGD basis, ξ).
-/// Version 6: `BoundaryState` names the interfaces whose rows it holds and the interface node it
-/// is for, when a subdomain's interfaces belong to several.
+/// Version 6: `BoundaryState` names the interfaces whose rows it holds and, when the run has
+/// several interface nodes, the one it is for.
 pub const SCHEMA_VERSION: u32 = 6;

@@ -152,9 +152,9 @@ pub enum Payload {
     /// after the other (2 × pairs rows each, in the subdomain's boundary layout), × (N+1).
     BoundaryState {
         subdomain: u32,
-        /// The interface node these rows are for, when the subdomain's interfaces belong to
-        /// several (each then gets the rows of its own; the key ends with its index). None: the
-        /// whole boundary, for every interface node owning one of its interfaces.
+        /// The interface node these rows are for, when the run has several (each owner of one
+        /// of the subdomain's interfaces then gets the rows of those; the key ends with its
+        /// index). None: the whole boundary, for the run's one interface node.
         to: Option<u32>,
         interfaces: Vec<u32>,
         w: Field,
@@ -338,7 +338,9 @@ impl Payload {
         for_each_field!(self, visit, &mut);
     }
 
-    /// Subdomain a payload is addressed to, for payloads with one recipient subdomain.
+    /// The last chunk of a payload's key, for payloads with one recipient: the subdomain of
+    /// `MacroDisplacements` and `LocalDirections`, the interface node of an addressed
+    /// `BoundaryState`.
     pub fn destination(&self) -> Option<u32> {
         match self {
             Payload::MacroDisplacements { subdomain, .. } | Payload::LocalDirections { subdomain, .. } => {

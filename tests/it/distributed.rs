@@ -255,7 +255,7 @@ fn interfaces_with_their_subdomains_match_one_node_bit_for_bit() {
                     parts.insert((*subdomain, *to), (interfaces.clone(), w.rows()));
                     keys.insert(m.topic());
                 }
-                if let Some(state) = states.fields(&m.payload) {
+                if let Some(state) = states.fields(m) {
                     let (s, w, f) = state.expect("a state that fits");
                     whole.insert((m.envelope.iteration, s), (w.into_owned(), f.into_owned()));
                 }

@@ -94,7 +94,7 @@ struct Stats {
     failed: u64,
     ignored: u64,
     undecodable: u64,
-    /// Damaged copies whose damage fell on the envelope's iteration number: not fed.
+    /// Damaged copies whose damage raised the envelope's iteration number: not fed.
     relabelled: u64,
 }
 
@@ -239,11 +239,12 @@ impl Fuzzer {
                     self.stats.inputs += 1;
                     self.stats.undecodable += 1;
                 }
-                // A copy relabelled to another iteration, e.g. a state of iteration 6 relabelled
+                // A copy relabelled to a later iteration, e.g. a state of iteration 6 relabelled
                 // 7 while the node waits for the states of iteration 7, is what a genuine message
                 // of that iteration looks like: no check of the node can tell it from one (the
-                // transport's checksums rule such damage out). It is not fed.
-                Ok(d) if d.envelope.iteration != m.envelope.iteration => {
+                // transport's checksums rule such damage out). It is not fed. One relabelled to
+                // an earlier iteration is, and must be refused.
+                Ok(d) if d.envelope.iteration > m.envelope.iteration => {
                     self.stats.inputs += 1;
                     self.stats.relabelled += 1;
                 }
@@ -507,7 +508,7 @@ fn fuzz_run(scene: &LoadedScene, interior: bool, kinds: &[&str], seed: u64) -> S
     let s = fuzz.stats;
     eprintln!(
         "node fuzz: {} inputs, 0 panics, {} rejected, {} failed (non-finite values, node unchanged), \
-         {} ignored without output, {} refused by the decoder, {} relabelled to another iteration (not fed); {} \
+         {} ignored without output, {} refused by the decoder, {} relabelled to a later iteration (not fed); {} \
          genuine messages, run bit-identical",
         s.inputs,
         s.rejected,

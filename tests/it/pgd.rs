@@ -457,7 +457,7 @@ fn pgd_messages_carry_each_mode_once() {
                     messages += 1;
                     columns += z.cols();
                     modes_bytes += encode(m).len();
-                    let (s, w, f) = states.fields(&m.payload).expect("a state").expect("expands");
+                    let (s, w, f) = states.fields(m).expect("a state").expect("expands");
                     let full = Message {
                         envelope: m.envelope.clone(),
                         payload: Payload::BoundaryState {

@@ -201,13 +201,16 @@ pub fn build_interface_node(
             plan.interface_groups.len() - 1
         )));
     }
-    Ok(Box::new(InterfaceNode::owning(
-        ctx.clone(),
-        model.clone(),
-        &plan.k0,
-        &plan.interface_groups,
-        index,
-    )))
+    let pgd = plan
+        .participants
+        .iter()
+        .copied()
+        .filter(|&s| plan.stage_of(model, s as usize) == LinearStage::Pgd)
+        .collect();
+    Ok(Box::new(
+        InterfaceNode::owning(ctx.clone(), model.clone(), &plan.k0, &plan.interface_groups, index)
+            .with_mode_senders(pgd),
+    ))
 }
 
 impl Selection {

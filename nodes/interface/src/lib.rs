@@ -4,9 +4,8 @@
 //! stop it publishes every interface's s and ŝ.
 //!
 //! A run may have several interface nodes, each owning a set of interfaces (the scene's
-//! deployment): each runs the local stage of its interfaces, receives from a subdomain whose
-//! interfaces belong to several nodes only the rows of its own (`StateRows`), and sends q̂ for
-//! their rows only.
+//! deployment): each runs the local stage of its interfaces, receives from each subdomain only
+//! the rows of its own, addressed to it (`StateRows`), and sends q̂ for their rows only.
 //! Node 0 decides: the others send it their per-interface indicator sums (`IndicatorPartials`),
 //! it adds every interface's in interface order (the additions of a one-node run, so the
 //! decision is bit for bit the same), applies the stop rule and publishes the `Decision` the
@@ -80,6 +79,9 @@ pub struct InterfaceNode {
     participants: Vec<u32>,
     /// Per subdomain, the boundary-state rows it sends this node (None: not a participant).
     state_rows: Vec<Option<StateRows>>,
+    /// The subdomains that may send their state in mode form (PGD linear stage; by default
+    /// every subdomain with a boundary).
+    mode_senders: Vec<u32>,
     locals: Vec<InterfaceLocal>,
     fields: Vec<InterfaceFields>,
     /// Per owned interface followed by the error estimate (contact interfaces; every interface
@@ -102,9 +104,9 @@ pub struct InterfaceNode {
     pool: FieldPool,
 }
 
-/// The rows of a subdomain's `BoundaryState` this node receives: its whole boundary (`to` None),
-/// or, when the subdomain's interfaces belong to several interface nodes, the rows of this node's
-/// interfaces only (`to` this node's index).
+/// The rows of a subdomain's `BoundaryState` this node receives: its whole boundary (`to` None)
+/// when the run has one interface node, else the rows of this node's interfaces only (`to` this
+/// node's index).
 struct StateRows {
     to: Option<u32>,
     interfaces: Vec<u32>,

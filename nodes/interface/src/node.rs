@@ -59,9 +59,13 @@ impl InterfaceNode {
                 .collect()
         };
         let participants = with_slot(&|i| position[i].is_some());
-        // A subdomain whose interfaces belong to several nodes sends each the rows of its own
-        // (the owner of an interface: the group that holds it, as the subdomain reckons).
+        // With several interface nodes a subdomain sends each node owning one of its interfaces
+        // the rows of those, addressed to it (the owner of an interface: the group that holds
+        // it, as the subdomain reckons); with one, its whole state, unaddressed.
         let owner = |i: usize| groups.iter().position(|g| g.contains(&i));
+        let mode_senders = (0..layouts.len() as u32)
+            .filter(|&s| layouts[s as usize].is_some())
+            .collect();
         let state_rows = layouts
             .iter()
             .enumerate()
@@ -70,8 +74,7 @@ impl InterfaceNode {
                 if !participants.contains(&(s as u32)) {
                     return None;
                 }
-                let owners: BTreeSet<Option<usize>> = l.slots.iter().map(|sl| owner(sl.interface)).collect();
-                if owners.len() <= 1 || owners.contains(&None) {
+                if groups.len() <= 1 || l.slots.iter().any(|sl| owner(sl.interface).is_none()) {
                     return Some(StateRows {
                         to: None,
                         interfaces: l.slots.iter().map(|sl| sl.interface as u32).collect(),
@@ -146,6 +149,7 @@ impl InterfaceNode {
             layouts,
             owned,
             position,
+            mode_senders,
             participants,
             state_rows,
             locals,
@@ -160,6 +164,13 @@ impl InterfaceNode {
             solutions_left: 0..0,
             pool: FieldPool::default(),
         }
+    }
+
+    /// Only `subdomains` send their state in mode form (the PGD linear stage): this node listens
+    /// for mode-form states from those of them on its interfaces only.
+    pub fn with_mode_senders(mut self, subdomains: Vec<u32>) -> Self {
+        self.mode_senders = subdomains;
+        self
     }
 
     /// The rejection of a message this node does not take.
@@ -357,33 +368,29 @@ impl Node for InterfaceNode {
 
     fn subscriptions(&self) -> Vec<String> {
         let run = &self.ctx.run_id;
-        let fields = ["boundary_state", "boundary_modes"];
         let with_boundary = self.layouts.iter().filter(|l| l.is_some()).count();
-        let whole = self.state_rows.iter().flatten().all(|r| r.to.is_none());
-        let mut subs: Vec<String> = if self.participants.len() == with_boundary && whole {
-            fields
-                .iter()
-                .map(|field| role_field_topic(run, Role::Subdomain, field, None))
-                .collect()
+        let all = self.participants.len() == with_boundary;
+        let addressed = self.state_rows.iter().flatten().any(|r| r.to.is_some());
+        let mut subs = vec![if addressed {
+            // The states addressed to this node, from whichever subdomain sends one.
+            role_field_topic(run, Role::Subdomain, "boundary_state", Some(self.id.index))
         } else {
-            // The states of the subdomains on its interfaces only, and of each only its rows for
-            // this node: the others would cross the network to be dropped.
-            self.participants
-                .iter()
-                .flat_map(|&s| {
-                    let sender = NodeId {
-                        role: Role::Subdomain,
-                        index: s,
-                    };
-                    let state = sender_field_topic(run, sender, "boundary_state");
-                    let state = match self.state_rows[s as usize].as_ref().and_then(|r| r.to) {
-                        Some(k) => format!("{state}/{k}"),
-                        None => state,
-                    };
-                    [state, sender_field_topic(run, sender, "boundary_modes")]
-                })
-                .collect()
-        };
+            role_field_topic(run, Role::Subdomain, "boundary_state", None)
+        }];
+        // Mode-form states are not addressed: those of the subdomains on its interfaces only
+        // (the others would cross the network to be dropped), or all when that is every one.
+        let modes = self.participants.iter().filter(|s| self.mode_senders.contains(s));
+        if all && self.mode_senders.len() == with_boundary {
+            subs.push(role_field_topic(run, Role::Subdomain, "boundary_modes", None));
+        } else {
+            subs.extend(modes.map(|&s| {
+                let sender = NodeId {
+                    role: Role::Subdomain,
+                    index: s,
+                };
+                sender_field_topic(run, sender, "boundary_modes")
+            }));
+        }
         match &self.decider {
             Some(d) => {
                 if d.n_nodes > 1 {

@@ -177,8 +177,8 @@ fn states(model: &Model, ctx: &RunContext, k0: &[f64]) -> Vec<Message> {
 }
 
 /// A whole boundary state cut as its subdomain sends it in a deployment whose interface nodes
-/// own `groups`: whole when one node owns its interfaces, else to each owner (ascending) the
-/// rows of its own interfaces, in layout order.
+/// own `groups`: whole and unaddressed with one interface node, else to each owner of one of its
+/// interfaces (ascending) the rows of those, in layout order, addressed.
 fn cut(model: &Model, k0: &[f64], groups: &[Vec<usize>], m: &Message) -> Vec<Message> {
     let Payload::BoundaryState { subdomain, w, f, .. } = &m.payload else {
         panic!("a boundary state")
@@ -188,7 +188,7 @@ fn cut(model: &Model, k0: &[f64], groups: &[Vec<usize>], m: &Message) -> Vec<Mes
     let mut owners: Vec<u32> = layout.slots.iter().map(|sl| owner(sl.interface)).collect();
     owners.sort_unstable();
     owners.dedup();
-    if owners.len() == 1 {
+    if groups.len() == 1 {
         return vec![m.clone()];
     }
     owners
@@ -250,18 +250,21 @@ fn two_interface_nodes_decide_as_one() {
         single.extend(deliver(&mut one, &m));
         parts.extend(cut(&model, &k0, &groups, &m));
     }
-    // Subdomains 0 and 2 have one interface each, subdomain 1 one of each node: its state comes
-    // in two parts, to each node the rows of its own interface on its own key.
+    // Subdomains 0 and 2 have one interface each, whole states addressed to its owner (interface
+    // 0 is node 1's, interface 1 node 0's); subdomain 1 one of each node: its state comes in two
+    // parts, to each node the rows of its own interface. Each node hears its own key only.
     let keys: Vec<String> = parts.iter().map(|m| m.topic()).collect();
     assert_eq!(
         keys,
         [
-            "glissade/r/subdomain/0/boundary_state",
+            "glissade/r/subdomain/0/boundary_state/1",
             "glissade/r/subdomain/1/boundary_state/0",
             "glissade/r/subdomain/1/boundary_state/1",
-            "glissade/r/subdomain/2/boundary_state"
+            "glissade/r/subdomain/2/boundary_state/0"
         ]
     );
+    assert_eq!(n0.subscriptions()[0], "glissade/r/subdomain/*/boundary_state/0");
+    assert_eq!(one.subscriptions()[0], "glissade/r/subdomain/*/boundary_state");
     // A part for the other node is refused, naming both.
     let err = InterfaceNode::owning(ctx.clone(), model.clone(), &k0, &groups, 0)
         .handle(&parts[2])

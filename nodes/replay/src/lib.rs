@@ -111,6 +111,9 @@ pub struct ReplaySummary {
     pub errors: Vec<(u32, f64, f64)>,
     /// Wall time of the reference solve (s), when asked for.
     pub reference_s: Option<f64>,
+    /// (subdomain, iteration) of the boundary states left out because some of their parts are
+    /// not in the recording.
+    pub incomplete_states: Vec<(u32, u32)>,
 }
 
 #[derive(Debug, thiserror::Error)]

@@ -7,7 +7,7 @@ use faer::Mat;
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::model::Model;
 use glissade_mechanics::modes::ModeForm;
-use glissade_messages::{Field, Payload};
+use glissade_messages::{Field, Message, Payload};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 
@@ -17,8 +17,19 @@ pub struct BoundaryStates {
     /// Per subdomain, its slots: (interface, first row, rows).
     slots: Vec<Vec<(u32, usize, usize)>>,
     forms: BTreeMap<u32, ModeForm>,
-    /// Per subdomain whose state came in parts: W, F and which of its slots arrived.
-    parts: BTreeMap<u32, (Field, Field, Vec<bool>)>,
+    /// Per subdomain whose state is coming in parts: its iteration, W, F and which of its slots
+    /// arrived.
+    parts: BTreeMap<u32, Partial>,
+    /// (subdomain, iteration) of the states whose parts did not all come: a part of a later
+    /// iteration arrived first (a recording that left messages out).
+    incomplete: Vec<(u32, u32)>,
+}
+
+struct Partial {
+    iteration: u32,
+    w: Field,
+    f: Field,
+    seen: Vec<bool>,
 }
 
 /// A subdomain's boundary state: (subdomain, W, F), each n_b × (N+1).
@@ -41,7 +52,13 @@ impl BoundaryStates {
             slots,
             forms: BTreeMap::new(),
             parts: BTreeMap::new(),
+            incomplete: Vec::new(),
         }
+    }
+
+    /// (subdomain, iteration) of the states left out because some of their parts never came.
+    pub fn incomplete(&self) -> &[(u32, u32)] {
+        &self.incomplete
     }
 
     /// The subdomain and full (W, F) of a boundary-state message, None for other payloads and
@@ -49,8 +66,9 @@ impl BoundaryStates {
     /// taken (a part that does not fit the subdomain's boundary, a mode-form message without a
     /// particular part before it or with sizes that do not fit the held modes). Messages must
     /// come in the order the subdomain sent them.
-    pub fn fields<'a>(&mut self, payload: &'a Payload) -> Option<Result<State<'a>, String>> {
-        match payload {
+    pub fn fields<'a>(&mut self, msg: &'a Message) -> Option<Result<State<'a>, String>> {
+        let iteration = msg.envelope.iteration;
+        match &msg.payload {
             Payload::BoundaryState {
                 subdomain,
                 to: None,
@@ -64,7 +82,7 @@ impl BoundaryStates {
                 w,
                 f,
                 ..
-            } => self.part(*subdomain, interfaces, w, f).transpose(),
+            } => self.part(*subdomain, iteration, interfaces, w, f).transpose(),
             Payload::BoundaryModes {
                 subdomain,
                 particular,
@@ -78,7 +96,14 @@ impl BoundaryStates {
     }
 
     /// Puts the rows of `interfaces` into subdomain `s`'s state; the state once every slot came.
-    fn part<'a>(&mut self, s: u32, interfaces: &[u32], w: &Field, f: &Field) -> Result<Option<State<'a>>, String> {
+    fn part<'a>(
+        &mut self,
+        s: u32,
+        iteration: u32,
+        interfaces: &[u32],
+        w: &Field,
+        f: &Field,
+    ) -> Result<Option<State<'a>>, String> {
         let at = |e: String| format!("boundary state of subdomain {s}: {e}");
         let slots = self
             .slots
@@ -103,10 +128,22 @@ impl BoundaryStates {
                 f.cols()
             )));
         }
-        let (full_w, full_f, seen) = self
-            .parts
-            .entry(s)
-            .or_insert_with(|| (Field::zeros(n_b, nt), Field::zeros(n_b, nt), vec![false; slots.len()]));
+        // A held state of another iteration never got all its parts: it is left out, and said.
+        if self.parts.get(&s).is_some_and(|p| p.iteration != iteration) {
+            let stale = self.parts.remove(&s).expect("checked just above");
+            self.incomplete.push((s, stale.iteration));
+        }
+        let Partial {
+            w: full_w,
+            f: full_f,
+            seen,
+            ..
+        } = self.parts.entry(s).or_insert_with(|| Partial {
+            iteration,
+            w: Field::zeros(n_b, nt),
+            f: Field::zeros(n_b, nt),
+            seen: vec![false; slots.len()],
+        });
         if full_w.cols() != nt {
             return Err(at(format!("parts of {} and {nt} time points", full_w.cols())));
         }
@@ -125,8 +162,8 @@ impl BoundaryStates {
         if !seen.iter().all(|&b| b) {
             return Ok(None);
         }
-        let (w, f, _) = self.parts.remove(&s).expect("held just above");
-        Ok(Some((s, Cow::Owned(w), Cow::Owned(f))))
+        let done = self.parts.remove(&s).expect("held just above");
+        Ok(Some((s, Cow::Owned(done.w), Cow::Owned(done.f))))
     }
 
     fn expand<'a>(
@@ -171,5 +208,79 @@ impl BoundaryStates {
         form.expand_into(w.as_mut(), f.as_mut());
         let field = |m: &Mat<f64>| Field::from_fn(n_b, nt, |r, c| m[(r, c)]);
         Ok((s, Cow::Owned(field(&w)), Cow::Owned(field(&f))))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glissade_messages::{Envelope, NodeId, Role, Stage, SCHEMA_VERSION};
+
+    fn part(s: u32, iteration: u32, to: u32, interfaces: Vec<u32>, rows: usize, value: f64) -> Message {
+        Message {
+            envelope: Envelope {
+                schema_version: SCHEMA_VERSION,
+                run_id: "r".into(),
+                scene_fingerprint: 1,
+                iteration,
+                stage: Stage::Linear,
+                sender: NodeId {
+                    role: Role::Subdomain,
+                    index: s,
+                },
+            },
+            payload: Payload::BoundaryState {
+                subdomain: s,
+                to: Some(to),
+                interfaces,
+                w: Field::from_fn(rows, 2, |_, _| value),
+                f: Field::from_fn(rows, 2, |_, _| -value),
+            },
+        }
+    }
+
+    /// The parts of a state are put together at their slots' rows; a state whose parts did not
+    /// all come before a part of a later iteration is left out and named, never mixed with the
+    /// later one.
+    #[test]
+    fn parts_make_a_state_and_a_missing_part_is_named() {
+        let text = include_str!("../../../launch/scenes/small-three-layer.toml");
+        let model = glissade_scene::load_str(text, "small.toml").unwrap().model;
+        let k = vec![1.0; model.interfaces.len()];
+        // A subdomain with two interfaces or more.
+        let (s, layout) = (0..model.subdomains.len())
+            .map(|s| (s as u32, BoundaryLayout::new(&model, s, &k)))
+            .find(|(_, l)| l.slots.len() >= 2)
+            .expect("a subdomain with two interfaces");
+        let (first, rest) = layout.slots.split_first().unwrap();
+        let rest_rows: usize = rest.iter().map(|sl| 2 * sl.n_pairs).sum();
+        let rest_ifs: Vec<u32> = rest.iter().map(|sl| sl.interface as u32).collect();
+        let a = |it, v| part(s, it, 0, vec![first.interface as u32], 2 * first.n_pairs, v);
+        let b = |it, v| part(s, it, 1, rest_ifs.clone(), rest_rows, v);
+        let mut states = BoundaryStates::new(&model);
+        // Iteration 1 loses its second part.
+        assert!(states.fields(&a(1, 1.0)).is_none());
+        // Iteration 2 whole, second part first.
+        let (b2, a2) = (b(2, 2.0), a(2, 3.0));
+        assert!(states.fields(&b2).is_none());
+        assert_eq!(states.incomplete(), &[(s, 1)]);
+        let a2_state = states.fields(&a2).expect("complete").expect("fits");
+        let (got, w, f) = a2_state;
+        assert_eq!(got, s);
+        assert_eq!((w.rows(), w.cols()), (layout.len(), 2));
+        for c in 0..2 {
+            for r in 0..layout.len() {
+                let want = if r >= first.offset && r < first.offset + 2 * first.n_pairs {
+                    3.0
+                } else {
+                    2.0
+                };
+                assert_eq!(w.data[c * layout.len() + r], want, "row {r}");
+                assert_eq!(f.data[c * layout.len() + r], -want, "row {r}");
+            }
+        }
+        // A part naming an interface off the boundary is refused, naming it.
+        let e = states.fields(&part(s, 3, 0, vec![999], 2, 0.0)).unwrap().unwrap_err();
+        assert!(e.contains("interface 999 is not on its boundary"), "{e}");
     }
 }

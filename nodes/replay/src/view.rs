@@ -139,7 +139,7 @@ impl View {
     /// Takes one message of the run.
     pub fn message(&mut self, msg: &Message) -> Result<(), ReplayError> {
         self.summary.messages += 1;
-        if let Some(state) = self.states.fields(&msg.payload) {
+        if let Some(state) = self.states.fields(msg) {
             let (subdomain, w, f) = state.map_err(|detail| ReplayError::Content {
                 path: format!("iteration {}", msg.envelope.iteration),
                 detail,
@@ -432,6 +432,7 @@ impl View {
         self.summary.amplification = amplification;
         self.summary.color_range = Some(range);
         self.summary.interior_recorded = !self.displacements.is_empty();
+        self.summary.incomplete_states = self.states.incomplete().to_vec();
         Ok(self.summary)
     }
 }

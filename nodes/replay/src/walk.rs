@@ -109,7 +109,7 @@ pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
     let mut states = BoundaryStates::new(&model);
     let mut skipped = Skipped::default();
     for (_, m, msg) in run_messages(recording, &mut skipped) {
-        if let Some(state) = states.fields(&msg.payload) {
+        if let Some(state) = states.fields(&msg) {
             let (subdomain, w, f) = state.map_err(|e| content(format!("message on `{}`: {e}", m.topic)))?;
             if first_w.is_none() {
                 first_w = Some(largest_time_point(&w));

@@ -3,9 +3,9 @@
 //! Setup: builds A_E and sends L_E (when the coarse problem is on), then runs the first linear
 //! stage from ŝ = 0. Each iteration: `LocalDirections` (q̂, from every interface node owning one
 //! of its interfaces) → micro problem 1 → `MacroForces`;
-//! `MacroDisplacements` (w̃) → micro problem 2, relaxation → `BoundaryState` (s = (W, F); when its
-//! interfaces belong to several interface nodes, one message per node with the rows of that
-//! node's interfaces, on a key of its own). Without
+//! `MacroDisplacements` (w̃) → micro problem 2, relaxation → `BoundaryState` (s = (W, F); with
+//! several interface nodes, one message per node owning one of its interfaces, with the rows of
+//! those, addressed to it). Without
 //! the coarse problem micro 2 is skipped (w̃ = 0). A stop `Decision` ends the node, after sending
 //! the full displacement field when asked.
 //!
@@ -113,9 +113,10 @@ pub struct SubdomainNode {
     /// Per boundary slot, the index of the interface node that owns its interface (None: any
     /// interface node is taken).
     owners: Option<Vec<u32>>,
-    /// When its interfaces belong to several interface nodes: per node (ascending), its index,
-    /// its interfaces and their rows (offset, count) in the boundary layout. Each gets only
-    /// those rows of the state. Empty: the whole state, to every node.
+    /// With several interface nodes in the deployment: per node owning one of its interfaces
+    /// (ascending), its index, its interfaces and their rows (offset, count) in the boundary
+    /// layout. Each gets only those rows of the state, addressed to it. Empty: one interface
+    /// node, which gets the whole state unaddressed.
     state_parts: Vec<StatePart>,
     /// Buffers of the fields this node sent, back from the bus ([`glissade_bus::Node::recycle`]).
     pool: FieldPool,
@@ -176,8 +177,10 @@ impl SubdomainNode {
         let mut nodes: Vec<u32> = self.owners.clone().unwrap_or_default();
         nodes.sort_unstable();
         nodes.dedup();
-        self.state_parts = if nodes.len() > 1 {
-            let owners = self.owners.as_ref().expect("several owners");
+        // With several interface nodes every state is addressed: each node subscribes to the
+        // states for it with one key expression, `subdomain/*/boundary_state/<node>`.
+        self.state_parts = if groups.len() > 1 && !nodes.is_empty() {
+            let owners = self.owners.as_ref().expect("owners of every slot");
             nodes
                 .into_iter()
                 .map(|to| {

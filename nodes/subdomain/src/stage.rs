@@ -181,8 +181,8 @@ impl SubdomainNode {
         }
     }
 
-    /// The state s = (W, F) (to each interface node the rows of its interfaces, when they
-    /// belong to several), then the stage's counters.
+    /// The state s = (W, F) (with several interface nodes, to each one owning one of its
+    /// interfaces the rows of those, addressed), then the stage's counters.
     pub(crate) fn boundary_state(&mut self) -> Vec<Message> {
         let subdomain = self.subdomain();
         let mut out = Vec::with_capacity(self.state_parts.len().max(1) + 1);
@@ -197,17 +197,28 @@ impl SubdomainNode {
             out.push(self.msg(Stage::Linear, payload));
         } else {
             let nt = self.fields.w.ncols();
+            let n_slots = self.solver.op.layout.slots.len();
             for part in &self.state_parts {
                 let n: usize = part.rows.iter().map(|&(_, n)| n).sum();
-                let rows_of = |from: faer::MatRef<'_, f64>, mut to: faer::MatMut<'_, f64>| {
-                    let mut r0 = 0;
-                    for &(offset, n) in &part.rows {
-                        to.as_mut().subrows_mut(r0, n).copy_from(from.subrows(offset, n));
-                        r0 += n;
-                    }
+                let (w, f) = if part.interfaces.len() == n_slots {
+                    // Every interface to one node: the whole state, in layout order.
+                    (
+                        self.pool.field_of(self.fields.w.as_ref()),
+                        self.pool.field_of(self.fields.f.as_ref()),
+                    )
+                } else {
+                    let rows_of = |from: faer::MatRef<'_, f64>, mut to: faer::MatMut<'_, f64>| {
+                        let mut r0 = 0;
+                        for &(offset, n) in &part.rows {
+                            to.as_mut().subrows_mut(r0, n).copy_from(from.subrows(offset, n));
+                            r0 += n;
+                        }
+                    };
+                    (
+                        self.pool.field_with(n, nt, |to| rows_of(self.fields.w.as_ref(), to)),
+                        self.pool.field_with(n, nt, |to| rows_of(self.fields.f.as_ref(), to)),
+                    )
                 };
-                let w = self.pool.field_with(n, nt, |to| rows_of(self.fields.w.as_ref(), to));
-                let f = self.pool.field_with(n, nt, |to| rows_of(self.fields.f.as_ref(), to));
                 let payload = Payload::BoundaryState {
                     subdomain,
                     to: Some(part.to),

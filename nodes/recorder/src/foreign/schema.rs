@@ -231,8 +231,8 @@ pub const MESSAGES: &[MessageDef] = &[
                 "to",
                 6,
                 Ty::Uint32,
-                "the interface node the rows are for, when the subdomain's interfaces belong to several \
-                 (absent: the whole boundary, for every interface node)",
+                "the interface node the rows are for, when the run has several (absent: the whole \
+                 boundary, for the run's one interface node)",
             ),
         ],
     },
