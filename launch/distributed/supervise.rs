@@ -479,10 +479,22 @@ impl<'r> Supervisor<'r> {
             }
         }
         if self.last_message.elapsed() > IDLE_TIMEOUT {
+            // What each node process last said is what it was waiting for.
+            let said: Vec<String> = spawned
+                .children
+                .0
+                .iter()
+                .map(|p| format!("node {}: {}", p.name, p.last_lines()))
+                .collect();
             self.stop_all(spawned, "the run stalled");
+            let said = if said.is_empty() {
+                String::new()
+            } else {
+                format!("; the node processes' last lines:\n  {}", said.join("\n  "))
+            };
             return Err(Error::Silent {
                 idle: IDLE_TIMEOUT,
-                what: "the run stalled".into(),
+                what: format!("the run stalled{said}"),
             });
         }
         Ok(false)
