@@ -110,9 +110,9 @@ pub struct InterfaceNode {
 struct StateRows {
     to: Option<u32>,
     interfaces: Vec<u32>,
-    /// Per slot of the subdomain's boundary layout, its first row in the message (slots of
-    /// other nodes' interfaces: not read).
-    at: Vec<usize>,
+    /// Per slot of the subdomain's boundary layout, its first row in the message (None: the
+    /// slot of another node's interface).
+    at: Vec<Option<usize>>,
     rows: usize,
 }
 

@@ -62,7 +62,6 @@ impl InterfaceNode {
         // With several interface nodes a subdomain sends each node owning one of its interfaces
         // the rows of those, addressed to it (the owner of an interface: the group that holds
         // it, as the subdomain reckons); with one, its whole state, unaddressed.
-        let owner = |i: usize| groups.iter().position(|g| g.contains(&i));
         let mode_senders = (0..layouts.len() as u32)
             .filter(|&s| layouts[s as usize].is_some())
             .collect();
@@ -74,27 +73,24 @@ impl InterfaceNode {
                 if !participants.contains(&(s as u32)) {
                     return None;
                 }
-                if groups.len() <= 1 || l.slots.iter().any(|sl| owner(sl.interface).is_none()) {
-                    return Some(StateRows {
+                // The rule the subdomain cuts its state by ([`BoundaryLayout::parts`]).
+                let part = (groups.len() > 1)
+                    .then(|| l.parts(groups))
+                    .flatten()
+                    .and_then(|parts| parts.into_iter().find(|p| p.node == index as u32));
+                Some(match part {
+                    Some(part) => StateRows {
+                        to: Some(index as u32),
+                        interfaces: part.interfaces(l),
+                        at: part.at,
+                        rows: part.rows,
+                    },
+                    None => StateRows {
                         to: None,
                         interfaces: l.slots.iter().map(|sl| sl.interface as u32).collect(),
-                        at: l.slots.iter().map(|sl| sl.offset).collect(),
+                        at: l.slots.iter().map(|sl| Some(sl.offset)).collect(),
                         rows: l.len(),
-                    });
-                }
-                let (mut at, mut interfaces, mut rows) = (Vec::new(), Vec::new(), 0);
-                for sl in &l.slots {
-                    at.push(rows);
-                    if owner(sl.interface) == Some(index) {
-                        interfaces.push(sl.interface as u32);
-                        rows += 2 * sl.n_pairs;
-                    }
-                }
-                Some(StateRows {
-                    to: Some(index as u32),
-                    interfaces,
-                    at,
-                    rows,
+                    },
                 })
             })
             .collect();
@@ -231,16 +227,19 @@ impl InterfaceNode {
     /// thread and the forces on another (the other nodes wait for the local stage).
     /// The step of the forces since the previous iteration is summed on the way, on the
     /// interfaces the error estimate follows ([`force_step_sums`]).
-    /// `whole`: W and F span the subdomain's whole boundary (mode form, or a state for every
-    /// node); otherwise they hold the rows of [`StateRows`].
-    fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>, whole: bool) {
+    /// W and F span the subdomain's whole boundary (mode form, or a state for every node: as
+    /// many rows as its layout) or hold the rows of [`StateRows`] (a node that owns all of a
+    /// subdomain's interfaces gets the whole state: its rows are the layout's).
+    fn store(&mut self, s: u32, w: MatRef<'_, f64>, f: MatRef<'_, f64>) {
         let layout = self.layouts[s as usize]
             .as_ref()
             .expect("handle refuses a subdomain without a boundary layout");
-        let rows = self.state_rows[s as usize].as_ref().filter(|_| !whole);
+        let rows = self.state_rows[s as usize]
+            .as_ref()
+            .filter(|_| w.nrows() != layout.len());
         for (k, slot) in layout.slots.iter().enumerate() {
             if let Some(p) = self.position[slot.interface] {
-                let at = rows.map_or(slot.offset, |r| r.at[k]);
+                let at = rows.map_or(slot.offset, |r| r.at[k].expect("the rows of this node's interfaces"));
                 let (to_w, to_f) = self.fields[p].side_mut(slot.side);
                 let rows = to_w.nrows();
                 let new_f = f.subrows(at, rows);
@@ -274,8 +273,11 @@ impl InterfaceNode {
             .iter()
             .enumerate()
             .filter(|(_, sl)| self.position[sl.interface].is_some())
-            .find(|&(k, sl)| r >= rows.at[k] && r < rows.at[k] + 2 * sl.n_pairs)
-            .map_or(r, |(k, sl)| sl.offset + r - rows.at[k])
+            .find_map(|(k, sl)| {
+                let at = rows.at[k]?;
+                (r >= at && r < at + 2 * sl.n_pairs).then(|| sl.offset + r - at)
+            })
+            .unwrap_or(r)
     }
 
     /// Where a non-finite value of subdomain `s`'s W or F sits, for the divergence diagnosis.
@@ -485,7 +487,7 @@ impl Node for InterfaceNode {
                     ),
                 ));
             }
-            let (rows, whole) = (expected.rows, expected.to.is_none());
+            let rows = expected.rows;
             let nt = self.model.time.n_points();
             expect_shape(self.id, "w", w, rows, nt)?;
             expect_shape(self.id, "f", f, rows, nt)?;
@@ -494,12 +496,12 @@ impl Node for InterfaceNode {
             let (bad_w, bad_f) = rayon::join(|| w.first_non_finite(), || f.first_non_finite());
             for (name, bad) in [("W", bad_w), ("F", bad_f)] {
                 if let Some((r, c, v)) = bad {
-                    let r = if whole { r } else { self.layout_row(s, r) };
+                    let r = self.layout_row(s, r);
                     let detail = self.non_finite_detail(s, name, (r, c, v));
                     return Ok(self.report(Vec::new(), Some(detail)));
                 }
             }
-            self.store(s, view(w), view(f), whole);
+            self.store(s, view(w), view(f));
         } else {
             let receiver = self.take_modes(s, &msg.payload)?;
             self.received.insert(s);
@@ -511,7 +513,7 @@ impl Node for InterfaceNode {
                 self.modes[s as usize] = Some(receiver);
                 return Ok(self.report(Vec::new(), Some(detail)));
             }
-            self.store(s, receiver.w.as_ref(), receiver.f.as_ref(), true);
+            self.store(s, receiver.w.as_ref(), receiver.f.as_ref());
             self.modes[s as usize] = Some(receiver);
         }
         if self.received.len() == self.participants.len() {

@@ -70,6 +70,79 @@ impl BoundaryLayout {
     pub fn is_empty(&self) -> bool {
         self.dofs.is_empty()
     }
+
+    /// How this subdomain's state is shared among the interface nodes that own its interfaces
+    /// (`groups`: the interfaces of each node): one part per node owning one of them, in node
+    /// order, each the rows of that node's interfaces in layout order. None when one of its
+    /// interfaces has no owner. The subdomain cuts its state this way and each node reads its
+    /// part this way: one rule for both.
+    pub fn parts(&self, groups: &[Vec<usize>]) -> Option<Vec<StatePart>> {
+        let owners: Vec<usize> = self
+            .slots
+            .iter()
+            .map(|sl| groups.iter().position(|g| g.contains(&sl.interface)))
+            .collect::<Option<_>>()?;
+        let mut nodes = owners.clone();
+        nodes.sort_unstable();
+        nodes.dedup();
+        Some(
+            nodes
+                .into_iter()
+                .map(|node| {
+                    let mut rows = 0;
+                    let at = self
+                        .slots
+                        .iter()
+                        .zip(&owners)
+                        .map(|(sl, &owner)| {
+                            (owner == node).then(|| {
+                                rows += 2 * sl.n_pairs;
+                                rows - 2 * sl.n_pairs
+                            })
+                        })
+                        .collect();
+                    StatePart {
+                        node: node as u32,
+                        at,
+                        rows,
+                    }
+                })
+                .collect(),
+        )
+    }
+}
+
+/// The rows of a subdomain's state that one interface node receives ([`BoundaryLayout::parts`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StatePart {
+    /// The interface node.
+    pub node: u32,
+    /// Per slot of the layout, its first row in the part; None for the slots of the interfaces
+    /// of other nodes.
+    pub at: Vec<Option<usize>>,
+    /// The part's rows.
+    pub rows: usize,
+}
+
+impl StatePart {
+    /// The part's interfaces, in layout order.
+    pub fn interfaces(&self, layout: &BoundaryLayout) -> Vec<u32> {
+        self.slots(layout).map(|sl| sl.interface as u32).collect()
+    }
+
+    /// The part's rows in the whole state: (first row, rows) per interface, in layout order.
+    pub fn ranges(&self, layout: &BoundaryLayout) -> Vec<(usize, usize)> {
+        self.slots(layout).map(|sl| (sl.offset, 2 * sl.n_pairs)).collect()
+    }
+
+    fn slots<'l>(&'l self, layout: &'l BoundaryLayout) -> impl Iterator<Item = &'l InterfaceSlot> {
+        layout
+            .slots
+            .iter()
+            .zip(&self.at)
+            .filter(|(_, at)| at.is_some())
+            .map(|(sl, _)| sl)
+    }
 }
 
 /// Condensed operator of one subdomain and its load responses.
@@ -269,5 +342,67 @@ impl CondensedOperator {
                     }
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout(pairs: &[(usize, usize)]) -> BoundaryLayout {
+        let mut offset = 0;
+        let slots = pairs
+            .iter()
+            .map(|&(interface, n_pairs)| {
+                let sl = InterfaceSlot {
+                    interface,
+                    side: Side::A,
+                    offset,
+                    n_pairs,
+                };
+                offset += 2 * n_pairs;
+                sl
+            })
+            .collect();
+        BoundaryLayout {
+            dofs: (0..offset).collect(),
+            mass: vec![1.0; offset],
+            k: vec![1.0; offset],
+            slots,
+        }
+    }
+
+    /// Interfaces 4, 7 and 9 of 3, 2 and 5 pairs, owned by nodes 1, 0 and 1: node 0 gets rows
+    /// 6..10 of the state as its rows 0..4, node 1 rows 0..6 and 10..20 as its rows 0..16; a node
+    /// owning every interface gets the whole state in layout order; an interface without an owner
+    /// leaves the state whole (None).
+    #[test]
+    fn parts_cut_the_state_by_owner_in_layout_order() {
+        let l = layout(&[(4, 3), (7, 2), (9, 5)]);
+        let parts = l.parts(&[vec![7, 1], vec![4, 9]]).unwrap();
+        assert_eq!(
+            parts,
+            vec![
+                StatePart {
+                    node: 0,
+                    at: vec![None, Some(0), None],
+                    rows: 4
+                },
+                StatePart {
+                    node: 1,
+                    at: vec![Some(0), None, Some(6)],
+                    rows: 16
+                },
+            ]
+        );
+        assert_eq!(parts[0].interfaces(&l), [7]);
+        assert_eq!(parts[0].ranges(&l), [(6, 4)]);
+        assert_eq!(parts[1].interfaces(&l), [4, 9]);
+        assert_eq!(parts[1].ranges(&l), [(0, 6), (10, 10)]);
+        let one = l.parts(&[vec![], vec![9, 7, 4]]).unwrap();
+        assert_eq!(one.len(), 1);
+        assert_eq!((one[0].node, one[0].rows), (1, l.len()));
+        assert_eq!(one[0].at, l.slots.iter().map(|sl| Some(sl.offset)).collect::<Vec<_>>());
+        assert_eq!(l.parts(&[vec![4], vec![7]]), None);
     }
 }

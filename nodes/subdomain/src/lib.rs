@@ -173,27 +173,19 @@ impl SubdomainNode {
             .iter()
             .map(|sl| owner(sl.interface))
             .collect::<Option<Vec<u32>>>();
-        let slots = &self.solver.op.layout.slots;
-        let mut nodes: Vec<u32> = self.owners.clone().unwrap_or_default();
-        nodes.sort_unstable();
-        nodes.dedup();
         // With several interface nodes every state is addressed: each node subscribes to the
         // states for it with one key expression, `subdomain/*/boundary_state/<node>`.
-        self.state_parts = if groups.len() > 1 && !nodes.is_empty() {
-            let owners = self.owners.as_ref().expect("owners of every slot");
-            nodes
-                .into_iter()
-                .map(|to| {
-                    let mine = (0..slots.len()).filter(|&k| owners[k] == to);
-                    StatePart {
-                        to,
-                        interfaces: mine.clone().map(|k| slots[k].interface as u32).collect(),
-                        rows: mine.map(|k| (slots[k].offset, 2 * slots[k].n_pairs)).collect(),
-                    }
+        let layout = &self.solver.op.layout;
+        self.state_parts = match layout.parts(groups) {
+            Some(parts) if groups.len() > 1 => parts
+                .iter()
+                .map(|p| StatePart {
+                    to: p.node,
+                    interfaces: p.interfaces(layout),
+                    rows: p.ranges(layout),
                 })
-                .collect()
-        } else {
-            Vec::new()
+                .collect(),
+            _ => Vec::new(),
         };
         self
     }
