@@ -266,9 +266,16 @@ fn wait_for_start(run: &NodeRun, rx: &mpsc::Receiver<Event>) -> Result<VecDeque<
 }
 
 /// Replaces a process that died: the recorder's log holds every input its nodes handled and
-/// every output they published; handling the inputs again in recorded order rebuilds their
-/// state (nodes are deterministic whatever the arrival order of one stage's inputs), and the
-/// outputs not yet on the bus are published as they come.
+/// every output they published; handling the inputs again rebuilds their state (nodes are
+/// deterministic whatever the arrival order of one stage's inputs), and the outputs not yet on
+/// the bus are published as they come.
+///
+/// The log is in the order the recorder heard the messages, which need not be the order in which
+/// they could happen: the router forwards each sender's messages on its own, so the recorder can
+/// hear an Anderson step before the macro displacements the step's subdomain had received
+/// before it sent its partials. A node refuses a message it is not ready for; such a message is
+/// held and handed again after every message a node takes, so that each input is handled once
+/// the node is ready for it, as it was live.
 fn resume(
     run: &NodeRun,
     keys: &[String],
@@ -296,8 +303,34 @@ fn resume(
         handler.published.len()
     ));
     handler.start(nodes)?;
+    let mut held: VecDeque<(String, Vec<u8>)> = VecDeque::new();
     for (key, bytes) in inputs {
-        handler.handle(vec![Received::from_bytes(key, &bytes, &run.expected)], nodes, log)?;
+        let received = Received::from_bytes(key.clone(), &bytes, &run.expected);
+        if handler.handle_or_refused(received, nodes, log)?.is_some() {
+            held.push_back((key, bytes));
+            continue;
+        }
+        // What was held may be taken now: until a whole pass over it takes nothing.
+        let mut taken = true;
+        while taken && !held.is_empty() {
+            taken = false;
+            for _ in 0..held.len() {
+                let (key, bytes) = held.pop_front().expect("the pass is as long as what is held");
+                let received = Received::from_bytes(key.clone(), &bytes, &run.expected);
+                if handler.handle_or_refused(received, nodes, log)?.is_some() {
+                    held.push_back((key, bytes));
+                } else {
+                    taken = true;
+                }
+            }
+        }
+    }
+    // Refused still: not for this run's nodes after all, or already past (logged as live).
+    for (key, bytes) in held {
+        let received = Received::from_bytes(key, &bytes, &run.expected);
+        if let Some(why) = handler.handle_or_refused(received, nodes, log)? {
+            log(&why);
+        }
     }
     log("resumed: state rebuilt, continuing on the bus");
     Ok(())
@@ -452,7 +485,22 @@ impl Handler<'_> {
     ) -> Result<(), TransportError> {
         let msgs = self.admit(batch, log);
         let outcomes = self.dispatch(&msgs, nodes);
-        self.settle(msgs, outcomes, log)
+        let refused = self.settle(msgs, outcomes)?;
+        refused.iter().for_each(|why| log(why));
+        Ok(())
+    }
+
+    /// [`Handler::handle`] of one message whose refusal by a node is returned, not logged: a
+    /// message of the recorder's log can come before one it follows (see [`resume`]).
+    fn handle_or_refused(
+        &mut self,
+        received: Received,
+        nodes: &mut [Box<dyn Node>],
+        log: &mut dyn FnMut(&str),
+    ) -> Result<Option<String>, TransportError> {
+        let msgs = self.admit(vec![received], log);
+        let outcomes = self.dispatch(&msgs, nodes);
+        Ok(self.settle(msgs, outcomes)?.into_iter().next())
     }
 
     /// A handled or ignored message's buffers hold the next ones.
@@ -531,14 +579,13 @@ impl Handler<'_> {
             .collect()
     }
 
-    /// Logs the refusals in arrival order, returns the earliest message's error if any, and
-    /// counts the messages the nodes took as handled.
+    /// Returns the refusals in arrival order, or the earliest message's error if any, and counts
+    /// the messages the nodes took as handled.
     fn settle(
         &mut self,
         msgs: Vec<(String, u64, Message)>,
         outcomes: Vec<Outcome>,
-        log: &mut dyn FnMut(&str),
-    ) -> Result<(), TransportError> {
+    ) -> Result<Vec<String>, TransportError> {
         let mut taken = vec![true; msgs.len()];
         let mut refusals = Vec::new();
         let mut first_error: Option<(usize, TransportError)> = None;
@@ -554,9 +601,8 @@ impl Handler<'_> {
         }
         // Logged in arrival order (a stable sort keeps node order within a message).
         refusals.sort_by_key(|(k, _)| *k);
-        for (k, why) in refusals {
-            log(&why);
-            taken[k] = false;
+        for (k, _) in &refusals {
+            taken[*k] = false;
         }
         if let Some((_, e)) = first_error {
             return Err(e);
@@ -569,7 +615,7 @@ impl Handler<'_> {
             }
             self.recycle(msg);
         }
-        Ok(())
+        Ok(refusals.into_iter().map(|(_, why)| why).collect())
     }
 }
 

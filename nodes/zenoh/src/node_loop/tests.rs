@@ -3,7 +3,7 @@
 use super::*;
 use crate::presence::{launcher_token, watch_tokens};
 use crate::test_support::{displacement, received, test_launcher, test_run, wait_token};
-use crate::{config, open, publish, publish_done, publish_start};
+use crate::{config, encode_log, open, publish, publish_done, publish_start};
 use glissade_bus::NodeError;
 use glissade_messages::{decode, Field, NodeId, Role};
 
@@ -239,4 +239,86 @@ fn a_process_handles_its_nodes_early_messages_in_parallel() {
 #[test]
 fn a_process_handles_its_nodes_waiting_messages_in_parallel() {
     nodes_meet("parallel-waiting", true);
+}
+
+/// A node that takes the messages on its key in iteration order only (1, 2, …, `last`),
+/// refusing the others as not yet its turn, as the solver's nodes do.
+struct InOrder {
+    topic: String,
+    next: u32,
+    last: u32,
+    taken: Arc<Mutex<Vec<u32>>>,
+}
+
+impl Node for InOrder {
+    fn id(&self) -> NodeId {
+        NodeId {
+            role: Role::Interface,
+            index: 0,
+        }
+    }
+    fn subscriptions(&self) -> Vec<String> {
+        vec![self.topic.clone()]
+    }
+    fn start(&mut self) -> Result<Vec<Message>, NodeError> {
+        Ok(Vec::new())
+    }
+    fn handle(&mut self, msg: &Message) -> Result<Vec<Message>, NodeError> {
+        let it = msg.envelope.iteration;
+        if it != self.next {
+            return Err(NodeError::rejected(
+                self.id(),
+                format!("iteration {it} while at {}", self.next),
+            ));
+        }
+        self.taken.lock().unwrap().push(it);
+        self.next += 1;
+        Ok(Vec::new())
+    }
+    fn is_finished(&self) -> bool {
+        self.next > self.last
+    }
+}
+
+/// A replacement process resumes from a recorder's log that holds a message before the one it
+/// follows (the recorder hears each sender's messages through the router on their own, so its
+/// order need not be one the nodes could have seen): the message refused at first is handed
+/// again once the earlier one is taken, and the node finishes. Before, the refused message was
+/// dropped and the node waited for it until the run stalled.
+#[test]
+fn a_resumed_process_takes_the_logs_messages_once_it_is_ready_for_them() {
+    let (launcher, endpoint) = test_launcher();
+    let run_id = "resume-order";
+    let at = |iteration| displacement(run_id, 0, iteration, Field::from_fn(3, 2, |r, c| (r + c) as f64));
+    // Iterations 3, 1, 2 in the log: 3 waits for 2, which waits for 1.
+    let log: Vec<(String, Vec<u8>)> = [3, 1, 2].iter().map(|&i| (at(i).topic(), encode(&at(i)))).collect();
+    let served = encode_log(&log);
+    let _recorder = launcher
+        .declare_queryable(topic::log(run_id))
+        .callback(move |q| {
+            q.reply(q.key_expr().clone(), served.clone()).wait().unwrap();
+        })
+        .wait()
+        .unwrap();
+    let taken = Arc::new(Mutex::new(Vec::new()));
+    let node = InOrder {
+        topic: at(1).topic(),
+        next: 1,
+        last: 3,
+        taken: taken.clone(),
+    };
+    let session = open(config("client", &[], &[endpoint], false).unwrap()).unwrap();
+    let mut run = test_run(run_id, "interface", Duration::from_millis(200));
+    run.resume = true;
+    run.supervised = true;
+    run.idle_timeout = Duration::from_secs(5);
+    let mut lines = Vec::new();
+    let out = run_nodes(&session, &run, vec![Box::new(node)], |l| lines.push(l.to_string()));
+    out.unwrap_or_else(|e| panic!("{e}: {lines:?}"));
+    assert_eq!(*taken.lock().unwrap(), [1, 2, 3]);
+    assert!(
+        lines.iter().any(|l| l.contains("3 input(s) to handle again")),
+        "{lines:?}"
+    );
+    assert!(!lines.iter().any(|l| l.contains("ignored")), "{lines:?}");
 }
