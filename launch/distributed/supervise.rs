@@ -11,7 +11,7 @@ use super::{
     interrupted, Interrupted, Traffic, DEPARTURE_GRACE, EXIT_GRACE, FINISH_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT,
     STOP_TIMEOUT, STRAGGLER_TIMEOUT,
 };
-use crate::children::{spawn_node, Children, NodeName};
+use crate::children::{spawn_node, Children, NodeName, NodeProcess};
 use crate::error::{Error, IoWhat, Result};
 use crate::runner::{IterationRecord, RunResult};
 use glissade_deploy::Plan;
@@ -124,7 +124,7 @@ impl<'r> Supervisor<'r> {
                 }
                 .into());
             }
-            self.watch_presence(&mut spawned.children);
+            self.watch_presence(&mut spawned.children)?;
             if let Some(f) = self.failure(spawned)? {
                 self.stop_all(
                     spawned,
@@ -161,14 +161,19 @@ impl<'r> Supervisor<'r> {
         }
     }
 
-    /// Takes the liveliness tokens that came and went since the last look.
-    fn watch_presence(&mut self, children: &mut Children) {
+    /// Takes the liveliness tokens that came and went since the last look. A node process whose
+    /// token comes after `done` went out (a replacement started just before) is told again: it
+    /// subscribes before it shows its token, so it hears this one.
+    fn watch_presence(&mut self, children: &mut Children) -> Result<()> {
         for (key, up) in self.presence.changes() {
             let Some(&name) = self.tokens.get(&key) else { continue };
             if let Some(p) = children.0.iter_mut().find(|p| p.name == name) {
                 if up {
                     p.token_seen = true;
                     p.token_lost = None;
+                    if self.done_sent {
+                        transport::publish_done(&self.set_up.bus.session, self.run_id)?;
+                    }
                 } else if p.status.is_none() && p.token_seen {
                     p.token_lost = Some(Instant::now());
                 }
@@ -176,24 +181,42 @@ impl<'r> Supervisor<'r> {
                 self.remote_lost.entry(name).or_insert_with(Instant::now);
             }
         }
+        Ok(())
     }
 
     /// What stops the run, if anything: a node process that failed (and may not be restarted),
     /// a node started by hand that left, the recorder's failure before the start, nodes not
     /// ready in time. Starts the iterations once every node is ready.
     fn failure(&mut self, spawned: &mut Spawned) -> Result<Option<String>> {
-        let (mut child_failure, dead) = self.child_failure(&mut spawned.children)?;
+        let mut child_failure = if self.done_sent {
+            // The launcher holds every result: a node process that fails now (killed on its way
+            // out, say) costs nothing, and a replacement would wait for a `done` already sent. One
+            // that lost the bus but still runs has nothing left to do: it is stopped.
+            for p in spawned.children.0.iter_mut() {
+                if p.status.is_none() && p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) {
+                    let _ = p.child.kill();
+                    p.status = p.child.wait().ok();
+                    crate::console::warn(&format!(
+                        "node {} lost the bus after the run's results were in and did not exit: stopped",
+                        p.name
+                    ));
+                }
+            }
+            if let Some(late) = self.child_failure(&mut spawned.children, false)? {
+                crate::console::warn(&format!(
+                    "{late}\n(after the launcher held the run's results: they are complete and kept)"
+                ));
+            }
+            None
+        } else if self.set_up.supervised && self.got.started.is_some() {
+            // Every node process that died mid-run is restarted, whichever died first: a
+            // replacement resumes from the recorder's log, up to `restarts` times per node.
+            self.restart_dead(&mut spawned.children)?
+        } else {
+            self.child_failure(&mut spawned.children, true)?
+        };
         if child_failure.is_none() {
             child_failure = self.hosted_failure(&mut spawned.hosted);
-        }
-        // A node process that died mid-run: a replacement resumes from the recorder's log, up to
-        // `restarts` times per node.
-        if let (Some(k), Some(why), true) = (
-            dead,
-            &child_failure,
-            self.set_up.supervised && self.got.started.is_some(),
-        ) {
-            child_failure = self.restart(&mut spawned.children, k, why)?;
         }
         // A node started by hand that left before the end is the culprit if it left first (the
         // others leave after it, DEPARTURE_GRACE later); messages already sent may still bring
@@ -221,12 +244,43 @@ impl<'r> Supervisor<'r> {
         Ok(failure)
     }
 
-    /// The first local node process that failed, and its index: exited with a failure (or
-    /// before the run started), or lost its connection to the bus while still running. A node
+    /// Restarts every local node process that died: exited with a failure, or lost its
+    /// connection to the bus while still running. One that exited successfully has finished
+    /// (it is not restarted). The run's failure when a node has no restart left.
+    fn restart_dead(&mut self, children: &mut Children) -> Result<Option<String>> {
+        for k in 0..children.0.len() {
+            let p = &mut children.0[k];
+            if p.status.is_some() {
+                continue;
+            }
+            let why = match p
+                .child
+                .try_wait()
+                .what(|| format!("cannot wait for node process {}", p.name))?
+            {
+                Some(status) => {
+                    p.status = Some(status);
+                    if status.success() {
+                        continue;
+                    }
+                    failed(p, status)
+                }
+                None if p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) => lost_the_bus(p),
+                None => continue,
+            };
+            if let Some(failure) = self.restart(children, k, &why)? {
+                return Ok(Some(failure));
+            }
+        }
+        Ok(None)
+    }
+
+    /// The first local node process that failed: exited with a failure (or before the run
+    /// started), or lost its connection to the bus while still running (`running_too`). A node
     /// that exited because a peer left is not the culprit when that peer's token went first.
-    fn child_failure(&self, children: &mut Children) -> Result<(Option<String>, Option<usize>)> {
+    fn child_failure(&self, children: &mut Children, running_too: bool) -> Result<Option<String>> {
         let mut child_failure: Option<String> = None;
-        let mut dead: Option<usize> = None;
+        let mut exited: Option<usize> = None;
         for (k, p) in children.0.iter_mut().enumerate() {
             if p.status.is_some() || child_failure.is_some() {
                 continue;
@@ -238,30 +292,19 @@ impl<'r> Supervisor<'r> {
             {
                 p.status = Some(status);
                 if !status.success() {
-                    p.output.settle();
-                    child_failure = Some(format!(
-                        "node {} failed ({status}); its last lines:\n    {}",
-                        p.name,
-                        p.last_lines()
-                    ));
-                    dead = Some(k);
+                    child_failure = Some(failed(p, status));
+                    exited = Some(k);
                 } else if self.got.started.is_none() {
                     child_failure = Some(format!("node {} exited before the run started", p.name));
                 }
-            } else if p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) {
-                child_failure = Some(format!(
-                    "node {} lost its connection to the bus (its liveliness token disappeared {} s ago, \
-                     the process still runs); its last lines:\n    {}",
-                    p.name,
-                    EXIT_GRACE.as_secs(),
-                    p.last_lines()
-                ));
-                dead = Some(k);
+            } else if running_too && p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) {
+                child_failure = Some(lost_the_bus(p));
             }
         }
         // A node that exited because a peer left is not the culprit when that peer's token went
-        // first while its process still runs (stopped or hung): name the peer.
-        if let Some(k) = dead.filter(|&k| children.0[k].status.is_some()) {
+        // first while its process still runs (stopped or hung), or when that peer died too:
+        // name the peer. A peer that exited successfully has finished: not the culprit.
+        if let (Some(k), true) = (exited, running_too) {
             let exited_lost = children.0[k].token_lost;
             let silent = children
                 .0
@@ -278,29 +321,26 @@ impl<'r> Supervisor<'r> {
                     .child
                     .try_wait()
                     .what(|| format!("cannot wait for node process {}", p.name))?;
-                child_failure = Some(match status {
+                match status {
                     // It died too (before the other, as its token says): the usual report.
-                    Some(status) => {
+                    Some(status) if !status.success() => {
                         p.status = Some(status);
-                        p.output.settle();
-                        format!(
-                            "node {} failed ({status}); its last lines:\n    {}",
-                            p.name,
-                            p.last_lines()
-                        )
+                        child_failure = Some(failed(p, status));
                     }
-                    None => format!(
-                        "node {} stopped answering: its liveliness token disappeared {:.1} s ago, before node \
-                         {exited} failed, while its process still runs (stopped or hung?); its last lines:\n    {}",
-                        p.name,
-                        lost.elapsed().as_secs_f64(),
-                        p.last_lines()
-                    ),
-                });
-                dead = Some(j);
+                    Some(status) => p.status = Some(status),
+                    None => {
+                        child_failure = Some(format!(
+                            "node {} stopped answering: its liveliness token disappeared {:.1} s ago, before node \
+                             {exited} failed, while its process still runs (stopped or hung?); its last lines:\n    {}",
+                            p.name,
+                            lost.elapsed().as_secs_f64(),
+                            p.last_lines()
+                        ))
+                    }
+                }
             }
         }
-        Ok((child_failure, dead))
+        Ok(child_failure)
     }
 
     /// The first node run in the launcher's process that failed (or ended before the run
@@ -685,4 +725,25 @@ pub(super) fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a zen
     t.messages += 1;
     t.bytes += a.size as u64;
     a.bytes.as_ref()
+}
+
+/// Node process `p` exited with the failure `status`: what it said last.
+fn failed(p: &NodeProcess, status: std::process::ExitStatus) -> String {
+    p.output.settle();
+    format!(
+        "node {} failed ({status}); its last lines:\n    {}",
+        p.name,
+        p.last_lines()
+    )
+}
+
+/// Node process `p` still runs but its liveliness token is gone: what it said last.
+fn lost_the_bus(p: &NodeProcess) -> String {
+    format!(
+        "node {} lost its connection to the bus (its liveliness token disappeared {} s ago, the process \
+         still runs); its last lines:\n    {}",
+        p.name,
+        EXIT_GRACE.as_secs(),
+        p.last_lines()
+    )
 }

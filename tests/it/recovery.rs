@@ -183,3 +183,57 @@ fn restarts_need_a_complete_recording() {
         "processes of run {run_id} remain"
     );
 }
+
+/// Kills at any moment, not only as a decision reaches the launcher: a subdomain process is
+/// killed a few milliseconds (seeded, 0–59 ms) after a seeded iteration's decision, so that the
+/// kill lands while nodes publish, while the recorder is behind the run, or after the run's
+/// end. Every run ends bit-identical to the undisturbed one and leaves no process. Before, a
+/// replacement could drop a message the recorder had heard before one it follows (the run
+/// stalled), the launcher could restart a peer that had finished instead of the killed process,
+/// and a replacement started as the run ended waited for a `done` already sent.
+#[test]
+fn kills_at_any_moment_end_bit_identical() {
+    let sc = scene(&small_three_layer(""));
+    let undisturbed = Run::new(&sc, &RunOptions::new("undisturbed"))
+        .in_process()
+        .map(|o| o.result)
+        .expect("undisturbed run");
+    let n = undisturbed.iterations.len() as u64;
+    let seed = 0x1234_5678_9abc_def1;
+    let mut rng = Rng(seed);
+    for round in 0..30 {
+        let at = 1 + rng.below(n - 1) as u32;
+        let delay = std::time::Duration::from_millis(rng.below(60));
+        let index = if rng.below(2) == 0 { "0" } else { "1" };
+        println!("seed {seed:#x}, round {round}: kill subdomain:{index} {delay:?} after iteration {at}");
+        let (_dir, run_id, recording) = recorded_run(&format!("recovery-any-{round}"));
+        let opts = RunOptions::new(run_id.as_str());
+        let mut killer = None;
+        let (result, _) = Run::new(&sc, &opts)
+            .recorded(Some(&recording))
+            .on_iteration(|r| {
+                if r.iteration == at && killer.is_none() {
+                    let run_id = run_id.clone();
+                    killer = Some(std::thread::spawn(move || {
+                        std::thread::sleep(delay);
+                        // None when the process already left (the run is over).
+                        for pid in processes_with(&run_id, &["node", "subdomain", "--index", index]) {
+                            // SAFETY: kill(2) on a pid of this test's run.
+                            unsafe {
+                                libc::kill(pid, libc::SIGKILL);
+                            }
+                        }
+                    }));
+                }
+            })
+            .processes(exe(), &Network::default())
+            .map(|o| (o.result, o.traffic.unwrap_or_default()))
+            .unwrap_or_else(|e| panic!("round {round}: {e:#}"));
+        killer.expect("the kill iteration was reached").join().unwrap();
+        assert_identical(&undisturbed, &result);
+        assert!(
+            processes_with(&run_id, &[]).is_empty(),
+            "processes of run {run_id} remain"
+        );
+    }
+}
