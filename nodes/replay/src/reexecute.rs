@@ -267,19 +267,52 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
         cause,
     })?);
     keep(std::iter::from_fn(|| node.next_output()).collect());
-    for (i, msg) in &inputs {
-        let out = node.handle(msg).map_err(|cause| ReexecuteError::Node {
-            node: id,
-            what: format!(
-                "recorded message #{i} `{}` (iteration {}, stage {:?})",
-                msg.topic(),
-                msg.envelope.iteration,
-                msg.envelope.stage
-            ),
-            cause,
-        })?;
-        keep(out);
-        keep(std::iter::from_fn(|| node.next_output()).collect());
+    // The file is in the order the recorder heard the messages, which need not be one the node
+    // could have seen (the router forwards each sender's messages on its own): a message the
+    // node refuses as not yet its turn is held and handed again after every message it takes.
+    let failed = |i: usize, msg: &Message, cause| ReexecuteError::Node {
+        node: id,
+        what: format!(
+            "recorded message #{i} `{}` (iteration {}, stage {:?})",
+            msg.topic(),
+            msg.envelope.iteration,
+            msg.envelope.stage
+        ),
+        cause,
+    };
+    let mut held: std::collections::VecDeque<(&(usize, Message), NodeError)> = std::collections::VecDeque::new();
+    for input in &inputs {
+        match node.handle(&input.1) {
+            Ok(out) => {
+                keep(out);
+                keep(std::iter::from_fn(|| node.next_output()).collect());
+            }
+            Err(cause) if cause.is_rejection() => {
+                held.push_back((input, cause));
+                continue;
+            }
+            Err(cause) => return Err(failed(input.0, &input.1, cause)),
+        }
+        let mut taken = true;
+        while taken && !held.is_empty() {
+            taken = false;
+            for _ in 0..held.len() {
+                let (h, _) = held.pop_front().expect("the pass is as long as what is held");
+                match node.handle(&h.1) {
+                    Ok(out) => {
+                        keep(out);
+                        keep(std::iter::from_fn(|| node.next_output()).collect());
+                        taken = true;
+                    }
+                    Err(cause) if cause.is_rejection() => held.push_back((h, cause)),
+                    Err(cause) => return Err(failed(h.0, &h.1, cause)),
+                }
+            }
+        }
+    }
+    // Refused to the end: the node's reason for the earliest such message.
+    if let Some(((i, msg), cause)) = held.into_iter().min_by_key(|(h, _)| h.0) {
+        return Err(failed(*i, msg, cause));
     }
 
     // Compare, topic by topic, in order; keep the mismatch of the earliest recorded message.
