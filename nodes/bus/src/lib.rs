@@ -401,6 +401,38 @@ pub fn expect_origin(node: NodeId, msg: &Message, role: Role, index: Option<u32>
     Ok(())
 }
 
+/// Hands `inputs` to `take` in their order, as a replacement node process or a re-execution
+/// replays a recording. A recording's order is the order the recorder heard the messages, which
+/// need not be one the nodes could have seen (the router forwards each sender's messages on its
+/// own): an input `take` refuses as not yet its turn (`Ok(Some(why))`) is held and handed again
+/// after every input taken, until a pass over what is held takes nothing. Returns the inputs
+/// refused to the end with their last refusal, in the order they are held; stops at `take`'s
+/// first error.
+pub fn take_when_ready<T, R, E>(
+    inputs: impl IntoIterator<Item = T>,
+    mut take: impl FnMut(&T) -> Result<Option<R>, E>,
+) -> Result<Vec<(T, R)>, E> {
+    let mut held: std::collections::VecDeque<(T, R)> = std::collections::VecDeque::new();
+    for input in inputs {
+        if let Some(why) = take(&input)? {
+            held.push_back((input, why));
+            continue;
+        }
+        let mut taken = true;
+        while taken && !held.is_empty() {
+            taken = false;
+            for _ in 0..held.len() {
+                let (h, _) = held.pop_front().expect("the pass is as long as what is held");
+                match take(&h)? {
+                    Some(why) => held.push_back((h, why)),
+                    None => taken = true,
+                }
+            }
+        }
+    }
+    Ok(held.into())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -507,5 +539,26 @@ mod tests {
         let mut untimed = InProcessBus::new(nodes());
         untimed.run(|_| true).unwrap();
         assert!(untimed.iteration_times().is_empty());
+    }
+
+    /// Inputs 3, 1, 9, 2 to a taker of 1, 2, 3 in that order: each is taken once it is its turn,
+    /// and 9, never its turn, comes back with its last refusal.
+    #[test]
+    fn inputs_are_taken_when_ready_and_the_rest_comes_back() {
+        let mut next = 1;
+        let mut order = Vec::new();
+        let left = take_when_ready([3, 1, 9, 2], |&i| -> Result<Option<String>, ()> {
+            if i != next {
+                return Ok(Some(format!("{i} while at {next}")));
+            }
+            order.push(i);
+            next += 1;
+            Ok(None)
+        })
+        .unwrap();
+        assert_eq!(order, [1, 2, 3]);
+        assert_eq!(left, [(9, "9 while at 4".to_string())]);
+        let failed = take_when_ready([2, 1], |&i| if i == 1 { Err(i) } else { Ok(Some(())) });
+        assert_eq!(failed, Err(1));
     }
 }

@@ -6,7 +6,7 @@
 //! stage) and the first differing field in it.
 
 use crate::{run_messages, Skipped};
-use glissade_bus::{Node, NodeError, RunContext};
+use glissade_bus::{take_when_ready, Node, NodeError, RunContext};
 use glissade_deploy::{build_nodes, BuildError, Plan, Selection};
 use glissade_messages::{encode, key_matches, DecodeError, Message, NodeId, Role};
 use glissade_recorder::{Recording, THINNED_FIELDS};
@@ -268,8 +268,8 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
     })?);
     keep(std::iter::from_fn(|| node.next_output()).collect());
     // The file is in the order the recorder heard the messages, which need not be one the node
-    // could have seen (the router forwards each sender's messages on its own): a message the
-    // node refuses as not yet its turn is held and handed again after every message it takes.
+    // could have seen: a message the node refuses as not yet its turn is handed again once it
+    // has taken another ([`take_when_ready`]).
     let failed = |i: usize, msg: &Message, cause| ReexecuteError::Node {
         node: id,
         what: format!(
@@ -280,38 +280,17 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
         ),
         cause,
     };
-    let mut held: std::collections::VecDeque<(&(usize, Message), NodeError)> = std::collections::VecDeque::new();
-    for input in &inputs {
-        match node.handle(&input.1) {
-            Ok(out) => {
-                keep(out);
-                keep(std::iter::from_fn(|| node.next_output()).collect());
-            }
-            Err(cause) if cause.is_rejection() => {
-                held.push_back((input, cause));
-                continue;
-            }
-            Err(cause) => return Err(failed(input.0, &input.1, cause)),
+    let refused = take_when_ready(&inputs, |&(i, msg)| match node.handle(msg) {
+        Ok(out) => {
+            keep(out);
+            keep(std::iter::from_fn(|| node.next_output()).collect());
+            Ok(None)
         }
-        let mut taken = true;
-        while taken && !held.is_empty() {
-            taken = false;
-            for _ in 0..held.len() {
-                let (h, _) = held.pop_front().expect("the pass is as long as what is held");
-                match node.handle(&h.1) {
-                    Ok(out) => {
-                        keep(out);
-                        keep(std::iter::from_fn(|| node.next_output()).collect());
-                        taken = true;
-                    }
-                    Err(cause) if cause.is_rejection() => held.push_back((h, cause)),
-                    Err(cause) => return Err(failed(h.0, &h.1, cause)),
-                }
-            }
-        }
-    }
+        Err(cause) if cause.is_rejection() => Ok(Some(cause)),
+        Err(cause) => Err(failed(*i, msg, cause)),
+    })?;
     // Refused to the end: the node's reason for the earliest such message.
-    if let Some(((i, msg), cause)) = held.into_iter().min_by_key(|(h, _)| h.0) {
+    if let Some(((i, msg), cause)) = refused.into_iter().min_by_key(|((i, _), _)| *i) {
         return Err(failed(*i, msg, cause));
     }
 

@@ -12,7 +12,7 @@ use crate::receive::{batches, message_hash, PayloadBlocks, Received};
 use crate::recorder_log::fetch_log;
 use crate::shm::ShmLender;
 use crate::TransportError;
-use glissade_bus::Node;
+use glissade_bus::{take_when_ready, Node};
 use glissade_messages::{
     encode, key_matches, topic, BlockLender, BufferPool, DecodeBuffers, Expected, Message, Routes,
 };
@@ -274,8 +274,8 @@ fn wait_for_start(run: &NodeRun, rx: &mpsc::Receiver<Event>) -> Result<VecDeque<
 /// they could happen: the router forwards each sender's messages on its own, so the recorder can
 /// hear an Anderson step before the macro displacements the step's subdomain had received
 /// before it sent its partials. A node refuses a message it is not ready for; such a message is
-/// held and handed again after every message a node takes, so that each input is handled once
-/// the node is ready for it, as it was live.
+/// held and handed again after every message a node takes ([`take_when_ready`]), so that each
+/// input is handled once the node is ready for it, as it was live.
 fn resume(
     run: &NodeRun,
     keys: &[String],
@@ -303,34 +303,12 @@ fn resume(
         handler.published.len()
     ));
     handler.start(nodes)?;
-    let mut held: VecDeque<(String, Vec<u8>)> = VecDeque::new();
-    for (key, bytes) in inputs {
-        let received = Received::from_bytes(key.clone(), &bytes, &run.expected);
-        if handler.handle_or_refused(received, nodes, log)?.is_some() {
-            held.push_back((key, bytes));
-            continue;
-        }
-        // What was held may be taken now: until a whole pass over it takes nothing.
-        let mut taken = true;
-        while taken && !held.is_empty() {
-            taken = false;
-            for _ in 0..held.len() {
-                let (key, bytes) = held.pop_front().expect("the pass is as long as what is held");
-                let received = Received::from_bytes(key.clone(), &bytes, &run.expected);
-                if handler.handle_or_refused(received, nodes, log)?.is_some() {
-                    held.push_back((key, bytes));
-                } else {
-                    taken = true;
-                }
-            }
-        }
-    }
-    // Refused still: not for this run's nodes after all, or already past (logged as live).
-    for (key, bytes) in held {
-        let received = Received::from_bytes(key, &bytes, &run.expected);
-        if let Some(why) = handler.handle_or_refused(received, nodes, log)? {
-            log(&why);
-        }
+    let refused = take_when_ready(inputs, |(key, bytes)| {
+        handler.handle_or_refused(Received::from_bytes(key.clone(), bytes, &run.expected), nodes, log)
+    })?;
+    // Refused to the end: not for this run's nodes after all, or already past (logged as live).
+    for (_, why) in refused {
+        log(&why);
     }
     log("resumed: state rebuilt, continuing on the bus");
     Ok(())
