@@ -249,27 +249,10 @@ impl<'r> Supervisor<'r> {
     /// (it is not restarted). The run's failure when a node has no restart left.
     fn restart_dead(&mut self, children: &mut Children) -> Result<Option<String>> {
         for k in 0..children.0.len() {
-            let p = &mut children.0[k];
-            if p.status.is_some() {
-                continue;
-            }
-            let why = match p
-                .child
-                .try_wait()
-                .what(|| format!("cannot wait for node process {}", p.name))?
-            {
-                Some(status) => {
-                    p.status = Some(status);
-                    if status.success() {
-                        continue;
-                    }
-                    failed(p, status)
+            if let Look::Dead { why, .. } = look(&mut children.0[k], true)? {
+                if let Some(failure) = self.restart(children, k, &why)? {
+                    return Ok(Some(failure));
                 }
-                None if p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) => lost_the_bus(p),
-                None => continue,
-            };
-            if let Some(failure) = self.restart(children, k, &why)? {
-                return Ok(Some(failure));
             }
         }
         Ok(None)
@@ -282,23 +265,18 @@ impl<'r> Supervisor<'r> {
         let mut child_failure: Option<String> = None;
         let mut exited: Option<usize> = None;
         for (k, p) in children.0.iter_mut().enumerate() {
-            if p.status.is_some() || child_failure.is_some() {
+            if child_failure.is_some() {
                 continue;
             }
-            if let Some(status) = p
-                .child
-                .try_wait()
-                .what(|| format!("cannot wait for node process {}", p.name))?
-            {
-                p.status = Some(status);
-                if !status.success() {
-                    child_failure = Some(failed(p, status));
-                    exited = Some(k);
-                } else if self.got.started.is_none() {
+            match look(p, running_too)? {
+                Look::Dead { why, exited: e } => {
+                    child_failure = Some(why);
+                    exited = e.then_some(k);
+                }
+                Look::Finished if self.got.started.is_none() => {
                     child_failure = Some(format!("node {} exited before the run started", p.name));
                 }
-            } else if running_too && p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) {
-                child_failure = Some(lost_the_bus(p));
+                Look::Finished | Look::Unchanged => {}
             }
         }
         // A node that exited because a peer left is not the culprit when that peer's token went
@@ -725,6 +703,48 @@ pub(super) fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a zen
     t.messages += 1;
     t.bytes += a.size as u64;
     a.bytes.as_ref()
+}
+
+/// What a node process has come to since the launcher last looked.
+enum Look {
+    /// Nothing new: it runs, or its exit was seen before.
+    Unchanged,
+    /// It exited successfully just now.
+    Finished,
+    /// It exited with a failure just now (`exited`), or it still runs but lost the bus: why.
+    Dead { why: String, exited: bool },
+}
+
+/// Looks at node process `p` (unless it was seen exited before), noting its exit status; a
+/// process cut off from the bus for [`EXIT_GRACE`] while it runs is dead if `lost_counts`.
+fn look(p: &mut NodeProcess, lost_counts: bool) -> Result<Look> {
+    if p.status.is_some() {
+        return Ok(Look::Unchanged);
+    }
+    Ok(
+        match p
+            .child
+            .try_wait()
+            .what(|| format!("cannot wait for node process {}", p.name))?
+        {
+            Some(status) => {
+                p.status = Some(status);
+                if status.success() {
+                    Look::Finished
+                } else {
+                    Look::Dead {
+                        why: failed(p, status),
+                        exited: true,
+                    }
+                }
+            }
+            None if lost_counts && p.token_lost.is_some_and(|t| t.elapsed() > EXIT_GRACE) => Look::Dead {
+                why: lost_the_bus(p),
+                exited: false,
+            },
+            None => Look::Unchanged,
+        },
+    )
 }
 
 /// Node process `p` exited with the failure `status`: what it said last.
