@@ -71,17 +71,22 @@ impl BoundaryLayout {
         self.dofs.is_empty()
     }
 
+    /// Per slot, the interface node that owns its interface: the one whose group (`groups`, by
+    /// node index) holds it. None when an interface has no owner.
+    pub fn owners(&self, groups: &[Vec<usize>]) -> Option<Vec<u32>> {
+        self.slots
+            .iter()
+            .map(|sl| groups.iter().position(|g| g.contains(&sl.interface)).map(|g| g as u32))
+            .collect()
+    }
+
     /// How this subdomain's state is shared among the interface nodes that own its interfaces
     /// (`groups`: the interfaces of each node): one part per node owning one of them, in node
     /// order, each the rows of that node's interfaces in layout order. None when one of its
     /// interfaces has no owner. The subdomain cuts its state this way and each node reads its
     /// part this way: one rule for both.
     pub fn parts(&self, groups: &[Vec<usize>]) -> Option<Vec<StatePart>> {
-        let owners: Vec<usize> = self
-            .slots
-            .iter()
-            .map(|sl| groups.iter().position(|g| g.contains(&sl.interface)))
-            .collect::<Option<_>>()?;
+        let owners = self.owners(groups)?;
         let mut nodes = owners.clone();
         nodes.sort_unstable();
         nodes.dedup();
@@ -101,11 +106,7 @@ impl BoundaryLayout {
                             })
                         })
                         .collect();
-                    StatePart {
-                        node: node as u32,
-                        at,
-                        rows,
-                    }
+                    StatePart { node, at, rows }
                 })
                 .collect(),
         )

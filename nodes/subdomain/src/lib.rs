@@ -164,18 +164,10 @@ impl SubdomainNode {
     /// The interfaces each interface node owns (the deployment's groups, by node index): local
     /// directions of an interface are then taken only from its owner.
     pub fn with_interface_owners(mut self, groups: &[Vec<usize>]) -> Self {
-        let owner = |i: usize| groups.iter().position(|g| g.contains(&i)).map(|g| g as u32);
-        self.owners = self
-            .solver
-            .op
-            .layout
-            .slots
-            .iter()
-            .map(|sl| owner(sl.interface))
-            .collect::<Option<Vec<u32>>>();
+        let layout = &self.solver.op.layout;
+        self.owners = layout.owners(groups);
         // With several interface nodes every state is addressed: each node subscribes to the
         // states for it with one key expression, `subdomain/*/boundary_state/<node>`.
-        let layout = &self.solver.op.layout;
         self.state_parts = match layout.parts(groups) {
             Some(parts) if groups.len() > 1 => parts
                 .iter()
