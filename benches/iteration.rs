@@ -165,7 +165,11 @@ fn main() {
         let mut e = glissade_mechanics::estimate::ErrorEstimate::default();
         for k in 0..=glissade_mechanics::estimate::RATE_WINDOW {
             sink += e
-                .push(0.5f64.powi(k as i32), 0.5f64.powi(k as i32))
+                .push(
+                    0.5f64.powi(k as i32),
+                    0.5f64.powi(k as i32),
+                    Some(0.5f64.powi(k as i32)),
+                )
                 .map_or(0.0, |x| x.error);
         }
     }

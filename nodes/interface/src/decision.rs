@@ -97,7 +97,9 @@ impl InterfaceNode {
                         updates.push(i.interface);
                     }
                 }
-                let verdict = d.rule.decide(n, &sums);
+                // The residual of the last step mixed: iteration n − 1's (its step came before s_n).
+                let fixed_point = d.anderson.as_ref().and_then(|a| a.last_residual2()).map(f64::sqrt);
+                let verdict = d.rule.decide(n, &sums, fixed_point);
                 (sums, updates, verdict)
             }
         };

@@ -46,8 +46,9 @@ impl StopRule {
         self.last
     }
 
-    /// Verdict after the local stage of iteration `n` (0-based).
-    pub fn decide(&mut self, n: u32, sums: &IndicatorSums) -> Verdict {
+    /// Verdict after the local stage of iteration `n` (0-based); `fixed_point` is the
+    /// fixed-point residual ‖G(s) − s‖ of the last Anderson step (none without Anderson).
+    pub fn decide(&mut self, n: u32, sums: &IndicatorSums, fixed_point: Option<f64>) -> Verdict {
         let eta = sums.eta();
         self.history.push(eta);
         let residual = match sums.contact_indicator() {
@@ -58,10 +59,10 @@ impl StopRule {
         // (relative to nothing); their step carries no information, the tractions are zero.
         let separated = sums.counts[0] > 0 && sums.counts[1] + sums.counts[2] == 0;
         let step = if separated { 0.0 } else { sums.force_step() };
-        self.last = self.estimate.push(step, residual);
+        self.last = self.estimate.push(step, residual, fixed_point);
         if eta == 0.0 {
             // s = ŝ exactly: this iterate is the fixed point (e.g. a scene without load).
-            self.last = Some(Estimated { rate: 0.0, error: 0.0 });
+            self.last = Some(Estimated::EXACT);
         }
         if !eta.is_finite() || !sums.contact_indicator().is_finite() {
             return Verdict::Diverged {

@@ -26,13 +26,13 @@ fn stop_rules() {
         ..Default::default()
     };
     let mut r = StopRule::new(&p);
-    assert_eq!(r.decide(0, &sums(0.5, 1.0)), Verdict::Continue);
-    assert_eq!(r.decide(1, &sums(1e-4, 1.0)), Verdict::Converged);
+    assert_eq!(r.decide(0, &sums(0.5, 1.0), None), Verdict::Continue);
+    assert_eq!(r.decide(1, &sums(1e-4, 1.0), None), Verdict::Converged);
 
     let mut r = StopRule::new(&p);
     let mut v = Verdict::Continue;
     for n in 0..20 {
-        v = r.decide(n, &sums(0.1, 1.0));
+        v = r.decide(n, &sums(0.1, 1.0), None);
         if v.is_stop() {
             assert_eq!(n, 10, "stagnation is seen once the history holds two windows");
             break;
@@ -47,7 +47,7 @@ fn stop_rules() {
     let mut r = StopRule::new(&p);
     let mut v = Verdict::Continue;
     for n in 0..20 {
-        v = r.decide(n, &sums(if n % 2 == 0 { 0.4 } else { 0.3 }, 1.0));
+        v = r.decide(n, &sums(if n % 2 == 0 { 0.4 } else { 0.3 }, 1.0), None);
         if v.is_stop() {
             break;
         }
@@ -58,18 +58,18 @@ fn stop_rules() {
     );
 
     let mut r = StopRule::new(&p);
-    r.decide(0, &sums(0.5, 1.0));
-    r.decide(1, &sums(0.5, 1.0));
-    let v = r.decide(2, &sums(0.5, 1e13));
+    r.decide(0, &sums(0.5, 1.0), None);
+    r.decide(1, &sums(0.5, 1.0), None);
+    let v = r.decide(2, &sums(0.5, 1e13), None);
     assert!(
         matches!(&v, Verdict::Diverged { detail } if detail.contains("grew")),
         "{v:?}"
     );
 
     let mut r = StopRule::new(&SolverParams { max_iterations: 3, ..p });
-    assert_eq!(r.decide(0, &sums(0.5, 1.0)), Verdict::Continue);
-    assert_eq!(r.decide(1, &sums(0.4, 1.0)), Verdict::Continue);
-    assert_eq!(r.decide(2, &sums(0.3, 1.0)), Verdict::MaxIterations);
+    assert_eq!(r.decide(0, &sums(0.5, 1.0), None), Verdict::Continue);
+    assert_eq!(r.decide(1, &sums(0.4, 1.0), None), Verdict::Continue);
+    assert_eq!(r.decide(2, &sums(0.3, 1.0), None), Verdict::MaxIterations);
 }
 
 /// With an accuracy the run converges only once the error estimate is at most it: a small η
@@ -96,7 +96,7 @@ fn accuracy_stops_on_the_estimate_not_on_eta() {
     let mut converged_at = None;
     for n in 0..40 {
         // η is tiny from the start: it must not stop the run.
-        if r.decide(n, &step_sums(1e-12, n)) == Verdict::Converged {
+        if r.decide(n, &step_sums(1e-12, n), None) == Verdict::Converged {
             converged_at = Some(n);
             break;
         }
@@ -113,7 +113,7 @@ fn accuracy_stops_on_the_estimate_not_on_eta() {
         ..p.clone()
     });
     let stop = (0..40)
-        .find(|&n| r.decide(n, &step_sums(if n < 25 { 1e-3 } else { 1e-7 }, n)) == Verdict::Converged)
+        .find(|&n| r.decide(n, &step_sums(if n < 25 { 1e-3 } else { 1e-7 }, n), None) == Verdict::Converged)
         .expect("converges");
     assert_eq!(stop, 25);
 
@@ -123,7 +123,7 @@ fn accuracy_stops_on_the_estimate_not_on_eta() {
         max_iterations: 5,
         ..p
     });
-    let verdicts: Vec<Verdict> = (0..5).map(|n| r.decide(n, &step_sums(0.0, n))).collect();
+    let verdicts: Vec<Verdict> = (0..5).map(|n| r.decide(n, &step_sums(0.0, n), None)).collect();
     assert_eq!(verdicts[4], Verdict::MaxIterations, "{verdicts:?}");
     assert!(verdicts[..4].iter().all(|v| *v == Verdict::Continue), "{verdicts:?}");
 }

@@ -30,6 +30,12 @@ impl AndersonCoordinator {
         }
     }
 
+    /// ‖r‖² = ‖G(s) − s‖² (force part) summed over the parts of the last step's partials: the
+    /// fixed-point residual of the last iterate mixed, which the error estimate calibrates.
+    pub fn last_residual2(&self) -> Option<f64> {
+        self.last_residual2
+    }
+
     /// The step for every part's `partials` (the same k), summed from zero in the order given (a
     /// fixed order, so that the sum is the same bit for bit on every run): [`Self::decide`] on
     /// the sum.
