@@ -27,8 +27,8 @@
 //!
 //!   êₙ = c · ‖rₙ‖ · exp(mean over the last [`CALIBRATION_WINDOW`] iterations of log(tₖ / ‖rₖ‖)),
 //!
-//! c = [`CALIBRATION_FACTOR`], used once half of that window (rounded down) has both values and
-//! while the fit contracts; before, and without Anderson, the estimate is the bound. Where the
+//! c = [`CALIBRATION_FACTOR`], used once [`CALIBRATION_MIN`] iterations of that window have both
+//! values and while the fit contracts; before, and without Anderson, the estimate is the bound. Where the
 //! contraction is slow (ρ̂ > [`SLOW_CONTRACTION`]) the estimate is the larger of the two. The window
 //! and c were chosen on the iterations of every shipped scene and stability case against the
 //! reference (docs/accuracy.md): sharper than the bound, and as safe at the stops.
@@ -39,6 +39,9 @@ pub const RATE_WINDOW: usize = 20;
 pub const STEP_WINDOW: usize = 10;
 /// Iterations over which the fixed-point residual's level is calibrated against the steps' trend.
 pub const CALIBRATION_WINDOW: usize = 25;
+/// Iterations of the calibration window that must have both values before the calibration is
+/// used.
+pub const CALIBRATION_MIN: usize = 18;
 /// Factor c of the calibrated estimate.
 pub const CALIBRATION_FACTOR: f64 = 2.5;
 /// Above this contraction the estimate is at least the bound: 1/(1 − ρ̂) is then too sensitive to
@@ -53,6 +56,7 @@ pub struct ErrorEstimate {
     pub rate_window: usize,
     pub step_window: usize,
     pub calibration_window: usize,
+    pub calibration_min: usize,
     pub calibration_factor: f64,
     steps: Vec<f64>,
     residuals: Vec<f64>,
@@ -112,6 +116,7 @@ impl ErrorEstimate {
             rate_window,
             step_window,
             calibration_window: CALIBRATION_WINDOW,
+            calibration_min: CALIBRATION_MIN,
             calibration_factor: CALIBRATION_FACTOR,
             steps: Vec::with_capacity(kept + 1),
             residuals: Vec::with_capacity(kept + 1),
@@ -133,7 +138,7 @@ impl ErrorEstimate {
         let fixed_point = fixed_point.filter(|r| *r > 0.0 && r.is_finite());
         let known: Vec<f64> = self.ratios.iter().flatten().copied().collect();
         match fixed_point {
-            Some(r) if estimate.error > 0.0 && known.len() >= (self.calibration_window / 2).max(3) => {
+            Some(r) if estimate.error > 0.0 && known.len() >= self.calibration_min => {
                 let mean = known.iter().sum::<f64>() / known.len() as f64;
                 let calibrated = self.calibration_factor * r * mean.exp();
                 if estimate.rate > SLOW_CONTRACTION && calibrated < estimate.error {
@@ -265,8 +270,8 @@ mod tests {
 
     /// On a geometric sequence whose fixed-point residual is K ρⁿ, the steps' trend over the
     /// window is the last step itself, ρⁿ⁻¹(1 − ρ)/(1 − ρ) = ρⁿ⁻¹, and log(trend / residual) is the
-    /// same every iteration: the calibrated estimate is c ρⁿ⁻¹ whatever K, once half of the
-    /// calibration window has both values, and the bound before that.
+    /// same every iteration: the calibrated estimate is c ρⁿ⁻¹ whatever K, once
+    /// [`CALIBRATION_MIN`] iterations of the window have both values, and the bound before that.
     #[test]
     fn the_calibrated_estimate_is_c_times_the_trend_on_a_geometric_sequence() {
         let rho: f64 = 0.9;
@@ -292,12 +297,8 @@ mod tests {
                     assert!((est.error / rho.powi(n - m as i32) - 1.0).abs() < 1e-9, "n = {n}");
                 }
             }
-            // Estimates from n = w on; half the window (12) of them calibrate from n = w + 11.
-            assert_eq!(
-                first_calibrated,
-                Some(w as i32 + CALIBRATION_WINDOW as i32 / 2 - 1),
-                "K = {k}"
-            );
+            // Estimates from n = w on; the 18th of them calibrates, at n = w + 17.
+            assert_eq!(first_calibrated, Some(w as i32 + CALIBRATION_MIN as i32 - 1), "K = {k}");
         }
     }
 
