@@ -144,7 +144,8 @@ fn main() {
     println!("{:<40} {:>12.3}", "iteration", per_it);
     // The error estimate's share: the interface node sums the step of the contact forces of
     // both sides as they arrive (`force_step_sums`, here against the current forces as the
-    // previous ones: the same pass), then fits 20 residuals.
+    // previous ones: the same pass), then fits 20 residuals and 10 steps and, once calibrated,
+    // takes a mean over 25 ratios.
     let weights = latin.model.time.trapezoid_weights();
     let t_est = Instant::now();
     let mut sink = 0.0;
@@ -162,8 +163,11 @@ fn main() {
                 }
             }
         }
+        // A whole estimate's life up to its calibrated stage, every iteration: far more pushes
+        // than the one a run makes per iteration, so an upper bound of the estimate's cost.
         let mut e = glissade_mechanics::estimate::ErrorEstimate::default();
-        for k in 0..=glissade_mechanics::estimate::RATE_WINDOW {
+        let pushes = glissade_mechanics::estimate::RATE_WINDOW + glissade_mechanics::estimate::CALIBRATION_MIN;
+        for k in 0..=pushes {
             sink += e
                 .push(
                     0.5f64.powi(k as i32),
