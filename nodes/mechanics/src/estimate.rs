@@ -28,10 +28,10 @@
 //!   êₙ = c · ‖rₙ‖ · exp(mean over the last [`CALIBRATION_WINDOW`] iterations of log(tₖ / ‖rₖ‖)),
 //!
 //! c = [`CALIBRATION_FACTOR`], used once [`CALIBRATION_MIN`] iterations of that window have both
-//! values and while the fit contracts; before, and without Anderson, the estimate is the bound. Where the
-//! contraction is slow (ρ̂ > [`SLOW_CONTRACTION`]) the estimate is the larger of the two. The window
-//! and c were chosen on the iterations of every shipped scene and stability case against the
-//! reference (docs/accuracy.md): sharper than the bound, and as safe at the stops.
+//! values and while the fit contracts; before, and without Anderson, the estimate is the bound.
+//! Where the contraction is slow (ρ̂ > [`SLOW_CONTRACTION`]) the estimate is the larger of the two.
+//! The constants were chosen on the iterations of every shipped scene and stability case against
+//! the reference; docs/accuracy.md has how they were chosen and where the estimate stops early.
 
 /// Iterations in the contraction fit.
 pub const RATE_WINDOW: usize = 20;
@@ -55,9 +55,6 @@ pub const SLOW_CONTRACTION: f64 = 0.97;
 pub struct ErrorEstimate {
     pub rate_window: usize,
     pub step_window: usize,
-    pub calibration_window: usize,
-    pub calibration_min: usize,
-    pub calibration_factor: f64,
     steps: Vec<f64>,
     residuals: Vec<f64>,
     /// log(tₖ / ‖rₖ‖) where both exist, oldest first.
@@ -92,7 +89,8 @@ impl Default for ErrorEstimate {
     }
 }
 
-/// Value at the last point of a least-squares fit of log v against the index.
+/// A least-squares fit of log v against the index: the fitted value at the last index and
+/// exp(slope), the factor per index.
 fn log_linear_fit(values: &[f64]) -> (f64, f64) {
     let w = values.len() as f64;
     let x_mean = (w - 1.0) / 2.0;
@@ -108,16 +106,13 @@ fn log_linear_fit(values: &[f64]) -> (f64, f64) {
 }
 
 impl ErrorEstimate {
-    /// The bound over these windows, calibrated over the default [`CALIBRATION_WINDOW`].
+    /// The bound over these windows, calibrated over [`CALIBRATION_WINDOW`] iterations.
     pub fn new(rate_window: usize, step_window: usize) -> Self {
         assert!(rate_window >= 2 && step_window >= 2, "a fit needs two points");
         let kept = rate_window.max(step_window);
         Self {
             rate_window,
             step_window,
-            calibration_window: CALIBRATION_WINDOW,
-            calibration_min: CALIBRATION_MIN,
-            calibration_factor: CALIBRATION_FACTOR,
             steps: Vec::with_capacity(kept + 1),
             residuals: Vec::with_capacity(kept + 1),
             ratios: Vec::with_capacity(CALIBRATION_WINDOW + 1),
@@ -129,18 +124,17 @@ impl ErrorEstimate {
     /// fixed-point residual ‖G(s) − s‖ of the last iterate mixed before this one; returns its
     /// estimate when there is one.
     pub fn push(&mut self, step: f64, residual: f64, fixed_point: Option<f64>) -> Option<Estimated> {
+        let fixed_point = fixed_point.filter(|r| *r > 0.0 && r.is_finite());
         let (estimate, ratio) = self.bound(step, residual, fixed_point);
         self.ratios.push(ratio);
-        if self.ratios.len() > self.calibration_window {
+        if self.ratios.len() > CALIBRATION_WINDOW {
             self.ratios.remove(0);
         }
         let estimate = estimate?;
-        let fixed_point = fixed_point.filter(|r| *r > 0.0 && r.is_finite());
-        let known: Vec<f64> = self.ratios.iter().flatten().copied().collect();
+        let (known, sum) = self.ratios.iter().flatten().fold((0, 0.0), |(n, s), l| (n + 1, s + l));
         match fixed_point {
-            Some(r) if estimate.error > 0.0 && known.len() >= self.calibration_min => {
-                let mean = known.iter().sum::<f64>() / known.len() as f64;
-                let calibrated = self.calibration_factor * r * mean.exp();
+            Some(r) if estimate.error > 0.0 && known >= CALIBRATION_MIN => {
+                let calibrated = CALIBRATION_FACTOR * r * (sum / known as f64).exp();
                 if estimate.rate > SLOW_CONTRACTION && calibrated < estimate.error {
                     return Some(estimate);
                 }
@@ -154,7 +148,8 @@ impl ErrorEstimate {
         }
     }
 
-    /// The bound of this iteration, and log(tₙ / ‖rₙ‖) for the calibration where both exist.
+    /// The bound of this iteration, and log(tₙ / ‖rₙ‖) for the calibration where both exist
+    /// (`fixed_point` positive and finite, or none).
     fn bound(&mut self, step: f64, residual: f64, fixed_point: Option<f64>) -> (Option<Estimated>, Option<f64>) {
         let kept = self.rate_window.max(self.step_window);
         self.steps.push(step);
@@ -189,10 +184,7 @@ impl ErrorEstimate {
         } else {
             largest
         } / (1.0 - rate);
-        let ratio = fixed_point
-            .filter(|r| *r > 0.0 && r.is_finite())
-            .map(|r| (trend / r).ln())
-            .filter(|l| l.is_finite());
+        let ratio = fixed_point.map(|r| (trend / r).ln()).filter(|l| l.is_finite());
         let bound = Estimated {
             rate,
             error: largest / (1.0 - rate),
