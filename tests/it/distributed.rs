@@ -217,12 +217,13 @@ fn several_interface_nodes_match_one_bit_for_bit() {
     assert_identical(&one, &remote);
 }
 
-/// `interfaces_with_subdomains` (the stratified scene's deployment, one process per layer):
-/// interface node 0 owns the 12 contact interfaces and runs beside the router, nodes 1 to 3 the
-/// perfect interfaces inside each layer, in that layer's process. Each subdomain sends node 0
-/// the rows of its contact interfaces and its own layer's node the rows of its perfect ones, each
-/// on a key of its own, so that the perfect interfaces' fields never leave their process. The
-/// run is the one-interface-node run bit for bit, in-process and as processes.
+/// `interfaces_with_subdomains` (the stratified scene's deployment, one process per column of
+/// 60 mm through the three layers): interface node 0 owns the 6 perfect interfaces between
+/// columns and runs beside the router, nodes 1 to 3 the 4 contact and 3 perfect interfaces
+/// inside each column, in that column's process. Each subdomain sends each node owning one of
+/// its interfaces the rows of those, each on a key of its own, so that the fields of the
+/// interfaces inside a column never leave their process. The run is the one-interface-node run
+/// bit for bit, in-process and as processes.
 #[test]
 fn interfaces_with_their_subdomains_match_one_node_bit_for_bit() {
     use glissade_messages::{Field, Payload};
@@ -286,26 +287,40 @@ fn interfaces_with_their_subdomains_match_one_node_bit_for_bit() {
         bits(&local_states) == bits(&one_states),
         "the states put together differ from the whole ones"
     );
-    // Every subdomain touches a contact interface (node 0) and a perfect one of its layer (node
-    // 1 + layer): two parts each, never a whole state.
-    assert_eq!(parts.len(), 36, "{parts:?}");
+    // Each subdomain sends a part to each node owning one of its interfaces (node 0: the
+    // perfect interfaces between columns; node 1 + column: those inside its column), the rows
+    // of exactly those interfaces; the outer columns' subdomains touch no interface between
+    // columns: 6 subdomains with one part, 12 with two, never a whole state.
+    let plan = glissade_deploy::Plan::new(&sc.model).with_scene(&sc);
+    assert!(plan.interface_groups[0]
+        .iter()
+        .all(|&i| !sc.model.interfaces[i].is_contact()));
+    assert_eq!(plan.interface_groups[0].len(), 6);
+    assert_eq!(parts.len(), 6 + 2 * 12, "{parts:?}");
     let n_pairs = |i: u32| sc.model.interfaces[i as usize].n_pairs();
     for s in 0..18u32 {
-        let layer = s / 6;
-        let (contact, c_rows) = &parts[&(s, Some(0))];
-        let (perfect, p_rows) = &parts[&(s, Some(1 + layer))];
-        assert!(
-            contact.iter().all(|&i| sc.model.interfaces[i as usize].is_contact()),
-            "{contact:?}"
-        );
-        assert!(
-            perfect.iter().all(|&i| !sc.model.interfaces[i as usize].is_contact()),
-            "{perfect:?}"
-        );
-        assert_eq!(*c_rows, contact.iter().map(|&i| 2 * n_pairs(i)).sum::<usize>());
-        assert_eq!(*p_rows, perfect.iter().map(|&i| 2 * n_pairs(i)).sum::<usize>());
+        let column = (s % 6) / 2;
+        let mut expected = 0;
+        for (k, owned) in plan.interface_groups.iter().enumerate() {
+            let mine: Vec<u32> = owned
+                .iter()
+                .filter(|&&i| [sc.model.interfaces[i].a, sc.model.interfaces[i].b].contains(&(s as usize)))
+                .map(|&i| i as u32)
+                .collect();
+            if mine.is_empty() {
+                continue;
+            }
+            expected += 1;
+            assert!(k == 0 || k == 1 + column as usize, "subdomain {s}, node {k}");
+            let (interfaces, rows) = &parts[&(s, Some(k as u32))];
+            let mut sorted = interfaces.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, mine, "subdomain {s}, node {k}");
+            assert_eq!(*rows, mine.iter().map(|&i| 2 * n_pairs(i)).sum::<usize>());
+        }
+        assert_eq!(parts.keys().filter(|(t, _)| *t == s).count(), expected, "subdomain {s}");
     }
-    assert!(keys.contains("glissade/local/subdomain/7/boundary_state/2"), "{keys:?}");
+    assert!(keys.contains("glissade/local/subdomain/7/boundary_state/1"), "{keys:?}");
     let remote = Run::new(&sc, &RunOptions::new("distributed-test-owner"))
         .processes(exe(), &Network::default())
         .map(|o| o.result)

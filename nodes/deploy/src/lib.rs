@@ -12,7 +12,7 @@ use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::linear::{default_k0, macro_bases, LinearStage, SubdomainSolver};
 use glissade_mechanics::model::Model;
 use glissade_mechanics::pgd::PgdParams;
-use glissade_scene::LoadedScene;
+use glissade_scene::{LoadedScene, Partition};
 use glissade_subdomain::{SubdomainNode, SubdomainOptions};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -43,6 +43,10 @@ pub struct Plan {
     /// Per interface node, the subdomain process that runs it (`interfaces_with_subdomains`), or
     /// None: a process of its own, or a thread of the launcher's.
     pub interface_hosts: Vec<Option<usize>>,
+    /// How [`Plan::groups`] splits the participants into processes.
+    pub partition: Partition,
+    /// Each subdomain's centroid (the mean of its nodes, mm), for [`Partition::Bisection`].
+    pub centroids: Vec<[f64; 2]>,
 }
 
 impl Plan {
@@ -62,6 +66,22 @@ impl Plan {
             pgd: PgdParams::default(),
             interface_groups: vec![(0..model.interfaces.len()).collect()],
             interface_hosts: vec![None],
+            partition: Partition::Contiguous,
+            centroids: model
+                .subdomains
+                .iter()
+                .map(|sub| {
+                    let n = sub.mesh.coords.len().max(1) as f64;
+                    let (x, y) = sub
+                        .mesh
+                        .coords
+                        .iter()
+                        .fold((0.0, 0.0), |(x, y), c| (x + c[0], y + c[1]));
+                    // To the nanometre: subdomains of one column or row of a structured layout
+                    // then tie exactly, whatever their sums' rounding.
+                    [(x / n * 1e6).round() / 1e6, (y / n * 1e6).round() / 1e6]
+                })
+                .collect(),
         }
     }
 
@@ -69,6 +89,7 @@ impl Plan {
     pub fn with_scene(mut self, scene: &LoadedScene) -> Self {
         self.linear_stage = scene.linear_stage;
         self.pgd = scene.pgd.clone();
+        self.partition = scene.deployment.partition;
         if scene.deployment.interfaces_with_subdomains {
             let groups = self.groups(scene.deployment.subdomain_nodes);
             (self.interface_groups, self.interface_hosts) = interfaces_with_subdomains(&scene.model, &groups);
@@ -94,9 +115,13 @@ impl Plan {
         }
     }
 
-    /// The participants split into `n` contiguous groups, one per subdomain node process, whose
-    /// sizes differ by at most one (the first groups take the extra subdomains): `n` processes
-    /// whenever there are at least `n` participants, one per participant otherwise.
+    /// The participants split into `n` groups, one per subdomain node process, whose sizes differ
+    /// by at most one: `n` processes whenever there are at least `n` participants, one per
+    /// participant otherwise. [`Partition::Contiguous`]: runs of consecutive participants, the
+    /// first groups taking the extra ones. [`Partition::Bisection`]: the participants sorted along
+    /// the longer side of the box around their centroids and cut in two, the first part getting
+    /// the subdomains of the first ⌊k/2⌋ of the k groups to make, and so on in each part; each
+    /// group's subdomains in ascending order.
     pub fn groups(&self, n: usize) -> Vec<Vec<u32>> {
         let p = self.participants.len();
         if p == 0 {
@@ -104,14 +129,55 @@ impl Plan {
         }
         let n = n.clamp(1, p);
         let (base, extra) = (p / n, p % n);
-        let mut groups = Vec::with_capacity(n);
-        let mut start = 0;
-        for g in 0..n {
-            let len = base + usize::from(g < extra);
-            groups.push(self.participants[start..start + len].to_vec());
-            start += len;
+        let sizes: Vec<usize> = (0..n).map(|g| base + usize::from(g < extra)).collect();
+        match self.partition {
+            Partition::Contiguous => {
+                let mut start = 0;
+                sizes
+                    .iter()
+                    .map(|&len| {
+                        start += len;
+                        self.participants[start - len..start].to_vec()
+                    })
+                    .collect()
+            }
+            Partition::Bisection => {
+                let mut groups = Vec::with_capacity(n);
+                self.bisect(self.participants.clone(), &sizes, &mut groups);
+                groups
+            }
         }
-        groups
+    }
+
+    /// Recursive coordinate bisection of `subdomains` into groups of `sizes` (summing to their
+    /// count), appended to `out` in order. Ties along the cut's axis are broken by the other
+    /// coordinate, then by index, so that the groups do not depend on the order of `subdomains`.
+    fn bisect(&self, mut subdomains: Vec<u32>, sizes: &[usize], out: &mut Vec<Vec<u32>>) {
+        if sizes.len() == 1 {
+            subdomains.sort_unstable();
+            out.push(subdomains);
+            return;
+        }
+        let c = |s: u32| self.centroids[s as usize];
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for &s in &subdomains {
+            for d in 0..2 {
+                lo[d] = lo[d].min(c(s)[d]);
+                hi[d] = hi[d].max(c(s)[d]);
+            }
+        }
+        let axis = usize::from(hi[1] - lo[1] > hi[0] - lo[0]);
+        subdomains.sort_unstable_by(|&a, &b| {
+            let (ca, cb) = (c(a), c(b));
+            ca[axis]
+                .total_cmp(&cb[axis])
+                .then(ca[1 - axis].total_cmp(&cb[1 - axis]))
+                .then(a.cmp(&b))
+        });
+        let (first, second) = sizes.split_at(sizes.len() / 2);
+        let rest = subdomains.split_off(first.iter().sum());
+        self.bisect(subdomains, first, out);
+        self.bisect(rest, second, out);
     }
 
     /// Nodes used (role × count) and what is left out and why.
@@ -309,6 +375,7 @@ pub fn build_nodes_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glissade_mechanics::model::InterfaceKind;
 
     fn plan_of(participants: usize) -> Plan {
         Plan {
@@ -320,6 +387,8 @@ mod tests {
             pgd: PgdParams::default(),
             interface_groups: Vec::new(),
             interface_hosts: Vec::new(),
+            partition: Partition::Contiguous,
+            centroids: Vec::new(),
         }
     }
 
@@ -388,5 +457,97 @@ mod tests {
                 _ => assert_eq!(hosts[0], None, "interfaces between processes"),
             }
         }
+    }
+
+    /// Bisection on a grid of `cols` × `rows` unit subdomains (row by row, as blocks number
+    /// theirs): the groups are balanced, cover every subdomain once, and each is a compact piece
+    /// of the grid.
+    fn grid_plan(cols: usize, rows: usize) -> Plan {
+        let mut plan = plan_of(cols * rows);
+        plan.partition = Partition::Bisection;
+        plan.centroids = (0..rows)
+            .flat_map(|r| (0..cols).map(move |c| [c as f64 + 0.5, r as f64 + 0.5]))
+            .collect();
+        plan
+    }
+
+    #[test]
+    fn bisection_groups_are_balanced_and_complete() {
+        for (cols, rows) in [(6, 3), (50, 20), (7, 5), (1, 9), (3, 1)] {
+            let plan = grid_plan(cols, rows);
+            let p = cols * rows;
+            for n in [1, 2, 3, 4, 7, 10, p] {
+                let groups = plan.groups(n);
+                assert_eq!(groups.len(), n.min(p), "{cols} × {rows}, {n}");
+                let mut all = groups.concat();
+                all.sort_unstable();
+                assert_eq!(
+                    all,
+                    (0..p as u32).collect::<Vec<_>>(),
+                    "{cols} × {rows}, {n}: a partition"
+                );
+                let (min, max) = groups
+                    .iter()
+                    .fold((usize::MAX, 0), |(a, b), g| (a.min(g.len()), b.max(g.len())));
+                assert!(max - min <= 1, "{cols} × {rows}, {n}: sizes {min} to {max}");
+                assert!(groups.iter().all(|g| g.windows(2).all(|w| w[0] < w[1])), "ascending");
+            }
+        }
+        // A laminate of 20 plies of 50 on 10 processes: the cuts go across the 50 columns
+        // until a part is taller than wide, then across the plies. Runs of consecutive
+        // subdomains (pairs of plies) are joined by 9 × 50 = 450 interfaces, strips of 5 columns
+        // through every ply by 9 × 20 = 180; bisection's blocks are joined by fewer (140: one
+        // 15-column part is cut into three across its plies, not along whole plies).
+        let cut = |groups: &[Vec<u32>]| {
+            let mut of = vec![0; 1000];
+            for (g, group) in groups.iter().enumerate() {
+                for &s in group {
+                    of[s as usize] = g;
+                }
+            }
+            let right = (0..1000).filter(|&s| s % 50 < 49 && of[s] != of[s + 1]).count();
+            let up = (0..950).filter(|&s| of[s] != of[s + 50]).count();
+            right + up
+        };
+        let mut plan = grid_plan(50, 20);
+        let bisection = cut(&plan.groups(10));
+        assert!(bisection <= 180, "{bisection} interfaces between processes");
+        plan.partition = Partition::Contiguous;
+        assert_eq!(cut(&plan.groups(10)), 450);
+    }
+
+    /// The stratified scene on 3 processes: bisection cuts the 180 × 90 mm stack into three
+    /// columns of 60 mm, so that 6 perfect interfaces join two processes (contiguous groups are
+    /// the layers, joined by the 12 contact interfaces), and the contact interfaces are each
+    /// inside one process.
+    #[test]
+    fn bisection_of_the_stratified_scene_is_three_columns() {
+        let scene = glissade_scene::load_str(include_str!("../../../launch/scenes/stratified.toml"), "s.toml").unwrap();
+        let model = &scene.model;
+        let mut plan = Plan::new(model);
+        let cut = |groups: &[Vec<u32>]| {
+            let (owned, hosts) = interfaces_with_subdomains(model, groups);
+            assert_eq!(hosts[0], None);
+            owned[0].clone()
+        };
+        plan.partition = Partition::Contiguous;
+        let layers = plan.groups(3);
+        assert_eq!(layers[1], (6..12).collect::<Vec<u32>>());
+        let between = cut(&layers);
+        assert_eq!(between.len(), 12);
+        assert!(between
+            .iter()
+            .all(|&i| matches!(model.interfaces[i].kind, InterfaceKind::Contact { .. })));
+        plan.partition = Partition::Bisection;
+        let columns = plan.groups(3);
+        assert_eq!(
+            columns,
+            [[0, 1, 6, 7, 12, 13], [2, 3, 8, 9, 14, 15], [4, 5, 10, 11, 16, 17]]
+        );
+        let between = cut(&columns);
+        assert_eq!(between.len(), 6);
+        assert!(between
+            .iter()
+            .all(|&i| model.interfaces[i].kind == InterfaceKind::Perfect));
     }
 }

@@ -33,8 +33,8 @@ mod settings;
 mod tests;
 
 pub use settings::{
-    balanced_interface_groups, final_field_bytes, full_field_bytes_per_iteration, Deployment, Network, Recording,
-    TlsFiles, AUTO_FULL_FIELDS_EVERY, AUTO_FULL_FIELD_BYTES,
+    balanced_interface_groups, final_field_bytes, full_field_bytes_per_iteration, Deployment, Network, Partition,
+    Recording, TlsFiles, AUTO_FULL_FIELDS_EVERY, AUTO_FULL_FIELD_BYTES,
 };
 
 // The command-line overrides are a wire type (defined with the messages): they travel beside the

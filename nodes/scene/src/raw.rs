@@ -186,6 +186,13 @@ pub(crate) enum RawAcceleration {
 
 #[derive(Deserialize, Clone, Copy)]
 #[serde(rename_all = "kebab-case")]
+pub(crate) enum RawPartition {
+    Contiguous,
+    Bisection,
+}
+
+#[derive(Deserialize, Clone, Copy)]
+#[serde(rename_all = "kebab-case")]
 pub(crate) enum RawCriterion {
     Increment,
     Accumulated,
@@ -209,6 +216,7 @@ pub(crate) struct RawPgd {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawDeployment {
     pub(crate) subdomain_nodes: Option<usize>,
+    pub(crate) partition: Option<RawPartition>,
     pub(crate) interface_nodes: Option<usize>,
     pub(crate) interface_groups: Option<Vec<Vec<RawInterfaceRef>>>,
     pub(crate) restarts: Option<usize>,

@@ -62,10 +62,25 @@ impl Network {
     }
 }
 
+/// How the subdomains are split into the subdomain node processes' groups.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Partition {
+    /// Runs of consecutive subdomains (model order: blocks in the scene's order, each block's
+    /// subdomains row by row).
+    #[default]
+    Contiguous,
+    /// Recursive coordinate bisection of the subdomains' centroids: each cut is across the
+    /// longer side of the box around the centroids, so that long parts (plies, layers) are cut
+    /// into strips across them and fewer interfaces join two processes.
+    Bisection,
+}
+
 /// How many node processes of each role a run uses.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Deployment {
     pub subdomain_nodes: usize,
+    /// Which subdomains each subdomain node process hosts.
+    pub partition: Partition,
     pub interface_nodes: usize,
     /// The interfaces each interface node owns (model interface indices, ascending), when the
     /// scene assigns them; None: [`balanced_interface_groups`].
@@ -88,6 +103,7 @@ impl Default for Deployment {
     fn default() -> Self {
         Self {
             subdomain_nodes: 1,
+            partition: Partition::Contiguous,
             interface_nodes: 1,
             interface_groups: None,
             restarts: 3,

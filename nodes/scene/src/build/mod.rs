@@ -12,7 +12,7 @@ mod rigid;
 
 use crate::raw::*;
 use crate::{
-    Deployment, Network, Recording, SceneError, TlsFiles, DEFAULT_ANDERSON_WINDOW, MAX_ANDERSON_WINDOW,
+    Deployment, Network, Partition, Recording, SceneError, TlsFiles, DEFAULT_ANDERSON_WINDOW, MAX_ANDERSON_WINDOW,
     MAX_MACRO_DEGREE,
 };
 use glissade_mechanics::element::edge_lumped_mass;

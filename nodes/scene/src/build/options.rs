@@ -338,6 +338,11 @@ impl Ctx<'_> {
         let d = Deployment::default();
         let dep = Deployment {
             subdomain_nodes: r.subdomain_nodes.unwrap_or(d.subdomain_nodes),
+            partition: match r.partition {
+                None => d.partition,
+                Some(RawPartition::Contiguous) => Partition::Contiguous,
+                Some(RawPartition::Bisection) => Partition::Bisection,
+            },
             interface_nodes: r
                 .interface_nodes
                 .or(r.interface_groups.as_ref().map(Vec::len))

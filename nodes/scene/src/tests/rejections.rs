@@ -204,6 +204,11 @@ fn rejects_bad_solver_settings() {
         "3 nodes",
     );
     expect_err(
+        &format!("{TWO_BLOCKS}[deployment]\npartition = \"metis\"\n"),
+        "deployment.partition",
+        "unknown variant `metis`, expected `contiguous` or `bisection`",
+    );
+    expect_err(
         &format!("{TWO_BLOCKS}[recording]\nfull_fields_every = 0\n"),
         "recording.full_fields_every",
         "≥ 1",
