@@ -389,4 +389,15 @@ pub(crate) struct GenerateArgs {
     /// group, interface node 0 those between groups (`[deployment] interfaces_with_subdomains`).
     #[arg(long, conflicts_with = "interface_nodes")]
     pub(crate) interfaces_with_subdomains: bool,
+    /// Which subdomains each subdomain process hosts (`[deployment] partition`): runs of
+    /// consecutive subdomains (whole plies), or recursive coordinate bisection (pieces cut
+    /// across the plies, fewer interfaces between processes).
+    #[arg(long, value_enum, default_value_t = PartitionArg::Contiguous)]
+    pub(crate) partition: PartitionArg,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub(crate) enum PartitionArg {
+    Contiguous,
+    Bisection,
 }

@@ -217,6 +217,10 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 subdomain_nodes: args.subdomain_nodes,
                 interface_nodes: args.interface_nodes,
                 interfaces_with_subdomains: args.interfaces_with_subdomains,
+                partition: match args.partition {
+                    cli::PartitionArg::Contiguous => glissade_scene::Partition::Contiguous,
+                    cli::PartitionArg::Bisection => glissade_scene::Partition::Bisection,
+                },
             };
             let text = laminate.scene_text()?;
             // Check what was generated as any scene is checked, before writing it; but not

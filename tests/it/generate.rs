@@ -38,11 +38,12 @@ fn the_laminate_at_the_stratified_parameters_is_the_stratified_scene() {
         elements: 20,
         steps: 1000,
         interfaces_with_subdomains: true,
+        partition: glissade_scene::Partition::Bisection,
         ..Laminate::default()
     };
     let text = generated.scene_text().unwrap();
     assert!(
-        text.contains("--subdomain-nodes 3 --interfaces-with-subdomains`"),
+        text.contains("--subdomain-nodes 3 --interfaces-with-subdomains --partition bisection`"),
         "{text}"
     );
     let ours = scene(&text);
@@ -53,7 +54,8 @@ fn the_laminate_at_the_stratified_parameters_is_the_stratified_scene() {
         anonymous(&ours) == anonymous(&stratified),
         "the generated model differs from stratified.toml's"
     );
-    // And the same deployment: one process per ply, each with its ply's perfect interfaces.
+    // And the same deployment: three processes, each a column of two subdomains through the
+    // plies with the interfaces inside it.
     assert_eq!(ours.deployment, stratified.deployment);
 }
 
@@ -104,6 +106,27 @@ fn a_generated_laminate_matches_the_reference_and_runs_alike_as_processes() {
     assert!(sc.deployment.interfaces_with_subdomains);
     let split = crate::distributed::in_process_equals_processes(&sc, "generate-processes-with");
     crate::distributed::assert_identical(&local, &split);
+    // And with the processes' groups cut by bisection: the laminate is 450 mm long and 240 mm
+    // high, so the cut is across the plies (7.5 columns of 8 subdomains each side): the same run
+    // bit for bit.
+    let bisected = Laminate {
+        partition: glissade_scene::Partition::Bisection,
+        ..with
+    };
+    let sc = scene(&bisected.scene_text().unwrap());
+    let plan = glissade_deploy::Plan::new(&sc.model).with_scene(&sc);
+    let groups = plan.groups(2);
+    assert!(
+        groups.iter().all(|g| g
+            .iter()
+            .map(|s| s / 15)
+            .collect::<std::collections::BTreeSet<_>>()
+            .len()
+            == 8),
+        "each process holds a piece of every ply: {groups:?}"
+    );
+    let cut = crate::distributed::in_process_equals_processes(&sc, "generate-processes-bisected");
+    crate::distributed::assert_identical(&local, &cut);
 }
 
 #[test]
