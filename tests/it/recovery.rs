@@ -237,3 +237,84 @@ fn kills_at_any_moment_end_bit_identical() {
         );
     }
 }
+
+/// A node process killed after the launcher said `done`: at the last decision the coarse node's
+/// or a subdomain's process is stopped (SIGSTOP: it has nothing left to send), the test waits
+/// until the run's other node processes have left (they leave on `done`, so the launcher holds
+/// every result), then kills it. The run ends bit-identical, the recording finalised, no process
+/// left. The same for a kill as the last decision arrives, before `done`.
+#[test]
+fn a_node_killed_after_done_costs_nothing() {
+    let sc = scene(&small_three_layer(""));
+    let undisturbed = Run::new(&sc, &RunOptions::new("undisturbed"))
+        .in_process()
+        .map(|o| o.result)
+        .expect("undisturbed run");
+    let last = undisturbed.iterations.last().expect("iterations").iteration;
+    for (round, (role, index, after_done)) in [
+        ("coarse", "0", true),
+        ("subdomain", "1", true),
+        ("subdomain", "0", false),
+        ("coarse", "0", false),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let (dir, run_id, recording) = recorded_run(&format!("recovery-done-{round}"));
+        let opts = RunOptions::new(run_id.as_str());
+        let words: Vec<&'static str> = if role == "coarse" {
+            vec!["node", "coarse"]
+        } else {
+            vec!["node", "subdomain", "--index", index]
+        };
+        let mut killer = None;
+        let (result, _) = Run::new(&sc, &opts)
+            .recorded(Some(&recording))
+            .on_iteration(|r| {
+                if r.iteration != last || killer.is_some() {
+                    return;
+                }
+                let pids = processes_with(&run_id, &words);
+                assert_eq!(pids.len(), 1, "{role}:{index}: {pids:?}");
+                let pid = pids[0];
+                if !after_done {
+                    // SAFETY: kill(2) on a pid of this test's run.
+                    unsafe { libc::kill(pid, libc::SIGKILL) };
+                    killer = Some(std::thread::spawn(move || true));
+                    return;
+                }
+                // SAFETY: as above.
+                unsafe { libc::kill(pid, libc::SIGSTOP) };
+                let run_id = run_id.clone();
+                killer = Some(std::thread::spawn(move || {
+                    // The others leave once the launcher has said `done` (bounded wait).
+                    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+                    let others_left = loop {
+                        let left = processes_with(&run_id, &["node"]).iter().all(|&p| p == pid);
+                        if left || std::time::Instant::now() > deadline {
+                            break left;
+                        }
+                        std::thread::sleep(std::time::Duration::from_millis(10));
+                    };
+                    // SAFETY: as above; SIGKILL ends a stopped process too.
+                    unsafe { libc::kill(pid, libc::SIGKILL) };
+                    others_left
+                }));
+            })
+            .processes(exe(), &Network::default())
+            .map(|o| (o.result, o.traffic.unwrap_or_default()))
+            .unwrap_or_else(|e| panic!("{role}:{index} killed after the last decision: {e:#}"));
+        let others_left = killer.expect("the last decision was reached").join().unwrap();
+        assert!(
+            others_left,
+            "{role}:{index} stopped: the other node processes did not leave within 30 s"
+        );
+        assert_identical(&undisturbed, &result);
+        assert!(
+            processes_with(&run_id, &[]).is_empty(),
+            "processes of run {run_id} remain"
+        );
+        let rec = glissade_recorder::Recording::open(&dir.join("run.mcap")).expect("recording");
+        assert!(rec.is_finished(), "the recording is finalised");
+    }
+}
