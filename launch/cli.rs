@@ -390,8 +390,9 @@ pub(crate) struct GenerateArgs {
     #[arg(long, conflicts_with = "interface_nodes")]
     pub(crate) interfaces_with_subdomains: bool,
     /// Which subdomains each subdomain process hosts (`[deployment] partition`): runs of
-    /// consecutive subdomains (whole plies), or recursive coordinate bisection (pieces cut
-    /// across the plies, fewer interfaces between processes).
+    /// consecutive subdomains (whole plies when the processes divide the plies evenly), or
+    /// recursive coordinate bisection (pieces cut across the plies, fewer interfaces between
+    /// processes).
     #[arg(long, value_enum, default_value_t = PartitionArg::Contiguous)]
     pub(crate) partition: PartitionArg,
 }

@@ -76,6 +76,12 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 m.time.n_points(),
                 m.subdomains.iter().map(|s| s.n_dofs()).sum::<usize>()
             );
+            // How a run as processes deploys it: which subdomains each process hosts, which
+            // interfaces each interface node owns.
+            let plan = glissade_deploy::Plan::new(m).with_scene(&sc);
+            for line in plan.deployment_lines(sc.deployment.subdomain_nodes) {
+                println!("{line}");
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Reference {

@@ -203,6 +203,14 @@ fn rejects_bad_solver_settings() {
         "deployment.subdomain_nodes",
         "3 nodes",
     );
+    assert_eq!(load(TWO_BLOCKS).unwrap().deployment.partition, Partition::Contiguous);
+    assert_eq!(
+        load(&format!("{TWO_BLOCKS}[deployment]\npartition = \"bisection\"\n"))
+            .unwrap()
+            .deployment
+            .partition,
+        Partition::Bisection
+    );
     expect_err(
         &format!("{TWO_BLOCKS}[deployment]\npartition = \"metis\"\n"),
         "deployment.partition",
