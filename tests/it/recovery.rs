@@ -238,28 +238,39 @@ fn kills_at_any_moment_end_bit_identical() {
     }
 }
 
-/// A node process killed after the launcher said `done`: at the last decision the coarse node's
-/// or a subdomain's process is stopped (SIGSTOP: it has nothing left to send), the test waits
-/// until the run's other node processes have left (they leave on `done`, so the launcher holds
-/// every result), then kills it. The run ends bit-identical, the recording finalised, no process
-/// left. The same for a kill as the last decision arrives, before `done`.
+/// A node process that dies or freezes after the launcher said `done`. At the last decision the
+/// coarse node's or a subdomain's process is stopped (SIGSTOP: it has nothing left to send); the
+/// test waits until the run's other subdomain, interface and coarse processes have left (they
+/// leave only on `done`, so the launcher holds every result), then kills it. In the frozen
+/// case it is never resumed: the launcher stops it once its link's lease has run out (the
+/// recorder waits for it until then). The same for a kill as the last decision arrives,
+/// before `done`. Every case ends bit-identical, the recording finalised, no process left.
 #[test]
-fn a_node_killed_after_done_costs_nothing() {
+fn a_node_dying_or_frozen_after_done_costs_nothing() {
+    /// What happens to the node process, relative to the launcher's `done`.
+    #[derive(Clone, Copy, PartialEq, Debug)]
+    enum Fate {
+        KilledBefore,
+        KilledAfter,
+        FrozenAfter,
+    }
     let sc = scene(&small_three_layer(""));
     let undisturbed = Run::new(&sc, &RunOptions::new("undisturbed"))
         .in_process()
         .map(|o| o.result)
         .expect("undisturbed run");
     let last = undisturbed.iterations.last().expect("iterations").iteration;
-    for (round, (role, index, after_done)) in [
-        ("coarse", "0", true),
-        ("subdomain", "1", true),
-        ("subdomain", "0", false),
-        ("coarse", "0", false),
+    for (round, (role, index, fate)) in [
+        ("coarse", "0", Fate::KilledAfter),
+        ("subdomain", "1", Fate::KilledAfter),
+        ("subdomain", "0", Fate::FrozenAfter),
+        ("subdomain", "0", Fate::KilledBefore),
+        ("coarse", "0", Fate::KilledBefore),
     ]
     .into_iter()
     .enumerate()
     {
+        println!("{role}:{index}: {fate:?}");
         let (dir, run_id, recording) = recorded_run(&format!("recovery-done-{round}"));
         let opts = RunOptions::new(run_id.as_str());
         let words: Vec<&'static str> = if role == "coarse" {
@@ -267,44 +278,50 @@ fn a_node_killed_after_done_costs_nothing() {
         } else {
             vec!["node", "subdomain", "--index", index]
         };
-        let mut killer = None;
+        let mut watcher = None;
         let (result, _) = Run::new(&sc, &opts)
             .recorded(Some(&recording))
             .on_iteration(|r| {
-                if r.iteration != last || killer.is_some() {
+                if r.iteration != last || watcher.is_some() {
                     return;
                 }
                 let pids = processes_with(&run_id, &words);
                 assert_eq!(pids.len(), 1, "{role}:{index}: {pids:?}");
                 let pid = pids[0];
-                if !after_done {
+                if fate == Fate::KilledBefore {
                     // SAFETY: kill(2) on a pid of this test's run.
                     unsafe { libc::kill(pid, libc::SIGKILL) };
-                    killer = Some(std::thread::spawn(move || true));
+                    watcher = Some(std::thread::spawn(move || true));
                     return;
                 }
                 // SAFETY: as above.
                 unsafe { libc::kill(pid, libc::SIGSTOP) };
                 let run_id = run_id.clone();
-                killer = Some(std::thread::spawn(move || {
-                    // The others leave once the launcher has said `done` (bounded wait).
+                watcher = Some(std::thread::spawn(move || {
+                    // The other node processes but the recorder (which waits for every node
+                    // process) leave once the launcher has said `done` (bounded wait).
+                    let recorder = processes_with(&run_id, &["node", "recorder"]);
                     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
                     let others_left = loop {
-                        let left = processes_with(&run_id, &["node"]).iter().all(|&p| p == pid);
+                        let left = processes_with(&run_id, &["node"])
+                            .iter()
+                            .all(|p| *p == pid || recorder.contains(p));
                         if left || std::time::Instant::now() > deadline {
                             break left;
                         }
                         std::thread::sleep(std::time::Duration::from_millis(10));
                     };
-                    // SAFETY: as above; SIGKILL ends a stopped process too.
-                    unsafe { libc::kill(pid, libc::SIGKILL) };
+                    if fate == Fate::KilledAfter {
+                        // SAFETY: as above; the process is stopped, so still there to be killed.
+                        unsafe { libc::kill(pid, libc::SIGKILL) };
+                    }
                     others_left
                 }));
             })
             .processes(exe(), &Network::default())
             .map(|o| (o.result, o.traffic.unwrap_or_default()))
-            .unwrap_or_else(|e| panic!("{role}:{index} killed after the last decision: {e:#}"));
-        let others_left = killer.expect("the last decision was reached").join().unwrap();
+            .unwrap_or_else(|e| panic!("{role}:{index}, {fate:?}: {e:#}"));
+        let others_left = watcher.expect("the last decision was reached").join().unwrap();
         assert!(
             others_left,
             "{role}:{index} stopped: the other node processes did not leave within 30 s"
