@@ -64,10 +64,7 @@ fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
 /// (itself bit-identical to a multi-process run, tests/it/distributed.rs).
 #[test]
 fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
-    let undisturbed = Run::new(&scene(&small_three_layer("")), &RunOptions::new("undisturbed"))
-        .in_process()
-        .map(|o| o.result)
-        .expect("undisturbed run");
+    let undisturbed = crate::common::run(&scene(&small_three_layer("")));
     let n = undisturbed.iterations.len() as u64;
     assert!(
         n > 6,
@@ -194,10 +191,7 @@ fn restarts_need_a_complete_recording() {
 #[test]
 fn kills_at_any_moment_end_bit_identical() {
     let sc = scene(&small_three_layer(""));
-    let undisturbed = Run::new(&sc, &RunOptions::new("undisturbed"))
-        .in_process()
-        .map(|o| o.result)
-        .expect("undisturbed run");
+    let undisturbed = crate::common::run(&sc);
     let n = undisturbed.iterations.len() as u64;
     let seed = 0x1234_5678_9abc_def1;
     let mut rng = Rng(seed);
@@ -255,10 +249,7 @@ fn a_node_dying_or_frozen_after_done_costs_nothing() {
         FrozenAfter,
     }
     let sc = scene(&small_three_layer(""));
-    let undisturbed = Run::new(&sc, &RunOptions::new("undisturbed"))
-        .in_process()
-        .map(|o| o.result)
-        .expect("undisturbed run");
+    let undisturbed = crate::common::run(&sc);
     let last = undisturbed.iterations.last().expect("iterations").iteration;
     for (round, (role, index, fate)) in [
         ("coarse", "0", Fate::KilledAfter),
