@@ -256,6 +256,10 @@ pub(super) fn set_up(
             "node restarts off ({why}): a node process that dies stops the run"
         ));
     }
+    // With --verbose: which subdomains each process hosts (as `glissade check` prints it).
+    for line in plan.deployment_lines(scene.deployment.subdomain_nodes) {
+        crate::console::note(&line);
+    }
     let set_up = SetUp {
         plan,
         groups,

@@ -752,6 +752,11 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
     assert!(err.contains("node(s) ready, iterating"), "{err}");
     assert!(err.contains("[recorder:0] note: recorded "), "{err}");
     assert!(err.contains("bus: boundary_state: "), "{err}");
+    // The deployment, as `glissade check` prints it.
+    assert!(
+        err.contains("subdomain processes: 2 (partition = \"contiguous\")\n  subdomain:0: 3 subdomain(s): 0-2\n  subdomain:1: 3 subdomain(s): 3-5\n"),
+        "{err}"
+    );
     assert!(
         err.contains("GFLOP per iteration over ") && err.contains("time not measured as processes"),
         "{err}"
