@@ -162,8 +162,8 @@ impl Laminate {
                 format!("--interface-nodes {}", self.interface_nodes)
             },
             part = match self.partition {
-                glissade_scene::Partition::Contiguous => "",
-                glissade_scene::Partition::Bisection => " --partition bisection",
+                glissade_scene::Partition::Contiguous => String::new(),
+                other => format!(" --partition {}", other.name()),
             },
             subs = self.subdomains(),
             ifs = self.interfaces(),
@@ -210,8 +210,8 @@ impl Laminate {
             "[[boundary]]\nx = {length:?}\nty = \"1500/90*sin(4*pi*t/10)\"\n\n[solver]\naccuracy = 1e-3\nrelaxation = 0.8\nalpha = 0.3333333333333333\ni0 = 0.1\n\n[deployment]\nsubdomain_nodes = {}\n{}{}",
             self.subdomain_nodes,
             match self.partition {
-                glissade_scene::Partition::Contiguous => "",
-                glissade_scene::Partition::Bisection => "partition = \"bisection\"\n",
+                glissade_scene::Partition::Contiguous => String::new(),
+                other => format!("partition = \"{}\"\n", other.name()),
             },
             if self.interfaces_with_subdomains {
                 "interfaces_with_subdomains = true".to_string()

@@ -79,7 +79,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             // How a run as processes deploys it: which subdomains each process hosts, which
             // interfaces each interface node owns.
             let plan = glissade_deploy::Plan::new(m).with_scene(&sc);
-            for line in plan.deployment_lines(sc.deployment.subdomain_nodes) {
+            for line in plan.deployment_lines(&plan.groups(sc.deployment.subdomain_nodes)) {
                 println!("{line}");
             }
             Ok(ExitCode::SUCCESS)

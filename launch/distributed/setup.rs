@@ -257,7 +257,7 @@ pub(super) fn set_up(
         ));
     }
     // With --verbose: which subdomains each process hosts (as `glissade check` prints it).
-    for line in plan.deployment_lines(scene.deployment.subdomain_nodes) {
+    for line in plan.deployment_lines(&groups) {
         crate::console::note(&line);
     }
     let set_up = SetUp {

@@ -41,8 +41,8 @@ impl Rng {
     }
 }
 
-/// SIGKILL to the one process of run `run_id` that is node `role` (with `--index index`).
-fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
+/// The one process of run `run_id` that is node `role` (with `--index index`).
+fn node_pid(run_id: &str, role: &str, index: &str) -> i32 {
     // The coarse node takes no --index (a run has one).
     let words: &[&str] = if role == "coarse" {
         &["node", role]
@@ -51,11 +51,17 @@ fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
     };
     let pids = processes_with(run_id, words);
     assert_eq!(pids.len(), 1, "node {role}:{index} of run {run_id}: processes {pids:?}");
+    pids[0]
+}
+
+/// SIGKILL to the one process of run `run_id` that is node `role` (with `--index index`).
+fn kill_node(run_id: &str, role: &str, index: &str) -> i32 {
+    let pid = node_pid(run_id, role, index);
     // SAFETY: kill(2) on a pid of this test's run.
     unsafe {
-        libc::kill(pids[0], libc::SIGKILL);
+        libc::kill(pid, libc::SIGKILL);
     }
-    pids[0]
+    pid
 }
 
 /// kill -9 of each node role (subdomain, interface, coarse, and one of several interface nodes)
@@ -264,11 +270,6 @@ fn a_node_dying_or_frozen_after_done_costs_nothing() {
         println!("{role}:{index}: {fate:?}");
         let (dir, run_id, recording) = recorded_run(&format!("recovery-done-{round}"));
         let opts = RunOptions::new(run_id.as_str());
-        let words: Vec<&'static str> = if role == "coarse" {
-            vec!["node", "coarse"]
-        } else {
-            vec!["node", "subdomain", "--index", index]
-        };
         let mut watcher = None;
         let (result, _) = Run::new(&sc, &opts)
             .recorded(Some(&recording))
@@ -276,9 +277,7 @@ fn a_node_dying_or_frozen_after_done_costs_nothing() {
                 if r.iteration != last || watcher.is_some() {
                     return;
                 }
-                let pids = processes_with(&run_id, &words);
-                assert_eq!(pids.len(), 1, "{role}:{index}: {pids:?}");
-                let pid = pids[0];
+                let pid = node_pid(&run_id, role, index);
                 if fate == Fate::KilledBefore {
                     // SAFETY: kill(2) on a pid of this test's run.
                     unsafe { libc::kill(pid, libc::SIGKILL) };

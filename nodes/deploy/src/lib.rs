@@ -184,10 +184,11 @@ impl Plan {
         self.bisect(rest, second, out);
     }
 
-    /// The deployment as `glissade check` prints it: per subdomain process, the subdomains it
-    /// hosts (indices as `glissade node --subdomains` takes them, runs of consecutive ones as
-    /// a–b); per interface node, how many interfaces it owns and where it runs.
-    pub fn deployment_lines(&self, subdomain_nodes: usize) -> Vec<String> {
+    /// The deployment as `glissade check` prints it: per subdomain process of `groups` (this
+    /// plan's [`Plan::groups`]), the subdomains it hosts (indices as `glissade node --subdomains`
+    /// takes them, runs of consecutive ones as a–b); per interface node, how many interfaces it
+    /// owns and where it runs.
+    pub fn deployment_lines(&self, groups: &[Vec<u32>]) -> Vec<String> {
         let runs = |s: &[u32]| {
             let mut out: Vec<String> = Vec::new();
             let mut i = 0;
@@ -205,14 +206,10 @@ impl Plan {
             }
             out.join(", ")
         };
-        let groups = self.groups(subdomain_nodes);
-        let partition = match self.partition {
-            Partition::Contiguous => "contiguous",
-            Partition::Bisection => "bisection",
-        };
         let mut lines = vec![format!(
-            "subdomain processes: {} (partition = \"{partition}\")",
-            groups.len()
+            "subdomain processes: {} (partition = \"{}\")",
+            groups.len(),
+            self.partition.name()
         )];
         for (g, group) in groups.iter().enumerate() {
             lines.push(format!(
@@ -603,7 +600,7 @@ mod tests {
         assert_eq!(scene.deployment.partition, Partition::Bisection);
         let shipped = Plan::new(model).with_scene(&scene);
         assert_eq!(
-            shipped.deployment_lines(3),
+            shipped.deployment_lines(&shipped.groups(3)),
             [
                 "subdomain processes: 3 (partition = \"bisection\")",
                 "  subdomain:0: 6 subdomain(s): 0-1, 6-7, 12-13",

@@ -75,6 +75,16 @@ pub enum Partition {
     Bisection,
 }
 
+impl Partition {
+    /// Its name in a scene's `[deployment] partition` (and `glissade generate --partition`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Partition::Contiguous => "contiguous",
+            Partition::Bisection => "bisection",
+        }
+    }
+}
+
 /// How many node processes of each role a run uses.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Deployment {
