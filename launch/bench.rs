@@ -40,19 +40,19 @@ pub use glissade_mechanics::FIELD_PASSES;
 
 /// Passes over full boundary fields that a subdomain's Anderson record makes beyond the plain
 /// iteration's, when it holds `k` stored differences after the record (its `AndersonGram` is
-/// k × k). `AndersonHistory::record_sum` replaces `sum_relax_into` (10 passes): it reads s (2),
-/// s₁ and s₂ (4) and the last record's s + μr and r_F (3), and writes s + μr (2), the new
-/// differences D_W, D_F, Δr_F (3) and r_F (1), then reads the k − 1 other stored Δr_F for the new
-/// Gram column (the new one and r_F are in cache, written in the same column): 14 + (k − 1) − 10
-/// = k + 3 (k ≥ 1: a record that sends partials has stored a difference). Iterations 0 and 1,
-/// which record without partials, are counted as plain ones.
+/// k × k). `AndersonHistory::record_sum` replaces `sum_relax_into` (10 passes): it reads s (2) and
+/// s₁ and s₂ (4), writes the new iterate's s + μr (2) and r_F (1), and reads the r_F of the k
+/// iterates before it, whose differences with each other and with the new one are the stored Δr_F
+/// of the Gram column (formed in cache, column by column): 9 + k − 10 = k − 1 (k ≥ 1: a record
+/// that sends partials has stored a difference). Iterations 0 and 1, which record without
+/// partials, are counted as plain ones.
 pub fn anderson_record_passes(k: usize) -> usize {
-    k + 3
+    k.saturating_sub(1)
 }
 
 /// Passes over full boundary fields of a subdomain's mixing step with `g` coefficients
-/// (`AndersonHistory::apply`; 0 for a plain or restart step): it reads s + μr (2) and the g stored
-/// D_W and D_F (2g), and writes s (2).
+/// (`AndersonHistory::apply`; 0 for a plain or restart step): it reads the s + μr of the g + 1
+/// iterates whose differences are the D_W and D_F it mixes (2g + 2), and writes s (2).
 pub fn anderson_step_passes(g: usize) -> usize {
     4 + 2 * g
 }

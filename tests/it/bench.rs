@@ -69,9 +69,9 @@ fn bench_splits_an_unchanged_run_by_stage() {
     assert!(flops >= 2.0 * (report.largest_boundary.pow(2) * report.time_points) as f64);
     assert!(report.memory_bound_ms > 0.0 && report.wall_over_memory_bound.is_finite());
     // The scene runs Anderson (window 5): its records and steps add passes to the plain
-    // iteration's, at most those of a full window's mixed step every iteration (34 + 8 + 14).
+    // iteration's, at most those of a full window's mixed step every iteration (34 + 4 + 14).
     let (full_record, full_step) = (anderson_record_passes(5), anderson_step_passes(5));
-    assert_eq!(FIELD_PASSES + full_record + full_step, 56);
+    assert_eq!(FIELD_PASSES + full_record + full_step, 52);
     assert!(
         report.field_passes > FIELD_PASSES as f64
             && report.field_passes < (FIELD_PASSES + full_record + full_step) as f64,

@@ -13,8 +13,10 @@
 //! nothing).
 //!
 //! The state is spread over subdomains, so the work is split in two:
-//! - [`AndersonHistory`] (one per subdomain, buffers allocated once) keeps the differences
-//!   D_i = Δs_i + μ Δr_i (W and F) and Δr_i (F only) in a ring of m slots, and gives its share of
+//! - [`AndersonHistory`] (one per subdomain, buffers allocated once) keeps the last m + 1
+//!   iterates' s + μ r (W and F) and r (F only) in a ring, whose consecutive differences are the
+//!   D_i = Δs_i + μ Δr_i and Δr_i (formed on the fly: a record writes one iterate, not the three
+//!   differences and the three fields they are taken from), and gives its share of
 //!   the least-squares problem as [`GramPartials`]: the k × k Gram matrix Δr_iᵀΔr_j (kept up to
 //!   date one new column per iteration), the projections Δr_iᵀ r_n and ‖r_n‖²;
 //! - [`AndersonCoordinator`] (one node) gets the partials summed over every subdomain in a fixed
@@ -87,31 +89,36 @@ pub enum AndersonStep {
     Restart,
 }
 
-/// One part's history: ring buffers of m differences, allocated once.
+/// One part's history: a ring of the last m + 1 iterates, allocated once.
+///
+/// Slot t of the ring holds one iterate's s + μ r (W and F) and r_F. A stored difference is named
+/// by the slot of its newer iterate t: D = p[t] − p[t − 1] and Δr = r_F[t] − r_F[t − 1] (slots
+/// modulo m + 1), each computed where it is used, so its value is the one a stored difference
+/// would hold.
 pub struct AndersonHistory {
     window: usize,
+    /// Slots of the ring: window + 1.
+    ring: usize,
     mu: f64,
     rows: usize,
     cols: usize,
-    /// D_i = Δ(s + μ r): W and F parts, per slot.
-    d_w: Vec<Mat<f64>>,
-    d_f: Vec<Mat<f64>>,
-    /// Δr_i, F part, per slot.
-    dr_f: Vec<Mat<f64>>,
-    /// Δr_iᵀΔr_j by slot (window × window).
+    /// s + μ r, W and F parts, and r_F, per slot.
+    p_w: Vec<Mat<f64>>,
+    p_f: Vec<Mat<f64>>,
+    r_f: Vec<Mat<f64>>,
+    /// Δr_iᵀΔr_j by difference (ring × ring).
     gram: Vec<f64>,
-    /// Δr_iᵀ r_n by slot and ‖r_n‖², of the last recorded iterate (computed by `record` in the
-    /// same pass over the columns as the differences).
+    /// Δr_iᵀ r_n by difference and ‖r_n‖², of the last recorded iterate (computed by `record` in
+    /// the same pass over the columns as the iterate).
     projection: Vec<f64>,
     residual2: f64,
-    /// s + μ r and r_F of the last recorded iterate.
-    p_w: Mat<f64>,
-    p_f: Mat<f64>,
-    r_f: Mat<f64>,
+    /// One column of every stored Δr_i, formed in a record's pass (window × rows).
+    dr_column: Vec<f64>,
     has_last: bool,
     len: usize,
-    next: usize,
-    /// Slot the last record wrote its difference to (None: it stored none).
+    /// Slot of the last recorded iterate.
+    newest: usize,
+    /// The difference the last record stored (None: it stored none).
     last_slot: Option<usize>,
     /// Coordinates mixed beside the state ([`AndersonHistory::with_coordinates`]).
     coords: Option<Coordinates>,
@@ -149,24 +156,24 @@ impl AndersonHistory {
             (1..=MAX_SLOTS).contains(&window),
             "Anderson window must be in 1..={MAX_SLOTS}"
         );
-        let z = || Mat::<f64>::zeros(rows, cols);
+        let ring = window + 1;
+        let z = || (0..ring).map(|_| Mat::<f64>::zeros(rows, cols)).collect();
         Self {
             window,
+            ring,
             mu,
             rows,
             cols,
-            d_w: (0..window).map(|_| z()).collect(),
-            d_f: (0..window).map(|_| z()).collect(),
-            dr_f: (0..window).map(|_| z()).collect(),
-            gram: vec![0.0; window * window],
-            projection: vec![0.0; window],
-            residual2: 0.0,
             p_w: z(),
             p_f: z(),
             r_f: z(),
+            gram: vec![0.0; ring * ring],
+            projection: vec![0.0; ring],
+            residual2: 0.0,
+            dr_column: vec![0.0; window * rows],
             has_last: false,
             len: 0,
-            next: 0,
+            newest: 0,
             last_slot: None,
             coords: None,
         }
@@ -177,8 +184,8 @@ impl AndersonHistory {
     pub fn with_coordinates(mut self, capacity: usize) -> Self {
         let z = || Mat::<f64>::zeros(capacity, self.cols);
         self.coords = Some(Coordinates {
-            d: (0..self.window).map(|_| z()).collect(),
-            rows: vec![0; self.window],
+            d: (0..self.ring).map(|_| z()).collect(),
+            rows: vec![0; self.ring],
             p: z(),
             p_rows: 0,
         });
@@ -271,10 +278,16 @@ impl AndersonHistory {
         self.len == 0
     }
 
-    /// Slot of the i-th stored difference, oldest first.
+    /// The i-th stored difference (the slot of its newer iterate), oldest first.
     #[inline(always)]
     fn slot(&self, i: usize) -> usize {
-        (self.next + self.window - self.len + i) % self.window
+        (self.newest + 1 + self.ring - self.len + i) % self.ring
+    }
+
+    /// The slot before `slot` in the ring: the older iterate of difference `slot`.
+    #[inline(always)]
+    fn before(&self, slot: usize) -> usize {
+        (slot + self.ring - 1) % self.ring
     }
 
     /// Records the iterate s = (s_w, s_f) and its image g = G(s): stores s + μ r and r_F
@@ -306,42 +319,20 @@ impl AndersonHistory {
         let image = |a: &[f64], b: &[f64], r: usize| if SUM { a[r] + b[r] } else { a[r] };
         let mu = self.mu;
         let mut pass = self.begin_record();
-        let (slot, push) = (pass.slot, pass.push);
+        let slot = pass.slot;
         for j in 0..self.cols {
             let (sw, gw, hw) = (s_w.col_as_slice(j), g_w[0].col_as_slice(j), g_w[1].col_as_slice(j));
-            let pw = self.p_w.col_as_slice_mut(j);
-            if push {
-                let dw = self.d_w[slot].col_as_slice_mut(j);
-                for r in 0..self.rows {
-                    let p = sw[r] + mu * (image(gw, hw, r) - sw[r]);
-                    dw[r] = p - pw[r];
-                    pw[r] = p;
-                }
-            } else {
-                for r in 0..self.rows {
-                    pw[r] = sw[r] + mu * (image(gw, hw, r) - sw[r]);
-                }
+            let pw = self.p_w[slot].col_as_slice_mut(j);
+            for r in 0..self.rows {
+                pw[r] = sw[r] + mu * (image(gw, hw, r) - sw[r]);
             }
             let (sf, gf, hf) = (s_f.col_as_slice(j), g_f[0].col_as_slice(j), g_f[1].col_as_slice(j));
-            let pf = self.p_f.col_as_slice_mut(j);
-            let rf = self.r_f.col_as_slice_mut(j);
-            if push {
-                let df = self.d_f[slot].col_as_slice_mut(j);
-                let drf = self.dr_f[slot].col_as_slice_mut(j);
-                for r in 0..self.rows {
-                    let res = image(gf, hf, r) - sf[r];
-                    let p = sf[r] + mu * res;
-                    df[r] = p - pf[r];
-                    drf[r] = res - rf[r];
-                    pf[r] = p;
-                    rf[r] = res;
-                }
-            } else {
-                for r in 0..self.rows {
-                    let res = image(gf, hf, r) - sf[r];
-                    pf[r] = sf[r] + mu * res;
-                    rf[r] = res;
-                }
+            let pf = self.p_f[slot].col_as_slice_mut(j);
+            let rf = self.r_f[slot].col_as_slice_mut(j);
+            for r in 0..self.rows {
+                let res = image(gf, hf, r) - sf[r];
+                pf[r] = sf[r] + mu * res;
+                rf[r] = res;
             }
             self.accumulate_column(j, &mut pass);
         }
@@ -355,19 +346,10 @@ impl AndersonHistory {
     pub fn record_residual(&mut self, r_f: &Mat<f64>) {
         assert_eq!((r_f.nrows(), r_f.ncols()), (self.rows, self.cols), "residual shape");
         let mut pass = self.begin_record();
-        let (slot, push) = (pass.slot, pass.push);
         for j in 0..self.cols {
-            let new = r_f.col_as_slice(j);
-            let rf = self.r_f.col_as_slice_mut(j);
-            if push {
-                let drf = self.dr_f[slot].col_as_slice_mut(j);
-                for r in 0..self.rows {
-                    drf[r] = new[r] - rf[r];
-                    rf[r] = new[r];
-                }
-            } else {
-                rf.copy_from_slice(new);
-            }
+            self.r_f[pass.slot]
+                .col_as_slice_mut(j)
+                .copy_from_slice(r_f.col_as_slice(j));
             self.accumulate_column(j, &mut pass);
         }
         self.end_record(&pass);
@@ -379,14 +361,16 @@ impl AndersonHistory {
     }
 
     /// Starts a record's pass: advances the ring if the record stores a difference (it has a
-    /// previous iterate), and returns the slot it writes, the stored slots and empty sums.
+    /// previous iterate; the slot it writes then held the oldest iterate, which only the dropped
+    /// difference used, or none), and returns the slot it writes, the stored differences and
+    /// empty sums.
     fn begin_record(&mut self) -> RecordPass {
-        let slot = self.next;
         let push = self.has_last;
         if push {
             self.len = (self.len + 1).min(self.window);
-            self.next = (self.next + 1) % self.window;
+            self.newest = (self.newest + 1) % self.ring;
         }
+        let slot = self.newest;
         RecordPass {
             slot,
             push,
@@ -398,14 +382,31 @@ impl AndersonHistory {
         }
     }
 
-    /// Adds column j's share of the new Gram column Δr_newᵀΔr_i, the projections Δr_iᵀ r and ‖r‖².
+    /// Adds column j's share of the new Gram column Δr_newᵀΔr_i, the projections Δr_iᵀ r and ‖r‖²
+    /// (column j of the new iterate written): forms column j of every stored Δr_i, newest last,
+    /// then takes the dot products.
     #[inline(always)]
-    fn accumulate_column(&self, j: usize, pass: &mut RecordPass) {
-        let (drf, rf) = (self.dr_f[pass.slot].col_as_slice(j), self.r_f.col_as_slice(j));
-        for (i, &other) in pass.slots[..pass.n_slots].iter().enumerate() {
-            let d_other = self.dr_f[other].col_as_slice(j);
-            pass.gram_new[i] += dot(drf, d_other);
-            pass.projection[i] += dot(d_other, rf);
+    fn accumulate_column(&mut self, j: usize, pass: &mut RecordPass) {
+        let rows = self.rows;
+        let n = pass.n_slots;
+        for (i, &other) in pass.slots[..n].iter().enumerate() {
+            let (newer, older) = (
+                self.r_f[other].col_as_slice(j),
+                self.r_f[self.before(other)].col_as_slice(j),
+            );
+            let d = &mut self.dr_column[i * rows..(i + 1) * rows];
+            for r in 0..rows {
+                d[r] = newer[r] - older[r];
+            }
+        }
+        let rf = self.r_f[pass.slot].col_as_slice(j);
+        if n > 0 {
+            let drf = &self.dr_column[(n - 1) * rows..n * rows];
+            for i in 0..n {
+                let d_other = &self.dr_column[i * rows..(i + 1) * rows];
+                pass.gram_new[i] += dot(drf, d_other);
+                pass.projection[i] += dot(d_other, rf);
+            }
         }
         pass.residual2 += dot(rf, rf);
     }
@@ -417,8 +418,8 @@ impl AndersonHistory {
         self.last_slot = pass.push.then_some(slot);
         self.residual2 = pass.residual2;
         for (i, &other) in pass.slots[..pass.n_slots].iter().enumerate() {
-            self.gram[slot * self.window + other] = pass.gram_new[i];
-            self.gram[other * self.window + slot] = pass.gram_new[i];
+            self.gram[slot * self.ring + other] = pass.gram_new[i];
+            self.gram[other * self.ring + slot] = pass.gram_new[i];
             self.projection[other] = pass.projection[i];
         }
     }
@@ -430,7 +431,7 @@ impl AndersonHistory {
         for i in 0..k {
             let si = self.slot(i);
             for j in 0..k {
-                p.gram[j * k + i] = self.gram[self.slot(j) * self.window + si];
+                p.gram[j * k + i] = self.gram[self.slot(j) * self.ring + si];
             }
             p.projection[i] = self.projection[si];
         }
@@ -441,7 +442,6 @@ impl AndersonHistory {
     /// Forgets every stored difference (the last iterate stays, so the next record starts anew).
     pub fn restart(&mut self) {
         self.len = 0;
-        self.next = 0;
     }
 
     /// The coefficients of `step` (none for a plain step), after forgetting the differences on a
@@ -468,15 +468,18 @@ impl AndersonHistory {
     #[inline(always)]
     fn apply_with(&self, gamma: &[f64], s_w: &mut Mat<f64>, s_f: &mut Mat<f64>) {
         // s = s + μ r − Σ γ_i D_i, oldest difference first, column by column (the column of s
-        // stays in cache over the k differences).
+        // stays in cache over the k differences), D_i = p[t] − p[t − 1] formed on the fly.
         for j in 0..self.cols {
-            for (s, p, d) in [(&mut *s_w, &self.p_w, &self.d_w), (&mut *s_f, &self.p_f, &self.d_f)] {
+            for (s, p) in [(&mut *s_w, &self.p_w), (&mut *s_f, &self.p_f)] {
                 let x = s.col_as_slice_mut(j);
-                x.copy_from_slice(p.col_as_slice(j));
+                x.copy_from_slice(p[self.newest].col_as_slice(j));
+                let mut older = p[self.before(self.slot(0))].col_as_slice(j);
                 for (i, &g) in gamma.iter().enumerate() {
-                    for (x, d) in x.iter_mut().zip(d[self.slot(i)].col_as_slice(j)) {
-                        *x -= g * d;
+                    let newer = p[self.slot(i)].col_as_slice(j);
+                    for ((x, a), b) in x.iter_mut().zip(newer).zip(older) {
+                        *x -= g * (a - b);
                     }
+                    older = newer;
                 }
             }
         }

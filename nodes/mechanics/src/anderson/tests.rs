@@ -328,3 +328,81 @@ fn coordinates_mix_as_the_fields_do() {
     }
     assert!(coordinator.counts.mixed > 3, "{:?}", coordinator.counts);
 }
+
+#[test]
+fn the_ring_gives_what_differences_stored_one_by_one_give() {
+    // A plain re-statement of the history: every iterate's p = s + μ r and r_F kept in a list,
+    // the last `window` differences taken afresh, the Gram matrix, the projections and the mixed
+    // state computed from them. Through full and partial windows, plain steps and restarts, the
+    // ring must give the same numbers bit for bit: its differences are the same subtractions of the
+    // same stored values, its sums the same dot products in the same order.
+    let (rows, cols, mu) = (7, 3, 0.8);
+    let mut seed = 11;
+    let mut field = |scale: f64| Mat::from_fn(rows, cols, |_, _| scale * rnd(&mut seed));
+    let sub = |a: &Mat<f64>, b: &Mat<f64>| Mat::from_fn(rows, cols, |r, c| a[(r, c)] - b[(r, c)]);
+    let dot_cols = |a: &Mat<f64>, b: &Mat<f64>| {
+        (0..cols)
+            .map(|j| dot(a.col_as_slice(j), b.col_as_slice(j)))
+            .sum::<f64>()
+    };
+    for window in [1, 2, 4] {
+        let mut h = AndersonHistory::new(window, mu, rows, cols);
+        let (mut s_w, mut s_f) = (field(1.0), field(1.0));
+        // The naive history: (p_w, p_f, r_f) per iterate since the last restart's iterate.
+        let mut kept: Vec<(Mat<f64>, Mat<f64>, Mat<f64>)> = Vec::new();
+        for it in 0..17 {
+            let scale = 0.8f64.powi(it);
+            let (g_w, g_f) = (field(scale), field(scale));
+            h.record(&s_w, &s_f, &g_w, &g_f);
+            let r_f = sub(&g_f, &s_f);
+            let p =
+                |s: &Mat<f64>, g: &Mat<f64>| Mat::from_fn(rows, cols, |r, c| s[(r, c)] + mu * (g[(r, c)] - s[(r, c)]));
+            kept.push((
+                p(&s_w, &g_w),
+                Mat::from_fn(rows, cols, |r, c| s_f[(r, c)] + mu * r_f[(r, c)]),
+                r_f,
+            ));
+            let k = (kept.len() - 1).min(window);
+            let last = &kept[kept.len() - k - 1..];
+            let dr: Vec<Mat<f64>> = last.windows(2).map(|x| sub(&x[1].2, &x[0].2)).collect();
+            let parts = h.partials();
+            assert_eq!(parts.k, k, "window {window}, iteration {it}");
+            let r_n = &last[k].2;
+            for i in 0..k {
+                assert_eq!(parts.projection[i], dot_cols(&dr[i], r_n), "projection {i}");
+                for j in 0..k {
+                    // Entry (i, j) was summed when the newer of the two was recorded.
+                    let (new, old) = if i > j { (i, j) } else { (j, i) };
+                    assert_eq!(parts.gram[j * k + i], dot_cols(&dr[new], &dr[old]), "Gram ({i}, {j})");
+                }
+            }
+            assert_eq!(parts.residual2, dot_cols(r_n, r_n));
+            let step = match it % 7 {
+                3 => AndersonStep::Plain,
+                5 => AndersonStep::Restart,
+                _ => AndersonStep::Mix((0..k).map(|i| 0.3 - 0.1 * i as f64).collect()),
+            };
+            h.apply(&step, &mut s_w, &mut s_f);
+            let gamma = match &step {
+                AndersonStep::Mix(g) => g.clone(),
+                _ => Vec::new(),
+            };
+            for (s, part) in [(&s_w, 0), (&s_f, 1)] {
+                let pick = |x: &(Mat<f64>, Mat<f64>, Mat<f64>)| if part == 0 { x.0.clone() } else { x.1.clone() };
+                let mut expected = pick(&last[k]);
+                for (i, g) in gamma.iter().enumerate() {
+                    let d = sub(&pick(&last[i + 1]), &pick(&last[i]));
+                    for c in 0..cols {
+                        for r in 0..rows {
+                            expected[(r, c)] -= g * d[(r, c)];
+                        }
+                    }
+                }
+                assert_eq!(s, &expected, "mixed state, window {window}, iteration {it}");
+            }
+            if let AndersonStep::Restart = step {
+                kept.drain(..kept.len() - 1);
+            }
+        }
+    }
+}
