@@ -204,33 +204,36 @@ pub(crate) fn run_logged(
     let setup_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let mut iterations = Vec::new();
-    let mut interfaces = Vec::new();
-    let mut displacements = Vec::new();
+    let (mut interfaces, mut displacements) = (Vec::new(), Vec::new());
+    // The final fields are moved out of the bus once delivered, not copied here.
     let mut bus = InProcessBus::new(nodes)
         .with_timing(timing.is_some())
-        .with_iteration_timing(log.is_some());
+        .with_iteration_timing(log.is_some())
+        .keeping(|m| matches!(m.payload, Payload::InterfaceSolution(_) | Payload::Displacement { .. }));
     let mut observer_time = Duration::ZERO;
     let mut stages = LinearStageRecords::default();
     bus.run(|m| {
         observer_time += observe(m);
         stages.observe(m);
-        match &m.payload {
-            Payload::Decision(d) => {
-                let rec = IterationRecord {
-                    iteration: m.envelope.iteration,
-                    elapsed_s: t1.elapsed().saturating_sub(observer_time).as_secs_f64(),
-                    decision: d.clone(),
-                };
-                let keep_going = on_iteration(&rec);
-                iterations.push(rec);
-                return keep_going;
-            }
-            Payload::InterfaceSolution(s) => interfaces.push(s.clone()),
-            Payload::Displacement { subdomain, u } => displacements.push((*subdomain, u.clone())),
-            _ => {}
+        if let Payload::Decision(d) = &m.payload {
+            let rec = IterationRecord {
+                iteration: m.envelope.iteration,
+                elapsed_s: t1.elapsed().saturating_sub(observer_time).as_secs_f64(),
+                decision: d.clone(),
+            };
+            let keep_going = on_iteration(&rec);
+            iterations.push(rec);
+            return keep_going;
         }
         true
     })?;
+    for m in bus.take_kept() {
+        match m.payload {
+            Payload::InterfaceSolution(s) => interfaces.push(s),
+            Payload::Displacement { subdomain, u } => displacements.push((subdomain, u)),
+            _ => {}
+        }
+    }
     if let Some(times) = timing {
         *times = bus.handle_times();
     }

@@ -183,7 +183,13 @@ pub struct InProcessBus {
     timing: Option<BTreeMap<(Role, String), (u64, Duration)>>,
     /// Per (node, iteration, field), when timing per iteration is on.
     iteration_timing: Option<IterationTiming>,
+    /// Which delivered messages the caller keeps ([`Self::keeping`]) instead of their senders.
+    keep: Option<Keep>,
+    kept: Vec<Message>,
 }
+
+/// Which delivered messages an [`InProcessBus`]'s caller keeps.
+type Keep = Box<dyn Fn(&Message) -> bool + Send>;
 
 impl InProcessBus {
     pub fn new(nodes: Vec<Box<dyn Node>>) -> Self {
@@ -193,7 +199,28 @@ impl InProcessBus {
             routes,
             timing: None,
             iteration_timing: None,
+            keep: None,
+            kept: Vec::new(),
         }
+    }
+
+    /// Hands the messages `keep` selects to the caller ([`Self::take_kept`]) once they are
+    /// delivered, instead of back to their senders: a run's final fields, which the caller holds
+    /// after the run, are then moved out of the bus rather than copied by the observer. When
+    /// `observe` stops the run, the selected messages it saw in that round are kept undelivered.
+    pub fn keeping(mut self, keep: impl Fn(&Message) -> bool + Send + 'static) -> Self {
+        self.keep = Some(Box::new(keep));
+        self
+    }
+
+    /// The messages kept so far ([`Self::keeping`]), in publication order.
+    pub fn take_kept(&mut self) -> Vec<Message> {
+        std::mem::take(&mut self.kept)
+    }
+
+    /// Whether the caller keeps `m` ([`Self::keeping`]).
+    fn keeps(&self, m: &Message) -> bool {
+        self.keep.as_ref().is_some_and(|k| k(m))
     }
 
     /// Times every [`Node::handle`] call (two clock reads per call; off by default).
@@ -256,10 +283,12 @@ impl InProcessBus {
             }
         }
         while !queue.is_empty() {
-            for m in &queue {
-                if !observe(m) {
-                    return Ok(());
-                }
+            if let Some(stop) = queue.iter().position(|m| !observe(m)) {
+                // The messages observed before the stop, the stopping one included.
+                let seen = queue.into_iter().take(stop + 1);
+                let kept: Vec<Message> = seen.filter(|m| self.keeps(m)).collect();
+                self.kept.extend(kept);
+                return Ok(());
             }
             let topics: Vec<String> = queue.iter().map(Message::topic).collect();
             let deliveries = self.routes.deliveries(topics.iter().map(String::as_str));
@@ -301,7 +330,9 @@ impl InProcessBus {
                 }
             }
             for m in std::mem::replace(&mut queue, next) {
-                if let Some(k) = ids.iter().position(|id| *id == m.envelope.sender) {
+                if self.keeps(&m) {
+                    self.kept.push(m);
+                } else if let Some(k) = ids.iter().position(|id| *id == m.envelope.sender) {
                     self.nodes[k].recycle(m);
                 }
             }
@@ -539,6 +570,33 @@ mod tests {
         let mut untimed = InProcessBus::new(nodes());
         untimed.run(|_| true).unwrap();
         assert!(untimed.iteration_times().is_empty());
+    }
+
+    /// Kept messages come out of the bus after delivery, in publication order, and are not given
+    /// back to their senders; without `keeping` none is kept. A run stopped by its observer keeps
+    /// the selected messages of the round it did not deliver.
+    #[test]
+    fn kept_messages_are_moved_to_the_caller() {
+        let is_q = |m: &Message| matches!(m.payload, Payload::LocalDirections { .. });
+        let mut bus = InProcessBus::new(nodes()).keeping(is_q);
+        let mut seen = 0;
+        bus.run(|m| {
+            seen += is_q(m) as usize;
+            true
+        })
+        .unwrap();
+        assert_eq!(seen, 1);
+        let kept = bus.take_kept();
+        assert_eq!(kept.len(), 1, "the one LocalDirections message");
+        assert!(is_q(&kept[0]) && kept[0].envelope.iteration == 3);
+        assert!(bus.take_kept().is_empty(), "taken once");
+        assert!(bus.into_nodes()[1].is_finished(), "delivered before it was kept");
+        let mut stopped = InProcessBus::new(nodes()).keeping(is_q);
+        stopped.run(|_| false).unwrap();
+        assert_eq!(stopped.take_kept().len(), 1, "kept though its round was not delivered");
+        let mut plain = InProcessBus::new(nodes());
+        plain.run(|_| true).unwrap();
+        assert!(plain.take_kept().is_empty());
     }
 
     /// Inputs 3, 1, 9, 2 to a taker of 1, 2, 3 in that order: each is taken once it is its turn,
