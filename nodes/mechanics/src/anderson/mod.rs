@@ -125,8 +125,8 @@ pub struct AndersonHistory {
 }
 
 /// Coordinates of the state on a basis of its own (a PGD state's time functions), mixed with the
-/// same coefficients as the state and not part of the least-squares problem: D_i and s + μ r in
-/// coordinates. A slot's rows past `rows[slot]` (`p_rows`) are zeros: a basis only grows between
+/// same coefficients as the state and not part of the least-squares problem: D_i (stored, by the
+/// ring slot that names the difference) and s + μ r in coordinates. A slot's rows past `rows[slot]` (`p_rows`) are zeros: a basis only grows between
 /// compressions, and a compression rotates every stored coordinate.
 struct Coordinates {
     d: Vec<Mat<f64>>,
@@ -291,8 +291,9 @@ impl AndersonHistory {
     }
 
     /// Records the iterate s = (s_w, s_f) and its image g = G(s): stores s + μ r and r_F
-    /// (r = g − s) and, from the second call on, their differences with the previous call's. The
-    /// new column of the Gram matrix, the projections Δr_iᵀ r_n and ‖r_n‖² are summed in the same
+    /// (r = g − s) in the ring's next slot, which from the second call on adds their differences
+    /// with the previous call's to the stored ones (the oldest dropped past m). The new column of
+    /// the Gram matrix, the projections Δr_iᵀ r_n and ‖r_n‖² are summed in the same
     /// pass, column by column while the column is in cache (each dot product is the sum over
     /// columns of the columns' dot products, as [`Self::partials`] reports them).
     pub fn record(&mut self, s_w: &Mat<f64>, s_f: &Mat<f64>, g_w: &Mat<f64>, g_f: &Mat<f64>) {
