@@ -574,27 +574,57 @@ mod tests {
 
     /// Kept messages come out of the bus after delivery, in publication order, and are not given
     /// back to their senders; without `keeping` none is kept. A run stopped by its observer keeps
-    /// the selected messages of the round it did not deliver.
+    /// the selected messages it saw of the round it did not deliver, and not the ones after.
     #[test]
     fn kept_messages_are_moved_to_the_caller() {
+        // The launcher of `nodes()` publishes, in one round, local directions of iteration 3, an
+        // Anderson step (not kept) and local directions of iteration 4.
+        let with_more = || {
+            let mut n = nodes();
+            let launcher = n[0].id();
+            let q3 = n[0].start().unwrap().remove(0);
+            let mut q4 = q3.clone();
+            q4.envelope.iteration = 4;
+            let step = Message {
+                envelope: q3.envelope.clone(),
+                payload: Payload::AndersonStep {
+                    gamma: Vec::new(),
+                    restart: false,
+                },
+            };
+            n[0] = Box::new(Toy {
+                id: launcher,
+                subs: Vec::new(),
+                out: vec![q3, step, q4],
+                start_ms: 0,
+                handle_ms: 0,
+                handled: false,
+            });
+            n
+        };
         let is_q = |m: &Message| matches!(m.payload, Payload::LocalDirections { .. });
-        let mut bus = InProcessBus::new(nodes()).keeping(is_q);
+        let mut bus = InProcessBus::new(with_more()).keeping(is_q);
         let mut seen = 0;
         bus.run(|m| {
             seen += is_q(m) as usize;
             true
         })
         .unwrap();
-        assert_eq!(seen, 1);
+        assert_eq!(seen, 2);
         let kept = bus.take_kept();
-        assert_eq!(kept.len(), 1, "the one LocalDirections message");
-        assert!(is_q(&kept[0]) && kept[0].envelope.iteration == 3);
+        let iterations: Vec<u32> = kept.iter().map(|m| m.envelope.iteration).collect();
+        assert_eq!(iterations, [3, 4], "both, in publication order");
+        assert!(kept.iter().all(is_q), "not the Anderson step");
         assert!(bus.take_kept().is_empty(), "taken once");
-        assert!(bus.into_nodes()[1].is_finished(), "delivered before it was kept");
-        let mut stopped = InProcessBus::new(nodes()).keeping(is_q);
-        stopped.run(|_| false).unwrap();
-        assert_eq!(stopped.take_kept().len(), 1, "kept though its round was not delivered");
-        let mut plain = InProcessBus::new(nodes());
+        assert!(bus.into_nodes()[1].is_finished(), "delivered before they were kept");
+        // Stopped at the Anderson step (the second message): the first is kept, the third not.
+        let mut stopped = InProcessBus::new(with_more()).keeping(is_q);
+        stopped
+            .run(|m| !matches!(m.payload, Payload::AndersonStep { .. }))
+            .unwrap();
+        let kept: Vec<u32> = stopped.take_kept().iter().map(|m| m.envelope.iteration).collect();
+        assert_eq!(kept, [3], "what the observer saw, up to the stop");
+        let mut plain = InProcessBus::new(with_more());
         plain.run(|_| true).unwrap();
         assert!(plain.take_kept().is_empty());
     }

@@ -126,8 +126,9 @@ pub struct AndersonHistory {
 
 /// Coordinates of the state on a basis of its own (a PGD state's time functions), mixed with the
 /// same coefficients as the state and not part of the least-squares problem: D_i (stored, by the
-/// ring slot that names the difference) and s + μ r in coordinates. A slot's rows past `rows[slot]` (`p_rows`) are zeros: a basis only grows between
-/// compressions, and a compression rotates every stored coordinate.
+/// ring slot that names the difference) and s + μ r in coordinates. A slot's rows past
+/// `rows[slot]` (`p_rows`) are zeros: a basis only grows between compressions, and a compression
+/// rotates every stored coordinate.
 struct Coordinates {
     d: Vec<Mat<f64>>,
     rows: Vec<usize>,

@@ -380,7 +380,8 @@ fn the_ring_gives_what_differences_stored_one_by_one_give() {
             let step = match it % 7 {
                 3 => AndersonStep::Plain,
                 5 => AndersonStep::Restart,
-                _ => AndersonStep::Mix((0..k).map(|i| 0.3 - 0.1 * i as f64).collect()),
+                // Coefficients well away from zero, so that every difference shows in the mix.
+                _ => AndersonStep::Mix((0..k).map(|i| 0.3 - 0.05 * i as f64).collect()),
             };
             h.apply(&step, &mut s_w, &mut s_f);
             let gamma = match &step {
