@@ -8,7 +8,8 @@ use crate::distributed::assert_identical;
 use crate::node_failures::processes_with;
 use glissade::distributed::Network;
 use glissade::run::Run;
-use glissade::runner::RunOptions;
+use glissade::runner::{IterationRecord, RunOptions, RunResult};
+use glissade_scene::LoadedScene;
 use std::path::{Path, PathBuf};
 
 fn exe() -> &'static Path {
@@ -27,6 +28,29 @@ fn recorded_run(name: &str) -> (Scratch, String, PathBuf) {
     let run_id = format!("{name}-{}", std::process::id());
     let recording = dir.join("run.mcap");
     (dir, run_id, recording)
+}
+
+/// Runs `sc` as node processes on loopback as run `run_id`, recorded to `recording`, with
+/// `on_iteration` seeing each decision as it reaches the launcher.
+fn run_recorded<'a>(
+    sc: &'a LoadedScene,
+    run_id: &str,
+    recording: &Path,
+    on_iteration: impl FnMut(&IterationRecord) + 'a,
+) -> glissade::Result<RunResult> {
+    Run::new(sc, &RunOptions::new(run_id))
+        .recorded(Some(recording))
+        .on_iteration(on_iteration)
+        .processes(exe(), &Network::default())
+        .map(|o| o.result)
+}
+
+/// No process of run `run_id` is left.
+fn assert_none_left(run_id: &str) {
+    assert!(
+        processes_with(run_id, &[]).is_empty(),
+        "processes of run {run_id} remain"
+    );
 }
 
 /// A small xorshift generator: the kill iterations are reproducible from the printed seed.
@@ -95,24 +119,16 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
         println!("seed {seed:#x}: kill {role}:{index} at iteration {at} of {n}");
         let with = if deployment.is_empty() { "" } else { "-deployed" };
         let (dir, run_id, recording) = recorded_run(&format!("recovery-{role}-{index}{with}"));
-        let opts = RunOptions::new(run_id.as_str());
         let mut killed = None;
-        let (result, _) = Run::new(&sc, &opts)
-            .recorded(Some(&recording))
-            .on_iteration(|r| {
-                if r.iteration == at && killed.is_none() {
-                    killed = Some(kill_node(&run_id, role, index));
-                }
-            })
-            .processes(exe(), &Network::default())
-            .map(|o| (o.result, o.traffic.unwrap_or_default()))
-            .unwrap_or_else(|e| panic!("run with {role}:{index} killed at iteration {at}: {e:#}"));
+        let result = run_recorded(&sc, &run_id, &recording, |r| {
+            if r.iteration == at && killed.is_none() {
+                killed = Some(kill_node(&run_id, role, index));
+            }
+        })
+        .unwrap_or_else(|e| panic!("run with {role}:{index} killed at iteration {at}: {e:#}"));
         let old = killed.expect("the kill iteration was reached");
         assert!(!processes_with(&run_id, &[]).contains(&old));
-        assert!(
-            processes_with(&run_id, &[]).is_empty(),
-            "processes of run {run_id} remain"
-        );
+        assert_none_left(&run_id);
         assert_identical(&undisturbed, &result);
         // The recording of the disturbed run is complete and finalised: every iteration's
         // decision is in it once.
@@ -131,18 +147,13 @@ fn killed_nodes_are_restarted_and_the_run_ends_bit_identical() {
 fn a_node_that_keeps_dying_stops_the_run_after_its_restarts() {
     let sc = scene(&small_three_layer("restarts = 1"));
     let (_dir, run_id, recording) = recorded_run("recovery-again");
-    let opts = RunOptions::new(run_id.as_str());
     let mut kills = Vec::new();
-    let err = Run::new(&sc, &opts)
-        .recorded(Some(&recording))
-        .on_iteration(|r| {
-            if (r.iteration == 2 || r.iteration == 5) && kills.len() < 2 {
-                kills.push(kill_node(&run_id, "subdomain", "0"));
-            }
-        })
-        .processes(exe(), &Network::default())
-        .map(|o| (o.result, o.traffic.unwrap_or_default()))
-        .expect_err("the run must stop");
+    let err = run_recorded(&sc, &run_id, &recording, |r| {
+        if (r.iteration == 2 || r.iteration == 5) && kills.len() < 2 {
+            kills.push(kill_node(&run_id, "subdomain", "0"));
+        }
+    })
+    .expect_err("the run must stop");
     let msg = format!("{err:#}");
     assert_eq!(kills.len(), 2, "{msg}");
     assert_ne!(kills[0], kills[1], "the second kill hits the replacement");
@@ -150,10 +161,7 @@ fn a_node_that_keeps_dying_stops_the_run_after_its_restarts() {
         msg.contains("node subdomain:0 died again after 1 restart(s) (deployment.restarts = 1)"),
         "{msg}"
     );
-    assert!(
-        processes_with(&run_id, &[]).is_empty(),
-        "processes of run {run_id} remain"
-    );
+    assert_none_left(&run_id);
 }
 
 /// A scene whose recording leaves messages out cannot resume a node: the launcher says restarts
@@ -167,24 +175,16 @@ fn restarts_need_a_complete_recording() {
         Some("recording.full_fields_every = 5 leaves full fields out")
     );
     let (_dir, run_id, recording) = recorded_run("recovery-thinned");
-    let opts = RunOptions::new(run_id.as_str());
     let mut killed = false;
-    let err = Run::new(&sc, &opts)
-        .recorded(Some(&recording))
-        .on_iteration(|r| {
-            if r.iteration == 2 && !killed {
-                kill_node(&run_id, "subdomain", "0");
-                killed = true;
-            }
-        })
-        .processes(exe(), &Network::default())
-        .map(|o| (o.result, o.traffic.unwrap_or_default()))
-        .expect_err("the run must stop");
+    let err = run_recorded(&sc, &run_id, &recording, |r| {
+        if r.iteration == 2 && !killed {
+            kill_node(&run_id, "subdomain", "0");
+            killed = true;
+        }
+    })
+    .expect_err("the run must stop");
     assert!(format!("{err:#}").contains("node subdomain:0 failed"), "{err:#}");
-    assert!(
-        processes_with(&run_id, &[]).is_empty(),
-        "processes of run {run_id} remain"
-    );
+    assert_none_left(&run_id);
 }
 
 /// Kills at any moment, not only as a decision reaches the launcher: a subdomain process is
@@ -207,34 +207,26 @@ fn kills_at_any_moment_end_bit_identical() {
         let index = if rng.below(2) == 0 { "0" } else { "1" };
         println!("seed {seed:#x}, round {round}: kill subdomain:{index} {delay:?} after iteration {at}");
         let (_dir, run_id, recording) = recorded_run(&format!("recovery-any-{round}"));
-        let opts = RunOptions::new(run_id.as_str());
         let mut killer = None;
-        let (result, _) = Run::new(&sc, &opts)
-            .recorded(Some(&recording))
-            .on_iteration(|r| {
-                if r.iteration == at && killer.is_none() {
-                    let run_id = run_id.clone();
-                    killer = Some(std::thread::spawn(move || {
-                        std::thread::sleep(delay);
-                        // None when the process already left (the run is over).
-                        for pid in processes_with(&run_id, &["node", "subdomain", "--index", index]) {
-                            // SAFETY: kill(2) on a pid of this test's run.
-                            unsafe {
-                                libc::kill(pid, libc::SIGKILL);
-                            }
+        let result = run_recorded(&sc, &run_id, &recording, |r| {
+            if r.iteration == at && killer.is_none() {
+                let run_id = run_id.clone();
+                killer = Some(std::thread::spawn(move || {
+                    std::thread::sleep(delay);
+                    // None when the process already left (the run is over).
+                    for pid in processes_with(&run_id, &["node", "subdomain", "--index", index]) {
+                        // SAFETY: kill(2) on a pid of this test's run.
+                        unsafe {
+                            libc::kill(pid, libc::SIGKILL);
                         }
-                    }));
-                }
-            })
-            .processes(exe(), &Network::default())
-            .map(|o| (o.result, o.traffic.unwrap_or_default()))
-            .unwrap_or_else(|e| panic!("round {round}: {e:#}"));
+                    }
+                }));
+            }
+        })
+        .unwrap_or_else(|e| panic!("round {round}: {e:#}"));
         killer.expect("the kill iteration was reached").join().unwrap();
         assert_identical(&undisturbed, &result);
-        assert!(
-            processes_with(&run_id, &[]).is_empty(),
-            "processes of run {run_id} remain"
-        );
+        assert_none_left(&run_id);
     }
 }
 
@@ -269,58 +261,50 @@ fn a_node_dying_or_frozen_after_done_costs_nothing() {
     {
         println!("{role}:{index}: {fate:?}");
         let (dir, run_id, recording) = recorded_run(&format!("recovery-done-{round}"));
-        let opts = RunOptions::new(run_id.as_str());
         let mut watcher = None;
-        let (result, _) = Run::new(&sc, &opts)
-            .recorded(Some(&recording))
-            .on_iteration(|r| {
-                if r.iteration != last || watcher.is_some() {
-                    return;
-                }
-                let pid = node_pid(&run_id, role, index);
-                if fate == Fate::KilledBefore {
-                    // SAFETY: kill(2) on a pid of this test's run.
-                    unsafe { libc::kill(pid, libc::SIGKILL) };
-                    watcher = Some(std::thread::spawn(move || true));
-                    return;
-                }
-                // SAFETY: as above.
-                unsafe { libc::kill(pid, libc::SIGSTOP) };
-                let run_id = run_id.clone();
-                watcher = Some(std::thread::spawn(move || {
-                    // The other node processes but the recorder (which waits for every node
-                    // process) leave once the launcher has said `done` (bounded wait).
-                    let recorder = processes_with(&run_id, &["node", "recorder"]);
-                    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
-                    let others_left = loop {
-                        let left = processes_with(&run_id, &["node"])
-                            .iter()
-                            .all(|p| *p == pid || recorder.contains(p));
-                        if left || std::time::Instant::now() > deadline {
-                            break left;
-                        }
-                        std::thread::sleep(std::time::Duration::from_millis(10));
-                    };
-                    if fate == Fate::KilledAfter {
-                        // SAFETY: as above; the process is stopped, so still there to be killed.
-                        unsafe { libc::kill(pid, libc::SIGKILL) };
+        let result = run_recorded(&sc, &run_id, &recording, |r| {
+            if r.iteration != last || watcher.is_some() {
+                return;
+            }
+            let pid = node_pid(&run_id, role, index);
+            if fate == Fate::KilledBefore {
+                // SAFETY: kill(2) on a pid of this test's run.
+                unsafe { libc::kill(pid, libc::SIGKILL) };
+                watcher = Some(std::thread::spawn(move || true));
+                return;
+            }
+            // SAFETY: as above.
+            unsafe { libc::kill(pid, libc::SIGSTOP) };
+            let run_id = run_id.clone();
+            watcher = Some(std::thread::spawn(move || {
+                // The other node processes but the recorder (which waits for every node
+                // process) leave once the launcher has said `done` (bounded wait).
+                let recorder = processes_with(&run_id, &["node", "recorder"]);
+                let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+                let others_left = loop {
+                    let left = processes_with(&run_id, &["node"])
+                        .iter()
+                        .all(|p| *p == pid || recorder.contains(p));
+                    if left || std::time::Instant::now() > deadline {
+                        break left;
                     }
-                    others_left
-                }));
-            })
-            .processes(exe(), &Network::default())
-            .map(|o| (o.result, o.traffic.unwrap_or_default()))
-            .unwrap_or_else(|e| panic!("{role}:{index}, {fate:?}: {e:#}"));
+                    std::thread::sleep(std::time::Duration::from_millis(10));
+                };
+                if fate == Fate::KilledAfter {
+                    // SAFETY: as above; the process is stopped, so still there to be killed.
+                    unsafe { libc::kill(pid, libc::SIGKILL) };
+                }
+                others_left
+            }));
+        })
+        .unwrap_or_else(|e| panic!("{role}:{index}, {fate:?}: {e:#}"));
         let others_left = watcher.expect("the last decision was reached").join().unwrap();
         assert!(
             others_left,
             "{role}:{index} stopped: the other node processes did not leave within 30 s"
         );
         assert_identical(&undisturbed, &result);
-        assert!(
-            processes_with(&run_id, &[]).is_empty(),
-            "processes of run {run_id} remain"
-        );
+        assert_none_left(&run_id);
         let rec = glissade_recorder::Recording::open(&dir.join("run.mcap")).expect("recording");
         assert!(rec.is_finished(), "the recording is finalised");
     }
