@@ -438,8 +438,9 @@ fn a_full_disk_fails_the_run_before_solving() {
 /// What a run records by default is what debugging a run needs: every small message, and on a
 /// scene with more than 1 MB of full fields per iteration (32 subdomains, N = 50: 5.3 MB) full
 /// fields every 20th iteration and the final interface solutions. The default recording is then
-/// at most a tenth of the complete one (`--record full`: 54 iterations × 5.3 MB; measured 23 MB
-/// against 314 MB); the start line says what will be recorded, `--no-record` writes none.
+/// at most a tenth of the complete one (`--record full`: 5.3 MB at every iteration; the sizes
+/// measured are in docs/recording.md); the start line says what will be recorded, `--no-record`
+/// writes none.
 #[test]
 fn the_default_recording_of_a_large_scene_is_a_tenth_of_a_complete_one() {
     let dir = temp_dir("defaults");
