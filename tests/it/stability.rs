@@ -205,8 +205,8 @@ fn full_matrix_scenes_load() {
 /// contact-traction error against the reference is at most the accuracy in at least 95 % of the
 /// stops and never above 3× it (the bar). A case whose reference or run fails is a
 /// failure here, not a skipped row; the two gap-open cases, whose reference has no contact force
-/// at all (a relative traction error is undefined), have no true error to compare. Measured
-/// (dev build, 2026-11-25): 60 defined stops, one above the accuracy (ν = 0.499 at 1e-2, 1.43×).
+/// at all (a relative traction error is undefined), have no true error to compare. The counts
+/// measured on the whole matrix are in docs/accuracy.md ("On the stability matrix").
 #[test]
 fn quick_cases_stop_within_the_requested_accuracy() {
     use glissade::accuracy::{check_cases, summary};
