@@ -356,7 +356,13 @@ pub(crate) fn join_bus(
         }
     }
     let shared_memory = match scene.network.shared_memory {
-        Some(on) => on,
+        Some(on) => {
+            crate::console::note(&format!(
+                "fields {} (network.shared_memory = {on})",
+                if on { "through shared memory" } else { "over TCP" }
+            ));
+            on
+        }
         None => {
             let host = Host {
                 recorded,
@@ -365,8 +371,11 @@ pub(crate) fn join_bus(
                 lockable: transport::shared_memory_lockable(),
             };
             let auto = auto_shared_memory(scene, &host);
-            if let Ok(why) = &auto {
-                crate::console::note(&format!("fields through shared memory ({why})"));
+            match &auto {
+                Ok(why) => crate::console::note(&format!("fields through shared memory ({why})")),
+                Err(why) => crate::console::note(&format!(
+                    "fields over TCP (network.shared_memory unset, and no shared memory: {why})"
+                )),
             }
             auto.is_ok()
         }

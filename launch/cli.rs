@@ -51,10 +51,10 @@ pub(crate) enum Command {
         out: PathBuf,
         /// LATIN stops once its estimated contact-traction error is at most this (overrides the
         /// scene's `solver.accuracy`).
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         accuracy: Option<f64>,
         /// LATIN also waits for η ≤ this (overrides the scene's `solver.tolerance`).
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         tolerance: Option<f64>,
         /// LATIN iteration cap (overrides the scene's).
         #[arg(long)]
@@ -76,7 +76,7 @@ pub(crate) enum Command {
         basis_subdomains: Vec<u32>,
         /// Stop each run at the first iteration whose contact-traction error against the
         /// reference is at most this (e.g. 1e-3), instead of at the tolerance or iteration cap.
-        #[arg(long)]
+        #[arg(long, allow_negative_numbers = true)]
         stop_at_error: Option<f64>,
         /// Newton iterations of the reference per attempt of a time step (the non-monotone attempt
         /// gets 20 times as many).
@@ -262,7 +262,7 @@ pub(crate) struct ReplayArgs {
     pub(crate) color_by: ColorByArg,
     /// Displacement amplification of the drawn meshes (default: the largest displacement drawn
     /// as 5 % of the model's size).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = positive_finite)]
     pub(crate) amplification: Option<f64>,
     /// Time point of the per-iteration meshes (default: the one with the largest boundary
     /// displacement).
@@ -295,7 +295,7 @@ pub(crate) struct RunArgs {
     pub(crate) run_id: Option<String>,
     /// Stop once the estimated contact-traction error is at most this (overrides the scene's
     /// `solver.accuracy`, default 1e-3).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub(crate) accuracy: Option<f64>,
     /// Also write every subdomain's displacement field.
     #[arg(long)]
@@ -401,4 +401,13 @@ pub(crate) struct GenerateArgs {
 pub(crate) enum PartitionArg {
     Contiguous,
     Bisection,
+}
+
+/// A finite number above zero (`--amplification`).
+fn positive_finite(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        Ok(x) => Err(format!("{x} is not a finite number above 0")),
+        Err(e) => Err(format!("not a number: {e}")),
+    }
 }

@@ -44,6 +44,8 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     let n = result.iterations.len();
     let mut met = Vec::new();
     let mut missed = Vec::new();
+    // η and e_c where the scene asks no tolerance of them: shown, but neither met nor missed.
+    let mut shown = Vec::new();
     let window = glissade_mechanics::estimate::RATE_WINDOW;
     let estimate = match d.estimate {
         Some(e) => format!("estimated contact-traction error {e:.2e}"),
@@ -56,19 +58,19 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
         Some(a) if d.estimate.is_some_and(|e| e <= a) => met.push(format!("{estimate} ≤ accuracy {a:e}")),
         Some(a) if d.estimate.is_some() => missed.push(format!("{estimate} > accuracy {a:e}")),
         Some(a) => missed.push(format!("{estimate} for accuracy {a:e}")),
-        None => met.push(estimate),
+        None => shown.push(estimate),
     }
     match s.tolerance {
         Some(t) if d.eta <= t => met.push(format!("η = {:.2e} ≤ tolerance {t:e}", d.eta)),
         Some(t) => missed.push(format!("η = {:.2e} > tolerance {t:e}", d.eta)),
-        None => met.push(format!("η = {:.2e}", d.eta)),
+        None => shown.push(format!("η = {:.2e}", d.eta)),
     }
     match s.contact_tolerance {
         Some(t) if d.contact_indicator <= t => {
             met.push(format!("e_c = {:.2e} ≤ contact tolerance {t:e}", d.contact_indicator))
         }
         Some(t) => missed.push(format!("e_c = {:.2e} > contact tolerance {t:e}", d.contact_indicator)),
-        None => met.push(format!("e_c = {:.2e}", d.contact_indicator)),
+        None => shown.push(format!("e_c = {:.2e}", d.contact_indicator)),
     }
     let how = match &result.verdict {
         Verdict::Converged => format!("Converged after {n} iterations"),
@@ -78,10 +80,17 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
         Verdict::Continue => format!("NOT converged: stopped after {n} iterations"),
     };
     if missed.is_empty() {
-        format!("{how}: {}", met.join(", "))
-    } else {
-        format!("{how}: {}; met: {}", missed.join(", "), met.join(", "))
+        met.extend(shown);
+        return format!("{how}: {}", met.join(", "));
     }
+    let mut line = format!("{how}: {}", missed.join(", "));
+    if !met.is_empty() {
+        line += &format!("; met: {}", met.join(", "));
+    }
+    if !shown.is_empty() {
+        line += &format!("; {}", shown.join(", "));
+    }
+    line
 }
 
 /// Seconds left until an estimate `estimate` that contracts by `rate` per iteration reaches

@@ -72,14 +72,17 @@ pub fn expected_size(scene: &LoadedScene) -> String {
     } else {
         format!(", only {:?}", r.topics)
     };
-    let each = if full < 1e6 {
-        format!("{:.0} kB", full * 1e-3)
-    } else {
-        format!("{:.1} MB", full * 1e-6)
+    let size = |bytes: f64, mb_digits: usize| {
+        if bytes < 1e6 {
+            format!("{:.0} kB", bytes * 1e-3)
+        } else {
+            format!("{:.*} MB", mb_digits, bytes * 1e-6)
+        }
     };
     format!(
-        "full fields {every}{topics}, {each} each; at most about {:.0} MB at the iteration cap ({cap})",
-        at_cap * 1e-6
+        "full fields {every}{topics}, {} each; at most about {} at the iteration cap ({cap})",
+        size(full, 1),
+        size(at_cap, 0)
     )
 }
 

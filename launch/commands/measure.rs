@@ -32,6 +32,11 @@ pub(crate) fn reference_outcome(report: &glissade::report::Report, n_points: usi
     }
 }
 
+/// The file of the time points a failed reference solved.
+fn partial_name(scene: &str) -> String {
+    format!("{scene}-reference-partial.fields.json")
+}
+
 /// Writes the interface fields of the time points a failed reference solved, prints its error
 /// and the hint; the exit code of a reference failure.
 pub(crate) fn reference_failed(
@@ -43,7 +48,7 @@ pub(crate) fn reference_failed(
     let solved = run.solution.newton_iterations.len();
     let f = write_json(
         out,
-        &format!("{}-reference-partial.fields.json", model.name),
+        &partial_name(&model.name),
         &glissade::output::interface_fields_upto(model, &reference_interfaces(model, &run.solution), solved),
     )?;
     eprintln!("error: reference: {error}");
@@ -63,6 +68,15 @@ pub(crate) fn reference(
 ) -> anyhow::Result<ExitCode> {
     let sc = load_scene(scene)?;
     ensure_writable(out)?;
+    let stem = format!("{}-reference", sc.model.name);
+    ensure_absent(
+        out,
+        &[
+            format!("{stem}.summary.json"),
+            format!("{stem}.fields.json"),
+            partial_name(&sc.model.name),
+        ],
+    )?;
     let t0 = std::time::Instant::now();
     let run = solve_reference_steps(&sc.model, opts)?;
     if let Some(e) = &run.failure {
@@ -82,9 +96,8 @@ pub(crate) fn reference(
         "newton_iterations_per_step": sol.newton_iterations,
         "newton_iterations_total": total,
         "r_factor_used": sol.r_factor_used,
-        "checks": format!("{checks:?}"),
+        "checks": checks_json(&checks),
     });
-    let stem = format!("{}-reference", sc.model.name);
     let s = write_json(out, &format!("{stem}.summary.json"), &summary)?;
     let f = write_json(
         out,
@@ -96,9 +109,51 @@ pub(crate) fn reference(
         sc.model.name,
         sc.model.time.n_points()
     );
-    println!("checks: {checks:?}");
+    println!("{}", checks_line(&checks));
     println!("summary: {}\nfields: {}", s.display(), f.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// The reference's residual checks by name, in [`Checks`]' order: the two scales, then the
+/// largest relative violations.
+fn checks_by_name(c: &Checks) -> [(&'static str, f64); 11] {
+    [
+        ("force_scale", c.force_scale),
+        ("displacement_scale", c.displacement_scale),
+        ("equilibrium", c.equilibrium),
+        ("prescribed", c.prescribed),
+        ("continuity", c.continuity),
+        ("action_reaction", c.action_reaction),
+        ("penetration", c.penetration),
+        ("tension", c.tension),
+        ("complementarity", c.complementarity),
+        ("cone", c.cone),
+        ("slip_direction", c.slip_direction),
+    ]
+}
+
+/// The checks as a JSON object of numbers (the scales in N and mm, the rest relative to them).
+fn checks_json(c: &Checks) -> serde_json::Value {
+    checks_by_name(c)
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), serde_json::json!(v)))
+        .collect::<serde_json::Map<_, _>>()
+        .into()
+}
+
+/// One line for the console: the largest relative violation of each law, then the scales.
+fn checks_line(c: &Checks) -> String {
+    let by_name = checks_by_name(c);
+    let violations: Vec<String> = by_name[2..]
+        .iter()
+        .map(|(k, v)| format!("{} {v:.1e}", k.replace('_', " ")))
+        .collect();
+    format!(
+        "checks (largest violation, relative): {}; scales: forces {:.4e} N, displacements {:.4e} mm",
+        violations.join(", "),
+        c.force_scale,
+        c.displacement_scale
+    )
 }
 
 pub(crate) fn bench(
@@ -112,10 +167,11 @@ pub(crate) fn bench(
         ..Default::default()
     };
     let sc = load_with_overrides(scene, out, &overrides)?;
+    let name = format!("{}-bench.json", sc.model.name);
+    ensure_absent(out, std::slice::from_ref(&name))?;
     let run_id = default_run_id()?;
     let report = glissade::bench::bench(&sc, &run_id)?;
     print!("{}", glissade::bench::render(&report));
-    let name = format!("{}-bench.json", sc.model.name);
     // Written before the process rounds, so that a failing round loses nothing already measured.
     let mut json = serde_json::to_value(&report)?;
     let mut j = write_json(out, &name, &json)?;
@@ -163,9 +219,18 @@ pub(crate) fn report(
 ) -> anyhow::Result<ExitCode> {
     let time_axis = plots.time_axis;
     let sc = load_with_overrides(scene, out, overrides)?;
+    let name = &sc.model.name;
+    ensure_absent(
+        out,
+        &[
+            format!("{name}-report.json"),
+            format!("{name}-report.svg"),
+            format!("{name}-iterations.svg"),
+            partial_name(name),
+        ],
+    )?;
     let run_id = default_run_id()?;
     let (report, reference, _) = build_report_with(&sc, &run_id, stop_at, reference_options)?;
-    let name = &sc.model.name;
     let j = write_json(out, &format!("{name}-report.json"), &serde_json::to_value(&report)?)?;
     let svg_path = out.join(format!("{name}-report.svg"));
     std::fs::write(&svg_path, plot_svg(&report, time_axis))
@@ -228,6 +293,18 @@ pub(crate) fn report_variants(
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let sc = load_with_overrides(scene, out, overrides)?;
+    let scene_name = &sc.model.name;
+    let mut targets: Vec<String> = names
+        .iter()
+        .flat_map(|stage| {
+            [
+                format!("{scene_name}-{stage}-report.json"),
+                format!("{scene_name}-{stage}-report.svg"),
+            ]
+        })
+        .collect();
+    targets.extend([format!("{scene_name}-iterations.svg"), partial_name(scene_name)]);
+    ensure_absent(out, &targets)?;
     // In-process runs only: the run id names nothing on a network.
     let run_id = format!("{}-report", sc.model.name);
     let (reports, reference) =
@@ -315,7 +392,7 @@ pub(crate) fn stability(
     accuracy: bool,
     out: &std::path::Path,
 ) -> anyhow::Result<ExitCode> {
-    use glissade::stability::{cases, markdown, run_cases, Assessment};
+    use glissade::stability::{cases, markdown, run_cases, Assessment, RunRow};
     let mut selected = cases(quick && only.is_empty());
     if list {
         for c in &selected {
@@ -330,20 +407,26 @@ pub(crate) fn stability(
         selected.retain(|c| only.iter().any(|n| n == c.name));
     }
     ensure_writable(out)?;
+    let stem = if accuracy { "stability-accuracy" } else { "stability" };
+    ensure_absent(out, &[format!("{stem}.md"), format!("{stem}.json")])?;
     if accuracy {
         return stability_accuracy(&selected, out);
     }
     let rows = run_cases(&selected, |r| {
-        let its = |n: Option<usize>| n.map_or("—".into(), |n| n.to_string());
+        let ended = |row: &RunRow| match row.iterations {
+            Some(n) => format!("{} after {n} iterations", row.outcome.kind()),
+            None => row.outcome.kind().to_string(),
+        };
         eprintln!(
-            "{}: {} after {} iterations, with Anderson {} after {} ({}; {:?})",
+            "{}: {}, with Anderson {} (acceleration {}; {})",
             r.case,
-            r.plain.outcome.kind(),
-            its(r.plain.iterations),
-            r.anderson.outcome.kind(),
-            its(r.anderson.iterations),
+            ended(&r.plain),
+            ended(&r.anderson),
             r.acceleration.kind(),
-            r.assessment
+            match r.assessment {
+                Assessment::AsExpected => "as expected",
+                Assessment::Unexpected => "NOT as expected",
+            }
         );
     });
     let table = markdown(&rows);

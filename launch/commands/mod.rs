@@ -17,7 +17,9 @@ pub(crate) use glissade::report::{build_report_with, linear_stage_table, plot_sv
 pub(crate) use glissade::run::Run;
 pub(crate) use glissade::runner::{IterationRecord, RunOptions};
 pub(crate) use glissade_messages::Verdict;
-pub(crate) use glissade_reference::{solve_reference_steps, verify, ReferenceError, ReferenceOptions, ReferenceRun};
+pub(crate) use glissade_reference::{
+    solve_reference_steps, verify, Checks, ReferenceError, ReferenceOptions, ReferenceRun,
+};
 pub(crate) use glissade_scene::{LoadedScene, Overrides, RecordOverride};
 pub(crate) use indicatif::{ProgressBar, ProgressStyle};
 pub(crate) use std::process::ExitCode;
@@ -58,6 +60,22 @@ pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
     let probe = out.join(format!(".probe-{}", std::process::id()));
     std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", out.display()))?;
     let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// Stops before anything is solved if one of the files `names` in `out` already exists: the
+/// measuring commands write fixed file names, and what an earlier run wrote there is never
+/// overwritten.
+pub(crate) fn ensure_absent(out: &std::path::Path, names: &[String]) -> anyhow::Result<()> {
+    for name in names {
+        let path = out.join(name);
+        if std::fs::symlink_metadata(&path).is_ok() {
+            anyhow::bail!(
+                "{} already exists; nothing was overwritten (use another --out, or remove it)",
+                path.display()
+            );
+        }
+    }
     Ok(())
 }
 

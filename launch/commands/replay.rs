@@ -14,6 +14,9 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     if let Some(why) = recording.damaged() {
         eprintln!("warning: {}: {why}", args.recording.display());
     }
+    if args.node.is_empty() {
+        warn_unfinished(&args.recording, &recording);
+    }
     if !args.node.is_empty() {
         use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
         let mut nodes = Vec::new();
@@ -123,6 +126,67 @@ pub(crate) fn export(
     if vtu.is_none() && csv.is_none() && foreign.is_none() {
         anyhow::bail!("nothing to export: give --vtu <DIR>, --csv <DIR>, --foreign <DIR> or several");
     }
+    // Everything is read and checked before anything is written: a recording that cannot give
+    // what was asked, or a target that exists, leaves no file and no folder behind.
+    let rec = glissade_recorder::Recording::open(recording)?;
+    if foreign.is_none() {
+        // (The foreign export says so itself, with what its file then holds.)
+        if let Some(why) = rec.truncated() {
+            eprintln!("warning: {}: {why}; exporting what was written", recording.display());
+        }
+        if let Some(why) = rec.damaged() {
+            eprintln!("warning: {}: {why}", recording.display());
+        }
+    }
+    warn_unfinished(recording, &rec);
+    let fields = if vtu.is_some() || csv.is_some() {
+        let unfinished = if rec.is_finished() {
+            ""
+        } else {
+            " (the recording is not finished: its run's last fields may not be in it)"
+        };
+        let state = glissade_replay::final_state(&rec)
+            .map_err(|e| anyhow::anyhow!("{}: {e}{unfinished}", recording.display()))?;
+        let model = &state.model;
+        if let Some(i) =
+            (0..model.interfaces.len()).find(|&i| !state.interfaces.iter().any(|s| s.interface as usize == i))
+        {
+            let itf = &model.interfaces[i];
+            anyhow::bail!(
+                "{}: no final solution of interface {i} ({} | {}) is recorded{unfinished}; nothing was exported",
+                recording.display(),
+                model.subdomains[itf.a].name,
+                model.subdomains[itf.b].name
+            );
+        }
+        if let Some(why) = state.skipped.describe() {
+            eprintln!("warning: {}: {why}", recording.display());
+        }
+        let stem = format!("{}-{}", state.model.name, rec.run_id());
+        let mut targets = Vec::new();
+        if let Some((dir, _)) = vtu {
+            targets.push(dir.join(format!("{stem}.pvd")));
+            targets.push(dir.join(format!("{stem}-vtu")));
+        }
+        if let Some(dir) = csv {
+            targets.push(dir.join(format!("{stem}.interfaces.csv")));
+        }
+        Some((state, stem, targets))
+    } else {
+        None
+    };
+    let mut targets: Vec<std::path::PathBuf> = fields.as_ref().map_or_else(Vec::new, |f| f.2.clone());
+    if let (Some(dir), Some(name)) = (foreign, recording.file_name()) {
+        targets.push(dir.join(name));
+    }
+    for t in &targets {
+        if std::fs::symlink_metadata(t).is_ok() {
+            anyhow::bail!(
+                "{} already exists; nothing was overwritten (nothing was exported)",
+                t.display()
+            );
+        }
+    }
     for dir in vtu.iter().map(|v| v.0).chain(csv.iter().copied()) {
         ensure_writable(dir)?;
     }
@@ -144,17 +208,11 @@ pub(crate) fn export(
             e.channels,
             e.bytes as f64 * 1e-6
         );
-        if vtu.is_none() && csv.is_none() {
-            return Ok(ExitCode::SUCCESS);
-        }
     }
-    let rec = glissade_recorder::Recording::open(recording)?;
-    let state = glissade_replay::final_state(&rec)?;
-    if let Some(why) = state.skipped.describe() {
-        eprintln!("warning: {}: {why}", recording.display());
-    }
+    let Some((state, stem, _)) = fields else {
+        return Ok(ExitCode::SUCCESS);
+    };
     let model = &state.model;
-    let stem = format!("{}-{}", model.name, rec.run_id());
     if let Some((dir, every)) = vtu {
         let u: Vec<Vec<&[f64]>> = (0..model.subdomains.len() as u32)
             .map(|s| {
@@ -186,4 +244,16 @@ pub(crate) fn export(
         println!("csv: {}", path.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Says so when `rec` was not finalised (its recorder stopped before the run's end; a cut in its
+/// data is reported by the reader itself): what it holds is read all the same.
+pub(crate) fn warn_unfinished(path: &std::path::Path, rec: &glissade_recorder::Recording) {
+    if !rec.is_finished() && rec.truncated().is_none() {
+        eprintln!(
+            "warning: {}: not finalised (no summary section: its recorder stopped before the end of the run, \
+             or the file was cut); reading the messages it holds",
+            path.display()
+        );
+    }
 }

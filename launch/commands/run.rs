@@ -8,13 +8,19 @@ use super::*;
 pub(crate) struct LiveView {
     view: Option<glissade_replay::View>,
     failure: Option<glissade_replay::ReplayError>,
+    /// The .rrd file the view is written to (None: streamed to a viewer).
+    file: Option<std::path::PathBuf>,
 }
 
 impl LiveView {
     fn new(args: &RunArgs, sc: &LoadedScene, run_id: &str) -> anyhow::Result<Self> {
+        let mut file = None;
         let view = match &args.rerun {
             Some(sink) => {
                 let sink = glissade_replay::Sink::parse(sink).map_err(|e| anyhow::anyhow!("--rerun {e}"))?;
+                if let glissade_replay::Sink::Save(path) = &sink {
+                    file = Some(path.clone());
+                }
                 let opts = glissade_replay::ReplayOptions {
                     sink,
                     color_by: glissade_replay::ColorBy::VonMises,
@@ -35,7 +41,11 @@ impl LiveView {
             }
             None => None,
         };
-        Ok(Self { view, failure: None })
+        Ok(Self {
+            view,
+            failure: None,
+            file,
+        })
     }
 
     fn message(&mut self, m: &glissade_messages::Message) {
@@ -52,7 +62,15 @@ impl LiveView {
         }
         if let Some(v) = self.view.take() {
             let s = v.finish()?;
-            println!("rerun: {} iterations, {} meshes streamed", s.iterations, s.meshes);
+            match &self.file {
+                Some(f) => println!(
+                    "rerun: {} iterations, {} meshes written to {}",
+                    s.iterations,
+                    s.meshes,
+                    f.display()
+                ),
+                None => println!("rerun: {} iterations, {} meshes streamed", s.iterations, s.meshes),
+            }
         }
         Ok(())
     }

@@ -251,10 +251,17 @@ pub(super) fn set_up(
     } else {
         Vec::new()
     };
-    if let (true, Some(why)) = (restarts > 0, &no_resume) {
-        crate::console::note(&format!(
+    match (restarts > 0, &no_resume) {
+        (true, Some(why)) => crate::console::note(&format!(
             "node restarts off ({why}): a node process that dies stops the run"
-        ));
+        )),
+        (true, None) => crate::console::note(&format!(
+            "node restarts on: a node process that dies is restarted, up to {restarts} times \
+             (deployment.restarts), and resumes from the recording"
+        )),
+        (false, _) => {
+            crate::console::note("node restarts off (deployment.restarts = 0): a node process that dies stops the run")
+        }
     }
     // With --verbose: which subdomains each process hosts (as `glissade check` prints it).
     for line in plan.deployment_lines(&groups) {

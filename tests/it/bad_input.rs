@@ -24,6 +24,25 @@ const RUN: &[&str] = &["run", "--in-process", "--quiet", "--out", "{out}", "{sce
 
 const CASES: &[Case] = &[
     Case {
+        name: "a negative accuracy on the command line",
+        args: &["run", "--in-process", "--accuracy", "-1", "--out", "{out}", "{scene}"],
+        edits: &[],
+        error: "--accuracy -1: {dir}/bad.toml: solver.accuracy: -1 is outside (0, 1)",
+    },
+    Case {
+        name: "an amplification that is not a number",
+        args: &["replay", "--amplification", "NaN", "{dir}/no-such.mcap"],
+        edits: &[],
+        error: "invalid value 'NaN' for '--amplification <AMPLIFICATION>': NaN is not a finite number above 0",
+    },
+    Case {
+        name: "a laminate too large to build here",
+        args: &["generate", "laminate", "--plies", "100000", "--per-ply", "100000", "-o", "{out}/huge.toml"],
+        edits: &[],
+        error: "a laminate of 100000 × 100000 subdomains of 10 × 10 QUA8 needs about 341000.0 GB to be built and \
+                checked here",
+    },
+    Case {
         name: "bench kernels with processes",
         args: &["bench", "--kernels", "baseline", "--processes", "1", "--out", "{out}", "{scene}"],
         edits: &[],
@@ -462,5 +481,46 @@ fn a_run_never_overwrites_an_earlier_runs_outputs() {
     assert_eq!(after, before.iter().map(|(p, _)| p.clone()).collect::<Vec<_>>());
     for (p, bytes) in &before {
         assert_eq!(&std::fs::read(p).expect("read"), bytes, "{} changed", p.display());
+    }
+}
+
+/// The measuring commands write fixed file names (`<scene>-reference.*`, `<scene>-report.*`,
+/// `<scene>-bench.json`, `stability.*`): where one of them is already in `--out`, the command
+/// stops before solving anything, exit 2, naming the file, and leaves it as it was.
+#[test]
+fn the_measuring_commands_never_overwrite_an_earlier_result() {
+    let dir = crate::common::scratch("measure-no-overwrite");
+    let scene = dir.join("two-blocks.toml");
+    std::fs::write(&scene, GOOD).expect("scene file");
+    let scene = scene.to_string_lossy().into_owned();
+    let cases: [(&[&str], &str); 5] = [
+        (&["reference", &scene], "two-blocks-reference.fields.json"),
+        (&["report", &scene], "two-blocks-report.svg"),
+        (
+            &["report", "--variants", "condensed+plain,condensed", &scene],
+            "two-blocks-condensed-report.json",
+        ),
+        (&["bench", &scene], "two-blocks-bench.json"),
+        (&["stability", "--case", "base"], "stability.json"),
+    ];
+    for (i, (args, existing)) in cases.iter().enumerate() {
+        let out = dir.join(format!("out-{i}"));
+        std::fs::create_dir_all(&out).expect("out");
+        let kept = out.join(existing);
+        std::fs::write(&kept, b"an earlier result").expect("earlier file");
+        let output = Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .args(*args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("spawn glissade");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(&format!("{} already exists; nothing was overwritten", kept.display())),
+            "{args:?}: {stderr}"
+        );
+        assert_eq!(std::fs::read(&kept).expect("read"), b"an earlier result");
+        assert_eq!(files_in(&out), vec![kept], "{args:?}: something was written");
     }
 }

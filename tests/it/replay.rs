@@ -360,7 +360,7 @@ fn multi_process_live_view_writes_an_rrd_the_rerun_cli_accepts() {
         &live,
         &scene_path,
     ]);
-    // "rerun: <iterations> iterations, <meshes> meshes streamed": every decision reached the view
+    // "rerun: <iterations> iterations, <meshes> meshes written to <file>": every decision reached the view
     // (the run's iteration count is in the summary), and each of the 6 subdomains was drawn at
     // least once per iteration.
     let line = stdout.lines().find(|l| l.starts_with("rerun: ")).expect("rerun line");
@@ -686,4 +686,98 @@ fn a_recording_out_of_causal_order_reexecutes_bit_identically() {
         assert_eq!(r.mismatch, None, "node {id}");
         assert_eq!(r.outputs, r.recorded_outputs, "node {id}");
     }
+}
+
+/// `replay --save` and the default `<f>.rrd` never overwrite a file: not the recording itself
+/// (which `--save <f.mcap>` used to replace with the view), not an earlier view; `run --rerun`
+/// neither. Each refusal names the file, exits 2 and leaves the file byte for byte as it was.
+#[test]
+fn a_rerun_view_never_overwrites_a_file() {
+    let dir = temp_dir("no-overwrite");
+    let path = record(&scene_text("small-three-layer"), &dir, "keep");
+    let original = std::fs::read(&path).unwrap();
+    let replay = |args: &[&dyn AsRef<std::ffi::OsStr>]| {
+        Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .arg("replay")
+            .args(args.iter().map(|a| a.as_ref()))
+            .output()
+            .unwrap()
+    };
+    let refused = |o: &std::process::Output, file: &Path| {
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{stderr}");
+        assert!(
+            stderr.contains(&file.display().to_string()) && stderr.contains("already exists; nothing was overwritten"),
+            "{stderr}"
+        );
+    };
+    // The recording as the view's file.
+    refused(&replay(&[&path, &"--save", &path]), &path);
+    assert_eq!(std::fs::read(&path).unwrap(), original, "the recording changed");
+    // The default <f>.rrd, once written, is not written again.
+    let rrd = path.with_extension("rrd");
+    glissade_ok(&[&"replay", &path]);
+    let view = std::fs::read(&rrd).unwrap();
+    refused(&replay(&[&path]), &rrd);
+    assert_eq!(std::fs::read(&rrd).unwrap(), view, "the earlier view changed");
+    // A live view onto an existing file: refused before the run starts (no summary written).
+    let o = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["run", "--in-process", "--run-id", "live", "--out"])
+        .arg(&*dir)
+        .arg("--rerun")
+        .arg(&rrd)
+        .arg(format!(
+            "{}/launch/scenes/small-three-layer.toml",
+            env!("CARGO_MANIFEST_DIR")
+        ))
+        .output()
+        .unwrap();
+    refused(&o, &rrd);
+    assert_eq!(std::fs::read(&rrd).unwrap(), view, "the earlier view changed");
+    assert!(!dir.join("small-three-layer-live.summary.json").exists());
+}
+
+/// `glissade export` reads and checks everything before it writes anything: a recording cut in
+/// half (its run's final solutions missing) and a target that already exists both stop it with
+/// exit 2 and a message naming the file, and leave no file and no folder behind.
+#[test]
+fn an_export_that_cannot_finish_writes_nothing() {
+    let dir = temp_dir("export-nothing");
+    let path = record(&scene_text("small-three-layer"), &dir, "whole");
+    let bytes = std::fs::read(&path).unwrap();
+    let half = dir.join("half.mcap");
+    std::fs::write(&half, &bytes[..bytes.len() / 2]).unwrap();
+    let export = |recording: &Path, targets: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .arg("export")
+            .arg(recording)
+            .args(["--vtu", &format!("{}/v{targets}", dir.display())])
+            .args(["--csv", &format!("{}/c{targets}", dir.display())])
+            .args(["--foreign", &format!("{}/f{targets}", dir.display())])
+            .output()
+            .unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let (code, stderr) = export(&half, "1");
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{}: no final solution of interface 0", half.display()))
+            && stderr.contains("nothing was exported"),
+        "{stderr}"
+    );
+    for d in ["v1", "c1", "f1"] {
+        assert!(!dir.join(d).exists(), "{d} was created");
+    }
+    // The CSV target exists: neither the series nor the foreign copy is written.
+    std::fs::create_dir_all(dir.join("c2")).unwrap();
+    let csv = dir.join("c2/small-three-layer-whole.interfaces.csv");
+    std::fs::write(&csv, b"earlier").unwrap();
+    let (code, stderr) = export(&path, "2");
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!("{} already exists; nothing was overwritten", csv.display())),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(&csv).unwrap(), b"earlier");
+    assert!(!dir.join("v2").exists() && !dir.join("f2").exists());
 }

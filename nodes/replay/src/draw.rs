@@ -105,6 +105,17 @@ pub(crate) fn create_stream(sink: &Sink) -> Result<rerun::RecordingStream, Repla
     if *sink == Sink::Spawn {
         no_display().map_or(Ok(()), Err)?;
     }
+    if let Sink::Save(p) = sink {
+        // A file that exists is never overwritten (it may be the recording itself, or a view
+        // kept from an earlier replay).
+        if std::fs::symlink_metadata(p).is_ok() {
+            return Err(ReplayError::Content {
+                path: p.display().to_string(),
+                detail: "already exists; nothing was overwritten (name another .rrd file, or remove this one)"
+                    .to_string(),
+            });
+        }
+    }
     let builder = rerun::RecordingStreamBuilder::new("glissade");
     match sink {
         Sink::Save(p) => builder.save(p),
