@@ -196,7 +196,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 tls: tls.as_ref(),
                 credentials: credentials.as_ref(),
             };
-            run_node_process(
+            let done = run_node_process(
                 role,
                 &args.run,
                 &bus,
@@ -208,8 +208,18 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                     resume: args.resume,
                     shared_memory: args.shared_memory,
                 },
-            )?;
-            Ok(ExitCode::SUCCESS)
+            );
+            match done {
+                Ok(()) => Ok(ExitCode::SUCCESS),
+                // The launcher stopped the run (interrupted, or a run it ended): not this node's
+                // error, so it is not said as one; the exit status stays that of a node that did
+                // not finish.
+                Err(glissade::Error::Transport(glissade_zenoh::TransportError::Stopped(why))) => {
+                    eprintln!("note: stopped by the launcher: {why}");
+                    Ok(ExitCode::from(2))
+                }
+                Err(e) => Err(e.into()),
+            }
         }
         Command::Generate(args) => {
             let GenerateKind::Laminate = args.kind;

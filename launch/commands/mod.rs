@@ -56,6 +56,9 @@ pub(crate) fn check_run_id(option: &str, run_id: &str) -> anyhow::Result<()> {
 }
 
 pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
+    if out.exists() && !out.is_dir() {
+        anyhow::bail!("output folder {} is a file, not a folder", out.display());
+    }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create output folder {}", out.display()))?;
     let probe = out.join(format!(".probe-{}", std::process::id()));
     std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", out.display()))?;

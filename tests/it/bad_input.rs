@@ -232,7 +232,7 @@ const CASES: &[Case] = &[
         name: "output folder is a file",
         args: &["run", "--in-process", "--out", "{dir}/a-file", "{scene}"],
         edits: &[],
-        error: "cannot create output folder {dir}/a-file: File exists",
+        error: "output folder {dir}/a-file is a file, not a folder",
     },
     Case {
         name: "run without a scene",

@@ -78,10 +78,13 @@ impl Expr {
             depth: 0,
         };
         if source.len() > MAX_FORMULA_LEN {
-            return Err(p.error(&format!(
-                "the formula is {} bytes long, at most {MAX_FORMULA_LEN}",
-                source.len()
-            )));
+            // Its beginning only: the whole would bury the message.
+            let start: String = source.chars().take(60).collect();
+            return Err(ExprError {
+                source_text: format!("{start}…"),
+                problem: format!("the formula is {} bytes long, at most {MAX_FORMULA_LEN}", source.len()),
+                position: 0,
+            });
         }
         let root = p.expr()?;
         p.skip_ws();

@@ -226,7 +226,7 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
             .collect();
         if !needs.is_empty() {
             return Err(refuse(format!(
-                "the recording keeps {} only every {thinning} iterations (recording.full_fields_every = {thinning}); node {id} needs every one of them: record with full_fields_every = 1",
+                "the recording keeps {} only every {thinning} iterations (recording.full_fields_every = {thinning}); node {id} needs every one of them: record with full_fields_every = 1 (`glissade run --record full`)",
                 needs.join(" and ")
             )));
         }
