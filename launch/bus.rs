@@ -374,7 +374,7 @@ pub(crate) fn join_bus(
             match &auto {
                 Ok(why) => crate::console::note(&format!("fields through shared memory ({why})")),
                 Err(why) => crate::console::note(&format!(
-                    "fields over TCP (network.shared_memory unset, and no shared memory: {why})"
+                    "fields over TCP (network.shared_memory unset; not through shared memory: {why})"
                 )),
             }
             auto.is_ok()

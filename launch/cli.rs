@@ -371,13 +371,13 @@ pub(crate) struct GenerateArgs {
     #[arg(long, default_value_t = 10)]
     pub(crate) elements: usize,
     /// Side of a subdomain (mm).
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = 30.0)]
     pub(crate) side: f64,
     /// Time steps N.
     #[arg(long, default_value_t = 100)]
     pub(crate) steps: usize,
     /// Coulomb friction coefficient between plies.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(allow_negative_numbers = true, long, default_value_t = 0.3)]
     pub(crate) friction: f64,
     /// Subdomain node processes of a multi-process run.
     #[arg(long, default_value_t = 3)]

@@ -259,8 +259,9 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 }
             }
             let text = laminate.scene_text()?;
-            // Check what was generated as any scene is checked, before writing it; but not
-            // against this machine's memory: the scene may be meant for a larger one.
+            // Check what was generated as any scene is checked, before writing it; but not against
+            // this machine's memory for a run (the scene may be meant for a larger one): only its
+            // meshes, which the check builds here, had to fit (above).
             glissade_scene::set_machine_memory(0);
             glissade_scene::load_str(&text, &args.out.display().to_string())
                 .context("the generated scene does not load (a bug in the generator)")?;

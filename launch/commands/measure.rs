@@ -7,7 +7,8 @@ use super::*;
 pub(crate) const REFERENCE_HINT: &str = "hint: the reference solves the same discrete problem as LATIN, step by step; \
 a step it cannot solve usually has many contact pairs at the edge of their law (gaps or stick margins near zero). \
 The steps solved are written. \
-A larger --newton-iterations may get through the step; \
+A larger --newton-iterations may get through the step (into another --out, or once the partial file is moved away: \
+nothing is overwritten); \
 a different time discretisation (N) changes the problem but may avoid it. Please report the scene.";
 
 /// The reference's options for `--newton-iterations n`: n per attempt, 20 n for the non-monotone
@@ -46,18 +47,26 @@ pub(crate) fn reference_failed(
     out: &std::path::Path,
 ) -> anyhow::Result<ExitCode> {
     let solved = run.solution.newton_iterations.len();
-    let f = write_json(
+    // Never over an earlier partial file (of this command or of `report`): then the steps solved
+    // are said but not written.
+    let written = glissade::output::write_json_new(
         out,
         &partial_name(&model.name),
         &glissade::output::interface_fields_upto(model, &reference_interfaces(model, &run.solution), solved),
-    )?;
+    );
     eprintln!("error: reference: {error}");
     eprintln!("{REFERENCE_HINT}");
-    eprintln!(
-        "reference: {solved} of {} time points solved, written to {} (PARTIAL)",
-        model.time.n_points(),
-        f.display()
-    );
+    match written {
+        Ok(f) => eprintln!(
+            "reference: {solved} of {} time points solved, written to {} (PARTIAL)",
+            model.time.n_points(),
+            f.display()
+        ),
+        Err(e) => eprintln!(
+            "reference: {solved} of {} time points solved, NOT written: {e}",
+            model.time.n_points()
+        ),
+    }
     Ok(ExitCode::from(NOT_CONVERGED))
 }
 
@@ -69,14 +78,7 @@ pub(crate) fn reference(
     let sc = load_scene(scene)?;
     ensure_writable(out)?;
     let stem = format!("{}-reference", sc.model.name);
-    ensure_absent(
-        out,
-        &[
-            format!("{stem}.summary.json"),
-            format!("{stem}.fields.json"),
-            partial_name(&sc.model.name),
-        ],
-    )?;
+    ensure_absent(out, &[format!("{stem}.summary.json"), format!("{stem}.fields.json")])?;
     let t0 = std::time::Instant::now();
     let run = solve_reference_steps(&sc.model, opts)?;
     if let Some(e) = &run.failure {
@@ -226,7 +228,6 @@ pub(crate) fn report(
             format!("{name}-report.json"),
             format!("{name}-report.svg"),
             format!("{name}-iterations.svg"),
-            partial_name(name),
         ],
     )?;
     let run_id = default_run_id()?;
@@ -303,7 +304,7 @@ pub(crate) fn report_variants(
             ]
         })
         .collect();
-    targets.extend([format!("{scene_name}-iterations.svg"), partial_name(scene_name)]);
+    targets.push(format!("{scene_name}-iterations.svg"));
     ensure_absent(out, &targets)?;
     // In-process runs only: the run id names nothing on a network.
     let run_id = format!("{}-report", sc.model.name);

@@ -159,6 +159,16 @@ pub(crate) fn export(
                 model.subdomains[itf.b].name
             );
         }
+        if vtu.is_some() {
+            if let Some(sub) = (0..model.subdomains.len()).find(|&s| !state.u.contains_key(&(s as u32))) {
+                anyhow::bail!(
+                    "{}: no displacement of subdomain `{}` can be recovered (no boundary state recorded); nothing \
+                     was exported",
+                    recording.display(),
+                    model.subdomains[sub].name
+                );
+            }
+        }
         if let Some(why) = state.skipped.describe() {
             eprintln!("warning: {}: {why}", recording.display());
         }
@@ -184,6 +194,14 @@ pub(crate) fn export(
             anyhow::bail!(
                 "{} already exists; nothing was overwritten (nothing was exported)",
                 t.display()
+            );
+        }
+    }
+    for dir in vtu.iter().map(|v| v.0).chain(csv).chain(foreign) {
+        if dir.exists() && !dir.is_dir() {
+            anyhow::bail!(
+                "output folder {} is a file, not a folder (nothing was exported)",
+                dir.display()
             );
         }
     }

@@ -256,8 +256,8 @@ pub(super) fn set_up(
             "node restarts off ({why}): a node process that dies stops the run"
         )),
         (true, None) => crate::console::note(&format!(
-            "node restarts on: a node process that dies is restarted, up to {restarts} times \
-             (deployment.restarts), and resumes from the recording"
+            "node restarts on: a node process the launcher started that dies is restarted, up to {restarts} \
+             times (deployment.restarts), and resumes from the recording"
         )),
         (false, _) => {
             crate::console::note("node restarts off (deployment.restarts = 0): a node process that dies stops the run")

@@ -221,8 +221,9 @@ impl Plan {
         for (k, (owned, host)) in self.interface_groups.iter().zip(&self.interface_hosts).enumerate() {
             let at = match host {
                 Some(g) => format!("in subdomain:{g}'s process"),
-                None => "in the launcher's process beside its router (a process of its own with node restarts, \
-                         --connect or interfaces_in_launcher = false)"
+                None => "beside the router in the launcher's process, or in a process of its own where the run \
+                         restarts nodes, goes through --connect, starts it by hand or sets \
+                         interfaces_in_launcher = false"
                     .to_string(),
             };
             lines.push(format!("  interface:{k}: {} interface(s), {at}", owned.len()));
@@ -608,8 +609,9 @@ mod tests {
                 "  subdomain:0: 6 subdomain(s): 0-1, 6-7, 12-13",
                 "  subdomain:1: 6 subdomain(s): 2-3, 8-9, 14-15",
                 "  subdomain:2: 6 subdomain(s): 4-5, 10-11, 16-17",
-                "  interface:0: 6 interface(s), in the launcher's process beside its router (a process of its own with \
-                 node restarts, --connect or interfaces_in_launcher = false)",
+                "  interface:0: 6 interface(s), beside the router in the launcher's process, or in a process of its own \
+                 where the run restarts nodes, goes through --connect, starts it by hand or sets \
+                 interfaces_in_launcher = false",
                 "  interface:1: 7 interface(s), in subdomain:0's process",
                 "  interface:2: 7 interface(s), in subdomain:1's process",
                 "  interface:3: 7 interface(s), in subdomain:2's process",

@@ -30,6 +30,8 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
     let nt = model.time.n_points();
     let k0 = default_k0(model);
     let dir = std::env::temp_dir().join(format!("glissade-replay-{}", std::process::id()));
+    // A folder left by an earlier run with this process id: its .rrd would be refused.
+    let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let mcap = dir.join("two-blocks-r.mcap");
     let run = RunInfo {
