@@ -54,6 +54,28 @@ pub fn start_compute_threads() -> std::result::Result<(), rayon::ThreadPoolBuild
 /// Reads and validates a scene file; its TLS files (`network.tls`) become relative to its folder
 /// and must be readable.
 pub fn load_scene(path: &Path) -> Result<LoadedScene> {
+    // A scene is a text of a few kB (meshes are files of their own, or base64 in `mesh.data`):
+    // anything but a file, or a file of more than this, is not one (a device such as /dev/zero
+    // would be read until memory runs out).
+    const MAX_SCENE_BYTES: u64 = 256 << 20;
+    if let Ok(meta) = std::fs::metadata(path) {
+        if !meta.is_file() {
+            return Err(Error::Option {
+                option: format!("scene file {}", path.display()),
+                why: "is not a regular file".into(),
+            });
+        }
+        if meta.len() > MAX_SCENE_BYTES {
+            return Err(Error::Option {
+                option: format!("scene file {}", path.display()),
+                why: format!(
+                    "is {} MiB, more than a scene can be (at most {} MiB)",
+                    meta.len() >> 20,
+                    MAX_SCENE_BYTES >> 20
+                ),
+            });
+        }
+    }
     let text = std::fs::read_to_string(path).what(|| format!("cannot read scene file {}", path.display()))?;
     let mut scene = load_str(&text, &path.display().to_string())?;
     scene.network.resolve_files(path)?;

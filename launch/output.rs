@@ -37,7 +37,14 @@ pub fn status_counts_per_time(model: &Model, result: &RunResult) -> Vec<[u64; 3]
 /// last iteration met and which it did not. "Converged" only when all are met.
 pub fn outcome(model: &Model, result: &RunResult) -> String {
     let Some(last) = result.iterations.last() else {
-        return format!("{:?} before any iteration", result.verdict);
+        let why = match &result.verdict {
+            Verdict::Converged => "converged".to_string(),
+            Verdict::MaxIterations => "the iteration cap".to_string(),
+            Verdict::Stagnated { detail } => format!("stagnation ({detail})"),
+            Verdict::Diverged { detail } => format!("divergence ({detail})"),
+            Verdict::Continue => "a stop".to_string(),
+        };
+        return format!("NOT converged: stopped before any iteration ({why})");
     };
     let d = &last.decision;
     let s = &model.solver;

@@ -24,6 +24,12 @@ const RUN: &[&str] = &["run", "--in-process", "--quiet", "--out", "{out}", "{sce
 
 const CASES: &[Case] = &[
     Case {
+        name: "a device as the scene file (read until memory ran out before)",
+        args: &["run", "--in-process", "--out", "{out}", "/dev/zero"],
+        edits: &[],
+        error: "scene file /dev/zero: is not a regular file",
+    },
+    Case {
         name: "a negative accuracy on the command line",
         args: &["run", "--in-process", "--accuracy", "-1", "--out", "{out}", "{scene}"],
         edits: &[],

@@ -25,6 +25,10 @@ impl Ctx<'_> {
                 .map_err(|e| self.err("mesh.data", format!("is not the base64 of a mesh file: {e}"))),
             None => {
                 let path = mesh_path(self.file, &mesh.file);
+                // Only a file (a device such as /dev/zero would be read until memory runs out).
+                if std::fs::metadata(&path).is_ok_and(|m| !m.is_file()) {
+                    return Err(self.err("mesh.file", format!("`{}` is not a regular file", path.display())));
+                }
                 std::fs::read(&path)
                     .map_err(|e| self.err("mesh.file", format!("cannot read `{}`: {e}", path.display())))
             }

@@ -94,14 +94,24 @@ impl State {
         } else {
             (hi[0] - lo[0]).hypot(hi[1] - lo[1])
         };
+        // Plain where that is short, else in exponent form (a damaged binary mesh can hold 1e300).
+        let short = |x: f64| {
+            if x == 0.0 || (1e-4..1e6).contains(&x.abs()) {
+                format!("{x}")
+            } else {
+                format!("{x:e}")
+            }
+        };
         for (i, &(z, at)) in self.node_z.iter().enumerate() {
             if z.abs() > PLANAR_TOLERANCE * size {
                 return Err(p.err_at(
                     at,
                     format!(
-                        "node {} has z = {z}: the mesh must lie in the plane z = 0 (|z| at most {PLANAR_TOLERANCE:e} × \
-                         the mesh size {size})",
-                        self.node_tags[i]
+                        "node {} has z = {}: the mesh must lie in the plane z = 0 (|z| at most {PLANAR_TOLERANCE:e} × \
+                         the mesh size {})",
+                        self.node_tags[i],
+                        short(z),
+                        short(size)
                     ),
                 ));
             }

@@ -102,12 +102,22 @@ impl Ctx<'_> {
                         .iter()
                         .find(|d| d.0.abs() <= 1e-12 * area || d.0.signum() != dets[0].0.signum());
                     let (det, xi, eta) = bad.copied().unwrap_or(worst);
+                    // Where the sign changes, both signs are named (a positive det J alone reads as
+                    // no fault).
+                    let (d0, xi0, eta0) = dets[0];
+                    let at = if det.abs() > 1e-12 * area && det.signum() != d0.signum() {
+                        format!(
+                            "det J = {d0:.3e} at the Gauss point (ξ, η) = ({xi0:.3}, {eta0:.3}) but {det:.3e} at \
+                             ({xi:.3}, {eta:.3})"
+                        )
+                    } else {
+                        format!("det J = {det:.3e} at the Gauss point (ξ, η) = ({xi:.3}, {eta:.3})")
+                    };
                     return Err(self.err(
                         key,
                         format!(
-                            "{who}: element {tag} is inverted or degenerate: det J = {det:.3e} at the Gauss point \
-                             (ξ, η) = ({xi:.3}, {eta:.3}) (its Jacobian must keep one strict sign over the element; \
-                             corner nodes {}, {}, {}, {})",
+                            "{who}: element {tag} is inverted or degenerate: {at} (its Jacobian must keep one \
+                             strict sign over the element; corner nodes {}, {}, {}, {})",
                             node_tag(el[0]),
                             node_tag(el[1]),
                             node_tag(el[2]),
