@@ -143,7 +143,7 @@ fn report_variants_switch_the_time_coarse_start() {
     assert_eq!(warm.start, "time-coarse start (c = 4, η ≤ 1e-4)");
     let table = comparison_table(&reports);
     assert!(
-        table.contains("condensed + time-coarse start (c = 4, η ≤ 1e-4): iterations"),
+        table.contains("| condensed + time-coarse start (c = 4, η ≤ 1e-4) | "),
         "{table}"
     );
     // The start is closer to the reference than ŝ = 0 at the first iteration.
