@@ -33,22 +33,26 @@ pub fn status_counts_per_time(model: &Model, result: &RunResult) -> Vec<[u64; 3]
     counts
 }
 
+/// How a run of `n` iterations ended, from its verdict (the first words of [`outcome`]).
+fn how_it_ended(verdict: &Verdict, n: usize) -> String {
+    match verdict {
+        Verdict::Converged => format!("Converged after {n} iterations"),
+        Verdict::MaxIterations => format!("NOT converged: stopped at the iteration cap ({n} iterations)"),
+        Verdict::Stagnated { detail } => format!("NOT converged: stagnated after {n} iterations ({detail})"),
+        Verdict::Diverged { detail } => format!("NOT converged: diverged after {n} iterations ({detail})"),
+        Verdict::Continue => format!("NOT converged: stopped after {n} iterations"),
+    }
+}
+
 /// What a run's stop means, in one sentence: which of the requested accuracy and tolerances the
 /// last iteration met and which it did not. "Converged" only when all are met.
 pub fn outcome(model: &Model, result: &RunResult) -> String {
+    let n = result.iterations.len();
     let Some(last) = result.iterations.last() else {
-        let why = match &result.verdict {
-            Verdict::Converged => "converged".to_string(),
-            Verdict::MaxIterations => "the iteration cap".to_string(),
-            Verdict::Stagnated { detail } => format!("stagnation ({detail})"),
-            Verdict::Diverged { detail } => format!("divergence ({detail})"),
-            Verdict::Continue => "a stop".to_string(),
-        };
-        return format!("NOT converged: stopped before any iteration ({why})");
+        return how_it_ended(&result.verdict, n);
     };
     let d = &last.decision;
     let s = &model.solver;
-    let n = result.iterations.len();
     let mut met = Vec::new();
     let mut missed = Vec::new();
     // η and e_c where the scene asks no tolerance of them: shown, but neither met nor missed.
@@ -79,13 +83,7 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
         Some(t) => missed.push(format!("e_c = {:.2e} > contact tolerance {t:e}", d.contact_indicator)),
         None => shown.push(format!("e_c = {:.2e}", d.contact_indicator)),
     }
-    let how = match &result.verdict {
-        Verdict::Converged => format!("Converged after {n} iterations"),
-        Verdict::MaxIterations => format!("NOT converged: stopped at the iteration cap ({n} iterations)"),
-        Verdict::Stagnated { detail } => format!("NOT converged: stagnated after {n} iterations ({detail})"),
-        Verdict::Diverged { detail } => format!("NOT converged: diverged after {n} iterations ({detail})"),
-        Verdict::Continue => format!("NOT converged: stopped after {n} iterations"),
-    };
+    let how = how_it_ended(&result.verdict, n);
     if missed.is_empty() {
         met.extend(shown);
         return format!("{how}: {}", met.join(", "));

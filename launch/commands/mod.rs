@@ -55,10 +55,16 @@ pub(crate) fn check_run_id(option: &str, run_id: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
+/// Refuses an output folder that is a file (before anything is created).
+pub(crate) fn ensure_not_a_file(out: &std::path::Path) -> anyhow::Result<()> {
     if out.exists() && !out.is_dir() {
         anyhow::bail!("output folder {} is a file, not a folder", out.display());
     }
+    Ok(())
+}
+
+pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
+    ensure_not_a_file(out)?;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create output folder {}", out.display()))?;
     let probe = out.join(format!(".probe-{}", std::process::id()));
     std::fs::write(&probe, b"").with_context(|| format!("output folder {} is not writable", out.display()))?;
@@ -66,15 +72,15 @@ pub(crate) fn ensure_writable(out: &std::path::Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Stops before anything is solved if one of the files `names` in `out` already exists: the
-/// measuring commands write fixed file names, and what an earlier run wrote there is never
-/// overwritten.
+/// Stops before anything is solved or written if one of the files `names` in `out` already
+/// exists: the measuring commands and `export` write fixed file names, and what an earlier run
+/// wrote there is never overwritten.
 pub(crate) fn ensure_absent(out: &std::path::Path, names: &[String]) -> anyhow::Result<()> {
     for name in names {
         let path = out.join(name);
         if std::fs::symlink_metadata(&path).is_ok() {
             anyhow::bail!(
-                "{} already exists; nothing was overwritten (use another --out, or remove it)",
+                "{} already exists; nothing was overwritten (use another output folder, or remove it)",
                 path.display()
             );
         }

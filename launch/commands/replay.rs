@@ -5,15 +5,7 @@ use super::*;
 
 pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     let recording = glissade_recorder::Recording::open(&args.recording)?;
-    if let Some(why) = recording.truncated() {
-        eprintln!(
-            "warning: {}: {why}; replaying what was written",
-            args.recording.display()
-        );
-    }
-    if let Some(why) = recording.damaged() {
-        eprintln!("warning: {}: {why}", args.recording.display());
-    }
+    warn_incomplete(&args.recording, &recording, "replaying");
     if args.node.is_empty() {
         warn_unfinished(&args.recording, &recording);
     }
@@ -131,12 +123,7 @@ pub(crate) fn export(
     let rec = glissade_recorder::Recording::open(recording)?;
     if foreign.is_none() {
         // (The foreign export says so itself, with what its file then holds.)
-        if let Some(why) = rec.truncated() {
-            eprintln!("warning: {}: {why}; exporting what was written", recording.display());
-        }
-        if let Some(why) = rec.damaged() {
-            eprintln!("warning: {}: {why}", recording.display());
-        }
+        warn_incomplete(recording, &rec, "exporting");
     }
     warn_unfinished(recording, &rec);
     let fields = if vtu.is_some() || csv.is_some() {
@@ -173,37 +160,21 @@ pub(crate) fn export(
             eprintln!("warning: {}: {why}", recording.display());
         }
         let stem = format!("{}-{}", state.model.name, rec.run_id());
-        let mut targets = Vec::new();
         if let Some((dir, _)) = vtu {
-            targets.push(dir.join(format!("{stem}.pvd")));
-            targets.push(dir.join(format!("{stem}-vtu")));
+            ensure_absent(dir, &[format!("{stem}.pvd"), format!("{stem}-vtu")])?;
         }
         if let Some(dir) = csv {
-            targets.push(dir.join(format!("{stem}.interfaces.csv")));
+            ensure_absent(dir, &[format!("{stem}.interfaces.csv")])?;
         }
-        Some((state, stem, targets))
+        Some((state, stem))
     } else {
         None
     };
-    let mut targets: Vec<std::path::PathBuf> = fields.as_ref().map_or_else(Vec::new, |f| f.2.clone());
     if let (Some(dir), Some(name)) = (foreign, recording.file_name()) {
-        targets.push(dir.join(name));
-    }
-    for t in &targets {
-        if std::fs::symlink_metadata(t).is_ok() {
-            anyhow::bail!(
-                "{} already exists; nothing was overwritten (nothing was exported)",
-                t.display()
-            );
-        }
+        ensure_absent(dir, &[name.to_string_lossy().into_owned()])?;
     }
     for dir in vtu.iter().map(|v| v.0).chain(csv).chain(foreign) {
-        if dir.exists() && !dir.is_dir() {
-            anyhow::bail!(
-                "output folder {} is a file, not a folder (nothing was exported)",
-                dir.display()
-            );
-        }
+        ensure_not_a_file(dir)?;
     }
     for dir in vtu.iter().map(|v| v.0).chain(csv.iter().copied()) {
         ensure_writable(dir)?;
@@ -227,7 +198,7 @@ pub(crate) fn export(
             e.bytes as f64 * 1e-6
         );
     }
-    let Some((state, stem, _)) = fields else {
+    let Some((state, stem)) = fields else {
         return Ok(ExitCode::SUCCESS);
     };
     let model = &state.model;
@@ -262,6 +233,16 @@ pub(crate) fn export(
         println!("csv: {}", path.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Says so when `rec` was cut short or has damaged chunks (`doing`: what is done with the rest).
+fn warn_incomplete(path: &std::path::Path, rec: &glissade_recorder::Recording, doing: &str) {
+    if let Some(why) = rec.truncated() {
+        eprintln!("warning: {}: {why}; {doing} what was written", path.display());
+    }
+    if let Some(why) = rec.damaged() {
+        eprintln!("warning: {}: {why}", path.display());
+    }
 }
 
 /// Says so when `rec` was not finalised (its recorder stopped before the run's end; a cut in its
