@@ -71,9 +71,26 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
         Some(a) => missed.push(format!("{estimate} for accuracy {a:e}")),
         None => shown.push(estimate),
     }
+    // The state written (s) must agree with the interface laws' (ŝ) within the accuracy too
+    // (`IndicatorSums::disagreement`: e_c on a scene with contact, η without).
+    let mut apart = None;
+    if let Some(a) = s.accuracy {
+        let (name, gap) = if model.interfaces.iter().any(|i| i.is_contact()) {
+            ("e_c", d.contact_indicator)
+        } else {
+            ("η", d.eta)
+        };
+        if gap > a {
+            apart = Some(name);
+            missed.push(format!(
+                "the fields written (s) and the interface laws' (ŝ) differ by {name} = {gap:.2e} > accuracy {a:e}"
+            ));
+        }
+    }
     match s.tolerance {
         Some(t) if d.eta <= t => met.push(format!("η = {:.2e} ≤ tolerance {t:e}", d.eta)),
         Some(t) => missed.push(format!("η = {:.2e} > tolerance {t:e}", d.eta)),
+        None if apart == Some("η") => {}
         None => shown.push(format!("η = {:.2e}", d.eta)),
     }
     match s.contact_tolerance {
@@ -81,6 +98,7 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
             met.push(format!("e_c = {:.2e} ≤ contact tolerance {t:e}", d.contact_indicator))
         }
         Some(t) => missed.push(format!("e_c = {:.2e} > contact tolerance {t:e}", d.contact_indicator)),
+        None if apart == Some("e_c") => {}
         None => shown.push(format!("e_c = {:.2e}", d.contact_indicator)),
     }
     let how = how_it_ended(&result.verdict, n);
@@ -304,9 +322,9 @@ pub fn linear_stage_totals(scene: &LoadedScene, records: &[LinearStageRecord], t
     out
 }
 
-/// Interface fields of ŝ (the last local stage) in each interface's local frame: normal and
-/// tangential traction on side a (MPa) and jump [Ŵ] = Ŵ_b − Ŵ_a (mm), per time point and pair;
-/// plus each pair's status by name. docs/outputs.md describes every field.
+/// Interface fields of s (the last linear stage, [`pair_values`]) in each interface's local frame:
+/// normal and tangential traction on side a (MPa) and jump [W] = W_b − W_a (mm), per time point
+/// and pair; plus each pair's status by name (from the last local stage). docs/outputs.md describes every field.
 pub fn interface_fields(model: &Model, interfaces: &[InterfaceSolution]) -> Value {
     interface_fields_upto(model, interfaces, model.time.n_points())
 }
@@ -384,8 +402,8 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
             "weights": "mm (lumped edge length of each pair)",
             "f_n": "MPa: traction on side a along the normal (compression negative)",
             "f_t": "MPa: traction on side a along the tangent",
-            "jump_n": "mm: (Ŵ_b − Ŵ_a)·normal; jump_n + gap ≥ 0, = 0 where in contact",
-            "jump_t": "mm: (Ŵ_b − Ŵ_a)·tangent",
+            "jump_n": "mm: (W_b − W_a)·normal; jump_n + gap ≥ 0, = 0 where in contact (within the accuracy)",
+            "jump_t": "mm: (W_b − W_a)·tangent",
             "normal": "unit vector out of side a towards side b; tangent = (−normal_y, normal_x)",
             "status": "separated, stick or slip per pair (contact interfaces only)",
         },
@@ -493,12 +511,14 @@ pub fn series_paths(out: &Path, stem: &str) -> (PathBuf, PathBuf) {
 }
 
 /// Pair `p` of interface `itf` at time point `i` in the interface's frame: the traction on side a
-/// (normal, tangential; MPa) and the jump Ŵ_b − Ŵ_a (normal, tangential; mm).
+/// (normal, tangential; MPa) and the jump W_b − W_a (normal, tangential; mm), of s, the last
+/// linear stage's state: the state the run's estimate and verdict judge, whose forces balance the
+/// parts and whose traces are the parts' displacements (docs/outputs.md).
 pub fn pair_values(itf: &Interface, sol: &InterfaceSolution, i: usize, p: usize) -> [f64; 4] {
-    let f = [sol.f_a_hat.get(2 * p, i), sol.f_a_hat.get(2 * p + 1, i)];
+    let f = [sol.f_a.get(2 * p, i), sol.f_a.get(2 * p + 1, i)];
     let jump = [
-        sol.w_b_hat.get(2 * p, i) - sol.w_a_hat.get(2 * p, i),
-        sol.w_b_hat.get(2 * p + 1, i) - sol.w_a_hat.get(2 * p + 1, i),
+        sol.w_b.get(2 * p, i) - sol.w_a.get(2 * p, i),
+        sol.w_b.get(2 * p + 1, i) - sol.w_a.get(2 * p + 1, i),
     ];
     [
         dot(f, itf.normal(p)),
@@ -515,7 +535,7 @@ pub fn status_name(c: u8) -> String {
         .map_or_else(|| format!("invalid status code {c}"), |s| s.to_string())
 }
 
-/// The interface fields of ŝ as CSV: one row per time point and node pair, with the pair's
+/// The interface fields of s ([`pair_values`]) as CSV: one row per time point and node pair, with the pair's
 /// position, the tractions on side a and the jumps in the interface's frame, and the status
 /// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface). docs/outputs.md.
 pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<String> {
@@ -534,14 +554,12 @@ pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<
                 scene: format!("{} interface(s)", model.interfaces.len()),
             })?;
         let np = itf.n_pairs();
-        if sol.f_a_hat.rows() != 2 * np || sol.f_a_hat.cols() != nt {
+        if let Some((name, f)) = [("F_a", &sol.f_a), ("W_a", &sol.w_a), ("W_b", &sol.w_b)]
+            .into_iter()
+            .find(|(_, f)| f.rows() != 2 * np || f.cols() != nt)
+        {
             return Err(Error::ResultShape {
-                what: format!(
-                    "interface {}: F̂_a is {} × {}",
-                    sol.interface,
-                    sol.f_a_hat.rows(),
-                    sol.f_a_hat.cols()
-                ),
+                what: format!("interface {}: {name} is {} × {}", sol.interface, f.rows(), f.cols()),
                 scene: format!("{} × {nt}", 2 * np),
             });
         }

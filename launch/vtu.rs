@@ -8,8 +8,8 @@
 //!   order of ParaView's symmetric tensors; nodal averages), `von_mises`; cell data `subdomain`.
 //! - Interfaces (`interfaces-NNNN.vtu`): each interface's node pairs at their coordinates, its
 //!   3-node edges (those of side a whose middle node is a pair) as quadratic edges (VTK type 21:
-//!   end, end, middle), point data `traction_n`, `traction_t` (F̂ on side a in the interface's
-//!   frame, MPa), `jump_n`, `jump_t` (Ŵ_b − Ŵ_a, mm), `status` (0 separated, 1 stick, 2 slip,
+//!   end, end, middle), point data `traction_n`, `traction_t` (F on side a in the interface's
+//!   frame, MPa), `jump_n`, `jump_t` (W_b − W_a, mm; both of s, the state the verdict judged), `status` (0 separated, 1 stick, 2 slip,
 //!   −1 on perfect interfaces, −2 at an edge end clamped on both sides, which is no pair), `normal`
 //!   and `tangent`; cell data `interface` and `contact` (1 on contact interfaces).
 
@@ -106,7 +106,7 @@ pub fn write_series(
             });
         };
         let rows = 2 * itf.n_pairs();
-        for (name, f) in [("F̂_a", &sol.f_a_hat), ("Ŵ_a", &sol.w_a_hat), ("Ŵ_b", &sol.w_b_hat)] {
+        for (name, f) in [("F_a", &sol.f_a), ("W_a", &sol.w_a), ("W_b", &sol.w_b)] {
             if f.rows() != rows || f.cols() != nt {
                 return Err(Error::ResultShape {
                     what: format!("interface {i}: {name} is {} × {}", f.rows(), f.cols()),

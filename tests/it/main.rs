@@ -31,6 +31,7 @@ mod stability;
 mod time_start;
 mod tls;
 mod two_hosts;
+mod verified_outputs;
 mod vtu;
 
 #[global_allocator]

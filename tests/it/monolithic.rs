@@ -124,7 +124,7 @@ fn a_run_that_misses_the_accuracy_says_so() {
     };
     let early = run_with(10, 1e-3);
     assert!(
-        early.starts_with("NOT converged: stopped at the iteration cap (10 iterations): no error estimate yet (it needs 21 iterations) for accuracy 1e-3; met: η = "),
+        early.starts_with("NOT converged: stopped at the iteration cap (10 iterations): no error estimate yet (it needs 21 iterations) for accuracy 1e-3, the fields written (s) and the interface laws' (ŝ) differ by e_c = "),
         "{early}"
     );
     assert!(early.contains("≤ tolerance 1e-2"), "{early}");

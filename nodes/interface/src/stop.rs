@@ -5,9 +5,9 @@ use glissade_mechanics::estimate::{ErrorEstimate, Estimated};
 use glissade_mechanics::local::IndicatorSums;
 use glissade_messages::Verdict;
 
-/// The stop rules of DESIGN §3: converged when the estimated contact-traction error is at most
-/// the accuracy and η, e_c at most their tolerances (each where set); else max iterations,
-/// stagnation, divergence.
+/// The stop rules of DESIGN §3: converged when the estimated contact-traction error and the
+/// disagreement between s and ŝ ([`IndicatorSums::disagreement`]) are at most the accuracy and
+/// η, e_c at most their tolerances (each where set); else max iterations, stagnation, divergence.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StopRule {
     pub accuracy: Option<f64>,
@@ -82,7 +82,11 @@ impl StopRule {
                 };
             }
         }
-        let accurate = self.accuracy.is_none_or(|a| self.last.is_some_and(|e| e.error <= a));
+        // The estimate follows s's forces; s must also agree with ŝ (the interface laws) within
+        // the accuracy, or a motion that changes no force would pass unseen.
+        let accurate = self
+            .accuracy
+            .is_none_or(|a| self.last.is_some_and(|e| e.error <= a) && sums.disagreement() <= a);
         let eta_ok = self.tolerance.is_none_or(|t| eta <= t);
         let contact_ok = self.contact_tolerance.is_none_or(|t| sums.contact_indicator() <= t);
         let asked = self.accuracy.is_some() || self.tolerance.is_some() || self.contact_tolerance.is_some();

@@ -117,6 +117,19 @@ fn accuracy_stops_on_the_estimate_not_on_eta() {
         .expect("converges");
     assert_eq!(stop, 25);
 
+    // The estimate is met from 20 on, but s and ŝ stay apart (e_F = 0.1, a part held off its
+    // place by an offset no force shows) until 30: no "Converged" before they agree within the
+    // accuracy.
+    let mut r = StopRule::new(&p);
+    let stop = (0..40)
+        .find(|&n| {
+            let mut s = step_sums(1e-12, n);
+            s.force_num = if n < 30 { 1e-2 } else { 1e-8 };
+            r.decide(n, &s, None) == Verdict::Converged
+        })
+        .expect("converges");
+    assert_eq!(stop, 30);
+
     // Nothing requested: only the cap stops the run.
     let mut r = StopRule::new(&SolverParams {
         accuracy: None,

@@ -347,14 +347,14 @@ impl View {
                     });
                 };
                 let np = itf.n_pairs();
-                if sol.w_a_hat.rows() != 2 * np || sol.w_a_hat.cols() != nt || sol.f_a_hat.rows() != 2 * np {
+                if sol.w_a.rows() != 2 * np || sol.w_a.cols() != nt || sol.f_a.rows() != 2 * np {
                     return Err(ReplayError::Content {
                         path: "final state".into(),
                         detail: format!(
                             "interface {}: solution is {} × {}, the scene gives {} × {nt}",
                             sol.interface,
-                            sol.w_a_hat.rows(),
-                            sol.w_a_hat.cols(),
+                            sol.w_a.rows(),
+                            sol.w_a.cols(),
                             2 * np
                         ),
                     });
@@ -362,8 +362,8 @@ impl View {
                 let pos: Vec<[f32; 3]> = (0..np)
                     .map(|p| {
                         [
-                            (itf.coords[p][0] + amplification * sol.w_a_hat.get(2 * p, i)) as f32,
-                            (itf.coords[p][1] + amplification * sol.w_a_hat.get(2 * p + 1, i)) as f32,
+                            (itf.coords[p][0] + amplification * sol.w_a.get(2 * p, i)) as f32,
+                            (itf.coords[p][1] + amplification * sol.w_a.get(2 * p + 1, i)) as f32,
                             0.01,
                         ]
                     })
@@ -393,15 +393,15 @@ impl View {
                 }
                 let fmax = (0..np)
                     .flat_map(|p| (0..nt).map(move |j| (p, j)))
-                    .map(|(p, j)| sol.f_a_hat.get(2 * p, j).hypot(sol.f_a_hat.get(2 * p + 1, j)))
+                    .map(|(p, j)| sol.f_a.get(2 * p, j).hypot(sol.f_a.get(2 * p + 1, j)))
                     .fold(0.0f64, f64::max);
                 if fmax > 0.0 {
                     let scale = 0.05 * diag / fmax;
                     let vectors: Vec<[f32; 3]> = (0..np)
                         .map(|p| {
                             [
-                                (scale * sol.f_a_hat.get(2 * p, i)) as f32,
-                                (scale * sol.f_a_hat.get(2 * p + 1, i)) as f32,
+                                (scale * sol.f_a.get(2 * p, i)) as f32,
+                                (scale * sol.f_a.get(2 * p + 1, i)) as f32,
                                 0.0,
                             ]
                         })

@@ -252,21 +252,25 @@ impl Ctx<'_> {
         let kinds = self.interface_rules(raw, &names, &subs, &geo, &curve_names)?;
         let gaps = self.gap_specs(raw)?;
         let interfaces = self.finish_interfaces(raw, geo, &kinds, &gaps, &sub_loads)?;
-        // On a scene with a curved or broken-line interface, the macro problem is on unless a
-        // part is held only by contact along which it can slip rigidly and Anderson mixing is on:
-        // that combination stalls (`rigid::part_slipping_rigidly`, docs/scenes.md). Straight
-        // scenes keep the macro problem as they always had it.
-        if interfaces.iter().any(|i| i.straight_normal().is_none()) {
+        // The macro problem is on unless a part is held only by contact in one of its rigid
+        // motions and Anderson mixing is on: that combination stalls, or keeps the part off its
+        // place while the forces have converged (`rigid::part_held_only_by_contact`,
+        // docs/scenes.md).
+        {
             let constrained: Vec<&[bool]> = sub_loads.iter().map(|l| l.constrained.as_slice()).collect();
+            let coords: Vec<&[[f64; 2]]> = subs.iter().map(|s| s.mesh.coords.as_slice()).collect();
             let anderson = matches!(solver.acceleration, Acceleration::Anderson { .. });
-            if let (true, Some(s)) = (anderson, rigid::part_slipping_rigidly(&interfaces, &constrained)) {
+            if let (true, Some(s)) = (
+                anderson,
+                rigid::part_held_only_by_contact(&interfaces, &coords, &constrained),
+            ) {
                 let part = &subs[s].name;
                 if raw.solver.coarse == Some(true) {
                     return Err(self.err(
                         "solver.coarse",
                         format!(
-                            "the macro (coarse) problem with Anderson mixing stalls on this scene: `{part}` is held \
-                             only by contact along which it can slip rigidly; leave `coarse` unset or false, or set \
+                            "`{part}` is held only by contact in one of its rigid-body motions, which the macro \
+                             (coarse) problem with Anderson mixing cannot see; leave `coarse` unset or false, or set \
                              acceleration = \"none\""
                         ),
                     ));
