@@ -596,3 +596,46 @@ fn run_at_most(args: &[OsString], limit: Duration) -> (std::process::Output, Dur
     let took = start.elapsed();
     (child.wait_with_output().expect("output"), took)
 }
+
+/// A mesh scene with N = 10¹¹ time steps is refused for its size at once, as a block scene is:
+/// `check` ran for minutes (trying every divisor of N for the time-coarse grid) before it came to
+/// the mesh's size check. Exit 2, the memory named, nothing written.
+#[test]
+fn a_mesh_scene_with_too_many_time_steps_is_refused_at_once() {
+    let dir = crate::common::scratch("mesh-huge-n");
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("launch/scenes");
+    let text = std::fs::read_to_string(scenes.join("wedge.toml")).expect("wedge scene");
+    let mesh = scenes.join("meshes/wedge.msh");
+    for from in ["file = \"meshes/wedge.msh\"", "N = 10\n"] {
+        assert!(text.contains(from), "`{from}` not in wedge.toml");
+    }
+    let text = text
+        .replacen(
+            "file = \"meshes/wedge.msh\"",
+            &format!("file = {:?}", mesh.display().to_string()),
+            1,
+        )
+        .replacen("N = 10\n", "N = 100000000000\n", 1);
+    let scene = dir.join("wedge-huge-n.toml");
+    std::fs::write(&scene, text).expect("scene file");
+    let out = dir.join("out");
+    for command in [&["check"][..], &["run", "--in-process", "--out"]] {
+        let mut args: Vec<OsString> = command.iter().map(OsString::from).collect();
+        if command[0] == "run" {
+            args.push(out.clone().into());
+        }
+        args.push(scene.clone().into());
+        let (output, took) = run_at_most(&args, Duration::from_secs(20));
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("wedge-huge-n.toml: (size): the scene needs an estimated ")
+                && stderr.contains(" GB of space-time fields for N = 100000000000), more than this machine's memory"),
+            "{args:?}: {stderr}"
+        );
+        assert!(files_in(&out).is_empty(), "{args:?}: written {:?}", files_in(&out));
+        // The refusal comes before any work per time point: well within a second but for a
+        // loaded machine.
+        assert!(took < Duration::from_secs(5), "{args:?}: took {took:?}");
+    }
+}
