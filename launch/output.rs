@@ -535,9 +535,21 @@ pub fn status_name(c: u8) -> String {
         .map_or_else(|| format!("invalid status code {c}"), |s| s.to_string())
 }
 
+/// `text` as one field of a CSV row (RFC 4180): as it is, unless it holds a comma, a double quote
+/// or a line break (a Gmsh physical name may), then between double quotes with each of its double
+/// quotes doubled.
+pub fn csv_field(text: &str) -> std::borrow::Cow<'_, str> {
+    if text.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", text.replace('"', "\"\"")).into()
+    } else {
+        text.into()
+    }
+}
+
 /// The interface fields of s ([`pair_values`]) as CSV: one row per time point and node pair, with the pair's
 /// position, the tractions on side a and the jumps in the interface's frame, and the status
-/// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface). docs/outputs.md.
+/// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface); the parts' names quoted
+/// where they must be ([`csv_field`]). docs/outputs.md.
 pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<String> {
     use rayon::prelude::*;
     use std::fmt::Write as _;
@@ -585,16 +597,16 @@ pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<
         } else {
             Vec::new()
         };
-        checked.push((sol, itf, statuses));
+        let names = [itf.a, itf.b].map(|s| csv_field(&model.subdomains[s].name));
+        checked.push((sol, itf, statuses, names));
     }
     let rows: Vec<String> = (0..nt)
         .into_par_iter()
         .map(|i| {
             let t = model.time.t(i);
             let mut out = String::new();
-            for (sol, itf, statuses) in &checked {
+            for (sol, itf, statuses, [a, b]) in &checked {
                 let np = itf.n_pairs();
-                let (a, b) = (&model.subdomains[itf.a].name, &model.subdomains[itf.b].name);
                 for p in 0..np {
                     let [f_n, f_t, jump_n, jump_t] = pair_values(itf, sol, i, p);
                     let status = if itf.is_contact() {
@@ -758,7 +770,19 @@ pub fn reference_interfaces(model: &Model, reference: &ReferenceSolution) -> Vec
 
 #[cfg(test)]
 mod tests {
-    use super::time_left;
+    use super::{csv_field, time_left};
+
+    /// A name with a comma, a double quote or a line break is quoted (RFC 4180), its quotes
+    /// doubled; any other is written as it is (the CSV of ordinary names is unchanged).
+    #[test]
+    fn csv_fields_are_quoted_where_they_must_be() {
+        assert_eq!(csv_field("lower"), "lower");
+        assert!(matches!(csv_field("sheath.1 <&>"), std::borrow::Cow::Borrowed(_)));
+        assert_eq!(csv_field("le,ft"), "\"le,ft\"");
+        assert_eq!(csv_field("the \"up\" part"), "\"the \"\"up\"\" part\"");
+        assert_eq!(csv_field("two\nlines\r"), "\"two\nlines\r\"");
+        assert_eq!(csv_field(""), "");
+    }
 
     /// 1e-2 to 1e-3 at a contraction of 0.5 per iteration: ln 10 / ln 2 = 3.3, so 4 iterations.
     #[test]

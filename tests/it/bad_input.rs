@@ -2,8 +2,10 @@
 //! binary exit with status 2, print an error that names the problem and where it is (the exact
 //! text below), and write nothing into the output folder.
 
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 /// The scene every bad scene is derived from (two blocks in contact, the GetFEM reference).
 const GOOD: &str = include_str!("../../launch/scenes/two-blocks.toml");
@@ -528,5 +530,112 @@ fn the_measuring_commands_never_overwrite_an_earlier_result() {
         );
         assert_eq!(std::fs::read(&kept).expect("read"), b"an earlier result");
         assert_eq!(files_in(&out), vec![kept], "{args:?}: something was written");
+    }
+}
+
+/// A recording that is not a regular file is refused before it is read, by `replay` and by
+/// `export --foreign` alike: a link to /dev/zero was read until memory ran out (24 GB before it
+/// was killed), and a FIFO blocked the reader forever. Each is refused at once (exit 2), the file
+/// named, and nothing written.
+#[test]
+fn a_recording_that_is_not_a_regular_file_is_refused_at_once() {
+    let dir = crate::common::scratch("recording-not-a-file");
+    let zero = dir.join("zero.mcap");
+    std::os::unix::fs::symlink("/dev/zero", &zero).expect("symlink");
+    let fifo = dir.join("fifo.mcap");
+    let c_path = std::ffi::CString::new(fifo.to_string_lossy().as_bytes()).expect("path");
+    // SAFETY: a valid NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c_path.as_ptr(), 0o600) }, 0, "mkfifo");
+    for (recording, kind) in [(&zero, "a character device"), (&fifo, "a FIFO")] {
+        let out = dir.join("out");
+        let commands: [Vec<OsString>; 2] = [
+            vec![
+                "replay".into(),
+                "--save".into(),
+                out.join("view.rrd").into(),
+                recording.into(),
+            ],
+            vec![
+                "export".into(),
+                recording.into(),
+                "--foreign".into(),
+                out.clone().into(),
+            ],
+        ];
+        for args in commands {
+            let (output, took) = run_at_most(&args, Duration::from_secs(20));
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+            let error = format!("recording {}: is not a regular file ({kind})", recording.display());
+            assert!(stderr.contains(&error), "{args:?}: {stderr}\n(expected: `{error}`)");
+            assert!(files_in(&out).is_empty(), "{args:?}: written {:?}", files_in(&out));
+            // Refused before anything is read: well within a second but for a loaded machine.
+            assert!(took < Duration::from_secs(5), "{args:?}: took {took:?}");
+        }
+    }
+}
+
+/// Runs `glissade` with `args`, killed (and the test failed) after `limit`: its output and how long
+/// it took. For the inputs that once hung or ran for minutes before their refusal.
+fn run_at_most(args: &[OsString], limit: Duration) -> (std::process::Output, Duration) {
+    let start = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("spawn glissade");
+    while child.try_wait().expect("try_wait").is_none() {
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{args:?}: still running after {:?}", start.elapsed());
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let took = start.elapsed();
+    (child.wait_with_output().expect("output"), took)
+}
+
+/// A mesh scene with N = 10¹¹ time steps is refused for its size at once, as a block scene is:
+/// `check` ran for minutes (trying every divisor of N for the time-coarse grid) before it came to
+/// the mesh's size check. Exit 2, the memory named, nothing written.
+#[test]
+fn a_mesh_scene_with_too_many_time_steps_is_refused_at_once() {
+    let dir = crate::common::scratch("mesh-huge-n");
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("launch/scenes");
+    let text = std::fs::read_to_string(scenes.join("wedge.toml")).expect("wedge scene");
+    let mesh = scenes.join("meshes/wedge.msh");
+    for from in ["file = \"meshes/wedge.msh\"", "N = 10\n"] {
+        assert!(text.contains(from), "`{from}` not in wedge.toml");
+    }
+    let text = text
+        .replacen(
+            "file = \"meshes/wedge.msh\"",
+            &format!("file = {:?}", mesh.display().to_string()),
+            1,
+        )
+        .replacen("N = 10\n", "N = 100000000000\n", 1);
+    let scene = dir.join("wedge-huge-n.toml");
+    std::fs::write(&scene, text).expect("scene file");
+    let out = dir.join("out");
+    for command in [&["check"][..], &["run", "--in-process", "--out"]] {
+        let mut args: Vec<OsString> = command.iter().map(OsString::from).collect();
+        if command[0] == "run" {
+            args.push(out.clone().into());
+        }
+        args.push(scene.clone().into());
+        let (output, took) = run_at_most(&args, Duration::from_secs(20));
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("wedge-huge-n.toml: (size): the scene needs an estimated ")
+                && stderr.contains(" GB of space-time fields for N = 100000000000), more than this machine's memory"),
+            "{args:?}: {stderr}"
+        );
+        assert!(files_in(&out).is_empty(), "{args:?}: written {:?}", files_in(&out));
+        // The refusal comes before any work per time point: well within a second but for a
+        // loaded machine.
+        assert!(took < Duration::from_secs(5), "{args:?}: took {took:?}");
     }
 }

@@ -289,3 +289,84 @@ fn export_of_a_recording_equals_the_runs_own_outputs() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("nothing was overwritten"));
 }
+
+/// Part names hold what a Gmsh physical name may: commas, double quotes, `<` and `&`. The CSV
+/// quotes them (RFC 4180: Python's `csv` reads 12 fields in every row, and the names back as they
+/// were; a part `le,ft` gave rows of 13 fields under a header of 12), and the ParaView series,
+/// which names parts by their index only, stays well-formed XML.
+#[test]
+fn part_names_with_commas_quotes_and_markup_are_escaped_in_the_outputs() {
+    let Some(python) = python_with(&[]) else {
+        return;
+    };
+    let dir = scratch("vtu-names");
+    let (lower, upper) = (r#"le,ft "low" <&>"#, r#"up"per, & <b>"#);
+    let text = include_str!("../../launch/scenes/two-blocks.toml")
+        .replacen("N = 40", "N = 4", 1)
+        .replacen("name = \"lower\"", &format!("name = '{lower}'"), 1)
+        .replacen("name = \"upper\"", &format!("name = '{upper}'"), 1)
+        .replacen(
+            "between = [\"lower\", \"upper\"]",
+            &format!("between = ['{lower}', '{upper}']"),
+            1,
+        );
+    for name in [lower, upper] {
+        assert_eq!(
+            text.matches(&format!("'{name}'")).count(),
+            2,
+            "{name} not set in the scene"
+        );
+    }
+    let scene = dir.join("names.toml");
+    std::fs::write(&scene, text).unwrap();
+    let out = dir.display().to_string();
+    glissade_ok(&[
+        &"run",
+        &scene,
+        &"--in-process",
+        &"--quiet",
+        &"--vtu",
+        &"--csv",
+        &"--no-record",
+        &"--out",
+        &out,
+        &"--run-id",
+        &"n",
+    ]);
+    let stem = dir.join("two-blocks-n");
+    const READ: &str = r#"
+import sys, csv, json, os
+import xml.etree.ElementTree as ET
+csv_path, pvd = sys.argv[1:3]
+with open(csv_path, newline="") as f:
+    rows = list(csv.reader(f))
+sets = ET.parse(pvd).getroot().find("Collection").findall("DataSet")
+base = os.path.dirname(pvd)
+for d in sets:
+    text = open(os.path.join(base, d.get("file")), "rb").read()
+    # The XML before the raw appended data (binary, not text) parses.
+    head = text[: text.index(b"<AppendedData")] + b"</VTKFile>"
+    ET.fromstring(head)
+print(json.dumps({
+    "header": rows[0],
+    "widths": sorted(set(len(r) for r in rows)),
+    "names": sorted(set((r[2], r[3]) for r in rows[1:])),
+    "rows": len(rows) - 1,
+    "datasets": len(sets),
+}))
+"#;
+    let o = Command::new(python)
+        .args(["-c", READ])
+        .arg(stem.with_extension("interfaces.csv"))
+        .arg(stem.with_extension("pvd"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "python: {}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["header"].as_array().unwrap().len(), 12, "{r}");
+    assert_eq!(r["widths"], serde_json::json!([12]), "{r}");
+    assert_eq!(r["names"], serde_json::json!([[lower, upper]]), "{r}");
+    // 5 time points of the interface's 33 node pairs; a solid and an interface dataset each.
+    assert_eq!(r["rows"], 5 * 33, "{r}");
+    assert_eq!(r["datasets"], 10, "{r}");
+}

@@ -99,6 +99,32 @@ fn indexed_end(bytes: &[u8]) -> Option<usize> {
     usize::try_from(end).ok().filter(|&e| e <= bytes.len())
 }
 
+/// What a file that is not a regular file is, in words.
+fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() {
+        "a folder"
+    } else {
+        "not a file"
+    }
+}
+
 /// A recording loaded in memory and indexed in one pass.
 pub struct Recording {
     path: PathBuf,
@@ -123,11 +149,43 @@ impl Recording {
     /// Reads and indexes a recording. A file cut short (recorder killed) is accepted: everything
     /// up to the last complete record is available and [`Recording::truncated`] says where
     /// reading stopped.
+    ///
+    /// Only a regular file (after following links) is read, and no more of it than its size when
+    /// opened: a device such as /dev/zero was read until memory ran out, and a FIFO blocked the
+    /// reader forever (the check comes before opening, which would block on a FIFO).
     pub fn open(path: &Path) -> Result<Self, RecorderError> {
-        let bytes = std::fs::read(path).map_err(|e| RecorderError::Io {
+        use std::io::Read;
+        let io = |detail: String| RecorderError::Io {
             path: path.to_path_buf(),
-            detail: format!("cannot read: {e}"),
+            detail,
+        };
+        let regular = |meta: &std::fs::Metadata| -> Result<u64, RecorderError> {
+            if meta.is_file() {
+                Ok(meta.len())
+            } else {
+                Err(io(format!(
+                    "is not a regular file ({}): a recording is an .mcap file a run wrote",
+                    file_kind(meta)
+                )))
+            }
+        };
+        regular(&std::fs::metadata(path).map_err(|e| io(format!("cannot read: {e}")))?)?;
+        let file = std::fs::File::open(path).map_err(|e| io(format!("cannot read: {e}")))?;
+        // What was opened may not be what was looked at (the name replaced in between).
+        let len = regular(&file.metadata().map_err(|e| io(format!("cannot read: {e}")))?)?;
+        let capacity =
+            usize::try_from(len).map_err(|_| io(format!("is {len} bytes, more than this machine can address")))?;
+        let mut bytes = Vec::new();
+        bytes.try_reserve_exact(capacity).map_err(|_| {
+            io(format!(
+                "is {} MiB, more than this machine's memory can hold",
+                len >> 20
+            ))
         })?;
+        // A file that grows while it is read is read as it was when opened.
+        file.take(len)
+            .read_to_end(&mut bytes)
+            .map_err(|e| io(format!("cannot read: {e}")))?;
         Self::from_bytes(path, bytes)
     }
 

@@ -19,14 +19,10 @@ fn mesh(name: &str) -> Msh {
     msh::parse(&bytes).unwrap_or_else(|e| panic!("{name}.msh: {e}"))
 }
 
-/// Loads the scene of the brief on `<name>.msh` (materials for `a`, and `b` if `two`); the error.
-fn refusal(name: &str, two: bool) -> SceneError {
-    let materials = if two {
-        r#"{ a = "m", b = "m" }"#
-    } else {
-        r#"{ a = "m" }"#
-    };
-    let text = format!(
+/// The scene of the brief on `<name>.msh` (`materials` of its parts), with `more` rules after its
+/// two boundary rules.
+fn scene_text(name: &str, materials: &str, more: &str) -> String {
+    format!(
         r#"[time]
 T = 1.0
 N = 1
@@ -47,8 +43,18 @@ uy = 0.0
 [[boundary]]
 curve = "right"
 tx = 1.0
-"#
-    );
+{more}"#
+    )
+}
+
+/// Loads the scene of the brief on `<name>.msh` (materials for `a`, and `b` if `two`); the error.
+fn refusal(name: &str, two: bool) -> SceneError {
+    let materials = if two {
+        r#"{ a = "m", b = "m" }"#
+    } else {
+        r#"{ a = "m" }"#
+    };
+    let text = scene_text(name, materials, "");
     let scene = dir().join("scene.toml");
     let scene = scene.to_str().expect("a UTF-8 path");
     match glissade_scene::load_str(&text, scene) {
@@ -178,4 +184,42 @@ fn an_element_in_two_physical_surfaces_is_refused_with_its_tag() {
         )),
         "{e}"
     );
+}
+
+/// A boundary curve on an edge inside a part (shared by two of its elements) is refused, naming
+/// the curve, its element and nodes (the file's tags) and the part: such a curve was accepted
+/// where the rest of it lay on the part's boundary. Made by hand (README): a 2 × 1 rectangle `a`
+/// of 2 QUA8 with the physical curve `load` along the right half of its top and then down the
+/// edge x = 1 the two elements share.
+#[test]
+fn a_boundary_curve_inside_a_part_is_refused_with_its_element() {
+    let m = mesh("interior-curve");
+    // The element of `load` on x = 1 (the other is on the top edge).
+    let line = m
+        .elements
+        .iter()
+        .find(|e| e.dim == 1 && e.physicals == [5] && e.nodes.iter().all(|&n| m.nodes[n][0] == 1.0))
+        .expect("the fixture's element of `load` inside `a`");
+    let tags: Vec<u64> = line.nodes.iter().map(|&n| m.node_tags[n]).collect();
+    let scene = dir().join("scene.toml");
+    let scene = scene.to_str().expect("a UTF-8 path");
+    let text = |more: &str| scene_text("interior-curve", r#"{ a = "m" }"#, more);
+    // Without a rule on `load`, the mesh is a good one.
+    glissade_scene::load_str(&text(""), scene).unwrap_or_else(|e| panic!("{e}"));
+    for rule in ["ty = 1.0", "ux = 0.0"] {
+        let e = match glissade_scene::load_str(&text(&format!("\n[[boundary]]\ncurve = \"load\"\n{rule}\n")), scene) {
+            Ok(_) => panic!("a rule `{rule}` on a curve partly inside part `a` was accepted"),
+            Err(e) => e,
+        };
+        assert_eq!(e.key, "boundary[2].curve", "{e}");
+        assert_eq!(
+            e.problem,
+            format!(
+                "boundary curve `load` element {} (nodes {}, {}, {}) lies on an edge shared by two elements of \
+                 part `a`: a boundary curve must lie on a part's outer boundary",
+                line.tag, tags[0], tags[1], tags[2]
+            ),
+            "{e}"
+        );
+    }
 }

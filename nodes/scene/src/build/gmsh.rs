@@ -2,7 +2,7 @@
 //! every physical curve a named curve of 3-node edges; the mesh's bytes read from the scene's
 //! `[mesh] file` or from the `data` the loader embedded.
 
-use super::parts::{PartIn, PartMesh};
+use super::parts::{CurveIn, PartIn, PartMesh};
 use super::*;
 use crate::msh;
 use base64::Engine;
@@ -132,7 +132,12 @@ impl Ctx<'_> {
             ));
         }
         // Named curves: 3-node lines (end, end, middle in Gmsh's order).
-        let mut curves: BTreeMap<i32, (String, Vec<[usize; 3]>)> = BTreeMap::new();
+        let mut curves: BTreeMap<i32, CurveIn> = BTreeMap::new();
+        let curve = |tag: i32| CurveIn {
+            name: name_of(1, tag),
+            edges: Vec::new(),
+            element_tags: Vec::new(),
+        };
         for e in m.elements.iter().filter(|e| e.dim == 1) {
             for &p in &e.physicals {
                 if e.kind != LINE3 {
@@ -148,20 +153,18 @@ impl Ctx<'_> {
                         ),
                     ));
                 }
-                curves
-                    .entry(p)
-                    .or_insert_with(|| (name_of(1, p), Vec::new()))
-                    .1
-                    .push([e.nodes[0], e.nodes[2], e.nodes[1]]);
+                let c = curves.entry(p).or_insert_with(|| curve(p));
+                c.edges.push([e.nodes[0], e.nodes[2], e.nodes[1]]);
+                c.element_tags.push(e.tag);
             }
         }
         // Physical curves without elements are kept (a rule naming one is told it selects
         // nothing); two physical curves of one name are refused.
-        for (&(dim, tag), _) in m.physical_names.iter().filter(|(k, _)| k.0 == 1) {
-            curves.entry(tag).or_insert_with(|| (name_of(dim, tag), Vec::new()));
+        for &(_, tag) in m.physical_names.keys().filter(|k| k.0 == 1) {
+            curves.entry(tag).or_insert_with(|| curve(tag));
         }
         let mut seen: BTreeMap<&str, i32> = BTreeMap::new();
-        for (&tag, (name, _)) in &curves {
+        for (&tag, CurveIn { name, .. }) in &curves {
             if let Some(other) = seen.insert(name.as_str(), tag) {
                 return Err(self.err(
                     key,

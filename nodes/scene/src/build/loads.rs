@@ -439,6 +439,18 @@ impl Ctx<'_> {
                     format!("unknown curve `{curve}` (the mesh names: {})", curve_names.join(", ")),
                 ));
             };
+            // A curve inside a part would load (or hold) the part inside, not on its boundary.
+            if let Some(inside) = &geometry.curve_inside[c] {
+                let [n0, n1, n2] = inside.nodes;
+                return Err(self.err(
+                    format!("{key}.curve"),
+                    format!(
+                        "boundary curve `{curve}` element {} (nodes {n0}, {n1}, {n2}) lies on an edge shared by two \
+                         elements of part `{}`: a boundary curve must lie on a part's outer boundary",
+                        inside.element, subs[inside.part].name
+                    ),
+                ));
+            }
             // Edges of each part on the curve.
             let mut selected: BTreeMap<usize, Vec<[usize; 3]>> = BTreeMap::new();
             for (s, edges) in geometry.boundary.iter().enumerate() {

@@ -209,7 +209,6 @@ impl Ctx<'_> {
         let pgd = self.pgd(raw.solver.pgd.as_ref())?;
         let linear_stage = self.linear_stage(&raw.solver)?;
         let coarsening = self.time_start(&raw.solver)?;
-        solver.time_start = self.resolve_time_start(coarsening, time.n_steps, linear_stage)?;
         let recording = self.recording(&raw.recording)?;
         let materials = self.materials(&raw.materials)?;
         let mut mesh_file = None;
@@ -248,6 +247,10 @@ impl Ctx<'_> {
                 (subs, names, geo, sub_loads, Vec::new())
             }
         };
+        // Only now: choosing the time-coarse grid tries divisors of N, and a mesh scene's size is
+        // known (and checked against the memory) once its parts are read: N = 10¹¹ took minutes
+        // before its refusal.
+        solver.time_start = self.resolve_time_start(coarsening, time.n_steps, linear_stage)?;
         let mut deployment = self.deployment(&raw.deployment, subs.len())?;
         let kinds = self.interface_rules(raw, &names, &subs, &geo, &curve_names)?;
         let gaps = self.gap_specs(raw)?;

@@ -24,8 +24,12 @@ pub fn auto_coarsening(n_steps: usize) -> Option<usize> {
     if n_steps < AUTO_COARSENING_MIN_STEPS {
         return None;
     }
-    (2..n_steps)
-        .filter(|c| n_steps.is_multiple_of(*c))
+    // The divisors in pairs (d, N/d) with d ≤ √N: √N trials, not N (N = 10¹¹ took minutes).
+    (1..)
+        .take_while(|&d| d <= n_steps / d)
+        .filter(|&d| n_steps.is_multiple_of(d))
+        .flat_map(|d| [d, n_steps / d])
+        .filter(|&c| c >= 2 && c < n_steps)
         .min_by_key(|&c| ((n_steps / c).abs_diff(AUTO_COARSE_STEPS), std::cmp::Reverse(c)))
 }
 

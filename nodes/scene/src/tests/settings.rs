@@ -99,6 +99,21 @@ fn automatic_time_coarsening() {
     assert_eq!(auto_coarsening(1500), Some(15));
     assert_eq!(auto_coarsening(1024), Some(8), "128 coarse steps is the nearest to 100");
     assert_eq!(auto_coarsening(401), None, "a prime N has no coarse grid");
+    // The divisors are tried up to √N only (N = 10¹¹ tried every number below it), with the
+    // choice of trying them all.
+    for n in 1..5000usize {
+        let every = (2..n)
+            .filter(|c| n.is_multiple_of(*c))
+            .min_by_key(|&c| ((n / c).abs_diff(AUTO_COARSE_STEPS), std::cmp::Reverse(c)));
+        assert_eq!(
+            auto_coarsening(n),
+            every.filter(|_| n >= AUTO_COARSENING_MIN_STEPS),
+            "N = {n}"
+        );
+    }
+    let start = std::time::Instant::now();
+    assert_eq!(auto_coarsening(100_000_000_000), Some(1_000_000_000));
+    assert!(start.elapsed().as_secs_f64() < 0.5, "{:?}", start.elapsed());
     let at = |n: usize, extra: &str| {
         let text = TWO_BLOCKS.replacen("N = 4", &format!("N = {n}"), 1);
         assert!(TWO_BLOCKS.contains("\nN = 4\n"), "the two-blocks text sets N = 4");

@@ -59,7 +59,9 @@ impl Ctx<'_> {
         let mut boundary = Vec::with_capacity(m.parts.len());
         let mut globals: Vec<Vec<usize>> = Vec::with_capacity(m.parts.len());
         let mut boxes = Vec::with_capacity(m.parts.len());
-        for part in &m.parts {
+        // The edges inside each part (shared by two of its elements): (part, end, middle, end).
+        let mut inner_edges: Vec<(usize, [[f64; 2]; 3])> = Vec::new();
+        for (s, part) in m.parts.iter().enumerate() {
             let who = format!("{}: part `{}`", m.origin, part.name);
             if part.elements.is_empty() {
                 return Err(self.err(key, format!("{who} has no 8-node quadrilateral")));
@@ -223,6 +225,9 @@ impl Ctx<'_> {
                         edges.push(Edge {
                             nodes: [el[side[0]], el[side[1]], el[side[2]]],
                         });
+                    } else if a < b && !m.curves.is_empty() {
+                        // Once per inner edge (its two elements run along it in opposite ways).
+                        inner_edges.push((s, side.map(|k| coords[el[k]])));
                     }
                 }
             }
@@ -377,23 +382,42 @@ impl Ctx<'_> {
             }
         }
 
-        // Named curves: which boundary edges lie on them (by middle node position).
+        // Named curves: which boundary edges lie on them (by middle node position), and which of
+        // their elements lie inside a part instead.
+        let on_curve_edge = |x: &[[f64; 2]; 3], e: &[usize; 3]| {
+            let ends = [m.nodes[e[0]], m.nodes[e[2]]];
+            dist(x[1], m.nodes[e[1]]) <= tol
+                && ((dist(x[0], ends[0]) <= tol && dist(x[2], ends[1]) <= tol)
+                    || (dist(x[0], ends[1]) <= tol && dist(x[2], ends[0]) <= tol))
+        };
+        let mut inner_by_mid = Grid::new(10.0 * tol);
+        for (i, (_, x)) in inner_edges.iter().enumerate() {
+            inner_by_mid.insert(x[1], i);
+        }
         let mut edge_curves: Vec<Vec<Vec<usize>>> = boundary.iter().map(|e| vec![Vec::new(); e.len()]).collect();
-        for (c, (_, edges)) in m.curves.iter().enumerate() {
-            for e in edges {
+        let mut curve_inside = Vec::with_capacity(m.curves.len());
+        for (c, curve) in m.curves.iter().enumerate() {
+            let mut inside = None;
+            for (e, &tag) in curve.edges.iter().zip(&curve.element_tags) {
                 let mid = m.nodes[e[1]];
                 for id in by_mid.near(mid) {
                     let (s, k) = edge_ids[id];
-                    let x = edge_x(s, &boundary[s][k]);
-                    let ends = [m.nodes[e[0]], m.nodes[e[2]]];
-                    let same = dist(x[1], mid) <= tol
-                        && ((dist(x[0], ends[0]) <= tol && dist(x[2], ends[1]) <= tol)
-                            || (dist(x[0], ends[1]) <= tol && dist(x[2], ends[0]) <= tol));
-                    if same && !edge_curves[s][k].contains(&c) {
+                    if on_curve_edge(&edge_x(s, &boundary[s][k]), e) && !edge_curves[s][k].contains(&c) {
                         edge_curves[s][k].push(c);
                     }
                 }
+                if inside.is_none() {
+                    inside = inner_by_mid
+                        .near(mid)
+                        .find(|&i| on_curve_edge(&inner_edges[i].1, e))
+                        .map(|i| CurveInside {
+                            element: tag,
+                            nodes: [e[0], e[2], e[1]].map(node_tag),
+                            part: inner_edges[i].0,
+                        });
+                }
             }
+            curve_inside.push(inside);
         }
 
         let mut interfaces = Vec::with_capacity(matched.len());
@@ -419,6 +443,7 @@ impl Ctx<'_> {
             meshes,
             boundary,
             edge_curves,
+            curve_inside,
             on_interface: is_matched,
             interfaces,
             tol,

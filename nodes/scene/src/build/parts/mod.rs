@@ -24,8 +24,25 @@ pub(crate) struct PartMesh {
     /// The file's tag of each node (for messages).
     pub(crate) node_tags: Vec<u64>,
     pub(crate) parts: Vec<PartIn>,
-    /// Named curves: name and edges.
-    pub(crate) curves: Vec<(String, Vec<[usize; 3]>)>,
+    /// Named curves (physical curves).
+    pub(crate) curves: Vec<CurveIn>,
+}
+
+/// A named curve as read from a mesh file: its 3-node edges (end, middle, end; global node
+/// indices) and the file's tag of each.
+pub(crate) struct CurveIn {
+    pub(crate) name: String,
+    pub(crate) edges: Vec<[usize; 3]>,
+    pub(crate) element_tags: Vec<u64>,
+}
+
+/// An element of a named curve that lies on an edge shared by two elements of one part (inside
+/// it, not on its boundary): the file's tags of the element and of its nodes (in the file's
+/// order: end, end, middle), and the part.
+pub(crate) struct CurveInside {
+    pub(crate) element: u64,
+    pub(crate) nodes: [u64; 3],
+    pub(crate) part: usize,
 }
 
 pub(crate) struct PartIn {
@@ -49,6 +66,8 @@ pub(crate) struct PartGeometry {
     pub(crate) boundary: Vec<Vec<Edge>>,
     /// Per subdomain and boundary edge: the named curves the edge lies on.
     pub(crate) edge_curves: Vec<Vec<Vec<usize>>>,
+    /// Per named curve: its first element inside a part, if any.
+    pub(crate) curve_inside: Vec<Option<CurveInside>>,
     /// Per subdomain and boundary edge: the edge is shared with another part (an interface).
     pub(crate) on_interface: Vec<Vec<bool>>,
     pub(crate) interfaces: Vec<GeoInterface>,
@@ -195,7 +214,7 @@ impl Ctx<'_> {
                 },
             )?;
         }
-        let curve_names: Vec<String> = pm.curves.iter().map(|(n, _)| n.clone()).collect();
+        let curve_names: Vec<String> = pm.curves.iter().map(|c| c.name.clone()).collect();
         let mut subs = Vec::with_capacity(pm.parts.len());
         for (s, (part, mesh_s)) in pm.parts.iter().zip(geometry.meshes.iter()).enumerate() {
             let group = &groups[group_of[s]];
