@@ -10,7 +10,7 @@ use glissade::run::Run;
 use glissade::runner::{RunOptions, RunResult};
 use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::linear::default_k0;
-use glissade_mechanics::local::InterfaceFields;
+use glissade_mechanics::local::{contact_pair_groups, InterfaceFields};
 use glissade_messages::{InterfaceSolution, Verdict};
 use glissade_reference::solve_reference;
 use glissade_scene::{load_str, LoadedScene};
@@ -137,23 +137,35 @@ fn assert_outputs_are_the_judged_state(name: &str, sc: &LoadedScene) {
 }
 
 /// The largest difference between the tractions a run writes and the reference's, over every
-/// contact pair and time point, relative to the reference's largest contact traction.
+/// physical contact point and time point, relative to the reference's largest contact traction.
+/// Copies of one node pair on several interfaces (a cross-point where perfect interfaces meet the
+/// contact) are one point: only the sum of their forces is determined (DESIGN §2), so the point's
+/// traction is Σ m·F over its copies / Σ m ([`contact_pair_groups`], as the report's error).
 fn largest_traction_difference(sc: &LoadedScene, result: &RunResult) -> f64 {
     let model = &sc.model;
     let reference = solve_reference(model, &Default::default()).expect("reference");
     let reference = reference_interfaces(model, &reference);
+    let got: Vec<&InterfaceSolution> = (0..model.interfaces.len())
+        .map(|k| {
+            result
+                .interfaces
+                .iter()
+                .find(|s| s.interface as usize == k)
+                .expect("solution")
+        })
+        .collect();
     let (mut diff, mut scale) = (0.0f64, 0.0f64);
-    for (k, itf) in model.interfaces.iter().enumerate().filter(|(_, i)| i.is_contact()) {
-        let got = result
-            .interfaces
-            .iter()
-            .find(|s| s.interface as usize == k)
-            .expect("solution");
+    for (members, m_g) in contact_pair_groups(&model.interfaces) {
         for i in 0..model.time.n_points() {
-            for p in 0..itf.n_pairs() {
-                let (g, r) = (pair_values(itf, got, i, p), pair_values(itf, &reference[k], i, p));
-                diff = diff.max((g[0] - r[0]).abs()).max((g[1] - r[1]).abs());
-                scale = scale.max(r[0].abs()).max(r[1].abs());
+            for c in 0..2 {
+                let (mut n, mut n_ref) = (0.0, 0.0);
+                for &(k, p) in &members {
+                    let m = model.interfaces[k].weights[p];
+                    n += m * got[k].f_a.get(2 * p + c, i);
+                    n_ref += m * reference[k].f_a.get(2 * p + c, i);
+                }
+                diff = diff.max((n - n_ref).abs() / m_g);
+                scale = scale.max(n_ref.abs() / m_g);
             }
         }
     }
@@ -166,7 +178,7 @@ fn largest_traction_difference(sc: &LoadedScene, result: &RunResult) -> f64 {
 /// pair; η = 0.11). Now the macro problem is off there (the block is held along x by the contact
 /// alone) and a run is "Converged" only with s and ŝ within the accuracy: it writes the
 /// reference's tractions. Tolerance: the default accuracy 1e-3 bounds the relative L2 error; the
-/// run stops with e_c ≈ 5e-7, and the largest pointwise difference measured is about 1e-6 of the
+/// run stops with e_c ≈ 5e-7, and the largest pointwise difference measured is 5e-6 of the
 /// largest traction, so 1e-3 pointwise has a wide margin and would catch the old 15 %.
 #[test]
 fn two_blocks_side_by_side_write_the_reference_tractions() {
@@ -276,7 +288,8 @@ fn outputs_against_the_reference() {
         scenes.push((label, shipped(name, n)));
     }
     for case in glissade::stability::cases(false) {
-        if case.reference.is_some() {
+        let converges = matches!(case.expect, glissade::stability::Expect::Converge { .. });
+        if case.reference.is_some() && converges {
             scenes.push((format!("stability: {}", case.name), scene(&case.accelerated)));
         }
     }
