@@ -741,31 +741,35 @@ fn write_json_as(dir: &Path, name: &str, value: &Value, replace: bool) -> Result
 /// The reference solution's interface fields as [`InterfaceSolution`]s (s = ŝ), so that they are
 /// written like a LATIN run's.
 pub fn reference_interfaces(model: &Model, reference: &ReferenceSolution) -> Vec<InterfaceSolution> {
-    let field = |m: &faer::Mat<f64>| glissade_bus::convert::field_of(m.as_ref());
     model
         .interfaces
         .iter()
         .enumerate()
         .map(|(i, _)| {
-            let f: &InterfaceFields = &reference.interfaces[i];
             let status = reference.contact[i]
                 .as_ref()
                 .map(|c| c.status.iter().map(|s| *s as u8).collect())
                 .unwrap_or_default();
-            InterfaceSolution {
-                interface: i as u32,
-                w_a: field(&f.w_a),
-                w_b: field(&f.w_b),
-                f_a: field(&f.f_a),
-                f_b: field(&f.f_b),
-                w_a_hat: field(&f.w_a),
-                w_b_hat: field(&f.w_b),
-                f_a_hat: field(&f.f_a),
-                f_b_hat: field(&f.f_b),
-                status,
-            }
+            solution_of_fields(i, &reference.interfaces[i], status)
         })
         .collect()
+}
+
+/// Interface `i`'s fields `f` as an [`InterfaceSolution`] whose s and ŝ are both `f`.
+pub fn solution_of_fields(i: usize, f: &InterfaceFields, status: Vec<u8>) -> InterfaceSolution {
+    let field = |m: &faer::Mat<f64>| glissade_bus::convert::field_of(m.as_ref());
+    InterfaceSolution {
+        interface: i as u32,
+        w_a: field(&f.w_a),
+        w_b: field(&f.w_b),
+        f_a: field(&f.f_a),
+        f_b: field(&f.f_b),
+        w_a_hat: field(&f.w_a),
+        w_b_hat: field(&f.w_b),
+        f_a_hat: field(&f.f_a),
+        f_b_hat: field(&f.f_b),
+        status,
+    }
 }
 
 #[cfg(test)]

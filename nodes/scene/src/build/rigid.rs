@@ -44,24 +44,7 @@ impl Ctx<'_> {
                     }
                 }
             }
-            let scale = (hi[0] - lo[0]).max(hi[1] - lo[1]);
-            let n = rows.len().max(1) as f64;
-            let mean = [
-                rows.iter().map(|r| r.0[0]).sum::<f64>() / n,
-                rows.iter().map(|r| r.0[1]).sum::<f64>() / n,
-            ];
-            let mut gram = nalgebra::Matrix3::<f64>::zeros();
-            for &(p, c) in &rows {
-                let row = if c == 0 {
-                    nalgebra::Vector3::new(1.0, 0.0, -(p[1] - mean[1]) / scale)
-                } else {
-                    nalgebra::Vector3::new(0.0, 1.0, (p[0] - mean[0]) / scale)
-                };
-                gram += row * row.transpose();
-            }
-            let eig = gram.symmetric_eigenvalues();
-            let max = eig.iter().fold(0.0f64, |m, &v| m.max(v));
-            let rank = eig.iter().filter(|&&v| v > 1e-10 * max && max > 0.0).count();
+            let rank = blocked_rigid_modes(&rows, (hi[0] - lo[0]).max(hi[1] - lo[1]));
             if rank == 3 {
                 continue;
             }
@@ -132,31 +115,35 @@ pub(crate) fn part_held_only_by_contact(
             .filter(|(_, &c)| c)
             .map(|(d, _)| (coords[s][d / 2], d % 2))
             .collect();
-        if rows.is_empty() {
-            return true;
-        }
-        let n = rows.len() as f64;
-        let mean = [
-            rows.iter().map(|r| r.0[0]).sum::<f64>() / n,
-            rows.iter().map(|r| r.0[1]).sum::<f64>() / n,
-        ];
-        let scale = coords[s]
+        let (lo, hi) = coords[s]
             .iter()
-            .map(|x| (x[0] - mean[0]).hypot(x[1] - mean[1]))
-            .fold(0.0, f64::max)
-            .max(f64::MIN_POSITIVE);
-        let mut gram = nalgebra::Matrix3::<f64>::zeros();
-        for &(p, c) in &rows {
-            let row = if c == 0 {
-                nalgebra::Vector3::new(1.0, 0.0, -(p[1] - mean[1]) / scale)
-            } else {
-                nalgebra::Vector3::new(0.0, 1.0, (p[0] - mean[0]) / scale)
-            };
-            gram += row * row.transpose();
-        }
-        let eig = gram.symmetric_eigenvalues();
-        let max = eig.iter().fold(0.0f64, |m, &v| m.max(v));
-        // The same rank test as the rigid-mode check of a body (`check_rigid_modes`).
-        eig.iter().filter(|&&v| v > 1e-10 * max && max > 0.0).count() < 3
+            .fold(([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]), |(lo, hi), x| {
+                ([lo[0].min(x[0]), lo[1].min(x[1])], [hi[0].max(x[0]), hi[1].max(x[1])])
+            });
+        blocked_rigid_modes(&rows, (hi[0] - lo[0]).max(hi[1] - lo[1])) < 3
     })
+}
+
+/// How many of the three rigid-body motions the constrained dofs `rows` (coordinates, component)
+/// block: the rank of the rows [δ_c0, δ_c1, c = 0 ? −(y − ȳ) : (x − x̄)] (x̄ the rows' mean, lengths
+/// over `scale`, the body's size), eigenvalues of their Gram matrix below 1e-10 of the largest
+/// counted as zero.
+fn blocked_rigid_modes(rows: &[([f64; 2], usize)], scale: f64) -> usize {
+    let n = rows.len().max(1) as f64;
+    let mean = [
+        rows.iter().map(|r| r.0[0]).sum::<f64>() / n,
+        rows.iter().map(|r| r.0[1]).sum::<f64>() / n,
+    ];
+    let mut gram = nalgebra::Matrix3::<f64>::zeros();
+    for &(p, c) in rows {
+        let row = if c == 0 {
+            nalgebra::Vector3::new(1.0, 0.0, -(p[1] - mean[1]) / scale)
+        } else {
+            nalgebra::Vector3::new(0.0, 1.0, (p[0] - mean[0]) / scale)
+        };
+        gram += row * row.transpose();
+    }
+    let eig = gram.symmetric_eigenvalues();
+    let max = eig.iter().fold(0.0f64, |m, &v| m.max(v));
+    eig.iter().filter(|&&v| v > 1e-10 * max && max > 0.0).count()
 }
