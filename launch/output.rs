@@ -72,10 +72,10 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
         None => shown.push(estimate),
     }
     // The state written (s) must agree with the interface laws' (ŝ) within the accuracy too
-    // (`IndicatorSums::disagreement`: e_c on a scene with contact, η without).
+    // (`IndicatorSums::disagreement`: the larger of e_c and η).
     let mut apart = None;
     if let Some(a) = s.accuracy {
-        let (name, gap) = if model.interfaces.iter().any(|i| i.is_contact()) {
+        let (name, gap) = if d.contact_indicator >= d.eta {
             ("e_c", d.contact_indicator)
         } else {
             ("η", d.eta)

@@ -65,16 +65,17 @@ fn compare_with(
         for p in 0..itf.n_pairs() {
             assert!((itf.coords[p][0] - x_ref[p]).abs() < 1e-9);
             let w = itf.weights[p];
-            let fa = [sol.f_a_hat.get(2 * p, i), sol.f_a_hat.get(2 * p + 1, i)];
+            // What the run writes (s, as fields.json holds it).
+            let fa = [sol.f_a.get(2 * p, i), sol.f_a.get(2 * p + 1, i)];
             let jump = [
-                sol.w_b_hat.get(2 * p, i) - sol.w_a_hat.get(2 * p, i),
-                sol.w_b_hat.get(2 * p + 1, i) - sol.w_a_hat.get(2 * p + 1, i),
+                sol.w_b.get(2 * p, i) - sol.w_a.get(2 * p, i),
+                sol.w_b.get(2 * p + 1, i) - sol.w_a.get(2 * p + 1, i),
             ];
             let g0 = match &itf.kind {
                 glissade_mechanics::model::InterfaceKind::Contact { gap, .. } => gap[p],
                 _ => 0.0,
             };
-            // Force on the upper body (side b) is −F̂_a; the reference reports it along n and t.
+            // Force on the upper body (side b) is −F_a; the reference reports it along n and t.
             let got = [
                 -w * (fa[0] * n[0] + fa[1] * n[1]),
                 -w * (fa[0] * t[0] + fa[1] * t[1]),

@@ -83,7 +83,7 @@ impl StopRule {
             }
         }
         // The estimate follows s's forces; s must also agree with ŝ (the interface laws) within
-        // the accuracy, or a motion that changes no force would pass unseen.
+        // the accuracy (max(e_c, η)), or a motion that changes no force would pass unseen.
         let accurate = self
             .accuracy
             .is_none_or(|a| self.last.is_some_and(|e| e.error <= a) && sums.disagreement() <= a);

@@ -117,14 +117,29 @@ fn accuracy_stops_on_the_estimate_not_on_eta() {
         .expect("converges");
     assert_eq!(stop, 25);
 
-    // The estimate is met from 20 on, but s and ŝ stay apart (e_F = 0.1, a part held off its
-    // place by an offset no force shows) until 30: no "Converged" before they agree within the
-    // accuracy.
+    // The estimate is met from 20 on (as above), but e_F, which falls by 0.9 an iteration from
+    // 0.1, is above the accuracy until 0.1 · 0.9ⁿ ≤ 1e-3, n ≥ 44 (a part held off its place by an
+    // offset no force shows): no "Converged" before s and ŝ agree within the accuracy.
+    let mut r = StopRule::new(&p);
+    let stop = (0..60)
+        .find(|&n| {
+            let mut s = step_sums(1e-12, n);
+            s.force_num = (0.1 * 0.9f64.powi(n as i32)).powi(2);
+            r.decide(n, &s, None) == Verdict::Converged
+        })
+        .expect("converges");
+    assert_eq!(stop, 44);
+    assert!(r.estimate().is_some_and(|e| e.error <= 1e-3));
+
+    // Every contact point separated (e_F = 0, e_c = e_W falling by half an iteration, so the
+    // estimate exists early): η = 1e-2 (s's forces not yet 0 where ŝ's are) holds the run until
+    // it falls at 30.
     let mut r = StopRule::new(&p);
     let stop = (0..40)
         .find(|&n| {
-            let mut s = step_sums(1e-12, n);
-            s.force_num = if n < 30 { 1e-2 } else { 1e-8 };
+            let mut s = step_sums(if n < 30 { 1e-2 } else { 1e-6 }, n);
+            (s.force_num, s.force_den) = (0.0, 0.0);
+            (s.jump_num, s.jump_den) = (0.25f64.powi(n as i32), 1.0);
             r.decide(n, &s, None) == Verdict::Converged
         })
         .expect("converges");

@@ -332,16 +332,13 @@ impl IndicatorSums {
     }
 
     /// How far s (the state a run writes) is from ŝ (the state that obeys the interface laws),
-    /// relative: e_c where the sums hold contact interfaces, η where they hold none. A run is
+    /// relative: max(e_c, η), e_c on the contact interfaces, η over every interface (the perfect
+    /// ones too, and contact interfaces whose every point is separated, where e_F is 0). A run is
     /// "Converged" on accuracy a only while this is at most a too: the estimate follows the
     /// contraction of s's forces, and a motion of s that changes no force (a part held only by
     /// contact, off its place) is seen here only.
     pub fn disagreement(&self) -> f64 {
-        if self.force_den > 0.0 || self.jump_den > 0.0 {
-            self.contact_indicator()
-        } else {
-            self.eta()
-        }
+        self.contact_indicator().max(self.eta())
     }
 }
 
