@@ -257,7 +257,7 @@ fn every_output_is_the_state_the_verdict_judged() {
 /// verdict and the largest difference between the tractions written and the reference's.
 /// `cargo test --release --test integration -- --ignored outputs_against_the_reference --nocapture`
 #[test]
-#[ignore = "a measurement for docs/accuracy.md, minutes in a release build"]
+#[ignore = "a measurement for docs/accuracy.md, 13 minutes in a debug build"]
 fn outputs_against_the_reference() {
     let mut scenes = vec![("side-by-side".to_string(), fixture("side-by-side"))];
     for name in SHIPPED {
