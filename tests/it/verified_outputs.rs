@@ -94,22 +94,21 @@ fn assert_outputs_are_the_judged_state(name: &str, sc: &LoadedScene) {
     let csv = interface_csv(model, &result.interfaces).expect("csv");
     let mut rows = csv.lines().skip(1);
     let nt = model.time.n_points();
-    let by_index: Vec<&InterfaceSolution> = (0..model.interfaces.len())
-        .map(|k| {
-            result
-                .interfaces
-                .iter()
-                .find(|s| s.interface as usize == k)
-                .expect("every interface's solution")
-        })
-        .collect();
+    // In interface order: the state judged, and the final solution messages' s.
+    let as_solutions = |fields: &[InterfaceFields]| -> Vec<InterfaceSolution> {
+        fields
+            .iter()
+            .enumerate()
+            .map(|(k, f)| solution_of_fields(k, f, Vec::new()))
+            .collect()
+    };
+    let (judged, finals) = (as_solutions(&judged), as_solutions(&result.interface_fields()));
     for i in 0..nt {
         for (k, itf) in model.interfaces.iter().enumerate() {
-            let judged = solution_of_fields(k, &judged[k], Vec::new());
             let entry = &doc["interfaces"][k];
             assert_eq!(entry["interface"], k, "{name}: interfaces in order");
             for p in 0..itf.n_pairs() {
-                let want = pair_values(itf, &judged, i, p);
+                let want = pair_values(itf, &judged[k], i, p);
                 let json: Vec<f64> = ["f_n", "f_t", "jump_n", "jump_t"]
                     .iter()
                     .map(|q| entry[q][i][p].as_f64().expect("a number"))
@@ -128,7 +127,7 @@ fn assert_outputs_are_the_judged_state(name: &str, sc: &LoadedScene) {
                     "{name}: CSV, interface {k}, time point {i}, pair {p}"
                 );
                 // The solution message carries that same s.
-                assert_eq!(pair_values(itf, by_index[k], i, p), want, "{name}: final solution");
+                assert_eq!(pair_values(itf, &finals[k], i, p), want, "{name}: final solution");
             }
         }
     }
@@ -143,15 +142,7 @@ fn largest_traction_difference(sc: &LoadedScene, result: &RunResult) -> f64 {
     let model = &sc.model;
     let reference = solve_reference(model, &Default::default()).expect("reference");
     let reference = reference_interfaces(model, &reference);
-    let got: Vec<&InterfaceSolution> = (0..model.interfaces.len())
-        .map(|k| {
-            result
-                .interfaces
-                .iter()
-                .find(|s| s.interface as usize == k)
-                .expect("solution")
-        })
-        .collect();
+    let got = result.interface_fields();
     let (mut diff, mut scale) = (0.0f64, 0.0f64);
     for (members, m_g) in contact_pair_groups(&model.interfaces) {
         for i in 0..model.time.n_points() {
@@ -159,7 +150,7 @@ fn largest_traction_difference(sc: &LoadedScene, result: &RunResult) -> f64 {
                 let (mut n, mut n_ref) = (0.0, 0.0);
                 for &(k, p) in &members {
                     let m = model.interfaces[k].weights[p];
-                    n += m * got[k].f_a.get(2 * p + c, i);
+                    n += m * got[k].f_a[(2 * p + c, i)];
                     n_ref += m * reference[k].f_a.get(2 * p + c, i);
                 }
                 diff = diff.max((n - n_ref).abs() / m_g);

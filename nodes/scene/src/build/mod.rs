@@ -259,14 +259,10 @@ impl Ctx<'_> {
         // motions and Anderson mixing is on: that combination stalls, or keeps the part off its
         // place while the forces have converged (`rigid::part_held_only_by_contact`,
         // docs/scenes.md).
-        {
+        if matches!(solver.acceleration, Acceleration::Anderson { .. }) {
             let constrained: Vec<&[bool]> = sub_loads.iter().map(|l| l.constrained.as_slice()).collect();
             let coords: Vec<&[[f64; 2]]> = subs.iter().map(|s| s.mesh.coords.as_slice()).collect();
-            let anderson = matches!(solver.acceleration, Acceleration::Anderson { .. });
-            if let (true, Some(s)) = (
-                anderson,
-                rigid::part_held_only_by_contact(&interfaces, &coords, &constrained),
-            ) {
+            if let Some(s) = rigid::part_held_only_by_contact(&interfaces, &coords, &constrained) {
                 let part = &subs[s].name;
                 if raw.solver.coarse == Some(true) {
                     return Err(self.err(
