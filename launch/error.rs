@@ -90,6 +90,9 @@ pub enum Error {
     /// Nothing came on the bus for `idle`: `what` happened then.
     #[error("no message on the bus for {} s: {what}", .idle.as_secs())]
     Silent { idle: std::time::Duration, what: String },
+    /// The run stopped moving and could not be set going again: who waits for what from whom.
+    #[error("the run stopped moving: {diagnosis}")]
+    Stalled { diagnosis: String },
     /// Node processes that did not leave after the run ended.
     #[error("node(s) {} did not leave within {} s after the run ended", .nodes.join(", "), .timeout.as_secs())]
     NotLeaving {

@@ -85,6 +85,12 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
             s.incomplete_states.len()
         );
     }
+    for (it, ended, diagnosis) in &s.stalls {
+        println!(
+            "after iteration {it} the run stopped moving and {}: {diagnosis}",
+            if *ended { "was ended" } else { "was set going again" }
+        );
+    }
     let range = s
         .color_range
         .map_or_else(|| "no colour range".to_string(), |r| format!("colour range {r}"));

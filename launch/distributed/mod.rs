@@ -20,6 +20,7 @@
 mod hosted;
 mod setup;
 mod spawn;
+mod stall;
 mod supervise;
 
 pub(crate) use crate::bus::unresumable;

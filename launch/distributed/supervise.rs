@@ -7,6 +7,7 @@
 use super::hosted::HostedNode;
 use super::setup::{token_of, Handover, SetUp, TimeStartSolve};
 use super::spawn::Spawned;
+use super::stall::{Stall, StallWatch};
 use super::{
     interrupted, Interrupted, Traffic, DEPARTURE_GRACE, EXIT_GRACE, FINISH_TIMEOUT, IDLE_TIMEOUT, READY_TIMEOUT,
     STOP_TIMEOUT, STRAGGLER_TIMEOUT,
@@ -15,7 +16,7 @@ use crate::children::{spawn_node, Children, NodeName, NodeProcess};
 use crate::error::{Error, IoWhat, Result};
 use crate::runner::{IterationRecord, RunResult};
 use glissade_deploy::Plan;
-use glissade_messages::{Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Verdict};
+use glissade_messages::{Awaited, Expected, Field, InterfaceSolution, Message, NodeId, Payload, Role, Verdict};
 use glissade_scene::LoadedScene;
 use glissade_subdomain::LinearStageRecords;
 use glissade_zenoh as transport;
@@ -52,6 +53,8 @@ pub(super) struct Supervisor<'r> {
     last_message: Instant,
     /// The time-coarse start's coarse solve, until the start takes its result.
     time_start: TimeStartSolve,
+    /// The watch on the run's progress: a run that stops moving is looked at within seconds.
+    stall: StallWatch,
 }
 
 impl<'r> Supervisor<'r> {
@@ -65,6 +68,32 @@ impl<'r> Supervisor<'r> {
         interior: bool,
     ) -> Self {
         let Handover { presence, time_start } = handover;
+        let expected = Expected {
+            run_id: run_id.to_string(),
+            scene_fingerprint: scene.fingerprint,
+        };
+        // Every node answers the launcher's status requests: the subdomains, the interface
+        // nodes and the coarse node, wherever they run.
+        let mut nodes: std::collections::BTreeSet<NodeId> = set_up
+            .groups
+            .iter()
+            .flatten()
+            .map(|&index| NodeId {
+                role: Role::Subdomain,
+                index,
+            })
+            .collect();
+        nodes.extend((0..set_up.plan.interface_groups.len() as u32).map(|index| NodeId {
+            role: Role::Interface,
+            index,
+        }));
+        nodes.extend(
+            set_up
+                .all_nodes
+                .iter()
+                .filter(|n| n.role == crate::children::NodeRole::Coarse)
+                .map(|n| n.id()),
+        );
         Self {
             run_id,
             scene,
@@ -72,10 +101,8 @@ impl<'r> Supervisor<'r> {
             presence,
             net,
             exe,
-            expected: Expected {
-                run_id: run_id.to_string(),
-                scene_fingerprint: scene.fingerprint,
-            },
+            stall: StallWatch::new(run_id, expected.clone(), nodes),
+            expected,
             tokens: set_up.tokens(run_id),
             restarts: scene.deployment.restarts,
             restarted: BTreeMap::new(),
@@ -149,7 +176,12 @@ impl<'r> Supervisor<'r> {
             };
             match self.set_up.arrivals.recv_timeout(poll) {
                 Ok(a) => {
-                    self.last_message = Instant::now();
+                    if !matches!(kind_of(&a.key), "status" | "stall") {
+                        self.last_message = Instant::now();
+                        if a.ours {
+                            self.stall.moved();
+                        }
+                    }
                     self.receive(&a, &mut on_iteration, observe)?;
                 }
                 Err(_) => {
@@ -157,6 +189,9 @@ impl<'r> Supervisor<'r> {
                         return Ok(());
                     }
                 }
+            }
+            if !self.done_sent {
+                self.look_for_a_stall(spawned)?;
             }
         }
     }
@@ -435,6 +470,7 @@ impl<'r> Supervisor<'r> {
     ) -> Result<()> {
         if let Some(rec) = self.take(a, observe) {
             self.stop_seen |= rec.decision.verdict.is_stop();
+            self.stall.decided(rec.iteration);
             on_iteration(&rec);
         }
         if !self.done_sent
@@ -466,7 +502,88 @@ impl<'r> Supervisor<'r> {
         if let Some(o) = observe.as_mut() {
             o(&m);
         }
+        if let Payload::NodeStatus(st) = &m.payload {
+            self.stall.status(m.envelope.sender, st.clone());
+            return None;
+        }
         self.got.take(m, &self.set_up.plan).cloned()
+    }
+
+    /// Asks the nodes for their status when the run stops moving, asks senders to publish again
+    /// what was lost on the way, or ends the run with a diagnosis ([`super::stall`]).
+    fn look_for_a_stall(&mut self, spawned: &mut Spawned) -> Result<()> {
+        if self.got.started.is_none() {
+            return Ok(());
+        }
+        let lacks = self.launcher_lacks();
+        let session = &self.set_up.bus.session;
+        let run_id = self.run_id;
+        let put = |key: String, bytes: Vec<u8>| {
+            if let Err(e) = zenoh::Wait::wait(session.put(key.as_str(), bytes)) {
+                crate::console::warn(&format!("cannot publish on {key}: {e}"));
+            }
+        };
+        let verdict = self.stall.look(
+            &lacks,
+            |round| {
+                put(
+                    glissade_messages::topic::status_request(run_id),
+                    round.to_le_bytes().to_vec(),
+                )
+            },
+            |key| put(glissade_messages::topic::republish(run_id), key.as_bytes().to_vec()),
+        );
+        match verdict {
+            Stall::None => Ok(()),
+            Stall::Recovered(report) => {
+                if let Payload::Stall(r) = &report.payload {
+                    crate::console::warn(&format!(
+                        "the run stopped moving and was set going again: {}",
+                        r.diagnosis
+                    ));
+                }
+                transport::publish(session, &report)?;
+                Ok(())
+            }
+            Stall::Ended(report, diagnosis) => {
+                transport::publish(session, &report)?;
+                self.stop_all(spawned, "the run stopped moving");
+                Err(Error::Stalled { diagnosis })
+            }
+        }
+    }
+
+    /// What the launcher itself waits for once the stop decision is in: the final solutions of
+    /// the interfaces it lacks (from the interface node that owns each) and, with `interior`,
+    /// the subdomains' displacements.
+    fn launcher_lacks(&self) -> Vec<Awaited> {
+        if !self.stop_seen {
+            return Vec::new();
+        }
+        let iteration = self.got.iterations.last().map_or(0, |r| r.iteration);
+        let awaited = |role, index, field: &str| Awaited {
+            from: NodeId { role, index },
+            field: field.to_string(),
+            iteration,
+            to: None,
+        };
+        let mut lacks: Vec<Awaited> = Vec::new();
+        for (k, group) in self.set_up.plan.interface_groups.iter().enumerate() {
+            if group
+                .iter()
+                .any(|&i| !self.got.interfaces.iter().any(|s| s.interface as usize == i))
+            {
+                lacks.push(awaited(Role::Interface, k as u32, "interface_solution"));
+            }
+        }
+        if self.final_displacements > 0 {
+            for &s in self.set_up.groups.iter().flatten() {
+                if !self.got.displacements.iter().any(|(d, _)| *d == s) {
+                    lacks.push(awaited(Role::Subdomain, s, "displacement"));
+                }
+            }
+        }
+        lacks
     }
 
     /// Nothing arrived for a while: true once every node process has exited and every node
@@ -681,11 +798,14 @@ impl Arrival {
 
 /// What the launcher keeps of a run, by sender role and field: the decisions, the final
 /// interface solutions and displacements, and the linear stages' counters.
-pub(super) const KEPT: [(Role, &str); 4] = [
+pub(super) const KEPT: [(Role, &str); 7] = [
     (Role::Interface, "decision"),
     (Role::Interface, "interface_solution"),
     (Role::Subdomain, "displacement"),
     (Role::Subdomain, "linear_stage_stats"),
+    (Role::Subdomain, "status"),
+    (Role::Interface, "status"),
+    (Role::Coarse, "status"),
 ];
 
 /// The field of a key ("?" if it has none).

@@ -34,7 +34,8 @@ pub use field::{BufferPool, DecodeBuffers, Field, HoldSource};
 pub use identity::{Envelope, NodeId, Role, Stage};
 pub use overrides::{Overrides, RecordOverride};
 pub use payload::{
-    Decision, InterfaceIndicators, InterfaceSolution, LinearStageStats, Message, ParticularModes, Payload, Verdict,
+    Awaited, Decision, InterfaceIndicators, InterfaceSolution, LinearStageStats, Message, MessageSeen, Missing,
+    NodeStatus, ParticularModes, Payload, StallReport, Verdict,
 };
 pub use topic::{key_matches, role_field_topic, run_topics, topic, topic_field, Routes};
 pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
@@ -46,5 +47,6 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 /// `Scene` carries the command-line [`Overrides`] beside the text (the text is the file as written),
 /// and `LinearStageStats`, a subdomain's counters of its linear stage (flops, PGD basis, ξ).
 /// Version 6: `BoundaryState` names the interfaces whose rows it holds and, when the run has
-/// several interface nodes, the one it is for.
-pub const SCHEMA_VERSION: u32 = 6;
+/// several interface nodes, the one it is for. Version 7: `NodeStatus` (a node's status, asked when
+/// a run stops moving) and `Stall` (the launcher's diagnosis).
+pub const SCHEMA_VERSION: u32 = 7;

@@ -1,9 +1,9 @@
 //! What a message carries: the [`Payload`]s of DESIGN §4 and their structs ([`Decision`],
 //! [`Verdict`], [`InterfaceIndicators`], [`ParticularModes`], [`InterfaceSolution`],
-//! [`LinearStageStats`]), the checks of their sizes after decoding, and the [`Message`]
+//! [`LinearStageStats`], and a stall's [`NodeStatus`] and [`StallReport`]), the checks of their sizes after decoding, and the [`Message`]
 //! (envelope + payload).
 
-use crate::{DecodeBuffers, DecodeError, Envelope, Field, Overrides, Role};
+use crate::{DecodeBuffers, DecodeError, Envelope, Field, NodeId, Overrides, Role};
 use serde::{Deserialize, Serialize};
 
 /// How a run ended, or that it goes on.
@@ -122,6 +122,67 @@ pub struct LinearStageStats {
     pub xi2: f64,
 }
 
+/// A message a node waits for: its sender, its kind (the field chunk of its key), its iteration
+/// and the destination chunk of its key (None: the key has none). [`crate::topic::awaited`] is
+/// its key.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct Awaited {
+    pub from: NodeId,
+    pub field: String,
+    pub iteration: u32,
+    pub to: Option<u32>,
+}
+
+/// A message as a node's status names it: its key, its iteration, and how long before the status
+/// (ms) it was handled or put on the bus.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct MessageSeen {
+    pub key: String,
+    pub iteration: u32,
+    pub ms_ago: u64,
+}
+
+/// What a node is doing, sent when the launcher asks (a run that stopped moving): what it waits
+/// for, whether its process is busy, what it last handled and what it last put on each key.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct NodeStatus {
+    /// The launcher's request this answers.
+    pub round: u64,
+    pub finished: bool,
+    /// The messages the node waits for (any one of them moves it on); empty when it waits for
+    /// none (finished, or between its outputs).
+    pub awaits: Vec<Awaited>,
+    /// The node's process is handling messages, since this many ms (None: it waits).
+    pub busy_ms: Option<u64>,
+    /// Messages the node's process has handled so far.
+    pub handled: u64,
+    pub last_handled: Option<MessageSeen>,
+    /// The node's last message on each key it published on.
+    pub sent: Vec<MessageSeen>,
+}
+
+/// A message a stalled run lacks: the node that waits for it, the message, and whether its
+/// sender says it put it on the bus (then it was lost on the way).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct Missing {
+    pub waiter: NodeId,
+    pub awaited: Awaited,
+    pub sent: bool,
+}
+
+/// The launcher's diagnosis of a run that stopped moving: how long nothing moved, what was
+/// missing, the messages it asked their senders to publish again, and whether it ended the run.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
+pub struct StallReport {
+    pub silent_ms: u64,
+    pub missing: Vec<Missing>,
+    /// Keys of the messages asked again.
+    pub republished: Vec<String>,
+    pub ended: bool,
+    /// The diagnosis in words: who waits for what from whom, and what that sender last did.
+    pub diagnosis: String,
+}
+
 /// The payloads of DESIGN §4.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 #[bincode(decode_context = "DecodeBuffers")]
@@ -216,6 +277,10 @@ pub enum Payload {
     /// A subdomain's counters of its linear stage, once per iteration after its state: recorded
     /// for whoever needs them (a report, a replay), taken by no node.
     LinearStageStats(LinearStageStats),
+    /// A node's status, asked by the launcher when the run stops moving; taken by no node.
+    NodeStatus(NodeStatus),
+    /// The launcher's diagnosis of a run that stopped moving; taken by no node.
+    Stall(StallReport),
 }
 
 /// The fields of a payload (`$p`), in wire order, each passed to `$visit` as `&` or `&mut`.
@@ -227,7 +292,9 @@ macro_rules! for_each_field {
             | Payload::AndersonStep { .. }
             | Payload::Decision(_)
             | Payload::IndicatorPartials { .. }
-            | Payload::LinearStageStats(_) => {}
+            | Payload::LinearStageStats(_)
+            | Payload::NodeStatus(_)
+            | Payload::Stall(_) => {}
             Payload::HomogenizedOperator { l_e, .. } => $visit(l_e),
             Payload::MacroForces { forces, .. } => $visit(forces),
             Payload::MacroDisplacements { w_tilde, .. } => $visit(w_tilde),
@@ -293,6 +360,8 @@ impl Payload {
             Payload::Displacement { .. } => "displacement",
             Payload::IndicatorPartials { .. } => "indicator_partials",
             Payload::LinearStageStats(_) => "linear_stage_stats",
+            Payload::NodeStatus(_) => "status",
+            Payload::Stall(_) => "stall",
         }
     }
 
@@ -300,7 +369,8 @@ impl Payload {
     /// (the launcher sends the scene and, after a time-coarse start, the first local directions).
     pub fn senders(&self) -> &'static [Role] {
         match self {
-            Payload::Scene { .. } => &[Role::Launcher],
+            Payload::Scene { .. } | Payload::Stall(_) => &[Role::Launcher],
+            Payload::NodeStatus(_) => &[Role::Subdomain, Role::Interface, Role::Coarse],
             Payload::HomogenizedOperator { .. }
             | Payload::MacroForces { .. }
             | Payload::BoundaryState { .. }
@@ -450,6 +520,7 @@ impl Payload {
             Payload::Displacement { u, .. } => u.check("u"),
             // Counters of fixed width: nothing sized to check.
             Payload::LinearStageStats(_) => Ok(()),
+            Payload::NodeStatus(_) | Payload::Stall(_) => Ok(()),
         }
     }
 }

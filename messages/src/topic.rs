@@ -3,8 +3,9 @@
 //!
 //! - messages: `<role>/<id>/<field>[/<destination subdomain>]` ([`topic`], [`role_field_topic`]);
 //! - the launcher's control keys: `launcher/0/scene` (queryable), `launcher/0/start`,
-//!   `launcher/0/stop`, `launcher/0/done`, `launcher/0/end` ([`scene`], [`start`], [`stop`],
-//!   [`done`], [`end`]);
+//!   `launcher/0/stop`, `launcher/0/done`, `launcher/0/end`, and when a run stops moving
+//!   `launcher/0/status_request` and `launcher/0/republish` ([`scene`], [`start`], [`stop`],
+//!   [`done`], [`end`], [`status_request`], [`republish`]);
 //! - liveliness tokens: `alive/<role>/<id>` for the nodes and the launcher ([`alive`]), and
 //!   `recording/alive` for the recorder, which is an observer, not a node ([`recorder_alive`]);
 //! - the recorder's log queryable: `recorder/0/log` ([`log`]).
@@ -12,7 +13,7 @@
 //! A key expression's chunks are separated by `/`; `*` matches one chunk, `**` any number
 //! ([`key_matches`]).
 
-use crate::{NodeId, Payload, Role};
+use crate::{Awaited, NodeId, Payload, Role};
 use std::fmt::Display;
 
 /// `glissade/<run>/<rest>`: a key (or key expression) of run `run_id`, e.g. a recorder's topic
@@ -111,6 +112,32 @@ pub fn done(run_id: &str) -> String {
 /// messages of the run it saw (u64, little-endian).
 pub fn end(run_id: &str) -> String {
     launcher(run_id, "end")
+}
+
+/// Key the launcher publishes on to ask every node for its status ([`crate::NodeStatus`];
+/// payload: the request's round, u64 little-endian), when the run stops moving.
+pub fn status_request(run_id: &str) -> String {
+    launcher(run_id, "status_request")
+}
+
+/// Key the launcher publishes on to ask a node to put its last message on a key again (payload:
+/// the key, UTF-8): a message its receiver lacks although its sender put it on the bus.
+pub fn republish(run_id: &str) -> String {
+    launcher(run_id, "republish")
+}
+
+/// Every node's status: `glissade/<run>/*/*/status`.
+pub fn statuses(run_id: &str) -> String {
+    within_run(run_id, "*/*/status")
+}
+
+/// The key of an awaited message: `glissade/<run>/<role>/<id>/<field>[/<to>]`.
+pub fn awaited(run_id: &str, a: &Awaited) -> String {
+    let base = sender_field_topic(run_id, a.from, &a.field);
+    match a.to {
+        Some(d) => format!("{base}/{d}"),
+        None => base,
+    }
 }
 
 /// Liveliness token of a node (the launcher's is role `launcher`, index 0):

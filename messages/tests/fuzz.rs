@@ -9,9 +9,10 @@
 //! serde's form through bincode, the wire form of the recordings.
 
 use glissade_messages::{
-    decode, decode_from_reader, decode_from_slices, encode, encode_pieces, BufferPool, Decision, DecodeBuffers,
-    Envelope, Expected, Field, HeldBlock, HoldSource, InterfaceIndicators, InterfaceSolution, Message, NodeId,
-    Overrides, Payload, Piece, RecordOverride, Role, Stage, Values, Verdict, SCHEMA_VERSION,
+    decode, decode_from_reader, decode_from_slices, encode, encode_pieces, Awaited, BufferPool, Decision,
+    DecodeBuffers, Envelope, Expected, Field, HeldBlock, HoldSource, InterfaceIndicators, InterfaceSolution, Message,
+    MessageSeen, Missing, NodeId, NodeStatus, Overrides, Payload, Piece, RecordOverride, Role, Stage, StallReport,
+    Values, Verdict, SCHEMA_VERSION,
 };
 use proptest::prelude::*;
 use std::sync::{Arc, Mutex};
@@ -37,14 +38,88 @@ fn field() -> impl Strategy<Value = Field> {
 }
 
 /// Every payload kind: `prop_oneof!` takes at most ten arms unboxed, so the two Anderson payloads,
-/// the mode-form state and the linear-stage counters form groups of their own, drawn in
-/// proportion (of 14 kinds).
+/// the mode-form state, the linear-stage counters and the stall's two payloads form groups of
+/// their own, drawn in proportion (of 16 kinds).
 fn payload() -> impl Strategy<Value = Payload> {
     prop_oneof![
         10 => other_payload().boxed(),
         2 => anderson_payload().boxed(),
         1 => boundary_modes().boxed(),
-        1 => linear_stage_stats().boxed()
+        1 => linear_stage_stats().boxed(),
+        2 => stall_payload().boxed()
+    ]
+}
+
+fn node_id() -> impl Strategy<Value = NodeId> {
+    (0usize..5, any::<u32>()).prop_map(|(role, index)| NodeId {
+        role: [
+            Role::Subdomain,
+            Role::Interface,
+            Role::Coarse,
+            Role::Launcher,
+            Role::Recorder,
+        ][role],
+        index,
+    })
+}
+
+fn awaited() -> impl Strategy<Value = Awaited> {
+    (node_id(), ".{0,12}", any::<u32>(), proptest::option::of(any::<u32>())).prop_map(|(from, field, iteration, to)| {
+        Awaited {
+            from,
+            field,
+            iteration,
+            to,
+        }
+    })
+}
+
+fn seen() -> impl Strategy<Value = MessageSeen> {
+    (".{0,20}", any::<u32>(), any::<u64>()).prop_map(|(key, iteration, ms_ago)| MessageSeen { key, iteration, ms_ago })
+}
+
+/// A node's status and the launcher's stall report: any values (nothing sized).
+fn stall_payload() -> impl Strategy<Value = Payload> {
+    prop_oneof![
+        (
+            any::<u64>(),
+            any::<bool>(),
+            proptest::collection::vec(awaited(), 0..3),
+            proptest::option::of(any::<u64>()),
+            any::<u64>(),
+            proptest::option::of(seen()),
+            proptest::collection::vec(seen(), 0..3)
+        )
+            .prop_map(|(round, finished, awaits, busy_ms, handled, last_handled, sent)| {
+                Payload::NodeStatus(NodeStatus {
+                    round,
+                    finished,
+                    awaits,
+                    busy_ms,
+                    handled,
+                    last_handled,
+                    sent,
+                })
+            }),
+        (
+            any::<u64>(),
+            proptest::collection::vec((node_id(), awaited(), any::<bool>()), 0..3),
+            proptest::collection::vec(".{0,20}", 0..3),
+            any::<bool>(),
+            ".{0,40}"
+        )
+            .prop_map(|(silent_ms, missing, republished, ended, diagnosis)| {
+                Payload::Stall(StallReport {
+                    silent_ms,
+                    missing: missing
+                        .into_iter()
+                        .map(|(waiter, awaited, sent)| Missing { waiter, awaited, sent })
+                        .collect(),
+                    republished,
+                    ended,
+                    diagnosis,
+                })
+            }),
     ]
 }
 

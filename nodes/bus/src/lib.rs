@@ -101,6 +101,12 @@ pub trait Node: Send {
     }
     /// The node has nothing more to do.
     fn is_finished(&self) -> bool;
+    /// The messages this node waits for now, any one of which moves it on (a message it would
+    /// take): what a run that stopped moving reports, so that the one lost can be found and its
+    /// sender named. Empty when the node is finished or waits for nothing.
+    fn awaits(&self) -> Vec<glissade_messages::Awaited> {
+        Vec::new()
+    }
     /// Takes back a message this node published, once the bus has delivered it (and no longer
     /// needs it), so that the node can reuse its field buffers ([`convert::FieldPool`]). A bus
     /// may not return every message; by default the message is dropped.
@@ -397,7 +403,11 @@ pub fn stage_of(payload: &Payload) -> Stage {
         | Payload::AndersonGram { .. }
         | Payload::AndersonStep { .. }
         | Payload::LinearStageStats(_) => Stage::Linear,
-        Payload::LocalDirections { .. } | Payload::Decision(_) | Payload::IndicatorPartials { .. } => Stage::Local,
+        Payload::LocalDirections { .. }
+        | Payload::Decision(_)
+        | Payload::IndicatorPartials { .. }
+        | Payload::NodeStatus(_)
+        | Payload::Stall(_) => Stage::Local,
         Payload::InterfaceSolution(_) | Payload::Displacement { .. } => Stage::Final,
     }
 }

@@ -6,7 +6,7 @@ use faer::Mat;
 use glissade_bus::convert::{copy_into, mat_of, FieldPool};
 use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::coarse::{Contribution, MacroProblem};
-use glissade_messages::{role_field_topic, Message, NodeId, Payload, Role, Stage};
+use glissade_messages::{role_field_topic, Awaited, Message, NodeId, Payload, Role, Stage};
 use std::collections::{BTreeMap, BTreeSet};
 
 /// A subdomain's macro slots (interface, number of modes) and its L_E.
@@ -269,6 +269,35 @@ impl Node for CoarseNode {
 
     fn is_finished(&self) -> bool {
         self.finished
+    }
+
+    fn awaits(&self) -> Vec<Awaited> {
+        if self.finished {
+            return Vec::new();
+        }
+        let one = |role, index, field: &str, iteration| Awaited {
+            from: NodeId { role, index },
+            field: field.to_string(),
+            iteration,
+            to: None,
+        };
+        let mut awaits: Vec<Awaited> = self
+            .subdomains
+            .iter()
+            .filter(|s| !self.operators.contains_key(s))
+            .map(|&s| one(Role::Subdomain, s, "homogenized_operator", 0))
+            .collect();
+        awaits.extend(
+            self.subdomains
+                .iter()
+                .filter(|s| !self.gathered.contains(s))
+                .map(|&s| one(Role::Subdomain, s, "macro_forces", self.iteration)),
+        );
+        // Or the decision to stop after the last macro problem.
+        if let Some(last) = self.iteration.checked_sub(1).filter(|&n| self.decided != Some(n)) {
+            awaits.push(one(Role::Interface, 0, "decision", last));
+        }
+        awaits
     }
 
     fn recycle(&mut self, msg: Message) {

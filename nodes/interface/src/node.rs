@@ -11,7 +11,7 @@ use glissade_mechanics::local::{force_step_sums, InterfaceFields, InterfaceLocal
 use glissade_mechanics::model::{Acceleration, Model};
 use glissade_mechanics::modes::ModeForm;
 use glissade_messages::topic::sender_field_topic;
-use glissade_messages::{role_field_topic, InterfaceSolution, Message, NodeId, Payload, Role, Stage};
+use glissade_messages::{role_field_topic, Awaited, InterfaceSolution, Message, NodeId, Payload, Role, Stage};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
@@ -545,6 +545,51 @@ impl Node for InterfaceNode {
 
     fn is_finished(&self) -> bool {
         self.finished
+    }
+
+    fn awaits(&self) -> Vec<Awaited> {
+        if self.finished {
+            return Vec::new();
+        }
+        let it = self.iteration;
+        let one = |role, index, field: &str, to| Awaited {
+            from: NodeId { role, index },
+            field: field.to_string(),
+            iteration: it,
+            to,
+        };
+        let mut awaits = Vec::new();
+        if !self.reported {
+            // The Anderson partials (decider, from iteration 2 on, before the step), and the
+            // states not yet in.
+            if let Some(d) = self.decider.as_ref().filter(|d| d.anderson.is_some()) {
+                if it >= 2 && d.stepped != Some(it) {
+                    awaits.extend(
+                        d.anderson_participants
+                            .iter()
+                            .filter(|s| !d.grams.contains_key(s))
+                            .map(|&s| one(Role::Subdomain, s, "anderson_gram", None)),
+                    );
+                }
+            }
+            for &s in self.participants.iter().filter(|s| !self.received.contains(s)) {
+                awaits.push(if self.mode_senders.contains(&s) {
+                    one(Role::Subdomain, s, "boundary_modes", None)
+                } else {
+                    let to = self.state_rows[s as usize].as_ref().and_then(|r| r.to);
+                    one(Role::Subdomain, s, "boundary_state", to)
+                });
+            }
+        } else if let Some(d) = &self.decider {
+            awaits.extend(
+                (1..d.n_nodes)
+                    .filter(|k| !d.shares.contains_key(k))
+                    .map(|k| one(Role::Interface, k, "indicator_partials", None)),
+            );
+        } else {
+            awaits.push(one(Role::Interface, 0, "decision", None));
+        }
+        awaits
     }
 
     fn recycle(&mut self, msg: Message) {

@@ -3,7 +3,7 @@
 use glissade_messages::SCHEMA_VERSION;
 
 /// (field chunk of the key expression, schema name `glissade.<Payload type>`, payload layout).
-pub const PAYLOAD_FIELDS: [(&str, &str, &str); 14] = [
+pub const PAYLOAD_FIELDS: [(&str, &str, &str); 16] = [
     (
         "scene",
         "glissade.Scene",
@@ -79,6 +79,20 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 14] = [
         "glissade.LinearStageStats",
         "(LinearStageStats { subdomain: u32, flops: u64, modes: u32, new_modes: u32, dropped_modes: u32, \
          xi1: f64, xi2: f64 })",
+    ),
+    (
+        "status",
+        "glissade.NodeStatus",
+        "(NodeStatus { round: u64, finished: bool, awaits: Vec<Awaited { from: NodeId, field: String, \
+         iteration: u32, to: Option<u32> }>, busy_ms: Option<u64>, handled: u64, last_handled: \
+         Option<MessageSeen { key: String, iteration: u32, ms_ago: u64 }>, sent: Vec<MessageSeen> })",
+    ),
+    (
+        "stall",
+        "glissade.Stall",
+        "(StallReport { silent_ms: u64, missing: Vec<Missing { waiter: NodeId, awaited: Awaited { from: NodeId, \
+         field: String, iteration: u32, to: Option<u32> }, sent: bool }>, republished: Vec<String>, ended: bool, \
+         diagnosis: String })",
     ),
 ];
 

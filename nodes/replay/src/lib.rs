@@ -114,6 +114,9 @@ pub struct ReplaySummary {
     /// (subdomain, iteration) of the boundary states left out because some of their parts are
     /// not in the recording.
     pub incomplete_states: Vec<(u32, u32)>,
+    /// The launcher's reports of the run stopping to move (`Stall`): the iteration of the last
+    /// decision before it, whether the run was ended there, and the diagnosis.
+    pub stalls: Vec<(u32, bool, String)>,
 }
 
 #[derive(Debug, thiserror::Error)]

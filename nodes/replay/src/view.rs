@@ -203,6 +203,26 @@ impl View {
             Payload::Displacement { subdomain, u } => {
                 self.displacements.insert(*subdomain, u.clone());
             }
+            Payload::Stall(r) => {
+                let n = msg.envelope.iteration;
+                self.summary.stalls.push((n, r.ended, r.diagnosis.clone()));
+                let rec = &self.rec;
+                rec.set_time_sequence("iteration", n as i64);
+                rec.disable_timeline("time");
+                let (level, what) = if r.ended {
+                    (rerun::TextLogLevel::ERROR, "the run stopped moving and was ended")
+                } else {
+                    (
+                        rerun::TextLogLevel::WARN,
+                        "the run stopped moving and was set going again",
+                    )
+                };
+                rec.log(
+                    "bus/stall",
+                    &rerun::TextLog::new(format!("{what}: {}", r.diagnosis)).with_level(level),
+                )
+                .map_err(rerr)?;
+            }
             _ => {}
         }
         Ok(())

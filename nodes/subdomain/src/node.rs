@@ -6,7 +6,7 @@
 use crate::{Phase, SubdomainNode};
 use glissade_bus::convert::{copy_into, field_of};
 use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError};
-use glissade_messages::{role_field_topic, Field, Message, NodeId, Payload, Role, Stage};
+use glissade_messages::{role_field_topic, Awaited, Field, Message, NodeId, Payload, Role, Stage};
 
 impl SubdomainNode {
     /// Time-coarse start (`solver.time_coarsening`): iteration 0 waits for q̂ from the launcher
@@ -278,6 +278,45 @@ impl Node for SubdomainNode {
 
     fn is_finished(&self) -> bool {
         self.finished
+    }
+
+    fn awaits(&self) -> Vec<Awaited> {
+        if self.finished {
+            return Vec::new();
+        }
+        let me = Some(self.subdomain());
+        let from = |role, index| NodeId { role, index };
+        let one = |sender: NodeId, field: &str, iteration: u32, to: Option<u32>| Awaited {
+            from: sender,
+            field: field.to_string(),
+            iteration,
+            to,
+        };
+        match self.phase {
+            Phase::Directions if !self.started => {
+                vec![one(from(Role::Launcher, 0), "local_directions", 0, me)]
+            }
+            Phase::Directions => {
+                // The local directions of every interface node whose share has not come, or the
+                // decision to stop.
+                let mut owners: Vec<u32> = (0..self.directions_in.len())
+                    .filter(|&k| !self.directions_in[k])
+                    .map(|k| self.owners.as_ref().map_or(0, |o| o[k]))
+                    .collect();
+                owners.sort_unstable();
+                owners.dedup();
+                let mut awaits: Vec<Awaited> = owners
+                    .into_iter()
+                    .map(|o| one(from(Role::Interface, o), "local_directions", self.iteration + 1, me))
+                    .collect();
+                if self.decided != Some(self.iteration) {
+                    awaits.push(one(from(Role::Interface, 0), "decision", self.iteration, None));
+                }
+                awaits
+            }
+            Phase::Macro => vec![one(from(Role::Coarse, 0), "macro_displacements", self.iteration, me)],
+            Phase::Step => vec![one(from(Role::Interface, 0), "anderson_step", self.iteration, None)],
+        }
     }
 
     fn recycle(&mut self, msg: Message) {

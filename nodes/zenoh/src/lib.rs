@@ -49,6 +49,7 @@ mod publish;
 mod receive;
 mod recorder_log;
 mod shm;
+mod watch;
 
 #[cfg(test)]
 mod test_support;
@@ -69,3 +70,4 @@ pub use publish::{publish, publish_lent, Publishers, SHARED_ENCODING_MIN};
 pub use receive::{decode_payload, message_hash, payload_hash};
 pub use recorder_log::{decode_log, encode_log, fetch_log};
 pub use shm::{shared_memory_lockable, shared_memory_room, ShmLender};
+pub use watch::DROP_HOOK;

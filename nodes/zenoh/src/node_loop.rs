@@ -11,6 +11,7 @@ use crate::publish::Publishers;
 use crate::receive::{batches, message_hash, PayloadBlocks, Received};
 use crate::recorder_log::fetch_log;
 use crate::shm::ShmLender;
+use crate::watch::{Ask, DropOnce, Hook, Responder, Watch};
 use crate::TransportError;
 use glissade_bus::{take_when_ready, Node};
 use glissade_messages::{
@@ -72,6 +73,8 @@ enum Event {
     Done,
     /// A liveliness token appeared (true) or disappeared (false).
     Alive(String, bool),
+    /// A line for the process's log from its status responder.
+    Note(String),
 }
 
 /// Runs `nodes` (all hosted by this process) on `session` until each is finished.
@@ -97,7 +100,22 @@ pub fn run_nodes(
     // The received fields' buffers: filled by the subscribers' decoding, given back once the
     // nodes have handled their message.
     let buffers = Arc::new(Mutex::new(BufferPool::default()));
-    let _listening = Listening::declare(session, run, &keys, &buffers, &tx)?;
+    let watch = Watch::new(DropOnce::from_env().map_err(TransportError::Protocol)?);
+    let (ask_tx, ask_rx) = mpsc::channel::<Ask>();
+    let note_tx = Mutex::new(tx.clone());
+    let _responder = Responder::start(
+        session,
+        run.expected.clone(),
+        watch.clone(),
+        (ask_tx.clone(), ask_rx),
+        move |line| {
+            let _ = note_tx
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .send(Event::Note(line));
+        },
+    );
+    let _listening = Listening::declare(session, run, &keys, &buffers, &tx, &ask_tx)?;
 
     // With shared memory, the nodes write their large fields straight into the pools' blocks.
     let lender = ShmLender::new(session).map(Arc::new);
@@ -112,6 +130,7 @@ pub fn run_nodes(
         buffers,
         seen: HashSet::new(),
         published: HashSet::new(),
+        watch,
     };
     let mut inbox = Inbox { rx, pending: None };
     if run.resume {
@@ -123,6 +142,7 @@ pub fn run_nodes(
             handler.handle(batch, &mut nodes, &mut log)?;
         }
     }
+    handler.watch.update(&nodes);
     let done = run_until_finished(run, &mut nodes, &mut handler, &mut inbox, &mut log)?;
     if !done {
         wait_for_done(run, &mut inbox, &mut log)?;
@@ -150,6 +170,7 @@ impl Listening {
         keys: &[String],
         buffers: &Arc<Mutex<BufferPool>>,
         tx: &mpsc::Sender<Event>,
+        ask: &mpsc::Sender<Ask>,
     ) -> Result<Self, TransportError> {
         let run_id = &run.run_id;
         let mut subscribers = Vec::new();
@@ -183,6 +204,28 @@ impl Listening {
                         1 => Event::Stop(String::from_utf8_lossy(&s.payload().to_bytes()).into_owned()),
                         _ => Event::Done,
                     });
+                })
+                .wait()
+                .map_err(|e| zerr(&format!("subscribe {key}"), e))?;
+            subscribers.push(sub);
+        }
+        // The launcher's requests when the run stops moving, answered by the process's
+        // responder (`crate::watch`).
+        for (key, republish) in [(topic::status_request(run_id), false), (topic::republish(run_id), true)] {
+            let ask = Mutex::new(ask.clone());
+            let sub = session
+                .declare_subscriber(key.as_str())
+                .callback(move |s| {
+                    let bytes = s.payload().to_bytes();
+                    let asked = if republish {
+                        Ask::Republish(String::from_utf8_lossy(&bytes).into_owned())
+                    } else {
+                        match <[u8; 8]>::try_from(bytes.as_ref()) {
+                            Ok(round) => Ask::Status(u64::from_le_bytes(round)),
+                            Err(_) => return,
+                        }
+                    };
+                    let _ = ask.lock().unwrap_or_else(|e| e.into_inner()).send(asked);
                 })
                 .wait()
                 .map_err(|e| zerr(&format!("subscribe {key}"), e))?;
@@ -254,7 +297,7 @@ fn wait_for_start(run: &NodeRun, rx: &mpsc::Receiver<Event>) -> Result<VecDeque<
                 })
             }
             Ok(Event::Data(received)) => early.push_back(received),
-            Ok(Event::Alive(..)) | Ok(Event::Done) => {}
+            Ok(Event::Alive(..)) | Ok(Event::Done) | Ok(Event::Note(_)) => {}
             Err(_) => {
                 return Err(TransportError::Protocol(format!(
                     "the launcher did not start the run within {:?}",
@@ -351,10 +394,17 @@ fn run_until_finished(
             Ok(Event::Data(received)) => {
                 last_message = Instant::now();
                 // With the messages already waiting behind it, in batches cut at repeats.
+                handler.watch.busy();
                 for batch in batches(inbox.with_waiting(received)) {
+                    let (count, last) = (batch.len(), batch.last().map(|r| (r.key.clone(), r.iteration())));
                     handler.handle(batch, nodes, log)?;
+                    handler
+                        .watch
+                        .handled(count, last.as_ref().map(|(k, i)| (k.as_str(), *i)));
                 }
+                handler.watch.update(nodes);
             }
+            Ok(Event::Note(line)) => log(&line),
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
             Ok(Event::Alive(key, false)) if run.supervised && key != own_token && key != launcher_token => {
                 // A note: the launcher says it when it restarts a node, and at the end of a run a
@@ -391,6 +441,7 @@ fn wait_for_done(run: &NodeRun, inbox: &mut Inbox, log: &mut dyn FnMut(&str)) ->
                 log("the launcher left before it acknowledged the run's results; leaving");
                 return Ok(());
             }
+            Ok(Event::Note(line)) => log(&line),
             Ok(_) => {}
             Err(_) => {
                 log(&format!(
@@ -438,6 +489,9 @@ struct Handler<'a> {
     seen: HashSet<u64>,
     /// When resuming, this process's outputs already on the bus.
     published: HashSet<u64>,
+    /// What the process tells the launcher when the run stops moving, and its last message on
+    /// each key.
+    watch: Watch,
 }
 
 impl Handler<'_> {
@@ -445,7 +499,7 @@ impl Handler<'_> {
     fn start(&self, nodes: &mut [Box<dyn Node>]) -> Result<(), TransportError> {
         for node in nodes {
             let outs = node.start()?;
-            publish_outputs(&self.publishers, node.as_mut(), outs, &self.published)?;
+            publish_outputs(&self.publishers, node.as_mut(), outs, &self.published, &self.watch)?;
         }
         Ok(())
     }
@@ -523,7 +577,7 @@ impl Handler<'_> {
     /// Each node handles the messages it subscribes to, in parallel with the others.
     fn dispatch(&mut self, msgs: &[(String, u64, Message)], nodes: &mut [Box<dyn Node>]) -> Vec<Outcome> {
         let deliveries = self.routes.deliveries(msgs.iter().map(|(key, _, _)| key.as_str()));
-        let (publishers, published) = (&self.publishers, &self.published);
+        let (publishers, published, watch) = (&self.publishers, &self.published, &self.watch);
         let failed = AtomicBool::new(false);
         nodes
             .par_iter_mut()
@@ -537,7 +591,7 @@ impl Handler<'_> {
                     }
                     let mut handled = || -> Result<(), TransportError> {
                         let outs = node.handle(msg)?;
-                        publish_outputs(publishers, node.as_mut(), outs, published)
+                        publish_outputs(publishers, node.as_mut(), outs, published, watch)
                     };
                     match handled() {
                         Ok(()) => {}
@@ -604,27 +658,45 @@ fn publish_outputs(
     node: &mut dyn Node,
     outs: Vec<Message>,
     published: &HashSet<u64>,
+    watch: &Watch,
 ) -> Result<(), TransportError> {
     for mut out in outs {
-        publish_new(publishers, &mut out, published)?;
+        publish_new(publishers, &mut out, published, watch)?;
         node.recycle(out);
     }
     while let Some(mut out) = node.next_output() {
-        publish_new(publishers, &mut out, published)?;
+        publish_new(publishers, &mut out, published, watch)?;
         node.recycle(out);
     }
     Ok(())
 }
 
 /// Publishes `msg` unless it is among the outputs already on the bus (`published`, the hashes
-/// of a resumed process's outputs that the recorder holds).
-/// Lent field blocks are sent without a copy ([`publish_lent`]).
-fn publish_new(publishers: &Publishers<'_>, msg: &mut Message, published: &HashSet<u64>) -> Result<(), TransportError> {
+/// of a resumed process's outputs that the recorder holds). Lent field blocks are sent without a
+/// copy ([`publish_lent`]). The bytes are kept in `watch` until the next message on the key (a
+/// clone: neither a shared block nor an encoded buffer is copied), and the transport's test hook
+/// may leave the message out ([`crate::DROP_HOOK`]).
+fn publish_new(
+    publishers: &Publishers<'_>,
+    msg: &mut Message,
+    published: &HashSet<u64>,
+    watch: &Watch,
+) -> Result<(), TransportError> {
+    let (sender, iteration) = (msg.envelope.sender, msg.envelope.iteration);
+    let hook = watch.hook(msg);
+    let keep = |key: &str, bytes: &zenoh::bytes::ZBytes| {
+        watch.sent(key, sender, iteration, (hook != Hook::Lose).then(|| bytes.clone()));
+        hook == Hook::Publish
+    };
     if published.is_empty() {
-        return publishers.publish_lent(msg);
+        return publishers.publish_lent_keeping(msg, keep);
     }
     let (topic, bytes) = (msg.topic(), encode(msg));
     if published.contains(&message_hash(&topic, &bytes)) {
+        return Ok(());
+    }
+    let bytes = zenoh::bytes::ZBytes::from(bytes);
+    if !keep(&topic, &bytes) {
         return Ok(());
     }
     publishers.put(&topic, bytes)

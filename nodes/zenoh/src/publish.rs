@@ -84,6 +84,22 @@ impl<'s> Publishers<'s> {
     pub fn publish_lent(&self, msg: &mut Message) -> Result<(), TransportError> {
         publish_lent_with(self.session, msg, &|key, bytes| self.put(key, bytes))
     }
+
+    /// [`Publishers::publish_lent`], showing the bytes to `keep` first (it may hold a clone: a
+    /// shared-memory block or an encoded buffer is not copied), which says whether to put them.
+    pub(crate) fn publish_lent_keeping(
+        &self,
+        msg: &mut Message,
+        keep: impl Fn(&str, &zenoh::bytes::ZBytes) -> bool,
+    ) -> Result<(), TransportError> {
+        publish_lent_with(self.session, msg, &|key, bytes| {
+            if keep(key, &bytes) {
+                self.put(key, bytes)
+            } else {
+                Ok(())
+            }
+        })
+    }
 }
 
 /// Smallest message encoded straight into shared memory: the boundary fields (MBs) and the macro

@@ -17,6 +17,11 @@ pub(crate) struct Received {
 }
 
 impl Received {
+    /// The message's iteration (0 when it did not decode).
+    pub(crate) fn iteration(&self) -> u32 {
+        self.message.as_ref().map_or(0, |m| m.envelope.iteration)
+    }
+
     pub(crate) fn from_bytes(key: String, bytes: &[u8], expected: &Expected) -> Self {
         Self {
             hash: message_hash(&key, bytes),

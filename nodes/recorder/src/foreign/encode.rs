@@ -4,7 +4,8 @@
 //! the bytes carry the value exactly (−0.0 too); a `None` is an absent field.
 
 use glissade_messages::{
-    Decision, Envelope, Field, InterfaceIndicators, Message, Payload, RecordOverride, Role, Stage, Verdict,
+    Awaited, Decision, Envelope, Field, InterfaceIndicators, Message, MessageSeen, NodeId, Payload, RecordOverride,
+    Role, Stage, Verdict,
 };
 use prost::encoding::{encode_varint, encoded_len_varint};
 
@@ -137,10 +138,33 @@ fn envelope(out: &mut Vec<u8>, e: &Envelope) {
         fixed64(b, 3, e.scene_fingerprint);
         uint(b, 4, e.iteration as u64);
         uint(b, 5, stage(e.stage));
-        small(b, 6, |n| {
-            uint(n, 1, role(e.sender.role));
-            uint(n, 2, e.sender.index as u64);
-        });
+        node_id(b, 6, e.sender);
+    });
+}
+
+fn node_id(out: &mut Vec<u8>, number: u32, id: NodeId) {
+    small(out, number, |n| {
+        uint(n, 1, role(id.role));
+        uint(n, 2, id.index as u64);
+    });
+}
+
+fn awaited(out: &mut Vec<u8>, number: u32, a: &Awaited) {
+    small(out, number, |b| {
+        node_id(b, 1, a.from);
+        bytes(b, 2, a.field.as_bytes());
+        uint(b, 3, a.iteration as u64);
+        if let Some(to) = a.to {
+            uint(b, 4, to as u64);
+        }
+    });
+}
+
+fn seen(out: &mut Vec<u8>, number: u32, s: &MessageSeen) {
+    small(out, number, |b| {
+        bytes(b, 1, s.key.as_bytes());
+        uint(b, 2, s.iteration as u64);
+        uint(b, 3, s.ms_ago);
     });
 }
 
@@ -329,6 +353,32 @@ pub fn encode_into(m: &Message, out: &mut Vec<u8>) {
             uint(out, 6, st.dropped_modes as u64);
             double(out, 7, st.xi1);
             double(out, 8, st.xi2);
+        }
+        Payload::NodeStatus(st) => {
+            uint(out, 2, st.round);
+            uint(out, 3, st.finished as u64);
+            st.awaits.iter().for_each(|a| awaited(out, 4, a));
+            if let Some(b) = st.busy_ms {
+                uint(out, 5, b);
+            }
+            uint(out, 6, st.handled);
+            if let Some(h) = &st.last_handled {
+                seen(out, 7, h);
+            }
+            st.sent.iter().for_each(|s| seen(out, 8, s));
+        }
+        Payload::Stall(r) => {
+            uint(out, 2, r.silent_ms);
+            for m in &r.missing {
+                small(out, 3, |b| {
+                    node_id(b, 1, m.waiter);
+                    awaited(b, 2, &m.awaited);
+                    uint(b, 3, m.sent as u64);
+                });
+            }
+            r.republished.iter().for_each(|k| bytes(out, 4, k.as_bytes()));
+            uint(out, 5, r.ended as u64);
+            bytes(out, 6, r.diagnosis.as_bytes());
         }
     }
 }

@@ -464,6 +464,52 @@ pub const MESSAGES: &[MessageDef] = &[
         ],
     },
     MessageDef {
+        name: "NodeStatus",
+        doc: "A node's status, sent when the launcher asks (a run that stopped moving).",
+        fields: &[
+            ENVELOPE,
+            f("round", 2, Ty::Uint64, "the launcher's request this answers"),
+            f("finished", 3, Ty::Bool, ""),
+            rep(
+                "awaits",
+                4,
+                Ty::Message("Awaited"),
+                "the messages the node waits for (any one moves it on)",
+            ),
+            opt(
+                "busy_ms",
+                5,
+                Ty::Uint64,
+                "the node's process handles messages since this many ms; absent when it waits",
+            ),
+            f("handled", 6, Ty::Uint64, "messages the node's process handled so far"),
+            f("last_handled", 7, Ty::Message("MessageSeen"), "absent before the first"),
+            rep(
+                "sent",
+                8,
+                Ty::Message("MessageSeen"),
+                "the node's last message on each key it published on",
+            ),
+        ],
+    },
+    MessageDef {
+        name: "Stall",
+        doc: "The launcher's diagnosis of a run that stopped moving.",
+        fields: &[
+            ENVELOPE,
+            f("silent_ms", 2, Ty::Uint64, "how long no message of the run moved"),
+            rep("missing", 3, Ty::Message("Missing"), "the messages nodes waited for"),
+            rep(
+                "republished",
+                4,
+                Ty::String,
+                "keys of the messages whose senders were asked to publish them again",
+            ),
+            f("ended", 5, Ty::Bool, "the launcher ended the run"),
+            f("diagnosis", 6, Ty::String, "in words"),
+        ],
+    },
+    MessageDef {
         name: "Envelope",
         doc: "Header of every message.",
         fields: &[
@@ -506,6 +552,34 @@ pub const MESSAGES: &[MessageDef] = &[
             f("w", 1, FIELD, "n_b x n_c"),
             f("f", 2, FIELD, "n_b x n_c"),
             f("time", 3, FIELD, "phi, n_c x (N+1)"),
+        ],
+    },
+    MessageDef {
+        name: "Awaited",
+        doc: "A message a node waits for: sender, kind (key field chunk), iteration, destination chunk.",
+        fields: &[
+            f("from", 1, Ty::Message("NodeId"), ""),
+            f("field", 2, Ty::String, ""),
+            f("iteration", 3, Ty::Uint32, ""),
+            opt("to", 4, Ty::Uint32, "the key's destination chunk; absent when it has none"),
+        ],
+    },
+    MessageDef {
+        name: "MessageSeen",
+        doc: "A message as a status names it.",
+        fields: &[
+            f("key", 1, Ty::String, ""),
+            f("iteration", 2, Ty::Uint32, ""),
+            f("ms_ago", 3, Ty::Uint64, "how long before the status it was handled or put"),
+        ],
+    },
+    MessageDef {
+        name: "Missing",
+        doc: "A message a stalled run lacked.",
+        fields: &[
+            f("waiter", 1, Ty::Message("NodeId"), "the node that waited for it"),
+            f("awaited", 2, Ty::Message("Awaited"), ""),
+            f("sent", 3, Ty::Bool, "its sender had put it on the bus (it was lost on the way)"),
         ],
     },
     MessageDef {

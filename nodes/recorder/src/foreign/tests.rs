@@ -4,8 +4,8 @@
 
 use super::*;
 use glissade_messages::{
-    Decision, Envelope, Field, InterfaceIndicators, InterfaceSolution, LinearStageStats, Message, NodeId, Overrides,
-    ParticularModes, RecordOverride, Role, Stage, Verdict,
+    Awaited, Decision, Envelope, Field, InterfaceIndicators, InterfaceSolution, LinearStageStats, Message, MessageSeen,
+    Missing, NodeId, NodeStatus, Overrides, ParticularModes, RecordOverride, Role, Stage, StallReport, Verdict,
 };
 use prost::Message as _;
 use prost_reflect::{DescriptorPool, DynamicMessage, ReflectMessage, Value};
@@ -233,6 +233,73 @@ fn samples() -> Vec<Message> {
             xi2: -0.0,
         }),
         Payload::LinearStageStats(LinearStageStats::default()),
+        Payload::NodeStatus(NodeStatus {
+            round: 3,
+            finished: false,
+            awaits: vec![
+                Awaited {
+                    from: NodeId {
+                        role: Role::Interface,
+                        index: 1,
+                    },
+                    field: "local_directions".into(),
+                    iteration: 6,
+                    to: Some(2),
+                },
+                Awaited {
+                    from: NodeId {
+                        role: Role::Interface,
+                        index: 0,
+                    },
+                    field: "decision".into(),
+                    iteration: 5,
+                    to: None,
+                },
+            ],
+            busy_ms: None,
+            handled: 41,
+            last_handled: Some(MessageSeen {
+                key: "glissade/r/coarse/0/macro_displacements/2".into(),
+                iteration: 5,
+                ms_ago: 1200,
+            }),
+            sent: vec![MessageSeen {
+                key: "glissade/r/subdomain/2/boundary_state".into(),
+                iteration: 5,
+                ms_ago: 1100,
+            }],
+        }),
+        Payload::NodeStatus(NodeStatus {
+            round: 0,
+            finished: true,
+            awaits: vec![],
+            busy_ms: Some(0),
+            handled: 0,
+            last_handled: None,
+            sent: vec![],
+        }),
+        Payload::Stall(StallReport {
+            silent_ms: 2500,
+            missing: vec![Missing {
+                waiter: NodeId {
+                    role: Role::Interface,
+                    index: 0,
+                },
+                awaited: Awaited {
+                    from: NodeId {
+                        role: Role::Interface,
+                        index: 1,
+                    },
+                    field: "indicator_partials".into(),
+                    iteration: 5,
+                    to: None,
+                },
+                sent: true,
+            }],
+            republished: vec!["glissade/r/interface/1/indicator_partials".into()],
+            ended: false,
+            diagnosis: "interface:0 waits for …".into(),
+        }),
     ];
     payloads
         .into_iter()
@@ -297,6 +364,30 @@ fn field_of(m: &DynamicMessage, name: &str) -> Field {
         rows: u32_(&f, "rows"),
         cols: u32_(&f, "cols"),
         data: list(&f, "values").iter().map(|v| v.as_f64().unwrap()).collect(),
+    }
+}
+
+fn node_of(n: &DynamicMessage) -> NodeId {
+    NodeId {
+        role: ROLES[enum_(n, "role") as usize],
+        index: u32_(n, "index"),
+    }
+}
+
+fn awaited_of(a: &DynamicMessage) -> Awaited {
+    Awaited {
+        from: node_of(&message(a, "from")),
+        field: string(a, "field"),
+        iteration: u32_(a, "iteration"),
+        to: a.has_field_by_name("to").then(|| u32_(a, "to")),
+    }
+}
+
+fn seen_of(s: &DynamicMessage) -> MessageSeen {
+    MessageSeen {
+        key: string(s, "key"),
+        iteration: u32_(s, "iteration"),
+        ms_ago: u64_(s, "ms_ago"),
     }
 }
 
@@ -461,6 +552,43 @@ fn from_proto(m: &DynamicMessage) -> Message {
             dropped_modes: u32_(m, "dropped_modes"),
             xi1: f64_(m, "xi1"),
             xi2: f64_(m, "xi2"),
+        }),
+        "NodeStatus" => Payload::NodeStatus(NodeStatus {
+            round: u64_(m, "round"),
+            finished: bool_(m, "finished"),
+            awaits: list(m, "awaits")
+                .iter()
+                .map(|v| awaited_of(v.as_message().unwrap()))
+                .collect(),
+            busy_ms: m.has_field_by_name("busy_ms").then(|| u64_(m, "busy_ms")),
+            handled: u64_(m, "handled"),
+            last_handled: m
+                .has_field_by_name("last_handled")
+                .then(|| seen_of(&message(m, "last_handled"))),
+            sent: list(m, "sent")
+                .iter()
+                .map(|v| seen_of(v.as_message().unwrap()))
+                .collect(),
+        }),
+        "Stall" => Payload::Stall(StallReport {
+            silent_ms: u64_(m, "silent_ms"),
+            missing: list(m, "missing")
+                .iter()
+                .map(|v| {
+                    let x = v.as_message().unwrap();
+                    Missing {
+                        waiter: node_of(&message(x, "waiter")),
+                        awaited: awaited_of(&message(x, "awaited")),
+                        sent: bool_(x, "sent"),
+                    }
+                })
+                .collect(),
+            republished: list(m, "republished")
+                .iter()
+                .map(|v| v.as_str().unwrap().to_string())
+                .collect(),
+            ended: bool_(m, "ended"),
+            diagnosis: string(m, "diagnosis"),
         }),
         other => panic!("no payload message {other}"),
     };
