@@ -560,11 +560,13 @@ impl<'r> Supervisor<'r> {
         if !self.stop_seen {
             return Vec::new();
         }
-        let iteration = self.got.iterations.last().map_or(0, |r| r.iteration);
+        // The final solutions carry the iteration after the stop decision's (an interface node
+        // moves on once it has decided), the displacements the decision's.
+        let last = self.got.iterations.last().map_or(0, |r| r.iteration);
         let awaited = |role, index, field: &str| Awaited {
             from: NodeId { role, index },
             field: field.to_string(),
-            iteration,
+            iteration: last,
             to: None,
         };
         let mut lacks: Vec<Awaited> = Vec::new();
@@ -573,7 +575,10 @@ impl<'r> Supervisor<'r> {
                 .iter()
                 .any(|&i| !self.got.interfaces.iter().any(|s| s.interface as usize == i))
             {
-                lacks.push(awaited(Role::Interface, k as u32, "interface_solution"));
+                lacks.push(Awaited {
+                    iteration: last + 1,
+                    ..awaited(Role::Interface, k as u32, "interface_solution")
+                });
             }
         }
         if self.final_displacements > 0 {

@@ -28,6 +28,7 @@ mod replay;
 mod run_id;
 mod shared_router;
 mod stability;
+mod stall;
 mod time_start;
 mod tls;
 mod two_hosts;
