@@ -135,6 +135,33 @@ pub(crate) enum Command {
     /// Start one node process by hand (on another machine): it connects to the launcher's Zenoh
     /// endpoint and receives the scene over the bus.
     Node(NodeArgs),
+    /// Run a scene as processes many times, several at once, beside busy loops that load the
+    /// machine's cores, and count how the runs end against the scene's in-process run (same
+    /// numbers, stalls recovered or ended, failures, hangs); writes `<out>/soak.json`
+    /// (docs/operations.md#soak).
+    Soak {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// Folder for the runs' outputs (those that converge to the same numbers are deleted)
+        /// and `soak.json`.
+        #[arg(long, default_value = "recordings/soak")]
+        out: PathBuf,
+        /// Runs in all.
+        #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..))]
+        runs: u32,
+        /// Runs at once.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+        parallel: u32,
+        /// Busy loops (threads spinning on a core) beside the runs.
+        #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=256))]
+        busy: u32,
+        /// A run still going after this many seconds is counted as hung and stopped.
+        #[arg(long, default_value_t = 120, value_parser = clap::value_parser!(u64).range(1..))]
+        timeout: u64,
+        /// Record nothing (the runs record as the scene says otherwise).
+        #[arg(long)]
+        no_record: bool,
+    },
     /// Write a generated scene file: `laminate`, plies of square subdomains in frictional contact
     /// (docs/scenes.md#generated-scenes), e.g. the 1000-subdomain laminate.
     Generate(GenerateArgs),

@@ -146,6 +146,23 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             bench(&scene, &out, max_iterations, processes)
         }
         Command::Replay(args) => replay(args),
+        Command::Soak {
+            scene,
+            out,
+            runs,
+            parallel,
+            busy,
+            timeout,
+            no_record,
+        } => commands::soak::soak(commands::soak::SoakArgs {
+            scene,
+            out,
+            runs,
+            parallel,
+            busy,
+            timeout: std::time::Duration::from_secs(timeout),
+            no_record,
+        }),
         Command::Export {
             recording,
             vtu,

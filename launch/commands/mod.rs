@@ -5,6 +5,7 @@
 pub(crate) mod measure;
 pub(crate) mod replay;
 pub(crate) mod run;
+pub(crate) mod soak;
 
 pub(crate) use crate::cli::{ColorByArg, ReplayArgs, RunArgs};
 pub(crate) use anyhow::Context;

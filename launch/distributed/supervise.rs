@@ -515,6 +515,17 @@ impl<'r> Supervisor<'r> {
         if self.got.started.is_none() {
             return Ok(());
         }
+        // A node process being replaced (restarts) or whose token is gone (its failure is being
+        // looked at) makes the others wait: that is not a stall.
+        let replacing = spawned
+            .children
+            .0
+            .iter()
+            .any(|p| p.status.is_none() && (!p.token_seen || p.token_lost.is_some()));
+        if replacing {
+            self.stall.moved();
+            return Ok(());
+        }
         let lacks = self.launcher_lacks();
         let session = &self.set_up.bus.session;
         let run_id = self.run_id;
