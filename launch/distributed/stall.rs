@@ -25,6 +25,12 @@ const ITERATIONS: f64 = 5.0;
 const REPLY_WAIT: Duration = Duration::from_secs(2);
 /// How many times one message is asked again before the run is ended.
 const REPUBLISH_LIMIT: u32 = 2;
+/// A process busy for longer than this is not taken to move (stuck in a put, say): the last-resort
+/// timeout of the processes is as long.
+const BUSY_LIMIT: Duration = Duration::from_secs(600);
+/// How long nodes may stay silent (their process alive but not answering) before the run is
+/// ended with their names.
+const SILENT_LIMIT: Duration = Duration::from_secs(30);
 /// Waits named in a diagnosis.
 const LINES: usize = 6;
 /// Shortest time between the two rounds that confirm a stall (half the patience: a message on
@@ -62,8 +68,15 @@ pub(super) struct StallWatch {
     /// The previous round's answers, when nothing moved since, and when they were complete.
     previous: Option<BTreeMap<NodeId, NodeStatus>>,
     previous_at: Option<Instant>,
-    /// Messages asked again, and how often.
-    republished: BTreeMap<String, u32>,
+    /// Messages asked again (key, iteration), and how often.
+    republished: BTreeMap<(String, u32), u32>,
+    /// Nodes that answered no status, since when.
+    silent_since: BTreeMap<NodeId, Instant>,
+    /// The launcher's own messages a node may wait for (a time-coarse start's local
+    /// directions), until every node has taken them.
+    own: Vec<MessageSeen>,
+    /// The decisions the launcher heard, by iteration: whether each stopped the run.
+    decisions: BTreeMap<u32, bool>,
     /// The last decision's iteration (the envelope of the launcher's reports).
     iteration: u32,
 }
@@ -82,6 +95,9 @@ impl StallWatch {
             previous: None,
             previous_at: None,
             republished: BTreeMap::new(),
+            silent_since: BTreeMap::new(),
+            own: Vec::new(),
+            decisions: BTreeMap::new(),
             iteration: 0,
         }
     }
@@ -94,8 +110,30 @@ impl StallWatch {
         self.previous_at = None;
     }
 
-    /// A decision of `iteration` came: its length counts towards the silence allowed.
-    pub(super) fn decided(&mut self, iteration: u32) {
+    /// The launcher put `key` (iteration `iteration`) on the bus for the nodes; None forgets its
+    /// messages (every node has taken them).
+    pub(super) fn launcher_sent(&mut self, sent: Option<(&str, u32)>) {
+        match sent {
+            Some((key, iteration)) => self.own.push(MessageSeen {
+                key: key.to_string(),
+                iteration,
+                ms_ago: 0,
+            }),
+            None => self.own.clear(),
+        }
+    }
+
+    /// The node processes of these nodes exited: they answer no more.
+    pub(super) fn gone(&mut self, nodes: &[NodeId]) {
+        for n in nodes {
+            self.nodes.remove(n);
+        }
+    }
+
+    /// A decision of `iteration` came (`stop`: it ends the run): its length counts towards the
+    /// silence allowed.
+    pub(super) fn decided(&mut self, iteration: u32, stop: bool) {
+        self.decisions.insert(iteration, stop);
         let now = Instant::now();
         if let Some(t) = self.last_decision.replace(now) {
             self.iterations.push_back(now.duration_since(t).as_secs_f64());
@@ -154,7 +192,8 @@ impl StallWatch {
             return Stall::None;
         }
         let replies = self.round.take().expect("a round under way").replies;
-        if replies.values().any(|s| s.busy_ms.is_some()) {
+        let limit = BUSY_LIMIT.as_millis() as u64;
+        if replies.values().any(|s| s.busy_ms.is_some_and(|b| b < limit)) {
             // A node is computing: the run moves.
             self.moved();
             return Stall::None;
@@ -191,6 +230,10 @@ impl StallWatch {
             .flat_map(|(&n, s)| s.awaits.iter().map(move |a| (n, a)))
             .collect();
         waits.extend(launcher_lacks.iter().map(|a| (launcher, a)));
+        // A node waits for a decision only in case it stops the run: one the launcher heard
+        // going on would not move it.
+        let going_on = |a: &Awaited| a.field == "decision" && self.decisions.get(&a.iteration) == Some(&false);
+        waits.retain(|(waiter, a)| *waiter == launcher || !going_on(a));
         let missing: Vec<Missing> = waits
             .iter()
             .map(|&(waiter, a)| Missing {
@@ -201,15 +244,30 @@ impl StallWatch {
             .collect();
         let answered = replies.keys().copied().collect::<BTreeSet<_>>();
         let silent_nodes: Vec<NodeId> = self.nodes.difference(&answered).copied().collect();
+        let now = Instant::now();
+        self.silent_since.retain(|n, _| silent_nodes.contains(n));
+        for n in &silent_nodes {
+            self.silent_since.entry(*n).or_insert(now);
+        }
         let mut asked = Vec::new();
         for m in missing.iter().filter(|m| m.sent) {
             let key = topic::awaited(&self.run_id, &m.awaited);
-            let times = self.republished.entry(key.clone()).or_default();
+            let times = self.republished.entry((key.clone(), m.awaited.iteration)).or_default();
             if *times < REPUBLISH_LIMIT && !asked.contains(&key) {
                 *times += 1;
                 republish(&key);
                 asked.push(key);
             }
+        }
+        // A node whose process lives but does not answer (busy sending, say) gets time: the run
+        // ends on it only once it has been silent for SILENT_LIMIT.
+        let waiting_for_silent = asked.is_empty()
+            && self
+                .silent_since
+                .values()
+                .any(|since| now.duration_since(*since) < SILENT_LIMIT);
+        if waiting_for_silent {
+            return Stall::None;
         }
         let diagnosis = format!(
             "nothing moved for {:.1} s: {}",
@@ -241,14 +299,15 @@ impl StallWatch {
         }
     }
 
-    /// What the sender of `a` says it put on `a`'s key at `a`'s iteration.
-    fn sent<'s>(&self, replies: &'s BTreeMap<NodeId, NodeStatus>, a: &Awaited) -> Option<&'s MessageSeen> {
+    /// What the sender of `a` says it put on `a`'s key at `a`'s iteration (the launcher's own
+    /// messages from its list).
+    fn sent<'s>(&'s self, replies: &'s BTreeMap<NodeId, NodeStatus>, a: &Awaited) -> Option<&'s MessageSeen> {
         let key = topic::awaited(&self.run_id, a);
-        replies
-            .get(&a.from)?
-            .sent
-            .iter()
-            .find(|s| s.key == key && s.iteration == a.iteration)
+        let sent = match a.from.role {
+            Role::Launcher => &self.own,
+            _ => &replies.get(&a.from)?.sent,
+        };
+        sent.iter().find(|s| s.key == key && s.iteration == a.iteration)
     }
 
     /// The diagnosis in words: the messages lost on the way if any; otherwise the waits whose

@@ -55,6 +55,9 @@ pub(super) struct Supervisor<'r> {
     time_start: TimeStartSolve,
     /// The watch on the run's progress: a run that stops moving is looked at within seconds.
     stall: StallWatch,
+    /// The launcher's own messages to the nodes (a time-coarse start's local directions), to
+    /// publish again if one is lost, until the first decision.
+    own_messages: Vec<Message>,
 }
 
 impl<'r> Supervisor<'r> {
@@ -102,6 +105,7 @@ impl<'r> Supervisor<'r> {
             net,
             exe,
             stall: StallWatch::new(run_id, expected.clone(), nodes),
+            own_messages: Vec::new(),
             expected,
             tokens: set_up.tokens(run_id),
             restarts: scene.deployment.restarts,
@@ -176,11 +180,11 @@ impl<'r> Supervisor<'r> {
             };
             match self.set_up.arrivals.recv_timeout(poll) {
                 Ok(a) => {
-                    if !matches!(kind_of(&a.key), "status" | "stall") {
+                    // The launcher's own requests and the statuses they bring are not the run
+                    // moving.
+                    if a.ours && !matches!(kind_of(&a.key), "status" | "stall") {
                         self.last_message = Instant::now();
-                        if a.ours {
-                            self.stall.moved();
-                        }
+                        self.stall.moved();
                     }
                     self.receive(&a, &mut on_iteration, observe)?;
                 }
@@ -428,10 +432,13 @@ impl<'r> Supervisor<'r> {
             transport::publish_start(session, self.run_id)?;
             for m in time_start.iter().flat_map(|t| &t.messages) {
                 transport::publish(session, m)?;
+                self.stall.launcher_sent(Some((&m.topic(), m.envelope.iteration)));
             }
+            self.own_messages = time_start.map(|t| t.messages).unwrap_or_default();
             self.got.setup_s = self.set_up.t0.elapsed().as_secs_f64();
             self.got.started = Some(Instant::now());
             self.last_message = Instant::now();
+            self.stall.moved();
             crate::console::note(&format!(
                 "run {}: {} node(s) ready, iterating",
                 self.run_id,
@@ -470,7 +477,11 @@ impl<'r> Supervisor<'r> {
     ) -> Result<()> {
         if let Some(rec) = self.take(a, observe) {
             self.stop_seen |= rec.decision.verdict.is_stop();
-            self.stall.decided(rec.iteration);
+            self.stall.decided(rec.iteration, rec.decision.verdict.is_stop());
+            // Every subdomain took the launcher's initial local directions (iteration 0) before
+            // any decision.
+            self.stall.launcher_sent(None);
+            self.own_messages.clear();
             on_iteration(&rec);
         }
         if !self.done_sent
@@ -526,11 +537,17 @@ impl<'r> Supervisor<'r> {
             self.stall.moved();
             return Ok(());
         }
+        self.stall.gone(&self.exited_nodes(spawned));
         let lacks = self.launcher_lacks();
         let session = &self.set_up.bus.session;
         let run_id = self.run_id;
+        let own = &self.own_messages;
+        // Blocking rather than dropped under congestion: the very load that loses messages.
         let put = |key: String, bytes: Vec<u8>| {
-            if let Err(e) = zenoh::Wait::wait(session.put(key.as_str(), bytes)) {
+            let put = session
+                .put(key.as_str(), bytes)
+                .congestion_control(zenoh::qos::CongestionControl::Block);
+            if let Err(e) = zenoh::Wait::wait(put) {
                 crate::console::warn(&format!("cannot publish on {key}: {e}"));
             }
         };
@@ -542,7 +559,15 @@ impl<'r> Supervisor<'r> {
                     round.to_le_bytes().to_vec(),
                 )
             },
-            |key| put(glissade_messages::topic::republish(run_id), key.as_bytes().to_vec()),
+            |key| match own.iter().find(|m| m.topic() == key) {
+                // The launcher's own message: it publishes it again itself.
+                Some(m) => {
+                    if let Err(e) = transport::publish(session, m) {
+                        crate::console::warn(&format!("cannot publish {key} again: {e}"));
+                    }
+                }
+                None => put(glissade_messages::topic::republish(run_id), key.as_bytes().to_vec()),
+            },
         );
         match verdict {
             Stall::None => Ok(()),
@@ -564,12 +589,51 @@ impl<'r> Supervisor<'r> {
         }
     }
 
+    /// The nodes of the node processes that exited (they answer no status request).
+    fn exited_nodes(&self, spawned: &Spawned) -> Vec<NodeId> {
+        let plan = &self.set_up.plan;
+        let mut gone = Vec::new();
+        for p in spawned.children.0.iter().filter(|p| p.status.is_some()) {
+            let k = p.name.index as usize;
+            match p.name.role {
+                crate::children::NodeRole::Subdomain => {
+                    gone.extend(self.set_up.groups.get(k).into_iter().flatten().map(|&index| NodeId {
+                        role: Role::Subdomain,
+                        index,
+                    }));
+                    gone.extend(
+                        plan.interface_hosts
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, h)| **h == Some(k))
+                            .map(|(i, _)| NodeId {
+                                role: Role::Interface,
+                                index: i as u32,
+                            }),
+                    );
+                }
+                _ => gone.push(p.name.id()),
+            }
+        }
+        gone
+    }
+
     /// What the launcher itself waits for once the stop decision is in: the final solutions of
     /// the interfaces it lacks (from the interface node that owns each) and, with `interior`,
     /// the subdomains' displacements.
     fn launcher_lacks(&self) -> Vec<Awaited> {
         if !self.stop_seen {
-            return Vec::new();
+            // The next decision: lost on its way to the launcher alone, it would hold the run.
+            let next = self.got.iterations.last().map_or(0, |r| r.iteration + 1);
+            return vec![Awaited {
+                from: NodeId {
+                    role: Role::Interface,
+                    index: 0,
+                },
+                field: "decision".into(),
+                iteration: next,
+                to: None,
+            }];
         }
         // The final solutions carry the iteration after the stop decision's (an interface node
         // moves on once it has decided), the displacements the decision's.

@@ -133,10 +133,15 @@ pub fn run_nodes(
         watch,
     };
     let mut inbox = Inbox { rx, pending: None };
+    // The process says it is busy while it starts its nodes or rebuilds their state: the
+    // launcher's watch then counts it as moving.
+    handler.watch.update(&nodes);
     if run.resume {
+        handler.watch.busy();
         resume(run, &keys, &mut nodes, &mut handler, &mut log)?;
     } else {
         let early = wait_for_start(run, &inbox.rx)?;
+        handler.watch.busy();
         handler.start(&mut nodes)?;
         for batch in batches(early) {
             handler.handle(batch, &mut nodes, &mut log)?;
@@ -692,11 +697,10 @@ fn publish_new(
         return publishers.publish_lent_keeping(msg, keep);
     }
     let (topic, bytes) = (msg.topic(), encode(msg));
-    if published.contains(&message_hash(&topic, &bytes)) {
-        return Ok(());
-    }
+    let on_the_bus = published.contains(&message_hash(&topic, &bytes));
     let bytes = zenoh::bytes::ZBytes::from(bytes);
-    if !keep(&topic, &bytes) {
+    // Kept even when the predecessor sent it: it can be lost on the way all the same.
+    if !keep(&topic, &bytes) || on_the_bus {
         return Ok(());
     }
     publishers.put(&topic, bytes)

@@ -144,7 +144,7 @@ impl Watch {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// The nodes' waits and states, after the process handled messages or started them.
+    /// The nodes' waits and states, once the process has handled what it had (it is idle).
     pub(crate) fn update(&self, nodes: &[Box<dyn glissade_bus::Node>]) {
         let states = nodes
             .iter()
@@ -154,7 +154,9 @@ impl Watch {
                 awaits: n.awaits(),
             })
             .collect();
-        self.lock().nodes = states;
+        let mut s = self.lock();
+        s.nodes = states;
+        s.busy_since = None;
     }
 
     /// The process starts handling messages.
@@ -165,7 +167,6 @@ impl Watch {
     /// The process handled `count` messages, the last on `key` at `iteration`.
     pub(crate) fn handled(&self, count: usize, last: Option<(&str, u32)>) {
         let mut s = self.lock();
-        s.busy_since = None;
         s.handled += count as u64;
         if let Some((key, iteration)) = last {
             s.last_handled = Some((key.to_string(), iteration, Instant::now()));
@@ -252,11 +253,15 @@ impl Watch {
             .collect()
     }
 
-    /// Copies of the last messages kept on `key`, with their iteration.
+    /// Copies of the last messages kept on `key`, with their iteration (the bytes are copied
+    /// after the lock is released: the publishing threads do not wait for it).
     fn copy_of(&self, key: &str) -> Option<(Vec<Vec<u8>>, u32)> {
-        let s = self.lock();
-        let k = s.kept.get(key)?;
-        Some((k.bytes.iter().map(|b| b.to_bytes().into_owned()).collect(), k.iteration))
+        let (held, iteration) = {
+            let s = self.lock();
+            let k = s.kept.get(key)?;
+            (k.bytes.clone(), k.iteration)
+        };
+        Some((held.iter().map(|b| b.to_bytes().into_owned()).collect(), iteration))
     }
 }
 
@@ -283,9 +288,10 @@ impl Responder {
         expected: Expected,
         watch: Watch,
         (tx, rx): (mpsc::Sender<Ask>, mpsc::Receiver<Ask>),
-        note: impl Fn(String) + Send + 'static,
-    ) -> Self {
+        note: impl Fn(String) + Send + Sync + 'static,
+    ) -> Result<Self, crate::TransportError> {
         let session = session.clone();
+        let note = Arc::new(note);
         let thread = std::thread::Builder::new()
             .name("glissade-status".into())
             .spawn(move || {
@@ -300,28 +306,48 @@ impl Responder {
                                 }
                             }
                         }
+                        // On a thread of its own: copying and sending a large message again must
+                        // not delay the answers to status requests.
                         Ask::Republish(key) if mine(&key) => {
-                            let Some((copies, iteration)) = watch.copy_of(&key) else { continue };
-                            if copies.is_empty() {
-                                note(format!("cannot publish {key} (iteration {iteration}) again: it was not kept"));
-                                continue;
+                            let (session, watch, n) = (session.clone(), watch.clone(), note.clone());
+                            let spawned = std::thread::Builder::new()
+                                .name("glissade-republish".into())
+                                .spawn(move || republish(&session, &watch, &key, &*n));
+                            if let Err(e) = spawned {
+                                note(format!("cannot publish a message again: no thread: {e}"));
                             }
-                            let outcome = copies.into_iter().try_for_each(|bytes| put_bytes(&session, &key, bytes));
-                            note(match outcome {
-                                Ok(()) => format!(
-                                    "{}published {key} (iteration {iteration}) again: the launcher says its receiver lacks it",
-                                    crate::NOTE
-                                ),
-                                Err(e) => format!("cannot publish {key} again: {e}"),
-                            });
                         }
                         Ask::Republish(_) => {}
                     }
                 }
             })
-            .ok();
-        Self { tx, thread }
+            .map_err(|e| crate::TransportError::Protocol(format!("cannot start the status responder's thread: {e}")))?;
+        Ok(Self {
+            tx,
+            thread: Some(thread),
+        })
     }
+}
+
+/// Puts the last messages kept on `key` again, as copies over the link.
+fn republish(session: &Session, watch: &Watch, key: &str, note: &(dyn Fn(String) + Send + Sync)) {
+    let Some((copies, iteration)) = watch.copy_of(key) else {
+        return;
+    };
+    if copies.is_empty() {
+        note(format!(
+            "cannot publish {key} (iteration {iteration}) again: it was not kept"
+        ));
+        return;
+    }
+    let outcome = copies.into_iter().try_for_each(|bytes| put_bytes(session, key, bytes));
+    note(match outcome {
+        Ok(()) => format!(
+            "{}published {key} (iteration {iteration}) again: the launcher says its receiver lacks it",
+            crate::NOTE
+        ),
+        Err(e) => format!("cannot publish {key} again: {e}"),
+    });
 }
 
 impl Drop for Responder {
