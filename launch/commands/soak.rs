@@ -45,7 +45,8 @@ struct RunRecord {
     seconds: f64,
     /// Stalls the launcher recovered from in this run.
     recovered_stalls: usize,
-    /// The run's last console lines when it did not converge to the same numbers.
+    /// The run's last console lines when it did not converge to the same numbers, or its
+    /// warnings about the stalls it recovered from.
     #[serde(skip_serializing_if = "Option::is_none")]
     said: Option<String>,
 }
@@ -182,16 +183,29 @@ pub(crate) fn soak(args: SoakArgs) -> anyhow::Result<ExitCode> {
                         };
                         let keep = outcome != Outcome::Same;
                         if !keep {
+                            // The outputs agree: only the log of a run that recovered from a stall
+                            // is kept.
                             let _ = std::fs::remove_dir_all(&out);
-                            let _ = std::fs::remove_file(&log);
+                            if recovered_stalls == 0 {
+                                let _ = std::fs::remove_file(&log);
+                            }
                         }
                         let tail: Vec<&str> = said.lines().rev().take(8).collect();
+                        let warnings = said
+                            .lines()
+                            .filter(|l| l.contains("stopped moving and was set going again"))
+                            .collect::<Vec<_>>()
+                            .join("\n");
                         let record = RunRecord {
                             run: k,
                             outcome,
                             seconds,
                             recovered_stalls,
-                            said: keep.then(|| tail.into_iter().rev().collect::<Vec<_>>().join("\n")),
+                            said: if keep {
+                                Some(tail.into_iter().rev().collect::<Vec<_>>().join("\n"))
+                            } else {
+                                (recovered_stalls > 0).then_some(warnings)
+                            },
                         };
                         println!(
                             "run {k}: {:?} in {seconds:.1} s{}",
