@@ -69,7 +69,7 @@ fn text_of(o: &Output) -> String {
     )
 }
 
-/// One message of each role left out once, at iteration 3 (the run takes 34): the stall is
+/// One message of each role left out once, at iteration 3 (the run takes 34) or at set-up: the stall is
 /// reported within the budget, naming the message and its sender as lost on the way, the sender
 /// publishes it again, and the run converges to the same bits as without the loss. The last case
 /// loses one of the final interface solutions the launcher waits for after the stop decision.
@@ -90,6 +90,12 @@ fn a_lost_message_of_each_role_is_asked_again_and_the_run_ends_as_undisturbed() 
         "an undisturbed run reports no stall"
     );
     let cases = [
+        // Before the first iteration: the coarse node waits for every operator.
+        (
+            "subdomain:0/homogenized_operator/0",
+            "subdomain:0",
+            "homogenized_operator",
+        ),
         ("subdomain:1/boundary_state/3", "subdomain:1", "boundary_state"),
         ("subdomain:0/macro_forces/3", "subdomain:0", "macro_forces"),
         ("interface:1/indicator_partials/3", "interface:1", "indicator_partials"),
