@@ -131,6 +131,7 @@ pub fn run_nodes(
         seen: HashSet::new(),
         published: HashSet::new(),
         watch,
+        touched: Vec::new(),
     };
     let mut inbox = Inbox { rx, pending: None };
     // The process says it is busy while it starts its nodes or rebuilds their state: the
@@ -407,7 +408,8 @@ fn run_until_finished(
                         .watch
                         .handled(count, last.as_ref().map(|(k, i)| (k.as_str(), *i)));
                 }
-                handler.watch.update(nodes);
+                // Idle again, with the new waits of the nodes that took messages.
+                handler.watch.update_touched(nodes, &mut handler.touched);
             }
             Ok(Event::Note(line)) => log(&line),
             Ok(Event::Stop(reason)) => return Err(TransportError::Stopped(reason)),
@@ -497,6 +499,8 @@ struct Handler<'a> {
     /// What the process tells the launcher when the run stops moving, and its last message on
     /// each key.
     watch: Watch,
+    /// The nodes that were handed a message since the watch last looked at them.
+    touched: Vec<bool>,
 }
 
 impl Handler<'_> {
@@ -582,6 +586,10 @@ impl Handler<'_> {
     /// Each node handles the messages it subscribes to, in parallel with the others.
     fn dispatch(&mut self, msgs: &[(String, u64, Message)], nodes: &mut [Box<dyn Node>]) -> Vec<Outcome> {
         let deliveries = self.routes.deliveries(msgs.iter().map(|(key, _, _)| key.as_str()));
+        self.touched.resize(deliveries.len(), false);
+        for (t, d) in self.touched.iter_mut().zip(&deliveries) {
+            *t |= !d.is_empty();
+        }
         let (publishers, published, watch) = (&self.publishers, &self.published, &self.watch);
         let failed = AtomicBool::new(false);
         nodes
