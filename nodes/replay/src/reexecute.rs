@@ -237,19 +237,8 @@ pub fn reexecute(recording: &Recording, id: NodeId) -> Result<Reexecution, Reexe
     let mut recorded: BTreeMap<String, Vec<(usize, Vec<u8>, Message)>> = BTreeMap::new();
     let mut recorded_outputs = 0;
     let mut skipped = Skipped::default();
-    // A message heard twice (its sender put it again when the launcher said it was lost on the
-    // way) is one message, as for every receiver; a node's status is no output of its algorithm.
-    let mut heard = std::collections::HashSet::new();
+    // A node's status is no output of its algorithm (repeats are passed over by `run_messages`).
     for (i, m, msg) in run_messages(recording, &mut skipped) {
-        let hash = {
-            use std::hash::{Hash, Hasher};
-            let mut h = std::collections::hash_map::DefaultHasher::new();
-            (m.topic, &m.data[..]).hash(&mut h);
-            h.finish()
-        };
-        if !heard.insert(hash) {
-            continue;
-        }
         if msg.envelope.sender == id && !matches!(msg.payload, glissade_messages::Payload::NodeStatus(_)) {
             recorded_outputs += 1;
             recorded

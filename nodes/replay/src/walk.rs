@@ -54,12 +54,25 @@ impl Skipped {
 
 /// The run's messages of `recording`, decoded, with their position in file order: those that
 /// decode as the run's, sit on their sender's key and are of a kind their sender sends
-/// ([`Message::not_from_its_sender`]); the others are counted in `skipped`.
+/// ([`Message::not_from_its_sender`]); the others are counted in `skipped`. A repeat of a message
+/// (same key and bytes) is passed over.
 pub fn run_messages<'r>(
     recording: &'r Recording,
     skipped: &'r mut Skipped,
 ) -> impl Iterator<Item = (usize, RecordedMessage<'r>, Message)> + 'r {
+    // A message heard twice (its sender put it again when the launcher said it was lost on the
+    // way) is one message, as for every receiver: the repeat is passed over.
+    let mut heard = std::collections::HashSet::new();
     recording.messages().enumerate().filter_map(move |(i, m)| {
+        let hash = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            (m.topic, &m.data[..]).hash(&mut h);
+            h.finish()
+        };
+        if !heard.insert(hash) {
+            return None;
+        }
         let why = match recording.decode(&m) {
             Ok(msg) => match msg.not_from_its_sender(m.topic) {
                 None => return Some((i, m, msg)),
