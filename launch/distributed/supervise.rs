@@ -255,7 +255,22 @@ impl<'r> Supervisor<'r> {
             self.child_failure(&mut spawned.children, true)?
         };
         if child_failure.is_none() {
-            child_failure = self.hosted_failure(&mut spawned.hosted);
+            child_failure = self.hosted_failure(&mut spawned.hosted).map(|(name, why)| {
+                // A node of the launcher's process that left because a peer's token went is not
+                // the culprit when that peer's process still runs (stopped or hung): name it, as
+                // for a node process that exited for that reason.
+                match silent_peer(&mut spawned.children) {
+                    Some((p, lost)) => format!(
+                        "node {} stopped answering: its liveliness token disappeared {:.1} s ago, before node {name} \
+                         (in the launcher's process) failed, while its process still runs (stopped or hung?); its last \
+                         lines:\n    {}",
+                        p.name,
+                        lost.elapsed().as_secs_f64(),
+                        p.last_lines()
+                    ),
+                    None => why,
+                }
+            });
         }
         // A node started by hand that left before the end is the culprit if it left first (the
         // others leave after it, DEPARTURE_GRACE later); messages already sent may still bring
@@ -362,13 +377,13 @@ impl<'r> Supervisor<'r> {
 
     /// The first node run in the launcher's process that failed (or ended before the run
     /// started).
-    fn hosted_failure(&self, hosted: &mut [HostedNode]) -> Option<String> {
+    fn hosted_failure(&self, hosted: &mut [HostedNode]) -> Option<(NodeName, String)> {
         let started = self.got.started.is_some();
         hosted.iter_mut().find_map(|h| {
             let name = h.name;
             match h.outcome()? {
-                Err(e) => Some(format!("node {name} (in the launcher's process) failed: {e}")),
-                Ok(()) if !started => Some(format!("node {name} ended before the run started")),
+                Err(e) => Some((name, format!("node {name} (in the launcher's process) failed: {e}"))),
+                Ok(()) if !started => Some((name, format!("node {name} ended before the run started"))),
                 Ok(()) => None,
             }
         })
@@ -903,6 +918,23 @@ pub(super) fn count<'a>(traffic: &mut Traffic, a: &'a Arrival) -> Option<&'a zen
     t.messages += 1;
     t.bytes += a.size as u64;
     a.bytes.as_ref()
+}
+
+/// The node process whose liveliness token went first while the process still runs (stopped or
+/// hung), and when its token went.
+fn silent_peer(children: &mut Children) -> Option<(&NodeProcess, Instant)> {
+    let k = children
+        .0
+        .iter_mut()
+        .enumerate()
+        .filter_map(|(k, p)| {
+            let running = p.status.is_none() && p.child.try_wait().ok().flatten().is_none();
+            Some((k, p.token_lost.filter(|_| running)?))
+        })
+        .min_by_key(|(_, lost)| *lost)
+        .map(|(k, _)| k)?;
+    let p = &children.0[k];
+    Some((p, p.token_lost?))
 }
 
 /// What a node process has come to since the launcher last looked.
