@@ -347,35 +347,24 @@ fn other_payload() -> impl Strategy<Value = Payload> {
 }
 
 fn message() -> impl Strategy<Value = Message> {
-    (any::<u32>(), 0usize..6, 0usize..5, any::<u32>(), payload()).prop_map(
-        |(iteration, stage, role, index, payload)| Message {
-            envelope: Envelope {
-                schema_version: SCHEMA_VERSION,
-                run_id: RUN.into(),
-                scene_fingerprint: SCENE,
-                iteration,
-                stage: [
-                    Stage::Setup,
-                    Stage::Micro1,
-                    Stage::Macro,
-                    Stage::Linear,
-                    Stage::Local,
-                    Stage::Final,
-                ][stage],
-                sender: NodeId {
-                    role: [
-                        Role::Subdomain,
-                        Role::Interface,
-                        Role::Coarse,
-                        Role::Launcher,
-                        Role::Recorder,
-                    ][role],
-                    index,
-                },
-            },
-            payload,
+    (any::<u32>(), 0usize..6, node_id(), payload()).prop_map(|(iteration, stage, sender, payload)| Message {
+        envelope: Envelope {
+            schema_version: SCHEMA_VERSION,
+            run_id: RUN.into(),
+            scene_fingerprint: SCENE,
+            iteration,
+            stage: [
+                Stage::Setup,
+                Stage::Micro1,
+                Stage::Macro,
+                Stage::Linear,
+                Stage::Local,
+                Stage::Final,
+            ][stage],
+            sender,
         },
-    )
+        payload,
+    })
 }
 
 /// A way bytes get damaged.
