@@ -17,6 +17,7 @@
 
 mod codec;
 mod field;
+mod hash;
 mod identity;
 mod overrides;
 mod payload;
@@ -31,6 +32,7 @@ pub use codec::{
     DecodeError, Expected, Piece,
 };
 pub use field::{BufferPool, DecodeBuffers, Field, HoldSource};
+pub use hash::{message_hash, message_hash_parts, MESSAGE_HASH_END};
 pub use identity::{Envelope, NodeId, Role, Stage};
 pub use overrides::{Overrides, RecordOverride};
 pub use payload::{

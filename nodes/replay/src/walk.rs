@@ -64,13 +64,7 @@ pub fn run_messages<'r>(
     // way) is one message, as for every receiver: the repeat is passed over.
     let mut heard = std::collections::HashSet::new();
     recording.messages().enumerate().filter_map(move |(i, m)| {
-        let hash = {
-            use std::hash::{Hash, Hasher};
-            let mut h = std::collections::hash_map::DefaultHasher::new();
-            (m.topic, &m.data[..]).hash(&mut h);
-            h.finish()
-        };
-        if !heard.insert(hash) {
+        if !heard.insert(glissade_messages::message_hash(m.topic, &m.data)) {
             return None;
         }
         let why = match recording.decode(&m) {

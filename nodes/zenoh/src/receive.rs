@@ -3,9 +3,10 @@
 //! recognise repeats ([`message_hash`]), and the cutting of arrivals into batches without
 //! repeats.
 
+pub use glissade_messages::message_hash;
 use glissade_messages::{decode, decode_from_slices, DecodeBuffers, DecodeError, Expected, Message};
+use glissade_messages::{message_hash_parts, MESSAGE_HASH_END};
 use std::collections::HashSet;
-use std::hash::{Hash, Hasher};
 use std::sync::Arc;
 
 /// A message as it arrived: its key, its hash ([`message_hash`]: repeats are recognised by it),
@@ -50,16 +51,21 @@ impl Received {
 /// blocks of a message sent with [`crate::publish_lent`]) without joining them.
 pub fn payload_hash(key: &str, payload: &zenoh::bytes::ZBytes) -> u64 {
     let slices: Vec<&[u8]> = payload.slices().collect();
-    let head: Vec<u8> = slices.iter().flat_map(|s| s.iter()).take(HASHED_END).copied().collect();
+    let head: Vec<u8> = slices
+        .iter()
+        .flat_map(|s| s.iter())
+        .take(MESSAGE_HASH_END)
+        .copied()
+        .collect();
     let mut tail: Vec<u8> = slices
         .iter()
         .rev()
         .flat_map(|s| s.iter().rev())
-        .take(HASHED_END)
+        .take(MESSAGE_HASH_END)
         .copied()
         .collect();
     tail.reverse();
-    hash_parts(key, payload.len(), &head, &tail)
+    message_hash_parts(key, payload.len(), &head, &tail)
 }
 
 /// A payload decoded where its slices lie, into `buffers`.
@@ -151,31 +157,6 @@ pub(crate) fn batches(received: impl IntoIterator<Item = Box<Received>>) -> Vec<
             .push(*r);
     }
     out
-}
-
-/// A 64-bit hash of a message's key and bytes (its envelope and up to 4 KiB at each end, and its
-/// length: a re-sent message is byte-identical, since nodes are deterministic).
-pub fn message_hash(key: &str, bytes: &[u8]) -> u64 {
-    let n = bytes.len();
-    hash_parts(
-        key,
-        n,
-        &bytes[..n.min(HASHED_END)],
-        &bytes[n.saturating_sub(HASHED_END)..],
-    )
-}
-
-/// Bytes of each end of a message that [`message_hash`] reads.
-const HASHED_END: usize = 4096;
-
-/// [`message_hash`] of a message of `len` bytes from its first and last (up to) [`HASHED_END`].
-fn hash_parts(key: &str, len: usize, head: &[u8], tail: &[u8]) -> u64 {
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    key.hash(&mut h);
-    len.hash(&mut h);
-    head.hash(&mut h);
-    tail.hash(&mut h);
-    h.finish()
 }
 
 #[cfg(test)]

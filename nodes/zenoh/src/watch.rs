@@ -106,6 +106,16 @@ struct NodeState {
     awaits: Vec<Awaited>,
 }
 
+impl NodeState {
+    fn of(node: &dyn glissade_bus::Node) -> Self {
+        Self {
+            id: node.id(),
+            finished: node.is_finished(),
+            awaits: node.awaits(),
+        }
+    }
+}
+
 /// The last messages a node put on a key: the last one, or all of the last iteration's where a
 /// key carries several (an interface node's final solutions).
 struct Kept {
@@ -146,14 +156,7 @@ impl Watch {
 
     /// The nodes' waits and states, once the process has handled what it had (it is idle).
     pub(crate) fn update(&self, nodes: &[Box<dyn glissade_bus::Node>]) {
-        let states = nodes
-            .iter()
-            .map(|n| NodeState {
-                id: n.id(),
-                finished: n.is_finished(),
-                awaits: n.awaits(),
-            })
-            .collect();
+        let states = nodes.iter().map(|n| NodeState::of(n.as_ref())).collect();
         let mut s = self.lock();
         s.nodes = states;
         s.busy_since = None;
@@ -169,15 +172,7 @@ impl Watch {
             .filter(|(_, t)| **t)
             .map(|(k, t)| {
                 *t = false;
-                let n = &nodes[k];
-                (
-                    k,
-                    NodeState {
-                        id: n.id(),
-                        finished: n.is_finished(),
-                        awaits: n.awaits(),
-                    },
-                )
+                (k, NodeState::of(nodes[k].as_ref()))
             })
             .collect();
         let mut s = self.lock();
