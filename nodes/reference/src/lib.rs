@@ -66,11 +66,25 @@
 //! solved once more with a small shift of the λ diagonal (a proximal step in λ, see
 //! `Problem::newton_step`); the residual and the checks are unchanged, so only the route differs.
 //!
-//! **Convergence** (per step, all ≤ `tolerance`), with F_s = max(‖K u‖_∞ over all dofs including
-//! reactions, ‖f‖_∞, max_m |λ_m|_∞) (N) and U_s = ‖u‖_∞ (mm) of the step:
+//! **Convergence** (per step, all ≤ `tolerance`), against the scene's scales F_s (N) and U_s (mm)
+//! of [`Scales::of`], the same for every step and for [`verify`]: F_s = max(P, E_max·U_d), U_s =
+//! max(U_d, P/E_min), with P the largest total applied load Σ|f| over the time points, U_d the
+//! largest prescribed displacement or |g0|, E_min, E_max the extreme Young moduli (and a floor of
+//! a strain of 1e-12 over the scene's size, so that both stay positive for a scene without load).
+//! They come from the scene alone, never from the solution checked, and a time point of zero load
+//! (an unloaded laminate, where the pairs sit at λ ≈ 0 and g ≈ 0) is checked against the same
+//! scales as the loaded ones:
 //! equilibrium ‖K u − f − contact‖_∞,free / F_s; penetration max(0, −g)/U_s; tension
 //! max(0, λ_n)/F_s; complementarity min(|λ_n|/F_s, |g|/U_s); cone max(0, |λ_t| − f|λ_n|)/F_s;
-//! slip direction min(|Δs|/U_s, |λ_t − f|λ_n| sign Δs|/F_s).
+//! slip direction min(|Δs|/U_s, |λ_t − f|λ_n| sign Δs|/F_s). Only the part of a residual, a gap
+//! or a slip increment beyond its round-off ([`ROUND_OFF`] times the magnitudes of the
+//! terms it is computed from) counts: a cantilever bent by a rigid rotation of tens of mm has
+//! terms of K u a million times the loads, whose round-off is above 1e-10 of the loads.
+//!
+//! A converged step whose displacement exceeds [`DISPLACEMENT_BOUND`] times the scene's size, or
+//! whose nodal forces (K u, supports and contact) exceed [`FORCE_BOUND`] times F_s, ends the run
+//! with [`ReferenceError::Implausible`] naming the step: small residuals against the scene's
+//! scales cannot be reached by such a solution unless the problem is singular.
 //!
 //! **Output** per interface in the layout of [`InterfaceFields`] (traction = nodal force /
 //! weight). A contact copy carries the share w_p/W_m of its merged pair's force (all copies have
@@ -86,9 +100,11 @@ pub mod glued;
 mod newton;
 mod numbering;
 mod output;
+mod scales;
 mod sparse;
 mod verify;
 
+pub use scales::{Scales, DISPLACEMENT_BOUND, FORCE_BOUND, ROUND_OFF};
 pub use verify::{verify, Checks};
 
 use faer::Mat;
@@ -265,6 +281,9 @@ pub enum ReferenceError {
         violation: f64,
         tolerance: f64,
     },
+    /// A step converged to a solution of absurd size ([`Scales::implausible`]).
+    #[error("time step {step} (t = {time}): the solution is implausible: {reason}")]
+    Implausible { step: usize, time: f64, reason: String },
 }
 
 fn tried_list(tried: &[FailedAttempt]) -> String {
@@ -344,6 +363,15 @@ pub fn solve_reference_steps(model: &Model, opts: &ReferenceOptions) -> Result<R
             break;
         };
         let u = pb.displacement(&s.x, &prescribed);
+        let (u_max, f_max) = pb.magnitudes(&s.x, &u);
+        if let Some(reason) = pb.scales.implausible(u_max, f_max) {
+            failure = Some(ReferenceError::Implausible {
+                step: i,
+                time: t,
+                reason,
+            });
+            break;
+        }
         for (m, sp) in slip_prev.iter_mut().enumerate() {
             *sp = dot(pb.jump(m, &u), pb.pairs[m].tangent);
         }

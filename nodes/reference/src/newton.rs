@@ -1,6 +1,7 @@
 //! Semi-smooth Newton on the Alart–Curnier augmented Lagrangian, one time step at a time.
 
 use crate::numbering::*;
+use crate::scales::{Scales, ROUND_OFF};
 use crate::sparse::*;
 use crate::verify::*;
 use crate::{Attempt, LinearSolver, ReferenceError, ReferenceOptions, NONE};
@@ -36,16 +37,6 @@ pub(crate) struct StepState {
     pub(crate) x: Vec<f64>,
 }
 
-/// Lower bound of the force scale F_s: 1e-4 · max|K_ii| · U_s. Without it a stress-free
-/// solution (a rigid motion: K u is round-off, f = 0, no contact force) has F_s at round-off level
-/// and the relative equilibrium check compares round-off with round-off (it failed at 0.5 on a
-/// rigid translation). Round-off in K u is about 1e-15 · max|K_ii| · U_s, so the relative residual
-/// stays near 1e-11 there, while for a loaded problem |K u| ~ max|K_ii| · U_s · h/L is far above
-/// the floor (h/L ≥ 1e-3 for any mesh of this project) and the checks are unchanged.
-pub(crate) fn force_floor(k_diag: f64, us: f64) -> f64 {
-    1e-4 * k_diag * us
-}
-
 pub(crate) struct Problem<'m> {
     pub(crate) model: &'m Model,
     pub(crate) num: Numbering,
@@ -53,8 +44,8 @@ pub(crate) struct Problem<'m> {
     pub(crate) free: Vec<usize>,
     pub(crate) n_free: usize,
     pub(crate) k: Csr,
-    /// max |K_ii|: with U_s it bounds the force scale from below ([`force_floor`]).
-    pub(crate) k_diag: f64,
+    /// The scene's scales of the convergence checks.
+    pub(crate) scales: Scales,
     pub(crate) pairs: Vec<MergedPair>,
     /// Per interface and pair: (merged pair, orientation sign) for contact interfaces.
     pub(crate) copies: Vec<Vec<(usize, f64)>>,
@@ -177,7 +168,7 @@ impl<'m> Problem<'m> {
             n_dofs,
             free,
             n_free,
-            k_diag: k.max_abs_diagonal(),
+            scales: Scales::of(model),
             k,
             pairs,
             copies,
@@ -244,38 +235,38 @@ impl<'m> Problem<'m> {
         [u[2 * b] - u[2 * a], u[2 * b + 1] - u[2 * a + 1]]
     }
 
-    /// Equilibrium residual on free dofs, K u over all dofs (for the scale) and the largest
-    /// relative violation of the step's convergence checks.
+    /// Equilibrium residual on free dofs and the largest relative violation of the step's
+    /// convergence checks, against the scene's scales ([`Scales`]).
     pub(crate) fn residual(&self, x: &[f64], u: &[f64], f: &[f64], slip_prev: &[f64]) -> (Vec<f64>, f64) {
         let mut ku = vec![0.0; self.n_dofs];
         self.k.matvec_into(u, &mut ku);
         let mut r_dof: Vec<f64> = ku.iter().zip(f).map(|(a, b)| a - b).collect();
-        let mut fs = ku.iter().chain(f).fold(0.0f64, |a, v| a.max(v.abs()));
+        // Magnitude of the terms of each residual entry (for its round-off, [`ROUND_OFF`]).
+        let mut mag = vec![0.0; self.n_dofs];
+        self.k.abs_matvec_into(u, &mut mag);
+        for (m, fv) in mag.iter_mut().zip(f) {
+            *m += fv.abs();
+        }
         for (m, mp) in self.pairs.iter().enumerate() {
             let (ln, lt) = (x[self.n_free + 2 * m], x[self.n_free + 2 * m + 1]);
             let lam = [
                 ln * mp.normal[0] + lt * mp.tangent[0],
                 ln * mp.normal[1] + lt * mp.tangent[1],
             ];
-            fs = fs.max(lam[0].abs()).max(lam[1].abs());
             for c in 0..2 {
                 r_dof[2 * mp.node_a + c] -= lam[c];
                 r_dof[2 * mp.node_b + c] += lam[c];
+                mag[2 * mp.node_a + c] += lam[c].abs();
+                mag[2 * mp.node_b + c] += lam[c].abs();
             }
         }
-        // Displacements scale the gaps' violations: an interference (g0 < 0) with no other load
-        // moves the parts by about |g0|.
-        let us = u
-            .iter()
-            .fold(0.0f64, |a, v| a.max(v.abs()))
-            .max(self.pairs.iter().fold(0.0f64, |a, mp| a.max(mp.gap.abs())));
-        let fs = fs.max(force_floor(self.k_diag, us));
+        let (fs, us) = (self.scales.force, self.scales.displacement);
         let mut r = vec![0.0; self.n_unknowns()];
         let mut worst = 0.0f64;
         for (g, &fg) in self.free.iter().enumerate() {
             if fg != NONE {
                 r[fg] = r_dof[g];
-                let v = r_dof[g].abs();
+                let v = (r_dof[g].abs() - ROUND_OFF * mag[g]).max(0.0);
                 if v != 0.0 {
                     worst = worst.max(v / fs);
                 }
@@ -286,10 +277,25 @@ impl<'m> Problem<'m> {
             let (ln, lt) = (x[self.n_free + 2 * m], x[self.n_free + 2 * m + 1]);
             let gap = dot(jump, mp.normal) + mp.gap;
             let dslip = dot(jump, mp.tangent) - slip_prev[m];
-            let v = law_violations(ln, lt, gap, dslip, mp.friction, fs, us);
+            let (ua, ub) = (2 * mp.node_a, 2 * mp.node_b);
+            let round = ROUND_OFF
+                * (u[ua].abs().max(u[ua + 1].abs())
+                    + u[ub].abs().max(u[ub + 1].abs())
+                    + mp.gap.abs()
+                    + slip_prev[m].abs());
+            let v = law_violations(ln, lt, gap, dslip, mp.friction, fs, us, round);
             worst = v.into_iter().fold(worst, f64::max);
         }
         (r, worst)
+    }
+
+    /// Largest displacement (mm) and largest nodal force (N: K u at every dof, supports included,
+    /// and the contact forces) of a state.
+    pub(crate) fn magnitudes(&self, x: &[f64], u: &[f64]) -> (f64, f64) {
+        let mut ku = vec![0.0; self.n_dofs];
+        self.k.matvec_into(u, &mut ku);
+        let f_max = ku.iter().chain(&x[self.n_free..]).fold(0.0f64, |a, v| a.max(v.abs()));
+        (u.iter().fold(0.0f64, |a, v| a.max(v.abs())), f_max)
     }
 
     /// Alart–Curnier residual rows of every pair, written into `r` (rows n_free..), their

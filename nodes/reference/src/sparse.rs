@@ -40,20 +40,6 @@ impl Csr {
         Self { row_ptr, col, val }
     }
 
-    /// max_i |A_ii|.
-    pub(crate) fn max_abs_diagonal(&self) -> f64 {
-        (0..self.row_ptr.len() - 1)
-            .flat_map(|i| {
-                let r = self.row_ptr[i]..self.row_ptr[i + 1];
-                self.col[r.clone()]
-                    .iter()
-                    .zip(&self.val[r])
-                    .filter(move |(&j, _)| j == i)
-                    .map(|(_, v)| v.abs())
-            })
-            .fold(0.0, f64::max)
-    }
-
     /// y = A x.
     pub(crate) fn matvec_into(&self, x: &[f64], y: &mut [f64]) {
         for (i, yi) in y.iter_mut().enumerate() {
@@ -62,6 +48,19 @@ impl Csr {
                 .iter()
                 .zip(&self.val[r])
                 .map(|(&j, &v)| v * x[j])
+                .sum();
+        }
+    }
+
+    /// y = |A| |x| (entry by entry: y_i = Σ_j |a_ij x_j|), the magnitude whose round-off bounds
+    /// that of A x.
+    pub(crate) fn abs_matvec_into(&self, x: &[f64], y: &mut [f64]) {
+        for (i, yi) in y.iter_mut().enumerate() {
+            let r = self.row_ptr[i]..self.row_ptr[i + 1];
+            *yi = self.col[r.clone()]
+                .iter()
+                .zip(&self.val[r])
+                .map(|(&j, &v)| (v * x[j]).abs())
                 .sum();
         }
     }

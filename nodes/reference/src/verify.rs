@@ -1,7 +1,7 @@
 //! Checks of a solution against the discrete problem, from per-subdomain displacements and
 //! per-interface fields alone.
 
-use crate::newton::*;
+use crate::scales::{Scales, ROUND_OFF};
 use crate::sparse::*;
 use crate::{ReferenceError, ReferenceSolution};
 use faer::Mat;
@@ -12,10 +12,10 @@ use glissade_mechanics::model::{InterfaceKind, Model};
 /// Largest relative violations of the discrete problem by a solution (see [`verify`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Checks {
-    /// F_s = max over subdomains, time points and dofs of |K_s u_s|, |f_s| and the interface
-    /// nodal forces w·|F| (N).
+    /// F_s: the scene's force scale ([`Scales::of`]: from the loads over the whole history, the
+    /// prescribed displacements and gaps, never from the solution checked) (N).
     pub force_scale: f64,
-    /// U_s = max |u| over subdomains, time points and dofs (mm).
+    /// U_s: the scene's displacement scale ([`Scales::of`]) (mm).
     pub displacement_scale: f64,
     /// ‖K_s u_s − f_s − Σ interface nodal forces‖ at non-prescribed dofs / F_s.
     pub equilibrium: f64,
@@ -57,8 +57,11 @@ impl Checks {
 }
 
 /// Contact-law violations of one pair: [penetration, tension, complementarity, cone, slip
-/// direction], relative to the force scale `fs` (N) and displacement scale `us` (mm). A zero
-/// scale makes any nonzero violation infinite.
+/// direction], relative to the force scale `fs` (N) and displacement scale `us` (mm). `round`
+/// (mm) is the round-off of the gap and the slip increment ([`ROUND_OFF`] times the magnitudes
+/// they are computed from): only the part of |g| and |Δs| beyond it counts. A zero scale makes
+/// any nonzero violation infinite.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn law_violations(
     lam_n: f64,
     lam_t: f64,
@@ -67,16 +70,18 @@ pub(crate) fn law_violations(
     friction: f64,
     fs: f64,
     us: f64,
+    round: f64,
 ) -> [f64; 5] {
     let rel = |v: f64, s: f64| if v == 0.0 { 0.0 } else { v / s };
+    let beyond = |v: f64| (v - round).max(0.0);
     let limit = friction * lam_n.abs();
     let slip_force = if dslip == 0.0 { 0.0 } else { limit * dslip.signum() };
     [
-        rel((-gap).max(0.0), us),
+        rel(beyond(-gap), us),
         rel(lam_n.max(0.0), fs),
-        rel(lam_n.abs(), fs).min(rel(gap.abs(), us)),
+        rel(lam_n.abs(), fs).min(rel(beyond(gap.abs()), us)),
         rel((lam_t.abs() - limit).max(0.0), fs),
-        rel(dslip.abs(), us).min(rel((lam_t - slip_force).abs(), fs)),
+        rel(beyond(dslip.abs()), us).min(rel((lam_t - slip_force).abs(), fs)),
     ]
 }
 
@@ -84,10 +89,21 @@ pub(crate) fn law_violations(
 /// displacements and the per-interface fields alone (no merged numbering, no λ unknowns): every
 /// subdomain's equilibrium with the interface nodal forces w·F, the prescribed displacements,
 /// trace continuity and action–reaction on every interface, and the contact law on every copy of
-/// every contact pair. Scales: see [`Checks`] (maxima over the whole run).
+/// every contact pair. Scales: the scene's ([`Scales::of`], the same as the Newton stop's).
+///
+/// A solution of implausible size ([`Scales::implausible`]: displacements beyond 100 times the
+/// scene's size, or internal, support or interface nodal forces beyond 1e6 times the force scale)
+/// is an error naming the first such time point, whatever its residuals.
 pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, ReferenceError> {
     let nt = model.time.n_points();
-    let mut ch = Checks::default();
+    let scales = Scales::of(model);
+    let mut ch = Checks {
+        force_scale: scales.force,
+        displacement_scale: scales.displacement,
+        ..Checks::default()
+    };
+    // Largest displacement and nodal force per time point.
+    let mut sizes = vec![(0.0f64, 0.0f64); nt];
     let sub_k: Vec<Csr> = model
         .subdomains
         .iter()
@@ -98,7 +114,8 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
             ))
         })
         .collect::<Result<_, AssemblyError>>()?;
-    // Residuals K u − f − interface forces, and the prescribed values, per subdomain and time.
+    // |K u − f − interface forces| beyond round-off, and the prescribed values, per subdomain and
+    // time.
     let mut residuals: Vec<Vec<Vec<f64>>> = Vec::new();
     let mut prescribed_err = 0.0f64;
     for (s, sub) in model.subdomains.iter().enumerate() {
@@ -106,17 +123,20 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
         for i in 0..nt {
             let t = model.time.t(i);
             let us: Vec<f64> = (0..sub.n_dofs()).map(|d| sol.u[s][(d, i)]).collect();
-            ch.displacement_scale = us.iter().fold(ch.displacement_scale, |a, v| a.max(v.abs()));
             let mut r = vec![0.0; sub.n_dofs()];
             sub_k[s].matvec_into(&us, &mut r);
-            ch.force_scale = r.iter().fold(ch.force_scale, |a, v| a.max(v.abs()));
+            // Magnitude of the terms of each residual entry (for its round-off).
+            let mut mag = vec![0.0; sub.n_dofs()];
+            sub_k[s].abs_matvec_into(&us, &mut mag);
+            let size = &mut sizes[i];
+            size.0 = us.iter().fold(size.0, |a, v| a.max(v.abs()));
+            size.1 = r.iter().fold(size.1, |a, v| a.max(v.abs()));
             let mut ud = vec![0.0; sub.n_dofs()];
             for case in &sub.loads {
                 let phi = case.time.eval(t);
                 for d in 0..sub.n_dofs() {
-                    let fv = case.force[d] * phi;
-                    ch.force_scale = ch.force_scale.max(fv.abs());
-                    r[d] -= fv;
+                    r[d] -= case.force[d] * phi;
+                    mag[d] += (case.force[d] * phi).abs();
                     ud[d] += case.displacement[d] * phi;
                 }
             }
@@ -134,17 +154,31 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
                     let node = itf.node(side, p);
                     for c in 0..2 {
                         let nf = itf.weights[p] * f[(2 * p + c, i)];
-                        ch.force_scale = ch.force_scale.max(nf.abs());
+                        sizes[i].1 = sizes[i].1.max(nf.abs());
                         r[2 * node + c] -= nf;
+                        mag[2 * node + c] += nf.abs();
                     }
                 }
             }
-            per_time.push(r);
+            // The part of each residual beyond its round-off.
+            per_time.push(
+                r.iter()
+                    .zip(&mag)
+                    .map(|(v, m)| (v.abs() - ROUND_OFF * m).max(0.0))
+                    .collect(),
+            );
         }
         residuals.push(per_time);
     }
-    let k_diag = sub_k.iter().map(Csr::max_abs_diagonal).fold(0.0, f64::max);
-    ch.force_scale = ch.force_scale.max(force_floor(k_diag, ch.displacement_scale));
+    for (i, &(u_max, f_max)) in sizes.iter().enumerate() {
+        if let Some(reason) = scales.implausible(u_max, f_max) {
+            return Err(ReferenceError::Implausible {
+                step: i,
+                time: model.time.t(i),
+                reason,
+            });
+        }
+    }
     let (fs, us) = (ch.force_scale, ch.displacement_scale);
     let rel = |v: f64, s: f64| if v == 0.0 { 0.0 } else { v / s };
     ch.prescribed = rel(prescribed_err, us);
@@ -152,7 +186,7 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
         for r in &residuals[s] {
             for (d, &v) in r.iter().enumerate() {
                 if !sub.constrained[d] {
-                    ch.equilibrium = ch.equilibrium.max(rel(v.abs(), fs));
+                    ch.equilibrium = ch.equilibrium.max(rel(v, fs));
                 }
             }
         }
@@ -166,7 +200,7 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
         for p in 0..itf.n_pairs() {
             let (na, nb) = itf.pairs[p];
             let w = itf.weights[p];
-            let mut slip_prev = 0.0;
+            let mut slip_prev = 0.0f64;
             for i in 0..nt {
                 let g = |m: &Mat<f64>| [m[(2 * p, i)], m[(2 * p + 1, i)]];
                 let (wa, wb, fa, fb) = (g(&fl.w_a), g(&fl.w_b), g(&fl.f_a), g(&fl.f_b));
@@ -184,6 +218,11 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
                     let jump = [wb[0] - wa[0], wb[1] - wa[1]];
                     let lam = [w * fa[0], w * fa[1]];
                     let slip = dot(jump, itf.tangent(p));
+                    let round = ROUND_OFF
+                        * (wa[0].abs().max(wa[1].abs())
+                            + wb[0].abs().max(wb[1].abs())
+                            + gap0[p].abs()
+                            + slip_prev.abs());
                     let v = law_violations(
                         dot(lam, itf.normal(p)),
                         dot(lam, itf.tangent(p)),
@@ -192,6 +231,7 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
                         friction,
                         fs,
                         us,
+                        round,
                     );
                     slip_prev = slip;
                     ch.penetration = ch.penetration.max(v[0]);
