@@ -1,5 +1,5 @@
-//! The reference on the 4-ply laminate of issue 32 (fixtures/laminate*.toml), and how a step that
-//! does not converge is reported.
+//! The reference on the 4-ply laminates of issues 32 and 55 (fixtures/laminate*.toml: pressed,
+//! without pressure, unloading to zero), and how a step that does not converge is reported.
 
 use glissade_mechanics::model::Model;
 use glissade_reference::*;
@@ -23,9 +23,13 @@ fn laminate_no_pressure() -> Model {
     )
 }
 
+fn laminate_unload() -> Model {
+    model_of(include_str!("fixtures/laminate-unload.toml"), "laminate-unload.toml")
+}
+
 /// Solves with the default options, prints iterations and time, and checks the solution against
 /// the discrete problem at the solver's tolerance.
-fn converges_and_verifies(model: &Model) {
+fn converges_and_verifies(model: &Model) -> ReferenceSolution {
     let start = Instant::now();
     let sol = solve_reference(model, &ReferenceOptions::default()).unwrap_or_else(|e| panic!("{}: {e}", model.name));
     let elapsed = start.elapsed().as_secs_f64();
@@ -40,11 +44,63 @@ fn converges_and_verifies(model: &Model) {
     println!("{}: {checks:?}", model.name);
     assert_eq!(sol.newton_iterations.len(), model.time.n_points());
     assert!(checks.max() <= 1e-10, "{}: {checks:?}", model.name);
+    sol
 }
 
 #[test]
 fn laminate_reference_converges() {
     converges_and_verifies(&laminate());
+}
+
+/// The laminate of issue 55 that unloads to zero: every time point solved, the last one (t = 1,
+/// no load at all) included, by the first attempt.
+#[test]
+fn laminate_unloading_to_zero_solves_every_time_point() {
+    let model = laminate_unload();
+    let sol = converges_and_verifies(&model);
+    let last = model.time.n_points() - 1;
+    let load_at = |i: usize| {
+        let t = model.time.t(i);
+        model
+            .subdomains
+            .iter()
+            .flat_map(|s| {
+                s.loads
+                    .iter()
+                    .map(move |c| c.force.iter().map(|f| (f * c.time.eval(t)).abs()).sum::<f64>())
+            })
+            .sum::<f64>()
+    };
+    assert_eq!(load_at(last), 0.0);
+    assert!(load_at(25) > 199.0);
+    let u_at = |i: usize| sol.u.iter().map(|u| u.col(i).norm_max()).fold(0.0, f64::max);
+    let contact_at = |i: usize| {
+        sol.contact
+            .iter()
+            .flatten()
+            .map(|c| c.lambda.col(i).norm_max())
+            .fold(0.0, f64::max)
+    };
+    println!(
+        "largest |u| (mm) and contact force (N): held (t = 0.5) {:.3e}, {:.3e}; unloaded (t = 1) {:.3e}, {:.3e}",
+        u_at(25),
+        contact_at(25),
+        u_at(last),
+        contact_at(last)
+    );
+    // Unloaded, the plies slide back to the state they started from: the measured solution at
+    // t = 1 is zero to round-off (1e-16 mm, 1e-16 N; 1e-18 of the held state's 83 mm), so every
+    // pair sits at λ = 0, g = 0, the degenerate corner of its law. 1e-9 of the held state leaves
+    // room for round-off and none for a state that kept part of the load's deformation.
+    assert!(u_at(last) <= 1e-9 * u_at(25) && contact_at(last) <= 1e-9 * contact_at(25));
+    // Solved by the first (monotone, 50 iterations) attempt: the step at zero load was the one
+    // that no attempt solved in 1250 iterations when the checks were relative to the step's own
+    // (vanishing) forces and displacements.
+    assert!(
+        sol.newton_iterations[last] <= ReferenceOptions::default().max_newton_iterations,
+        "{:?}",
+        sol.newton_iterations
+    );
 }
 
 #[test]
