@@ -58,6 +58,15 @@
 //!   the same 837 Newton iterations (one numeric sparse LU of J costs about 1.1 s). Falls back to
 //!   `SparseLu` when K_ff is not positive definite (a body held only through contact).
 //!
+//! **Parts held only by contact across a gap.** K_ff is factorised (sparse Cholesky) once,
+//! whichever linear solver is chosen; where it is not positive definite a part, or one of its
+//! rigid motions, is held by nothing but contact. If such a scene has pairs with an open initial
+//! gap (g0 > 0), the first Newton step from zero (those pairs separated) would be singular: the part
+//! floats until its gaps close. Step 0 then starts with every such pair closed and stuck
+//! (λ_n = −(F_s + r·g0), see `Problem::initial_state`), so its first Newton step is the linear
+//! solve with every pair in contact; the pairs that are open in the solution open in the
+//! following iterations. The discrete problem and the checks are unchanged.
+//!
 //! J is singular where the active contact constraints are linearly dependent: where contact pairs
 //! close a cycle of node copies (parts cut into sectors at the same angles in two layers, contact
 //! on the cuts and between the layers: four pairs around each cross-point, whose jumps sum to zero),
@@ -112,7 +121,7 @@ use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::laws::{dot, Status};
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::Model;
-use newton::{Problem, StepState};
+use newton::Problem;
 use output::postprocess;
 
 pub(crate) const NONE: usize = usize::MAX;
@@ -320,14 +329,13 @@ pub fn solve_reference(model: &Model, opts: &ReferenceOptions) -> Result<Referen
 pub fn solve_reference_steps(model: &Model, opts: &ReferenceOptions) -> Result<ReferenceRun, ReferenceError> {
     let pb = Problem::new(model, opts.linear_solver)?;
     let nt = model.time.n_points();
-    let mut state = StepState {
-        x: vec![0.0; pb.n_unknowns()],
-    };
+    let attempts = opts.attempts();
+    let r_max = attempts.iter().map(|a| a.r_factor).fold(0.0, f64::max);
+    let mut state = pb.initial_state(r_max);
     let mut slip_prev = vec![0.0; pb.pairs.len()];
     let mut states = Vec::with_capacity(nt);
     let mut newton_iterations = Vec::with_capacity(nt);
     let mut r_factor_used = Vec::with_capacity(nt);
-    let attempts = opts.attempts();
     let mut failure = None;
     for i in 0..nt {
         let t = model.time.t(i);

@@ -46,6 +46,8 @@ pub(crate) struct Problem<'m> {
     pub(crate) k: Csr,
     /// The scene's scales of the convergence checks.
     pub(crate) scales: Scales,
+    /// K_ff is singular: a part (or a rigid motion of one) is held by nothing but contact.
+    pub(crate) floating: bool,
     pub(crate) pairs: Vec<MergedPair>,
     /// Per interface and pair: (merged pair, orientation sign) for contact interfaces.
     pub(crate) copies: Vec<Vec<(usize, f64)>>,
@@ -154,12 +156,11 @@ impl<'m> Problem<'m> {
             }
         }
 
-        let solver = match linear_solver {
-            LinearSolver::Condensed => match condensed_solver(&k, &free, n_free, &pairs)? {
-                Some(c) => StepSolver::Condensed(c),
-                None => StepSolver::SparseLu(lu_pattern(&k, &free, n_free, &pairs)?),
-            },
-            LinearSolver::SparseLu => StepSolver::SparseLu(lu_pattern(&k, &free, n_free, &pairs)?),
+        let k_ff = factorize_k_ff(&k, &free, n_free)?;
+        let floating = k_ff.is_none();
+        let solver = match (linear_solver, k_ff) {
+            (LinearSolver::Condensed, Some(k_ff)) => StepSolver::Condensed(condensed_solver(k_ff, n_free, &pairs)),
+            _ => StepSolver::SparseLu(lu_pattern(&k, &free, n_free, &pairs)?),
         };
         let groups = perfect_groups(model, &num);
         Ok(Self {
@@ -169,6 +170,7 @@ impl<'m> Problem<'m> {
             free,
             n_free,
             scales: Scales::of(model),
+            floating,
             k,
             pairs,
             copies,
@@ -181,6 +183,24 @@ impl<'m> Problem<'m> {
 
     pub(crate) fn n_unknowns(&self) -> usize {
         self.n_free + 2 * self.pairs.len()
+    }
+
+    /// The state step 0 starts from: zero, except where K_ff is singular ([`Self::floating`]): there
+    /// every pair with an open initial gap (g0 > 0) starts in contact and stuck,
+    /// λ_n = −(F_s + r_max·g0), so that ν = λ_n + r g0 < 0 at u = 0 for every r factor up to
+    /// `r_max` (λ_t = 0 is inside the cone). Pairs with g0 ≤ 0 start closed and stuck from zero
+    /// already (ν = r g0 ≤ 0, and a tie counts as contact). The first Newton step is then the
+    /// linear solve with every pair closed and stuck, regular wherever contact holds every part;
+    /// from zero it would be the solve with the open pairs separated, singular for a part held
+    /// only by contact across an open gap. Only the start changes, not the discrete problem.
+    pub(crate) fn initial_state(&self, r_max: f64) -> StepState {
+        let mut x = vec![0.0; self.n_unknowns()];
+        if self.floating {
+            for (m, mp) in self.pairs.iter().enumerate().filter(|(_, mp)| mp.gap > 0.0) {
+                x[self.n_free + 2 * m] = -(self.scales.force + r_max * mp.r_base * mp.gap);
+            }
+        }
+        StepState { x }
     }
 
     /// Merged load vector f(t) and prescribed values at time `t` (zero at free dofs).

@@ -177,14 +177,9 @@ pub(crate) fn lu_pattern(
     })
 }
 
-/// Factorises K_ff and computes the contact-dof rows of Z = K_ff⁻¹ Bᵀ (in blocks of columns).
-/// `None` if K_ff is not positive definite.
-pub(crate) fn condensed_solver(
-    k: &Csr,
-    free: &[usize],
-    n_free: usize,
-    pairs: &[MergedPair],
-) -> Result<Option<CondensedSolver>, ReferenceError> {
+/// Factorises K_ff (sparse Cholesky). `None` if K_ff is not positive definite: a part, or a
+/// rigid motion of one, is held by nothing but contact.
+pub(crate) fn factorize_k_ff(k: &Csr, free: &[usize], n_free: usize) -> Result<Option<SparseSpd>, ReferenceError> {
     let mut k_ff = Vec::new();
     for (i, &fi) in free.iter().enumerate() {
         if fi == NONE {
@@ -197,11 +192,16 @@ pub(crate) fn condensed_solver(
             }
         }
     }
-    let k_ff = match SparseSpd::factorize(n_free, &k_ff, "the free stiffness of the reference solve") {
-        Ok(f) => f,
-        Err(AssemblyError::NotPositiveDefinite { .. }) => return Ok(None),
-        Err(e) => return Err(e.into()),
-    };
+    match SparseSpd::factorize(n_free, &k_ff, "the free stiffness of the reference solve") {
+        Ok(f) => Ok(Some(f)),
+        Err(AssemblyError::NotPositiveDefinite { .. }) => Ok(None),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// Computes the contact-dof rows of Z = K_ff⁻¹ Bᵀ (in blocks of columns) from the factors of
+/// K_ff.
+pub(crate) fn condensed_solver(k_ff: SparseSpd, n_free: usize, pairs: &[MergedPair]) -> CondensedSolver {
     let mut position = vec![NONE; n_free];
     let mut contact_dofs = Vec::new();
     for mp in pairs {
@@ -235,5 +235,5 @@ pub(crate) fn condensed_solver(
             }
         }
     }
-    Ok(Some(CondensedSolver { k_ff, position, z_t }))
+    CondensedSolver { k_ff, position, z_t }
 }
