@@ -40,6 +40,26 @@ fn scales_come_from_the_loads_and_the_scene() {
     );
 }
 
+#[test]
+fn a_scene_without_any_load_has_positive_scales_and_solves_to_zero() {
+    // The laminate without its tip shear: nothing loads it at any time point. Its scales are the
+    // floor of a strain of 1e-12 over the scene (E_max·D·1e-12 N, D·1e-12 mm), so that every
+    // check stays defined; the solution is zero and verifies.
+    let text = include_str!("fixtures/laminate-unload.toml");
+    let cut = text.find("[[boundary]]\nx = 200.0").expect("the tip shear rule");
+    let model = model_of(&text[..cut], "laminate-unload.toml");
+    let s = Scales::of(&model);
+    assert_eq!(
+        (s.force, s.displacement, s.size),
+        (1e-12 * 210000.0 * 200.0, 1e-12 * 200.0, 200.0)
+    );
+    let sol = solve_reference(&model, &ReferenceOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert!(sol.newton_iterations.iter().all(|&n| n == 0));
+    assert!(sol.u.iter().all(|u| u.norm_max() == 0.0));
+    let checks = verify(&model, &sol).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(checks.max(), 0.0, "{checks:?}");
+}
+
 /// The solution of the small three-layer scene with its fields from time point 5 on multiplied
 /// by `c`.
 fn scaled(sol: &ReferenceSolution, c: f64) -> ReferenceSolution {
