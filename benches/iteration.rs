@@ -153,13 +153,13 @@ fn main() {
         for (itf, f) in latin.model.interfaces.iter().zip(&latin.interface_fields) {
             if itf.is_contact() {
                 for side in [&f.f_a, &f.f_b] {
-                    let (n, d) = glissade_mechanics::local::force_step_sums(
+                    let st = glissade_mechanics::local::force_step_sums(
                         &itf.weights,
                         &weights,
                         side.as_ref(),
                         side.as_ref(),
                     );
-                    sink += n + d;
+                    sink += st.num + st.den + st.max_step + st.max_force;
                 }
             }
         }

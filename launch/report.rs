@@ -11,7 +11,7 @@ use crate::run::Run;
 use crate::runner::{AndersonTally, RunOptions, RunResult};
 use glissade_bus::convert::view;
 use glissade_mechanics::linear::LinearStage;
-use glissade_mechanics::local::ReferenceErrors;
+use glissade_mechanics::local::{ErrorsAgainstReference, PointwiseError, ReferenceErrors};
 use glissade_mechanics::model::{Acceleration, TimeStart, DEFAULT_TIME_START_TOLERANCE};
 use glissade_mechanics::pgd::PgdCriterion;
 use glissade_messages::{encode, Stage, Verdict};
@@ -40,10 +40,19 @@ pub struct ReportPoint {
     /// Relative space-time error of the contact jumps of s against the reference (NaN, null in
     /// JSON, when the reference failed).
     pub jump_error: f64,
+    /// The largest traction difference of s at one contact point and time point against the
+    /// reference, relative to the reference's largest contact traction
+    /// (`glissade_mechanics::local::pointwise_traction_error`; NaN, null in JSON, when the
+    /// reference failed).
+    pub pointwise_error: f64,
+    /// Where `pointwise_error` is: interface, pair (numbered from 0) and time point.
+    pub pointwise_at: [usize; 3],
     /// The run's own estimate of `traction_error` (`glissade_mechanics::estimate`), when it has one.
     pub estimate: Option<f64>,
     /// The contraction the estimate was made with.
     pub contraction: Option<f64>,
+    /// The run's own estimate of `pointwise_error`, when it has one.
+    pub pointwise_estimate: Option<f64>,
     /// Relative step of the contact forces since the previous iteration.
     pub force_step: f64,
     /// Wall time of this iteration's linear stages, summed over the subdomains (s): the
@@ -406,7 +415,7 @@ pub fn report_against(
     let model = &scene.model;
     let complete = reference.failure.is_none().then_some(&reference.solution);
     let mut tracker = ReferenceErrors::new(model);
-    let mut errors: Vec<(u32, f64, f64)> = Vec::new();
+    let mut errors: Vec<(u32, ErrorsAgainstReference)> = Vec::new();
     let mut anderson = AndersonTally::default();
     let mut bytes: Vec<u64> = Vec::new();
     let mut states = BoundaryStates::new(model);
@@ -434,15 +443,15 @@ pub fn report_against(
                 other => other.and_then(Result::ok),
             };
             if let (Some((subdomain, w, f)), Some(reference)) = (state, complete) {
-                if let Some((e_f, e_w)) = tracker.boundary_state(
+                if let Some(e) = tracker.boundary_state(
                     &model.interfaces,
                     subdomain as usize,
                     view(&w),
                     view(&f),
                     &reference.interfaces,
                 ) {
-                    errors.push((m.envelope.iteration, e_f, e_w));
-                    best.set(best.get().min(e_f));
+                    errors.push((m.envelope.iteration, e));
+                    best.set(best.get().min(e.traction));
                 }
             }
             t.elapsed()
@@ -460,9 +469,19 @@ pub fn report_against(
         .iterations
         .iter()
         .filter_map(|r| {
-            let (e_f, e_w) = match complete {
-                Some(_) => errors.iter().find(|e| e.0 == r.iteration).map(|e| (e.1, e.2))?,
-                None => (f64::NAN, f64::NAN),
+            let (e_f, e_w, e_max) = match complete {
+                Some(_) => errors
+                    .iter()
+                    .find(|e| e.0 == r.iteration)
+                    .map(|(_, e)| (e.traction, e.jump, e.pointwise))?,
+                None => (
+                    f64::NAN,
+                    f64::NAN,
+                    PointwiseError {
+                        error: f64::NAN,
+                        ..Default::default()
+                    },
+                ),
             };
             let of_it = || records.iter().filter(|x| x.iteration == r.iteration);
             Some(ReportPoint {
@@ -472,8 +491,11 @@ pub fn report_against(
                 contact_indicator: r.decision.contact_indicator,
                 traction_error: e_f,
                 jump_error: e_w,
+                pointwise_error: e_max.error,
+                pointwise_at: [e_max.interface, e_max.pair, e_max.time_point],
                 estimate: r.decision.estimate,
                 contraction: r.decision.contraction,
+                pointwise_estimate: r.decision.pointwise_estimate,
                 force_step: r.decision.force_step,
                 linear_s: of_it().map(|x| x.seconds).sum(),
                 linear_flops: of_it().map(|x| x.flops).sum(),

@@ -51,4 +51,4 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 /// Version 6: `BoundaryState` names the interfaces whose rows it holds and, when the run has
 /// several interface nodes, the one it is for. Version 7: `NodeStatus` (a node's status, asked when
 /// a run stops moving) and `Stall` (the launcher's diagnosis).
-pub const SCHEMA_VERSION: u32 = 7;
+pub const SCHEMA_VERSION: u32 = 8;

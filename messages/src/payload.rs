@@ -50,6 +50,12 @@ pub struct Decision {
     /// with (`glissade_mechanics::estimate`); none until the iteration shows a contraction.
     pub estimate: Option<f64>,
     pub contraction: Option<f64>,
+    /// The largest step of a contact traction at one point and time point since the previous
+    /// iteration, relative to the largest contact traction.
+    pub pointwise_step: f64,
+    /// Estimated largest error of a contact traction at one point and time point, relative to
+    /// the largest contact traction (the same estimate made on the pointwise steps).
+    pub pointwise_estimate: Option<f64>,
     pub verdict: Verdict,
 }
 
@@ -70,6 +76,10 @@ pub struct InterfaceIndicators {
     /// Σ w_i ‖Fₙ − Fₙ₋₁‖²_M and Σ w_i ‖Fₙ‖²_M over both sides (contact interfaces).
     pub step_num: f64,
     pub step_den: f64,
+    /// max |Fₙ − Fₙ₋₁| and max |Fₙ| over the pairs, time points, components and sides of the same
+    /// interfaces (tractions, MPa).
+    pub step_max: f64,
+    pub force_max: f64,
 }
 
 /// The particular part s₀ = (W_d, −k⁻W_d) of a subdomain's state in separated form: the boundary

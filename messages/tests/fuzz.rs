@@ -290,6 +290,8 @@ fn other_payload() -> impl Strategy<Value = Payload> {
                     force_step: contact_indicator,
                     estimate: Some(eta).filter(|_| counts[1] % 2 == 0),
                     contraction: None,
+                    pointwise_step: eta,
+                    pointwise_estimate: Some(contact_indicator).filter(|_| counts[2] % 2 == 0),
                     verdict,
                 })
             }),
@@ -338,6 +340,8 @@ fn other_payload() -> impl Strategy<Value = Payload> {
                             direction_updated,
                             step_num: v[0],
                             step_den: v[5],
+                            step_max: v[1],
+                            force_max: v[4],
                         }
                     )
                     .collect(),

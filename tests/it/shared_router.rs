@@ -68,6 +68,8 @@ fn messages_of_another_run_are_ignored() {
                 force_step: 0.0,
                 estimate: None,
                 contraction: None,
+                pointwise_step: 0.0,
+                pointwise_estimate: None,
                 verdict: Verdict::Converged,
             });
             let foreign = [

@@ -22,6 +22,8 @@ pub(crate) fn indicators_of(interface: usize, s: &IndicatorSums, direction_updat
         direction_updated,
         step_num: s.step_num,
         step_den: s.step_den,
+        step_max: s.step_max,
+        force_max: s.force_max,
     }
 }
 
@@ -37,6 +39,8 @@ fn sums_of(i: &InterfaceIndicators) -> IndicatorSums {
         status_changes: i.status_changes,
         step_num: i.step_num,
         step_den: i.step_den,
+        step_max: i.step_max,
+        force_max: i.force_max,
     }
 }
 
@@ -115,6 +119,8 @@ impl InterfaceNode {
             force_step: sums.force_step(),
             estimate: d.rule.estimate().map(|e| e.error),
             contraction: d.rule.estimate().map(|e| e.rate),
+            pointwise_step: sums.pointwise_step(),
+            pointwise_estimate: d.rule.pointwise_estimate().map(|e| e.error),
             verdict,
         };
         let stop = decision.verdict.is_stop();

@@ -36,7 +36,7 @@ use glissade_bus::convert::FieldPool;
 use glissade_bus::RunContext;
 use glissade_mechanics::anderson::{AndersonCoordinator, GramPartials};
 use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::local::{InterfaceFields, InterfaceLocal};
+use glissade_mechanics::local::{InterfaceFields, InterfaceLocal, StepSums};
 use glissade_mechanics::model::Model;
 use glissade_mechanics::modes::ModeForm;
 use glissade_messages::{InterfaceIndicators, NodeId};
@@ -86,8 +86,8 @@ pub struct InterfaceNode {
     fields: Vec<InterfaceFields>,
     /// Per owned interface followed by the error estimate (contact interfaces; every interface
     /// of a scene without contact), the sums of the forces' step of the current iteration
-    /// (`IndicatorSums::step_num`, `step_den`).
-    steps: Vec<Option<(f64, f64)>>,
+    /// ([`StepSums`]).
+    steps: Vec<Option<StepSums>>,
     received: BTreeSet<u32>,
     /// Per subdomain, its mode form once its first `BoundaryModes` arrived (PGD linear stage).
     modes: Vec<Option<ModeReceiver>>,

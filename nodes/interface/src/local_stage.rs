@@ -25,9 +25,9 @@ impl InterfaceNode {
                 let itf = &model.interfaces[i];
                 let (mut sums, updated) = local.local_iteration(itf, &model.solver, weights, fields, n == 0);
                 // The step of the forces, summed as the subdomains' states arrived.
-                if let Some((num, den)) = step {
-                    (sums.step_num, sums.step_den) = (*num, *den);
-                    (*num, *den) = (0.0, 0.0);
+                if let Some(step) = step.as_mut().map(std::mem::take) {
+                    (sums.step_num, sums.step_den) = (step.num, step.den);
+                    (sums.step_max, sums.force_max) = (step.max_step, step.max_force);
                 }
                 indicators_of(i, &sums, updated)
             })

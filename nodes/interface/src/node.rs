@@ -7,7 +7,7 @@ use glissade_bus::convert::{view, FieldPool};
 use glissade_bus::{expect_origin, expect_shape, Node, NodeError, RunContext};
 use glissade_mechanics::anderson::{AndersonCoordinator, MAX_CONDITION};
 use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::local::{force_step_sums, InterfaceFields, InterfaceLocal};
+use glissade_mechanics::local::{force_step_sums, InterfaceFields, InterfaceLocal, StepSums};
 use glissade_mechanics::model::{Acceleration, Model};
 use glissade_mechanics::modes::ModeForm;
 use glissade_messages::topic::sender_field_topic;
@@ -132,7 +132,7 @@ impl InterfaceNode {
         let any_contact = model.interfaces.iter().any(|i| i.is_contact());
         let steps = owned
             .iter()
-            .map(|&i| (model.interfaces[i].is_contact() || !any_contact).then_some((0.0, 0.0)))
+            .map(|&i| (model.interfaces[i].is_contact() || !any_contact).then(StepSums::default))
             .collect();
         Self {
             id: NodeId {
@@ -249,10 +249,8 @@ impl InterfaceNode {
                 rayon::join(
                     || to_w.copy_from(w.subrows(at, rows)),
                     || {
-                        if let Some((num, den)) = step {
-                            let (n, d) = force_step_sums(pair_weights, time_weights, to_f.as_ref(), new_f);
-                            *num += n;
-                            *den += d;
+                        if let Some(sums) = step {
+                            sums.add(&force_step_sums(pair_weights, time_weights, to_f.as_ref(), new_f));
                         }
                         to_f.copy_from(new_f)
                     },

@@ -5,7 +5,8 @@ use glissade_mechanics::estimate::{ErrorEstimate, Estimated};
 use glissade_mechanics::local::IndicatorSums;
 use glissade_messages::Verdict;
 
-/// The stop rules of DESIGN §3: converged when the estimated contact-traction error and the
+/// The stop rules of DESIGN §3: converged when the estimated contact-traction error (relative
+/// space-time L2, and the largest at one point relative to the largest traction) and the
 /// disagreement between s and ŝ ([`IndicatorSums::disagreement`]) are at most the accuracy and
 /// η, e_c at most their tolerances (each where set); else max iterations, stagnation, divergence.
 #[derive(Debug, Clone, PartialEq)]
@@ -22,6 +23,9 @@ pub struct StopRule {
     first_norm: Option<f64>,
     estimate: ErrorEstimate,
     last: Option<Estimated>,
+    /// The same estimate made on the pointwise steps ([`IndicatorSums::pointwise_step`]).
+    pointwise: ErrorEstimate,
+    last_pointwise: Option<Estimated>,
 }
 
 impl StopRule {
@@ -38,12 +42,20 @@ impl StopRule {
             first_norm: None,
             estimate: ErrorEstimate::default(),
             last: None,
+            pointwise: ErrorEstimate::default(),
+            last_pointwise: None,
         }
     }
 
     /// The error estimate of the last decided iteration, if the iteration showed a contraction.
     pub fn estimate(&self) -> Option<Estimated> {
         self.last
+    }
+
+    /// The pointwise error estimate of the last decided iteration (the largest contact-traction
+    /// error at one point and time point, relative to the largest traction), if it has one.
+    pub fn pointwise_estimate(&self) -> Option<Estimated> {
+        self.last_pointwise
     }
 
     /// Verdict after the local stage of iteration `n` (0-based); `fixed_point` is the
@@ -58,11 +70,17 @@ impl StopRule {
         // Every contact point of ŝ separated: ŝ has no contact force, and s's are round-off
         // (relative to nothing); their step carries no information, the tractions are zero.
         let separated = sums.counts[0] > 0 && sums.counts[1] + sums.counts[2] == 0;
-        let step = if separated { 0.0 } else { sums.force_step() };
+        let (step, pointwise) = if separated {
+            (0.0, 0.0)
+        } else {
+            (sums.force_step(), sums.pointwise_step())
+        };
         self.last = self.estimate.push(step, residual, fixed_point);
+        self.last_pointwise = self.pointwise.push(pointwise, residual, fixed_point);
         if eta == 0.0 {
             // s = ŝ exactly: this iterate is the fixed point (e.g. a scene without load).
             self.last = Some(Estimated::EXACT);
+            self.last_pointwise = Some(Estimated::EXACT);
         }
         if !eta.is_finite() || !sums.contact_indicator().is_finite() {
             return Verdict::Diverged {
@@ -84,9 +102,10 @@ impl StopRule {
         }
         // The estimate follows s's forces; s must also agree with ŝ (the interface laws) within
         // the accuracy (max(e_c, η)), or a motion that changes no force would pass unseen.
+        let within = |e: Option<Estimated>, a: f64| e.is_some_and(|e| e.error <= a);
         let accurate = self
             .accuracy
-            .is_none_or(|a| self.last.is_some_and(|e| e.error <= a) && sums.disagreement() <= a);
+            .is_none_or(|a| within(self.last, a) && within(self.last_pointwise, a) && sums.disagreement() <= a);
         let eta_ok = self.tolerance.is_none_or(|t| eta <= t);
         let contact_ok = self.contact_tolerance.is_none_or(|t| sums.contact_indicator() <= t);
         let asked = self.accuracy.is_some() || self.tolerance.is_some() || self.contact_tolerance.is_some();

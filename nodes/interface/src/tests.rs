@@ -145,6 +145,25 @@ fn accuracy_stops_on_the_estimate_not_on_eta() {
         .expect("converges");
     assert_eq!(stop, 30);
 
+    // The L2 estimate is met from 20 on (as above), but the largest step at one point is 40 times
+    // the L2 step (a corner that converges like the rest, 40 times its share): its estimate,
+    // 40 · 2⁻⁽ⁿ⁻¹⁰⁾, is at most 1e-3 from n = 26 (40 · 2⁻¹⁶ = 6.1e-4; at 25, 1.2e-3): no
+    // "Converged" before the pointwise estimate meets the accuracy too.
+    let mut r = StopRule::new(&p);
+    let stop = (0..60)
+        .find(|&n| {
+            let mut s = step_sums(1e-12, n);
+            (s.step_max, s.force_max) = (40.0 * 0.5f64.powi(n as i32), 1.0);
+            r.decide(n, &s, None) == Verdict::Converged
+        })
+        .expect("converges");
+    assert_eq!(stop, 26);
+    let (e, p_e) = (
+        r.estimate().expect("estimate"),
+        r.pointwise_estimate().expect("pointwise"),
+    );
+    assert!(e.error < 1e-4 && p_e.error <= 1e-3 && p_e.error > 5e-4, "{e:?} {p_e:?}");
+
     // Nothing requested: only the cap stops the run.
     let mut r = StopRule::new(&SolverParams {
         accuracy: None,

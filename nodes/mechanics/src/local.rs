@@ -130,7 +130,7 @@ impl ReferenceErrors {
         }
     }
 
-    /// Takes subdomain `subdomain`'s boundary state (W, F); returns (e_F, e_W) against
+    /// Takes subdomain `subdomain`'s boundary state (W, F); returns its errors against
     /// `reference` once the iteration's states are all in.
     pub fn boundary_state(
         &mut self,
@@ -139,7 +139,7 @@ impl ReferenceErrors {
         w: MatRef<'_, f64>,
         f: MatRef<'_, f64>,
         reference: &[InterfaceFields],
-    ) -> Option<(f64, f64)> {
+    ) -> Option<ErrorsAgainstReference> {
         for slot in &self.layouts.get(subdomain)?.slots {
             self.fields[slot.interface].set_side(slot.side, slot.offset, w, f);
         }
@@ -148,13 +148,86 @@ impl ReferenceErrors {
             return None;
         }
         self.seen.clear();
-        Some(error_against_reference(
-            interfaces,
-            &self.fields,
-            reference,
-            &self.weights,
-        ))
+        let (traction, jump) = error_against_reference(interfaces, &self.fields, reference, &self.weights);
+        Some(ErrorsAgainstReference {
+            traction,
+            jump,
+            pointwise: pointwise_traction_error(interfaces, &self.fields, reference),
+        })
     }
+}
+
+/// One iterate's errors against a reference ([`ReferenceErrors::boundary_state`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorsAgainstReference {
+    /// e_F of [`error_against_reference`].
+    pub traction: f64,
+    /// e_W of [`error_against_reference`].
+    pub jump: f64,
+    /// [`pointwise_traction_error`].
+    pub pointwise: PointwiseError,
+}
+
+/// The largest traction difference at one point of the contact interfaces and where it is.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PointwiseError {
+    /// max over physical contact points, time points, components (normal, tangential) and sides
+    /// of |t − t_ref|, relative to the largest |t_ref| over the same (0 where the reference has no
+    /// contact force and s none either; infinite where only the reference has none).
+    pub error: f64,
+    /// Where the largest difference is: an interface and pair of its group, and the time point.
+    pub interface: usize,
+    pub pair: usize,
+    pub time_point: usize,
+}
+
+/// The pointwise counterpart of e_F ([`error_against_reference`]): at each physical contact
+/// point g (a group of copies of one node pair, [`contact_pair_groups`]; only their summed force
+/// is determined at a cross-point) the traction t_g = Σ m·F / Σ m of each side, and the largest
+/// |t_g − t_g,ref| over points, time points, components and sides relative to the largest
+/// |t_g,ref|.
+pub fn pointwise_traction_error(
+    interfaces: &[Interface],
+    s: &[InterfaceFields],
+    reference: &[InterfaceFields],
+) -> PointwiseError {
+    let (mut worst, mut scale) = (PointwiseError::default(), 0.0f64);
+    for (members, m_g) in contact_pair_groups(interfaces) {
+        let Some(&(k0, p0)) = members.first() else {
+            continue;
+        };
+        for i in 0..s.get(k0).map_or(0, |x| x.f_a.ncols()) {
+            for c in 0..2 {
+                let (mut n_a, mut n_b, mut r_a, mut r_b) = (0.0, 0.0, 0.0, 0.0);
+                for &(k, p) in &members {
+                    let (x, r, m) = (&s[k], &reference[k], interfaces[k].weights[p]);
+                    let e = 2 * p + c;
+                    n_a += m * x.f_a[(e, i)];
+                    n_b += m * x.f_b[(e, i)];
+                    r_a += m * r.f_a[(e, i)];
+                    r_b += m * r.f_b[(e, i)];
+                }
+                let d = (n_a - r_a).abs().max((n_b - r_b).abs()) / m_g;
+                scale = scale.max(r_a.abs().max(r_b.abs()) / m_g);
+                if d > worst.error || d.is_nan() {
+                    worst = PointwiseError {
+                        error: d,
+                        interface: k0,
+                        pair: p0,
+                        time_point: i,
+                    };
+                }
+            }
+        }
+    }
+    worst.error = if worst.error == 0.0 {
+        0.0
+    } else if scale > 0.0 {
+        worst.error / scale
+    } else {
+        f64::INFINITY
+    };
+    worst
 }
 
 /// Error of interface fields `s` against a reference solution of the same discrete problem, on
@@ -201,17 +274,50 @@ pub fn error_against_reference(
     (ratio(f_num, f_den), ratio(w_num, w_den))
 }
 
-/// One side's share of [`IndicatorSums::step_num`] and [`IndicatorSums::step_den`]: `old` and
-/// `new` are that side's forces (2·n_pairs × (N+1)), `pair_weights` the lumped mass of each pair
-/// and `time_weights` the trapezoid weights. Returns (Σ_i w_i Σ_p m_p |new − old|²,
-/// Σ_i w_i Σ_p m_p |new|²).
+/// The larger of `m` and `v`, NaN if `v` is (a maximum that carries a NaN on).
+fn nan_max(m: f64, v: f64) -> f64 {
+    if v > m || v.is_nan() {
+        v
+    } else {
+        m
+    }
+}
+
+/// The step of one interface side's forces since the previous iteration, summed as the sides
+/// arrive ([`force_step_sums`], combined with [`StepSums::add`]): the terms of
+/// [`IndicatorSums::step_num`], [`IndicatorSums::step_den`], [`IndicatorSums::step_max`] and
+/// [`IndicatorSums::force_max`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepSums {
+    /// Σ_i w_i Σ_p m_p |Fₙ − Fₙ₋₁|².
+    pub num: f64,
+    /// Σ_i w_i Σ_p m_p |Fₙ|².
+    pub den: f64,
+    /// max over pairs, time points and components of |Fₙ − Fₙ₋₁| (a traction).
+    pub max_step: f64,
+    /// max over pairs, time points and components of |Fₙ|.
+    pub max_force: f64,
+}
+
+impl StepSums {
+    pub fn add(&mut self, o: &StepSums) {
+        self.num += o.num;
+        self.den += o.den;
+        self.max_step = nan_max(self.max_step, o.max_step);
+        self.max_force = nan_max(self.max_force, o.max_force);
+    }
+}
+
+/// One side's share of the force step ([`StepSums`]): `old` and `new` are that side's forces
+/// (2·n_pairs × (N+1)), `pair_weights` the lumped mass of each pair and `time_weights` the
+/// trapezoid weights. A NaN step or force makes the maxima NaN.
 pub fn force_step_sums(
     pair_weights: &[f64],
     time_weights: &[f64],
     old: MatRef<'_, f64>,
     new: MatRef<'_, f64>,
-) -> (f64, f64) {
-    let (mut num, mut den) = (0.0, 0.0);
+) -> StepSums {
+    let mut out = StepSums::default();
     for (i, &wt) in time_weights.iter().enumerate() {
         let (o, n) = (
             old.col(i)
@@ -222,16 +328,20 @@ pub fn force_step_sums(
                 .expect("the interfaces' force fields have unit row stride"),
         );
         let (o, n) = (o.as_slice(), n.as_slice());
-        let (mut col_num, mut col_den) = (0.0, 0.0);
+        let (mut col_num, mut col_den, mut col_step, mut col_force) = (0.0, 0.0, 0.0f64, 0.0f64);
         for (e, (&a, &b)) in o.iter().zip(n).enumerate() {
             let m = pair_weights[e / 2];
             col_num += m * (b - a) * (b - a);
             col_den += m * b * b;
+            col_step = nan_max(col_step, (b - a).abs());
+            col_force = nan_max(col_force, b.abs());
         }
-        num += wt * col_num;
-        den += wt * col_den;
+        out.num += wt * col_num;
+        out.den += wt * col_den;
+        out.max_step = nan_max(out.max_step, col_step);
+        out.max_force = nan_max(out.max_force, col_force);
     }
-    (num, den)
+    out
 }
 
 /// Search directions k⁺ of a contact interface, per pair and time point (n_pairs × (N+1)).
@@ -271,6 +381,11 @@ pub struct IndicatorSums {
     pub step_num: f64,
     /// Σ_i w_i Σ_sides FₙᵀMFₙ over the same interfaces.
     pub step_den: f64,
+    /// The pointwise step: max over the same interfaces' pairs, time points, components and
+    /// sides of |Fₙ − Fₙ₋₁| (a traction); the pointwise estimate is built on it.
+    pub step_max: f64,
+    /// max |Fₙ| over the same.
+    pub force_max: f64,
 }
 
 fn ratio(num: f64, den: f64) -> f64 {
@@ -295,6 +410,8 @@ impl IndicatorSums {
         self.status_changes += o.status_changes;
         self.step_num += o.step_num;
         self.step_den += o.step_den;
+        self.step_max = nan_max(self.step_max, o.step_max);
+        self.force_max = nan_max(self.force_max, o.force_max);
     }
 
     /// dₙ = ‖Fₙ − Fₙ₋₁‖ / ‖Fₙ‖: the relative step of the interface forces (contact interfaces)
@@ -304,6 +421,16 @@ impl IndicatorSums {
             return 0.0;
         }
         ratio(self.step_num, self.step_den)
+    }
+
+    /// The pointwise step of the forces: [`Self::step_max`] relative to [`Self::force_max`]
+    /// (0 where nothing moved).
+    pub fn pointwise_step(&self) -> f64 {
+        if self.step_max == 0.0 {
+            0.0
+        } else {
+            self.step_max / self.force_max
+        }
     }
 
     /// η of eq. (10).
@@ -702,6 +829,66 @@ impl InterfaceLocal {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The pointwise step is the largest change of one entry over every pair, component and time
+    /// point (whatever its weight), the force scale the largest entry; the sums keep their
+    /// weighted meaning, and combining sides takes the maxima.
+    #[test]
+    fn force_step_sums_keep_the_largest_entry() {
+        let old = Mat::<f64>::from_fn(4, 3, |r, c| (r + 3 * c) as f64);
+        let mut new = old.clone();
+        new[(3, 1)] += 5.0; // pair 1, tangential, time point 1: |Δ| = 5
+        new[(0, 2)] -= 2.0; // pair 0, normal, time point 2: |Δ| = 2
+        let (pairs, times) = ([0.5, 0.25], [0.5, 1.0, 0.5]);
+        let st = force_step_sums(&pairs, &times, old.as_ref(), new.as_ref());
+        assert_eq!(st.max_step, 5.0);
+        assert_eq!(st.max_force, 11.0); // entry (3, 1) = 3 + 3 + 5
+        assert_eq!(st.num, 1.0 * 0.25 * 25.0 + 0.5 * 0.5 * 4.0);
+        let mut both = st;
+        both.add(&StepSums {
+            num: 1.0,
+            den: 2.0,
+            max_step: 7.0,
+            max_force: 3.0,
+        });
+        assert_eq!((both.max_step, both.max_force, both.num), (7.0, 11.0, st.num + 1.0));
+        let mut nan = new.clone();
+        nan[(1, 0)] = f64::NAN;
+        assert!(force_step_sums(&pairs, &times, old.as_ref(), nan.as_ref())
+            .max_step
+            .is_nan());
+    }
+
+    /// The largest traction difference against a reference, relative to the reference's largest
+    /// traction, and where it is.
+    #[test]
+    fn pointwise_error_finds_the_worst_point() {
+        let model = crate::fixtures::two_blocks_contact();
+        let itf = &model.interfaces[0];
+        let nt = model.time.n_points();
+        let mut reference = InterfaceFields::zeros(itf.n_pairs(), nt);
+        for i in 0..nt {
+            for p in 0..itf.n_pairs() {
+                reference.f_a[(2 * p, i)] = -10.0 * (i as f64 + 1.0);
+                reference.f_b[(2 * p, i)] = 10.0 * (i as f64 + 1.0);
+            }
+        }
+        let mut s = reference.clone();
+        assert_eq!(
+            pointwise_traction_error(&model.interfaces, &[s.clone()], &[reference.clone()]).error,
+            0.0
+        );
+        let (p, i) = (itf.n_pairs() - 1, nt - 1);
+        s.f_b[(2 * p + 1, i)] += 0.5; // a tangential traction on side b off by 0.5
+        let e = pointwise_traction_error(&model.interfaces, &[s], &[reference.clone()]);
+        assert!((e.error - 0.5 / (10.0 * nt as f64)).abs() < 1e-15, "{e:?}");
+        assert_eq!((e.interface, e.pair, e.time_point), (0, p, i));
+        let zero = InterfaceFields::zeros(itf.n_pairs(), nt);
+        assert_eq!(
+            pointwise_traction_error(&model.interfaces, &[reference], &[zero]).error,
+            f64::INFINITY
+        );
+    }
 
     /// The contact indicator reads only s, ŝ, M and the time weights: evaluating it on the same
     /// pair (s, ŝ) with k₀ and 100 k₀ gives the same value, while η changes.

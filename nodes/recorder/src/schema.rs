@@ -57,7 +57,7 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 16] = [
         "glissade.Decision",
         "(Decision { eta: f64, contact_indicator: f64, force_error: f64, jump_error: f64, counts: [u64; 3], \
          status_changes: u64, direction_updates: Vec<u32>, force_step: f64, estimate: Option<f64>, \
-         contraction: Option<f64>, verdict: Verdict })",
+         contraction: Option<f64>, pointwise_step: f64, pointwise_estimate: Option<f64>, verdict: Verdict })",
     ),
     (
         "interface_solution",
@@ -71,7 +71,7 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 16] = [
         "glissade.IndicatorPartials",
         "{ interfaces: Vec<InterfaceIndicators { interface: u32, eta_num: f64, eta_den: f64, force_num: f64, \
          force_den: f64, jump_num: f64, jump_den: f64, counts: [u64; 3], status_changes: u64, direction_updated: bool, step_num: f64, \
-         step_den: f64 }>, \
+         step_den: f64, step_max: f64, force_max: f64 }>, \
          diverged: Option<String> }",
     ),
     (

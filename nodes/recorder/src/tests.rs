@@ -97,6 +97,8 @@ fn iteration_of(n: u32, rows: usize) -> Vec<Message> {
             force_step: 0.0,
             estimate: None,
             contraction: None,
+            pointwise_step: 0.0,
+            pointwise_estimate: None,
             verdict: Verdict::Continue,
         }),
     ));

@@ -26,11 +26,12 @@ use rerun::external::re_sdk_types::blueprint::components::{
 };
 use rerun::external::re_sdk_types::external::uuid::Uuid;
 
-/// The entities of the convergence panel: η, e_c and the error against the reference (log10).
-pub const CONVERGENCE: [&str; 3] = [
+/// The entities of the convergence panel: η, e_c and the errors against the reference (log10).
+pub const CONVERGENCE: [&str; 4] = [
     "indicators/log10_eta",
     "indicators/log10_contact_indicator",
     "error/log10_traction",
+    "error/log10_pointwise_traction",
 ];
 
 /// Display names of the views, as the viewer shows them (and the tests look them up).

@@ -153,9 +153,10 @@ impl View {
                     self.time_point = Some(largest_time_point(w));
                 }
                 let it = msg.envelope.iteration;
-                if let Some((e_f, e_w)) = self.errors.as_mut().and_then(|(reference, t)| {
+                if let Some(e) = self.errors.as_mut().and_then(|(reference, t)| {
                     t.boundary_state(&self.model.interfaces, *subdomain as usize, view(w), view(f), reference)
                 }) {
+                    let (e_f, e_w, e_max) = (e.traction, e.jump, e.pointwise.error);
                     self.summary.errors.push((it, e_f, e_w));
                     let rec = &self.rec;
                     rec.set_time_sequence("iteration", it as i64);
@@ -165,6 +166,8 @@ impl View {
                         ("error/jump", e_w),
                         ("error/log10_traction", e_f.log10()),
                         ("error/log10_jump", e_w.log10()),
+                        ("error/pointwise_traction", e_max),
+                        ("error/log10_pointwise_traction", e_max.log10()),
                     ] {
                         if v.is_finite() {
                             rec.log(name, &rerun::Scalars::single(v)).map_err(rerr)?;

@@ -86,6 +86,8 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
                 force_step: 0.0,
                 estimate: None,
                 contraction: None,
+                pointwise_step: 0.0,
+                pointwise_estimate: None,
                 verdict: if n + 1 == iterations {
                     Verdict::Converged
                 } else {

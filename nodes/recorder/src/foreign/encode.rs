@@ -188,6 +188,10 @@ fn decision(out: &mut Vec<u8>, d: &Decision) {
     let (v, detail) = verdict(&d.verdict);
     uint(out, 14, v);
     bytes(out, 15, detail.as_bytes());
+    double(out, 16, d.pointwise_step);
+    if let Some(e) = d.pointwise_estimate {
+        double(out, 17, e);
+    }
 }
 
 fn indicators(out: &mut Vec<u8>, i: &InterfaceIndicators) {
@@ -205,6 +209,8 @@ fn indicators(out: &mut Vec<u8>, i: &InterfaceIndicators) {
     uint(out, 12, i.direction_updated as u64);
     double(out, 13, i.step_num);
     double(out, 14, i.step_den);
+    double(out, 15, i.step_max);
+    double(out, 16, i.force_max);
 }
 
 /// Bytes of the message's fields beyond the envelope, to size the buffer once.

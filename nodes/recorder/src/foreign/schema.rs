@@ -365,6 +365,20 @@ pub const MESSAGES: &[MessageDef] = &[
                 Ty::String,
                 "what stagnated or diverged (empty for the other verdicts)",
             ),
+            f(
+                "pointwise_step",
+                16,
+                Ty::Double,
+                "largest step of a contact traction at one point and time point since the previous \
+                 iteration, relative to the largest contact traction",
+            ),
+            opt(
+                "pointwise_estimate",
+                17,
+                Ty::Double,
+                "estimated largest contact-traction error at one point and time point, relative to the \
+                 largest contact traction; absent until the iteration shows a contraction",
+            ),
         ],
     },
     MessageDef {
@@ -600,6 +614,8 @@ pub const MESSAGES: &[MessageDef] = &[
             f("direction_updated", 12, Ty::Bool, ""),
             f("step_num", 13, Ty::Double, ""),
             f("step_den", 14, Ty::Double, ""),
+            f("step_max", 15, Ty::Double, ""),
+            f("force_max", 16, Ty::Double, ""),
         ],
     },
 ];

@@ -61,6 +61,8 @@ fn decision(estimate: Option<f64>, verdict: Verdict) -> Payload {
         force_step: 0.125,
         estimate,
         contraction: estimate.map(|e| e * 0.5),
+        pointwise_step: 0.375,
+        pointwise_estimate: estimate.map(|e| e * 4.0),
         verdict,
     })
 }
@@ -201,6 +203,8 @@ fn samples() -> Vec<Message> {
                     direction_updated: true,
                     step_num: 7.0,
                     step_den: 8.0,
+                    step_max: 9.0,
+                    force_max: 10.0,
                 },
                 InterfaceIndicators {
                     interface: 5,
@@ -215,6 +219,8 @@ fn samples() -> Vec<Message> {
                     direction_updated: false,
                     step_num: 0.0,
                     step_den: 1.0,
+                    step_max: 0.0,
+                    force_max: 2.5,
                 },
             ],
             diverged: None,
@@ -492,6 +498,8 @@ fn from_proto(m: &DynamicMessage) -> Message {
                 force_step: f64_(m, "force_step"),
                 estimate: opt_f64("estimate"),
                 contraction: opt_f64("contraction"),
+                pointwise_step: f64_(m, "pointwise_step"),
+                pointwise_estimate: opt_f64("pointwise_estimate"),
                 verdict: match enum_(m, "verdict") {
                     0 => Verdict::Continue,
                     1 => Verdict::Converged,
@@ -539,6 +547,8 @@ fn from_proto(m: &DynamicMessage) -> Message {
                         direction_updated: bool_(i, "direction_updated"),
                         step_num: f64_(i, "step_num"),
                         step_den: f64_(i, "step_den"),
+                        step_max: f64_(i, "step_max"),
+                        force_max: f64_(i, "force_max"),
                     }
                 })
                 .collect(),
