@@ -54,7 +54,13 @@ pub fn check_report(name: &str, report: &Report) -> AccuracyCheck {
     let stops = ACCURACIES
         .iter()
         .map(|&a| {
-            let at = report.points.iter().find(|p| p.estimate.is_some_and(|e| e <= a));
+            // Where a run asking for `a` stops: both estimates and the agreement of s and ŝ
+            // within it (`StopRule::decide`).
+            let at = report.points.iter().find(|p| {
+                p.estimate.is_some_and(|e| e <= a)
+                    && p.pointwise_estimate.is_some_and(|e| e <= a)
+                    && p.contact_indicator.max(p.eta) <= a
+            });
             AccuracyStop {
                 accuracy: a,
                 iteration: at.map(|p| p.iteration),

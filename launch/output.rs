@@ -59,19 +59,29 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     let mut shown = Vec::new();
     let window = glissade_mechanics::estimate::RATE_WINDOW;
     // The accuracy bounds both estimates: the space-time L2 one and the largest at one point.
-    let both = d.estimate.zip(d.pointwise_estimate);
-    let estimate = match both {
-        Some((e, p)) => format!("estimated contact-traction error {e:.2e} (at one point {p:.2e})"),
-        None if n > window => {
-            format!("no error estimate (the contact indicator did not decrease over the last {window} iterations)")
-        }
-        None => format!("no error estimate yet (it needs {} iterations)", window + 1),
+    let missing = if n > window {
+        format!("(the contact indicator did not decrease over the last {window} iterations)")
+    } else {
+        format!("yet (it needs {} iterations)", window + 1)
     };
-    match s.accuracy {
-        Some(a) if both.is_some_and(|(e, p)| e.max(p) <= a) => met.push(format!("{estimate} ≤ accuracy {a:e}")),
-        Some(a) if both.is_some() => missed.push(format!("{estimate} > accuracy {a:e}")),
-        Some(a) => missed.push(format!("{estimate} for accuracy {a:e}")),
-        None => shown.push(estimate),
+    let estimates = [
+        ("estimated contact-traction error", d.estimate),
+        ("estimated largest traction error at one point", d.pointwise_estimate),
+    ];
+    if let (None, None, Some(a)) = (d.estimate, d.pointwise_estimate, s.accuracy) {
+        missed.push(format!("no error estimate {missing} for accuracy {a:e}"));
+    }
+    for (what, value) in estimates
+        .into_iter()
+        .filter(|_| d.estimate.is_some() || d.pointwise_estimate.is_some())
+    {
+        match (s.accuracy, value) {
+            (Some(a), Some(e)) if e <= a => met.push(format!("{what} {e:.2e} ≤ accuracy {a:e}")),
+            (Some(a), Some(e)) => missed.push(format!("{what} {e:.2e} > accuracy {a:e}")),
+            (Some(a), None) => missed.push(format!("no {what} {missing} for accuracy {a:e}")),
+            (None, Some(e)) => shown.push(format!("{what} {e:.2e}")),
+            (None, None) => {}
+        }
     }
     // The state written (s) must agree with the interface laws' (ŝ) within the accuracy too
     // (`IndicatorSums::disagreement`: the larger of e_c and η).

@@ -50,5 +50,7 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 /// and `LinearStageStats`, a subdomain's counters of its linear stage (flops, PGD basis, ξ).
 /// Version 6: `BoundaryState` names the interfaces whose rows it holds and, when the run has
 /// several interface nodes, the one it is for. Version 7: `NodeStatus` (a node's status, asked when
-/// a run stops moving) and `Stall` (the launcher's diagnosis).
+/// a run stops moving) and `Stall` (the launcher's diagnosis). Version 8: the decision carries the
+/// pointwise step and estimate (`pointwise_step`, `pointwise_estimate`), `InterfaceIndicators`
+/// the largest step and force at one point (`step_max`, `force_max`).
 pub const SCHEMA_VERSION: u32 = 8;

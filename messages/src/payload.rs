@@ -10,8 +10,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub enum Verdict {
     Continue,
-    /// The estimated contact-traction error reached the requested accuracy (and η, e_c their
-    /// tolerances where the scene sets them).
+    /// The estimated contact-traction errors (relative L2, and the largest at one point) reached
+    /// the requested accuracy, s and ŝ agree within it (and η, e_c met their tolerances where the
+    /// scene sets them).
     Converged,
     MaxIterations,
     /// η stopped decreasing.

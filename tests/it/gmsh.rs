@@ -185,8 +185,11 @@ fn curved_latin_equals_the_monolithic_reference() {
 #[test]
 fn gmsh_stratified_equals_the_block_scene() {
     // Same mesh (node positions bit for bit: the scene crate's mesh test), loads and settings,
-    // N = 20 for speed: interface fields equal to round-off, 1e-12 relative (the parts number
-    // their nodes differently, so the sums are taken in other orders). As processes too.
+    // N = 20 for speed: interface fields equal to round-off, 1e-8 relative. The parts number
+    // their nodes differently, so the sums are taken in other orders, and the iterations carry
+    // those differences on (Anderson's small least-squares solves amplify them): 5.2e-10 measured
+    // at the stop, where the run waits for its pointwise estimate; a part or a load placed
+    // differently gives differences of the order of the tractions. As processes too.
     let small = |t: String| {
         t.replace("N = 1000", "N = 20")
             .replace("[solver]\n", "[solver]\ntime_coarsening = \"off\"\n")
@@ -233,7 +236,7 @@ fn gmsh_stratified_equals_the_block_scene() {
         }
     }
     println!("Gmsh against blocks: worst difference {worst:e} of {scale:e}");
-    assert!(worst <= 1e-12 * scale, "worst difference {worst:e} of {scale:e}");
+    assert!(worst <= 1e-8 * scale, "worst difference {worst:e} of {scale:e}");
 }
 
 #[test]

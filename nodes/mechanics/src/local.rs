@@ -171,8 +171,7 @@ pub struct ErrorsAgainstReference {
 /// The largest traction difference at one point of the contact interfaces and where it is.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PointwiseError {
-    /// max over physical contact points, time points, components (normal, tangential) and sides
-    /// of |t − t_ref|, relative to the largest |t_ref| over the same (0 where the reference has no
+    /// max over physical contact points, time points, components (x, y) and sides of |t − t_ref|, relative to the largest |t_ref| over the same (0 where the reference has no
     /// contact force and s none either; infinite where only the reference has none).
     pub error: f64,
     /// Where the largest difference is: an interface and pair of its group, and the time point.
@@ -184,7 +183,7 @@ pub struct PointwiseError {
 /// The pointwise counterpart of e_F ([`error_against_reference`]): at each physical contact
 /// point g (a group of copies of one node pair, [`contact_pair_groups`]; only their summed force
 /// is determined at a cross-point) the traction t_g = Σ m·F / Σ m of each side, and the largest
-/// |t_g − t_g,ref| over points, time points, components and sides relative to the largest
+/// |t_g − t_g,ref| over points, time points, components (x, y) and sides relative to the largest
 /// |t_g,ref|.
 pub fn pointwise_traction_error(
     interfaces: &[Interface],
@@ -381,8 +380,9 @@ pub struct IndicatorSums {
     pub step_num: f64,
     /// Σ_i w_i Σ_sides FₙᵀMFₙ over the same interfaces.
     pub step_den: f64,
-    /// The pointwise step: max over the same interfaces' pairs, time points, components and
-    /// sides of |Fₙ − Fₙ₋₁| (a traction); the pointwise estimate is built on it.
+    /// The pointwise step: max over the same interfaces' pairs, time points, components (x, y)
+    /// and sides of |Fₙ − Fₙ₋₁| (a traction); the pointwise estimate is built on it. Each copy
+    /// of a node pair at a cross-point counts on its own (the traction its interface writes).
     pub step_max: f64,
     /// max |Fₙ| over the same.
     pub force_max: f64,
@@ -424,9 +424,9 @@ impl IndicatorSums {
     }
 
     /// The pointwise step of the forces: [`Self::step_max`] relative to [`Self::force_max`]
-    /// (0 where nothing moved).
+    /// (0 where nothing moved or no force is left, as [`Self::force_step`]).
     pub fn pointwise_step(&self) -> f64 {
-        if self.step_max == 0.0 {
+        if self.step_max == 0.0 || self.force_max == 0.0 {
             0.0
         } else {
             self.step_max / self.force_max
@@ -837,8 +837,8 @@ mod tests {
     fn force_step_sums_keep_the_largest_entry() {
         let old = Mat::<f64>::from_fn(4, 3, |r, c| (r + 3 * c) as f64);
         let mut new = old.clone();
-        new[(3, 1)] += 5.0; // pair 1, tangential, time point 1: |Δ| = 5
-        new[(0, 2)] -= 2.0; // pair 0, normal, time point 2: |Δ| = 2
+        new[(3, 1)] += 5.0; // pair 1, y, time point 1: |Δ| = 5
+        new[(0, 2)] -= 2.0; // pair 0, x, time point 2: |Δ| = 2
         let (pairs, times) = ([0.5, 0.25], [0.5, 1.0, 0.5]);
         let st = force_step_sums(&pairs, &times, old.as_ref(), new.as_ref());
         assert_eq!(st.max_step, 5.0);
@@ -879,7 +879,7 @@ mod tests {
             0.0
         );
         let (p, i) = (itf.n_pairs() - 1, nt - 1);
-        s.f_b[(2 * p + 1, i)] += 0.5; // a tangential traction on side b off by 0.5
+        s.f_b[(2 * p + 1, i)] += 0.5; // a traction's y component on side b off by 0.5
         let e = pointwise_traction_error(&model.interfaces, &[s], &[reference.clone()]);
         assert!((e.error - 0.5 / (10.0 * nt as f64)).abs() < 1e-15, "{e:?}");
         assert_eq!((e.interface, e.pair, e.time_point), (0, p, i));

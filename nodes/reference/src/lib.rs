@@ -90,7 +90,8 @@
 //! terms it is computed from) counts: a cantilever bent by a rigid rotation of tens of mm has
 //! terms of K u a million times the loads, whose round-off is above 1e-10 of the loads.
 //!
-//! A converged step whose displacement exceeds [`DISPLACEMENT_BOUND`] times the scene's size, or
+//! A converged step whose displacement exceeds [`DISPLACEMENT_BOUND`] times the scene's size and
+//! [`LOAD_DISPLACEMENT_BOUND`] times U_s, or
 //! whose nodal forces (K u, supports and contact) exceed [`FORCE_BOUND`] times F_s, ends the run
 //! with [`ReferenceError::Implausible`] naming the step: small residuals against the scene's
 //! scales cannot be reached by such a solution unless the problem is singular.
@@ -113,7 +114,7 @@ mod scales;
 mod sparse;
 mod verify;
 
-pub use scales::{Scales, DISPLACEMENT_BOUND, FORCE_BOUND, ROUND_OFF};
+pub use scales::{Scales, DISPLACEMENT_BOUND, FORCE_BOUND, LOAD_DISPLACEMENT_BOUND, ROUND_OFF};
 pub use verify::{verify, Checks};
 
 use faer::Mat;

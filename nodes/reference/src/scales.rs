@@ -4,10 +4,17 @@
 
 use glissade_mechanics::model::{InterfaceKind, Model};
 
-/// A solution whose displacement exceeds this many times the scene's size is refused: linear
-/// elasticity has no meaning there (strains and rotations of order 100), and a part left floating
-/// (a singular stiffness) solves to displacements many decades beyond it.
+/// A solution whose displacement exceeds this many times the scene's size, and also
+/// [`LOAD_DISPLACEMENT_BOUND`] times the displacement scale its loads give, is refused: linear
+/// elasticity has no meaning there (strains and rotations of order 100) unless the loads
+/// themselves ask for it (a scene whose loads are a million times too large gets the linear
+/// answer to them, as LATIN does), and a part left floating (a singular stiffness) solves to
+/// displacements many decades beyond both.
 pub const DISPLACEMENT_BOUND: f64 = 100.0;
+
+/// See [`DISPLACEMENT_BOUND`]: the factor over U_s (a slender part's deflection is up to
+/// 4 (L/H)³ times P/E, 4e6 at L/H = 100: the bound over the size holds such parts).
+pub const LOAD_DISPLACEMENT_BOUND: f64 = 1e6;
 
 /// A solution whose nodal forces (internal forces K u, reactions, contact forces) exceed this many
 /// times the force scale is refused. Internal forces exceed the applied loads by lever arms
@@ -105,12 +112,15 @@ impl Scales {
     /// Why a solution of largest displacement `u_max` (mm) and largest nodal force `f_max` (N)
     /// is implausible (see [`DISPLACEMENT_BOUND`], [`FORCE_BOUND`]; NaN is implausible), or None.
     pub fn implausible(&self, u_max: f64, f_max: f64) -> Option<String> {
-        if u_max.is_nan() || u_max > DISPLACEMENT_BOUND * self.size {
+        if u_max.is_nan()
+            || (u_max > DISPLACEMENT_BOUND * self.size && u_max > LOAD_DISPLACEMENT_BOUND * self.displacement)
+        {
             Some(format!(
                 "a displacement of {u_max:.3e} mm, beyond {DISPLACEMENT_BOUND} times the scene's size {:.3e} mm \
-                 (a singular stiffness solves to such displacements, e.g. where a part is held by nothing \
-                 but contact across an open gap)",
-                self.size
+                 and {LOAD_DISPLACEMENT_BOUND:e} times the displacement its loads give, {:.3e} mm (a singular \
+                 stiffness solves to such displacements, e.g. where a part is held by nothing but contact \
+                 across an open gap)",
+                self.size, self.displacement
             ))
         } else if f_max.is_nan() || f_max > FORCE_BOUND * self.force {
             Some(format!(

@@ -91,8 +91,8 @@ pub(crate) fn law_violations(
 /// trace continuity and action–reaction on every interface, and the contact law on every copy of
 /// every contact pair. Scales: the scene's ([`Scales::of`], the same as the Newton stop's).
 ///
-/// A solution of implausible size ([`Scales::implausible`]: displacements beyond 100 times the
-/// scene's size, or internal, support or interface nodal forces beyond 1e6 times the force scale)
+/// A solution of implausible size ([`Scales::implausible`]: displacements beyond both 100 times
+/// the scene's size and 1e6 times the displacement scale, or internal, support or interface nodal forces beyond 1e6 times the force scale)
 /// is an error naming the first such time point, whatever its residuals.
 pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, ReferenceError> {
     let nt = model.time.n_points();

@@ -29,10 +29,16 @@ fn scales_come_from_the_loads_and_the_scene() {
     assert_eq!(s.size, 200.0);
     assert_eq!(s.implausible(0.0, 0.0), None);
     assert_eq!(s.implausible(DISPLACEMENT_BOUND * 200.0, FORCE_BOUND * 200.0), None);
+    // Beyond the size but within what the loads give (a scene of absurd loads): plausible.
+    let absurd_loads = Scales { displacement: 1e3, ..s };
+    assert_eq!(absurd_loads.implausible(1.1e4, 0.0), None);
     let far = s
         .implausible(8e9, 0.0)
         .expect("a displacement of 8e9 mm is implausible");
-    assert!(far.contains("8.000e9 mm") && far.contains("2.000e2 mm"), "{far}");
+    assert!(
+        far.contains("8.000e9 mm") && far.contains("2.000e2 mm") && far.contains("2.857e-3 mm"),
+        "{far}"
+    );
     let strong = s.implausible(1.0, 7e11).expect("a force of 7e11 N is implausible");
     assert!(
         strong.contains("7.000e11 N") && strong.contains("2.000e2 N"),

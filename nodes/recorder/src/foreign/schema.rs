@@ -130,7 +130,7 @@ pub const ENUMS: &[EnumDef] = &[
             ("VERDICT_CONTINUE", "the run goes on"),
             (
                 "VERDICT_CONVERGED",
-                "the estimated contact-traction error reached the requested accuracy",
+                "the estimated contact-traction errors (relative L2, and the largest at one point) reached the requested accuracy",
             ),
             ("VERDICT_MAX_ITERATIONS", "the iteration cap was reached"),
             ("VERDICT_STAGNATED", "eta stopped decreasing (verdict_detail says more)"),
