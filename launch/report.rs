@@ -15,7 +15,7 @@ use glissade_mechanics::local::{ErrorsAgainstReference, PointwiseError, Referenc
 use glissade_mechanics::model::{Acceleration, TimeStart, DEFAULT_TIME_START_TOLERANCE};
 use glissade_mechanics::pgd::PgdCriterion;
 use glissade_messages::{encode, Stage, Verdict};
-use glissade_reference::{solve_reference_steps, ReferenceOptions, ReferenceRun};
+use glissade_reference::{solve_reference_watched, ReferenceOptions, ReferenceRun};
 use glissade_replay::BoundaryStates;
 use glissade_scene::LoadedScene;
 use serde::Serialize;
@@ -132,6 +132,26 @@ pub fn build_report(
     build_report_with(scene, run_id, stop_at, &ReferenceOptions::default())
 }
 
+/// The reference's steps ([`glissade_reference::solve_reference_steps`]) with a progress line on
+/// the terminal: time points solved, of how many, and the last one's Newton iterations (drawn
+/// only where stderr is a terminal).
+pub fn reference_with_progress(
+    model: &glissade_mechanics::model::Model,
+    opts: &ReferenceOptions,
+) -> std::result::Result<ReferenceRun, glissade_reference::ReferenceError> {
+    let bar = indicatif::ProgressBar::new(model.time.n_points() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} [{elapsed}] reference: time point {pos}/{len}  {msg}")
+            .expect("valid template"),
+    );
+    let run = solve_reference_watched(model, opts, &mut |s| {
+        bar.set_position(s.solved as u64);
+        bar.set_message(format!("{} Newton iterations at the last", s.newton_iterations));
+    });
+    bar.finish_and_clear();
+    run
+}
+
 /// [`build_report`] with the reference solved with `reference_options`.
 pub fn build_report_with(
     scene: &LoadedScene,
@@ -140,7 +160,7 @@ pub fn build_report_with(
     reference_options: &ReferenceOptions,
 ) -> crate::Result<(Report, ReferenceRun, RunResult)> {
     let t0 = Instant::now();
-    let reference = solve_reference_steps(&scene.model, reference_options)?;
+    let reference = reference_with_progress(&scene.model, reference_options)?;
     let reference_s = t0.elapsed().as_secs_f64();
     let (report, result) = report_against(scene, run_id, &reference, reference_s, stop_at)?;
     Ok((report, reference, result))
@@ -371,7 +391,7 @@ pub fn build_reports_with(
         .map(|v| variant_scene(scene, v))
         .collect::<crate::Result<Vec<_>>>()?;
     let t0 = Instant::now();
-    let reference = solve_reference_steps(&scene.model, reference_options)?;
+    let reference = reference_with_progress(&scene.model, reference_options)?;
     let reference_s = t0.elapsed().as_secs_f64();
     let mut reports = Vec::with_capacity(variants.len());
     for sc in &scenes {
@@ -733,6 +753,63 @@ mod tests {
             let e = err(name);
             assert!(e.contains(part), "{name}: `{part}` not in: {e}");
         }
+    }
+
+    /// A reference far slower than LATIN does not squeeze LATIN's curves: the time axis spans
+    /// LATIN's run, and the reference's time is named at its right edge; where it fits, it is
+    /// marked at its place. The pointwise error and estimate are drawn.
+    #[test]
+    fn the_time_axis_spans_latin_and_names_a_slower_reference() {
+        use super::{plot_svg, Report, ReportPoint, TimeAxis};
+        let point = |k: u32| ReportPoint {
+            iteration: k,
+            elapsed_s: 0.1 * (k + 1) as f64,
+            eta: 0.5f64.powi(k as i32),
+            contact_indicator: 0.5f64.powi(k as i32),
+            traction_error: 0.4f64.powi(k as i32),
+            jump_error: 0.4f64.powi(k as i32),
+            pointwise_error: 0.45f64.powi(k as i32),
+            pointwise_at: [0, 0, 0],
+            estimate: Some(0.5f64.powi(k as i32)),
+            contraction: Some(0.5),
+            pointwise_estimate: Some(0.6f64.powi(k as i32)),
+            force_step: 0.5f64.powi(k as i32),
+            linear_s: 0.05,
+            linear_flops: 0,
+            bus_bytes: 0,
+            basis_sizes: Vec::new(),
+        };
+        let report = |reference_s: f64| Report {
+            scene: "s".into(),
+            scene_fingerprint: String::new(),
+            software_version: String::new(),
+            build_profile: String::new(),
+            cores: 1,
+            reference_s,
+            reference_newton_iterations: 0,
+            reference_max_newton_per_step: 0,
+            reference_failure: None,
+            reference_steps_solved: 1,
+            latin_setup_s: 0.0,
+            latin_solve_s: 1.0,
+            latin_verdict: String::new(),
+            acceleration: String::new(),
+            anderson_steps: [0; 3],
+            linear_stage: String::new(),
+            start: String::new(),
+            points: (0..10).map(point).collect(),
+            time_to_accuracy: Vec::new(),
+            accuracy: Vec::new(),
+        };
+        // LATIN ends at 1.0 s: the last point sits at 1/1.05 of the axis (left 80, width 590)
+        // whether the reference took 100 s or 0.5 s.
+        let last_x = format!("{:.2},", 80.0 + 590.0 / 1.05);
+        let slow = plot_svg(&report(100.0), TimeAxis::Linear);
+        assert!(slow.contains(&last_x), "{slow}");
+        assert!(slow.contains("100.00 s (beyond this axis)"), "{slow}");
+        let fast = plot_svg(&report(0.5), TimeAxis::Linear);
+        assert!(fast.contains(&last_x) && fast.contains("0.50 s</text>"), "{fast}");
+        assert!(slow.contains("largest at a point vs reference") && slow.contains("estimated largest at a point"));
     }
 
     /// Tick labels are distinct and cover the axis: 0.0137 s used to give 0.00, 0.00, 0.01, ….

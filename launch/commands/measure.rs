@@ -80,7 +80,7 @@ pub(crate) fn reference(
     let stem = format!("{}-reference", sc.model.name);
     ensure_absent(out, &[format!("{stem}.summary.json"), format!("{stem}.fields.json")])?;
     let t0 = std::time::Instant::now();
-    let run = solve_reference_steps(&sc.model, opts)?;
+    let run = glissade::report::reference_with_progress(&sc.model, opts)?;
     if let Some(e) = &run.failure {
         return reference_failed(&sc.model, &run, e, out);
     }

@@ -18,9 +18,7 @@ pub(crate) use glissade::report::{build_report_with, linear_stage_table, plot_sv
 pub(crate) use glissade::run::Run;
 pub(crate) use glissade::runner::{IterationRecord, RunOptions};
 pub(crate) use glissade_messages::Verdict;
-pub(crate) use glissade_reference::{
-    solve_reference_steps, verify, Checks, ReferenceError, ReferenceOptions, ReferenceRun,
-};
+pub(crate) use glissade_reference::{verify, Checks, ReferenceError, ReferenceOptions, ReferenceRun};
 pub(crate) use glissade_scene::{LoadedScene, Overrides, RecordOverride};
 pub(crate) use indicatif::{ProgressBar, ProgressStyle};
 pub(crate) use std::process::ExitCode;

@@ -349,7 +349,7 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
     let (w, h) = (900.0, 560.0);
     let (left, right, top, bottom) = (80.0, 230.0, 40.0, 60.0);
     // Colour and dash pattern per curve, so that curves on top of each other stay apart.
-    let series: [Series; 5] = [
+    let series: [Series; 7] = [
         (
             "traction error vs reference",
             "#d62728",
@@ -362,6 +362,18 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
             "8,4",
             Box::new(|p| p.estimate.unwrap_or(f64::NAN)),
         ),
+        (
+            "largest at a point vs reference",
+            "#8c564b",
+            "",
+            Box::new(|p| p.pointwise_error),
+        ),
+        (
+            "estimated largest at a point",
+            "#e377c2",
+            "8,4",
+            Box::new(|p| p.pointwise_estimate.unwrap_or(f64::NAN)),
+        ),
         ("jump error vs reference", "#1f77b4", "2,3", Box::new(|p| p.jump_error)),
         ("η (LATIN indicator)", "#2ca02c", "10,3,2,3", Box::new(|p| p.eta)),
         (
@@ -372,13 +384,10 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
         ),
     ];
     let t_of = |p: &ReportPoint| report.latin_setup_s + p.elapsed_s;
-    let t_max = report
-        .points
-        .iter()
-        .map(t_of)
-        .fold(report.reference_s, f64::max)
-        .max(1e-9)
-        * 1.05;
+    // The axis spans LATIN's run (the reference's time is marked on it where it fits, else named
+    // at the right edge): a reference ten times slower would squeeze LATIN's curves into a tenth.
+    let latin_max = report.points.iter().map(t_of).fold(0.0, f64::max);
+    let t_max = if latin_max > 0.0 { latin_max } else { report.reference_s }.max(1e-9) * 1.05;
     let values: Vec<f64> = report
         .points
         .iter()
@@ -390,7 +399,7 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
         .points
         .iter()
         .map(t_of)
-        .chain([report.reference_s])
+        .chain([report.reference_s].into_iter().filter(|&t| t <= t_max))
         .filter(|t| *t > 0.0)
         .fold(t_max, f64::min)
         / 1.5;
@@ -445,7 +454,8 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
     svg += &format!(
         "<text x=\"20\" y=\"{mid}\" text-anchor=\"middle\" transform=\"rotate(-90 20 {mid})\">relative error, indicator (log scale)</text>\n"
     );
-    let xr = x(report.reference_s);
+    let beyond = report.reference_s > t_max;
+    let xr = if beyond { w - right } else { x(report.reference_s) };
     let reference_label = match report.reference_failure {
         None => "monolithic Newton reference".to_string(),
         Some(_) => format!(
@@ -454,13 +464,14 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
         ),
     };
     svg += &format!(
-        "<line x1=\"{xr}\" y1=\"{top}\" x2=\"{xr}\" y2=\"{}\" stroke=\"black\" stroke-dasharray=\"6,4\"/><text x=\"{}\" y=\"{}\" transform=\"rotate(-90 {} {})\">{reference_label}: {:.2} s</text>\n",
+        "<line x1=\"{xr}\" y1=\"{top}\" x2=\"{xr}\" y2=\"{}\" stroke=\"black\" stroke-dasharray=\"6,4\"/><text x=\"{}\" y=\"{}\" transform=\"rotate(-90 {} {})\">{reference_label}: {:.2} s{}</text>\n",
         h - bottom,
         xr - 6.0,
         top + 240.0,
         xr - 6.0,
         top + 240.0,
-        report.reference_s
+        report.reference_s,
+        if beyond { " (beyond this axis)" } else { "" }
     );
     for (k, (name, color, dash, f)) in series.iter().enumerate() {
         let pts: Vec<String> = report

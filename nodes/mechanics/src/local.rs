@@ -99,6 +99,89 @@ pub fn contact_pair_groups(interfaces: &[Interface]) -> Vec<PairGroup> {
     groups.into_values().collect()
 }
 
+/// One interface's final fields as column-major slices (2·n_pairs × (N+1) each): W and F of
+/// sides a and b of s, then of ŝ, and the status per (pair, time) at p + n_pairs·i.
+pub struct FinalColumns<'a> {
+    pub values: [&'a mut [f64]; 8],
+    pub status: &'a mut [u8],
+}
+
+/// One value per physical point: where copies of one node pair sit on several contact
+/// interfaces (a node where sectors, blocks or plies meet on a contact; [`contact_pair_groups`]),
+/// only the sum of their nodal forces is determined (DESIGN §2), and each copy's own traction
+/// carries a share of it that depends on the run (opposite halves of a tangential traction where
+/// the point has none). Every copy is given the point's values instead: the weighted means
+/// Σ m·v / Σ m of W and F of both sides, of s and of ŝ; and, where the copies' statuses differ,
+/// the status of the point's ŝ traction (separated without compression, stuck inside the cone,
+/// else slipping; the first copy's friction coefficient). `fields` is indexed by interface; an
+/// interface without fields (None), or whose fields have another shape than its pairs and the
+/// first copy's time points, leaves its points as they are.
+pub fn one_value_per_point(interfaces: &[Interface], fields: &mut [Option<FinalColumns<'_>>]) {
+    for (members, m_g) in contact_pair_groups(interfaces) {
+        if members.len() < 2 || members.iter().any(|&(k, _)| fields.get(k).is_none_or(Option::is_none)) {
+            continue;
+        }
+        let (k0, p0) = members[0];
+        let rows0 = 2 * interfaces[k0].n_pairs();
+        let nt = fields[k0].as_ref().map_or(0, |f| f.values[0].len() / rows0.max(1));
+        // Fields of another shape than their interface's (a solution the caller did not check)
+        // are left as they are.
+        let shaped = members.iter().all(|&(k, _)| {
+            let n = interfaces[k].n_pairs();
+            fields[k]
+                .as_ref()
+                .is_some_and(|f| f.values.iter().all(|v| v.len() == 2 * n * nt) && f.status.len() == n * nt)
+        });
+        if !shaped {
+            continue;
+        }
+        for i in 0..nt {
+            for v in 0..8 {
+                for c in 0..2 {
+                    let at = |k: usize, p: usize| (2 * p + c) + 2 * interfaces[k].n_pairs() * i;
+                    let mean = members
+                        .iter()
+                        .map(|&(k, p)| {
+                            interfaces[k].weights[p] * fields[k].as_ref().expect("checked above").values[v][at(k, p)]
+                        })
+                        .sum::<f64>()
+                        / m_g;
+                    for &(k, p) in &members {
+                        fields[k].as_mut().expect("checked above").values[v][at(k, p)] = mean;
+                    }
+                }
+            }
+            let status_at = |k: usize, p: usize| p + interfaces[k].n_pairs() * i;
+            let first = fields[k0].as_ref().expect("checked above").status[status_at(k0, p0)];
+            let agree = members
+                .iter()
+                .all(|&(k, p)| fields[k].as_ref().expect("checked above").status[status_at(k, p)] == first);
+            if agree {
+                continue;
+            }
+            let itf = &interfaces[k0];
+            let hat = &fields[k0].as_ref().expect("checked above").values[6];
+            let f = [hat[(2 * p0) + rows0 * i], hat[(2 * p0 + 1) + rows0 * i]];
+            let (n, t) = (laws::dot(f, itf.normal(p0)), laws::dot(f, itf.tangent(p0)));
+            let friction = match &itf.kind {
+                InterfaceKind::Contact { friction, .. } => *friction,
+                InterfaceKind::Perfect => unreachable!("contact_pair_groups holds contact pairs only"),
+            };
+            // Strictly inside the cone by more than round-off: stuck.
+            let status = if n >= 0.0 {
+                Status::Separated
+            } else if t.abs() < friction * n.abs() * (1.0 - 1e-9) {
+                Status::Stick
+            } else {
+                Status::Slip
+            } as u8;
+            for &(k, p) in &members {
+                fields[k].as_mut().expect("checked above").status[status_at(k, p)] = status;
+            }
+        }
+    }
+}
+
 /// Each LATIN iteration's error against a reference ([`error_against_reference`]), from the
 /// subdomains' boundary states s = (W, F) as they come: once every subdomain with a boundary has
 /// sent its state, the iteration's interface fields are complete and their errors are returned.
@@ -857,6 +940,63 @@ mod tests {
         assert!(force_step_sums(&pairs, &times, old.as_ref(), nan.as_ref())
             .max_step
             .is_nan());
+    }
+
+    /// Two contact interfaces meeting at x = 2 (the last pair of one, the first of the other):
+    /// their copies of that point carry opposite tangential halves and different statuses; each
+    /// copy is given the point's weighted mean and the status of its combined ŝ, the other
+    /// points are left alone.
+    #[test]
+    fn copies_of_one_point_get_its_values() {
+        let itf = |x0: f64, weights: Vec<f64>| Interface {
+            kind: InterfaceKind::Contact {
+                friction: 0.3,
+                gap: vec![0.0; 3],
+            },
+            a: 0,
+            b: 1,
+            pairs: vec![(0, 0); 3],
+            coords: vec![[x0, 0.0], [x0 + 1.0, 0.0], [x0 + 2.0, 0.0]],
+            weights,
+            normals: vec![[0.0, 1.0]; 3],
+            length: 2.0,
+            centroid: [x0 + 1.0, 0.0],
+        };
+        let interfaces = [
+            itf(0.0, vec![1.0 / 3.0, 4.0 / 3.0, 1.0 / 3.0]),
+            itf(2.0, vec![1.0, 4.0, 1.0]),
+        ];
+        // One time point; rows x, y per pair. The shared point: pair 2 of interface 0, pair 0
+        // of interface 1; weights 1/3 and 1 (a finer edge on the right).
+        let mut v0: Vec<Vec<f64>> = (0..8).map(|_| vec![1.0, -10.0, 1.0, -10.0, 3.0, -10.0]).collect();
+        let mut v1: Vec<Vec<f64>> = (0..8).map(|_| vec![-1.0, -12.0, 1.0, -10.0, 1.0, -10.0]).collect();
+        let (mut s0, mut s1) = (vec![1u8, 1, 2], vec![1u8, 1, 1]);
+        {
+            fn cols(v: &mut [Vec<f64>]) -> [&mut [f64]; 8] {
+                let mut it = v.iter_mut().map(|x| x.as_mut_slice());
+                std::array::from_fn(|_| it.next().expect("eight"))
+            }
+            let mut fields = [
+                Some(FinalColumns {
+                    values: cols(&mut v0),
+                    status: &mut s0,
+                }),
+                Some(FinalColumns {
+                    values: cols(&mut v1),
+                    status: &mut s1,
+                }),
+            ];
+            one_value_per_point(&interfaces, &mut fields);
+        }
+        // x: (3·1/3 − 1·1) / (4/3) = 0; y: (−10/3 − 12) / (4/3) = −11.5.
+        for v in 0..8 {
+            assert_eq!([v0[v][4], v0[v][5]], [0.0, -11.5], "field {v}");
+            assert_eq!([v1[v][0], v1[v][1]], [0.0, -11.5], "field {v}");
+            assert_eq!(&v0[v][..4], &[1.0, -10.0, 1.0, -10.0]);
+            assert_eq!(&v1[v][2..], &[1.0, -10.0, 1.0, -10.0]);
+        }
+        // |t| = 0 < 0.3 · 11.5: the point sticks, though one copy slipped.
+        assert_eq!((s0, s1), (vec![1, 1, 1], vec![1, 1, 1]));
     }
 
     /// The largest traction difference against a reference, relative to the reference's largest

@@ -328,6 +328,26 @@ pub fn solve_reference(model: &Model, opts: &ReferenceOptions) -> Result<Referen
 /// As [`solve_reference`], but a step that does not converge ends the run with the steps solved
 /// before it (an error in setting up the problem is still an `Err`).
 pub fn solve_reference_steps(model: &Model, opts: &ReferenceOptions) -> Result<ReferenceRun, ReferenceError> {
+    solve_reference_watched(model, opts, &mut |_| {})
+}
+
+/// One time point solved by [`solve_reference_watched`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepSolved {
+    /// Time points solved so far (this one included) and in all.
+    pub solved: usize,
+    pub of: usize,
+    /// Newton iterations of this time point, every attempt counted.
+    pub newton_iterations: usize,
+}
+
+/// As [`solve_reference_steps`], calling `on_step` after each time point solved (a progress
+/// display).
+pub fn solve_reference_watched(
+    model: &Model,
+    opts: &ReferenceOptions,
+    on_step: &mut dyn FnMut(StepSolved),
+) -> Result<ReferenceRun, ReferenceError> {
     let pb = Problem::new(model, opts.linear_solver)?;
     let nt = model.time.n_points();
     let attempts = opts.attempts();
@@ -388,6 +408,11 @@ pub fn solve_reference_steps(model: &Model, opts: &ReferenceOptions) -> Result<R
         r_factor_used.push(rf);
         states.push((u, s.x.clone(), status, f));
         state = s;
+        on_step(StepSolved {
+            solved: i + 1,
+            of: nt,
+            newton_iterations: total,
+        });
     }
     Ok(ReferenceRun {
         solution: postprocess(&pb, states, newton_iterations, r_factor_used),

@@ -52,7 +52,7 @@ fn laminate_reference_converges() {
     converges_and_verifies(&laminate());
 }
 
-/// The laminate of issue 55 that unloads to zero: every time point solved, the last one (t = 1,
+/// The laminate that unloads to zero: every time point solved, the last one (t = 1,
 /// no load at all) included, by the first attempt.
 #[test]
 fn laminate_unloading_to_zero_solves_every_time_point() {
