@@ -296,7 +296,7 @@ fn converged_runs_write_every_traction_within_the_accuracy() {
 /// verdict and the largest difference between the tractions written and the reference's.
 /// `cargo test --release --test integration -- --ignored outputs_against_the_reference --nocapture`
 #[test]
-#[ignore = "a measurement for docs/accuracy.md, 13 minutes in a debug build"]
+#[ignore = "a measurement for docs/accuracy.md, 21 minutes in a debug build"]
 fn outputs_against_the_reference() {
     let mut scenes = vec![("side-by-side".to_string(), fixture("side-by-side"))];
     for name in SHIPPED {
