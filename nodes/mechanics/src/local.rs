@@ -180,6 +180,28 @@ pub struct PointwiseError {
     pub time_point: usize,
 }
 
+/// The nodal forces Σ m·F of a group of copies of one node pair ([`contact_pair_groups`]) at
+/// time point `i`, component `c`: s's on sides a and b, then the reference's.
+fn group_forces(
+    interfaces: &[Interface],
+    members: &[(usize, usize)],
+    s: &[InterfaceFields],
+    reference: &[InterfaceFields],
+    i: usize,
+    c: usize,
+) -> [f64; 4] {
+    let mut sums = [0.0; 4];
+    for &(k, p) in members {
+        let (x, r, m) = (&s[k], &reference[k], interfaces[k].weights[p]);
+        let e = 2 * p + c;
+        sums[0] += m * x.f_a[(e, i)];
+        sums[1] += m * x.f_b[(e, i)];
+        sums[2] += m * r.f_a[(e, i)];
+        sums[3] += m * r.f_b[(e, i)];
+    }
+    sums
+}
+
 /// The pointwise counterpart of e_F ([`error_against_reference`]): at each physical contact
 /// point g (a group of copies of one node pair, [`contact_pair_groups`]; only their summed force
 /// is determined at a cross-point) the traction t_g = Σ m·F / Σ m of each side, and the largest
@@ -197,15 +219,7 @@ pub fn pointwise_traction_error(
         };
         for i in 0..s.get(k0).map_or(0, |x| x.f_a.ncols()) {
             for c in 0..2 {
-                let (mut n_a, mut n_b, mut r_a, mut r_b) = (0.0, 0.0, 0.0, 0.0);
-                for &(k, p) in &members {
-                    let (x, r, m) = (&s[k], &reference[k], interfaces[k].weights[p]);
-                    let e = 2 * p + c;
-                    n_a += m * x.f_a[(e, i)];
-                    n_b += m * x.f_b[(e, i)];
-                    r_a += m * r.f_a[(e, i)];
-                    r_b += m * r.f_b[(e, i)];
-                }
+                let [n_a, n_b, r_a, r_b] = group_forces(interfaces, &members, s, reference, i, c);
                 let d = (n_a - r_a).abs().max((n_b - r_b).abs()) / m_g;
                 scale = scale.max(r_a.abs().max(r_b.abs()) / m_g);
                 if d > worst.error || d.is_nan() {
@@ -252,14 +266,10 @@ pub fn error_against_reference(
     for (members, m_g) in contact_pair_groups(interfaces) {
         for (i, &wt) in time_weights.iter().enumerate() {
             for c in 0..2 {
-                let (mut n_a, mut n_b, mut r_a, mut r_b) = (0.0, 0.0, 0.0, 0.0);
+                let [n_a, n_b, r_a, r_b] = group_forces(interfaces, &members, s, reference, i, c);
                 for &(k, p) in &members {
                     let (x, r, m) = (&s[k], &reference[k], interfaces[k].weights[p]);
                     let e = 2 * p + c;
-                    n_a += m * x.f_a[(e, i)];
-                    n_b += m * x.f_b[(e, i)];
-                    r_a += m * r.f_a[(e, i)];
-                    r_b += m * r.f_b[(e, i)];
                     let jump = x.w_b[(e, i)] - x.w_a[(e, i)];
                     let jump_ref = r.w_b[(e, i)] - r.w_a[(e, i)];
                     w_num += wt * m * sq(jump - jump_ref);
