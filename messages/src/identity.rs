@@ -61,6 +61,18 @@ pub enum Stage {
     Final,
 }
 
+impl Stage {
+    /// Every stage, in the order of the enum (and of the foreign schema's values).
+    pub const ALL: [Stage; 6] = [
+        Stage::Setup,
+        Stage::Micro1,
+        Stage::Macro,
+        Stage::Linear,
+        Stage::Local,
+        Stage::Final,
+    ];
+}
+
 /// Header of every message.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub struct Envelope {

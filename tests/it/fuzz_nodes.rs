@@ -104,14 +104,7 @@ struct Fuzzer {
     stats: Stats,
 }
 
-const STAGES: [Stage; 6] = [
-    Stage::Setup,
-    Stage::Micro1,
-    Stage::Macro,
-    Stage::Linear,
-    Stage::Local,
-    Stage::Final,
-];
+const STAGES: [Stage; 6] = Stage::ALL;
 const ROLES: [Role; 5] = [
     Role::Subdomain,
     Role::Interface,

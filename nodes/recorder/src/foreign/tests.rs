@@ -12,14 +12,7 @@ use prost_reflect::{DescriptorPool, DynamicMessage, ReflectMessage, Value};
 use std::borrow::Cow;
 
 /// In the order of the proto enums' values.
-const STAGES: [Stage; 6] = [
-    Stage::Setup,
-    Stage::Micro1,
-    Stage::Macro,
-    Stage::Linear,
-    Stage::Local,
-    Stage::Final,
-];
+const STAGES: [Stage; 6] = Stage::ALL;
 const ROLES: [Role; 5] = [
     Role::Subdomain,
     Role::Interface,
