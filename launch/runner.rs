@@ -242,6 +242,7 @@ pub(crate) fn run_logged(
     }
     // Several interface nodes publish their interfaces' solutions in node order.
     interfaces.sort_by_key(|s| s.interface);
+    glissade_replay::one_value_per_point(&model, &mut interfaces);
     let verdict = iterations
         .last()
         .map(|r| r.decision.verdict.clone())

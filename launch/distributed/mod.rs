@@ -206,7 +206,7 @@ pub(crate) fn run_processes(
     }
     let linear_stages = got.linear_stages.records(&[]);
     Ok((
-        got.into_result(&set_up.plan, Verdict::MaxIterations, names, left_out),
+        got.into_result(model, &set_up.plan, Verdict::MaxIterations, names, left_out),
         traffic,
         linear_stages,
     ))

@@ -151,7 +151,7 @@ impl<'r> Supervisor<'r> {
                 let (nodes, left_out) = self.set_up.plan.describe(&self.scene.model, self.set_up.groups.len());
                 let got = std::mem::take(&mut self.got);
                 return Err(Interrupted {
-                    partial: got.into_result(&self.set_up.plan, Verdict::Continue, nodes, left_out),
+                    partial: got.into_result(&self.scene.model, &self.set_up.plan, Verdict::Continue, nodes, left_out),
                 }
                 .into());
             }
@@ -830,12 +830,14 @@ impl Collected {
     /// decision came.
     pub(super) fn into_result(
         mut self,
+        model: &glissade_mechanics::model::Model,
         plan: &Plan,
         verdict: Verdict,
         nodes: Vec<String>,
         left_out: Vec<String>,
     ) -> RunResult {
         self.interfaces.sort_by_key(|s| s.interface);
+        glissade_replay::one_value_per_point(model, &mut self.interfaces);
         self.displacements.sort_by_key(|d| d.0);
         RunResult {
             setup_s: self.setup_s,

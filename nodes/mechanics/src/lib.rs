@@ -19,6 +19,7 @@ pub mod mesh;
 pub mod model;
 pub mod modes;
 pub mod pgd;
+pub mod points;
 pub mod post;
 pub mod simd;
 

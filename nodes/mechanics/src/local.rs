@@ -6,6 +6,7 @@
 
 use crate::laws::{self, ContactPoint, PairState, Status};
 use crate::model::{Interface, InterfaceKind, SolverParams};
+use crate::points::{junctions, PhysicalPoint, PointCopy};
 use faer::reborrow::ReborrowMut;
 use faer::{Mat, MatMut, MatRef};
 
@@ -69,34 +70,6 @@ impl InterfaceFields {
         to_w.copy_from(w.subrows(offset, rows));
         to_f.copy_from(f.subrows(offset, rows));
     }
-}
-
-/// Copies of one physical contact node pair: members (interface, pair) and their summed weight.
-pub type PairGroup = (Vec<(usize, usize)>, f64);
-
-/// Contact node pairs grouped by physical location: copies of one merged node pair (a
-/// cross-point where perfect interfaces meet a contact interface, DESIGN §2) form one group.
-pub fn contact_pair_groups(interfaces: &[Interface]) -> Vec<PairGroup> {
-    let scale = interfaces.iter().map(|i| i.length).fold(0.0, f64::max).max(1.0);
-    let q = |v: f64| (v / (1e-9 * scale)).round() as i64;
-    let mut groups: std::collections::BTreeMap<[i64; 4], PairGroup> = Default::default();
-    for (k, itf) in interfaces.iter().enumerate() {
-        if !itf.is_contact() {
-            continue;
-        }
-        for p in 0..itf.n_pairs() {
-            let key = [
-                q(itf.coords[p][0]),
-                q(itf.coords[p][1]),
-                q(itf.normals[p][0] * scale),
-                q(itf.normals[p][1] * scale),
-            ];
-            let g = groups.entry(key).or_default();
-            g.0.push((k, p));
-            g.1 += itf.weights[p];
-        }
-    }
-    groups.into_values().collect()
 }
 
 /// Each LATIN iteration's error against a reference ([`error_against_reference`]), from the
@@ -180,31 +153,31 @@ pub struct PointwiseError {
     pub time_point: usize,
 }
 
-/// The nodal forces Σ m·F of a group of copies of one node pair ([`contact_pair_groups`]) at
-/// time point `i`, component `c`: s's on sides a and b, then the reference's.
+/// The nodal forces Σ m·F of the pairs of one junction ([`junctions`]) at time point
+/// `i`, component `c`: s's on the point's sides a and b, then the reference's.
 fn group_forces(
     interfaces: &[Interface],
-    members: &[(usize, usize)],
+    point: &PhysicalPoint,
     s: &[InterfaceFields],
     reference: &[InterfaceFields],
     i: usize,
     c: usize,
 ) -> [f64; 4] {
-    let mut sums = [0.0; 4];
-    for &(k, p) in members {
-        let (x, r, m) = (&s[k], &reference[k], interfaces[k].weights[p]);
-        let e = 2 * p + c;
-        sums[0] += m * x.f_a[(e, i)];
-        sums[1] += m * x.f_b[(e, i)];
-        sums[2] += m * r.f_a[(e, i)];
-        sums[3] += m * r.f_b[(e, i)];
-    }
-    sums
+    let force = |x: &[InterfaceFields], k: usize, p: usize, b: bool| {
+        let f = if b { &x[k].f_b } else { &x[k].f_a };
+        f[(2 * p + c, i)]
+    };
+    [
+        point.weighted_sum(interfaces, false, |k, p, b| force(s, k, p, b)),
+        point.weighted_sum(interfaces, true, |k, p, b| force(s, k, p, b)),
+        point.weighted_sum(interfaces, false, |k, p, b| force(reference, k, p, b)),
+        point.weighted_sum(interfaces, true, |k, p, b| force(reference, k, p, b)),
+    ]
 }
 
 /// The pointwise counterpart of e_F ([`error_against_reference`]): at each physical contact
-/// point g (a group of copies of one node pair, [`contact_pair_groups`]; only their summed force
-/// is determined at a cross-point) the traction t_g = Σ m·F / Σ m of each side, and the largest
+/// point g (a junction, [`junctions`]: one pair, or the pairs at one place whose summed force
+/// is what is determined) the traction t_g = Σ m·F / Σ m of each side, and the largest
 /// |t_g − t_g,ref| over points, time points, components (x, y) and sides relative to the largest
 /// |t_g,ref|.
 pub fn pointwise_traction_error(
@@ -213,13 +186,19 @@ pub fn pointwise_traction_error(
     reference: &[InterfaceFields],
 ) -> PointwiseError {
     let (mut worst, mut scale) = (PointwiseError::default(), 0.0f64);
-    for (members, m_g) in contact_pair_groups(interfaces) {
-        let Some(&(k0, p0)) = members.first() else {
+    for point in junctions(interfaces) {
+        let Some(&PointCopy {
+            interface: k0,
+            pair: p0,
+            ..
+        }) = point.copies.first()
+        else {
             continue;
         };
+        let m_g = point.weight;
         for i in 0..s.get(k0).map_or(0, |x| x.f_a.ncols()) {
             for c in 0..2 {
-                let [n_a, n_b, r_a, r_b] = group_forces(interfaces, &members, s, reference, i, c);
+                let [n_a, n_b, r_a, r_b] = group_forces(interfaces, &point, s, reference, i, c);
                 let d = (n_a - r_a).abs().max((n_b - r_b).abs()) / m_g;
                 scale = scale.max(r_a.abs().max(r_b.abs()) / m_g);
                 if d > worst.error || d.is_nan() {
@@ -246,10 +225,9 @@ pub fn pointwise_traction_error(
 /// Error of interface fields `s` against a reference solution of the same discrete problem, on
 /// contact interfaces (DESIGN §3, "error against a reference"): relative space-time norms
 /// (trapezoid weights w_i):
-/// - e_F over the contact forces: per group g of copies of one node pair (see
-///   [`contact_pair_groups`]; a single pair away from cross-points) the nodal forces M·F of both
-///   sides are summed, since only their sum is determined where perfect interfaces meet the
-///   contact; e_F² = Σ_i w_i Σ_g |N_g − N_g,ref|²/m_g / Σ_i w_i Σ_g |N_g,ref|²/m_g, which is the
+/// - e_F over the contact forces: per junction g (see [`junctions`]; a single pair away from
+///   cross-points) the nodal forces M·F of both sides are summed, since only their sum is
+///   determined where copies of a pair, or pairs closing a cycle, meet at one place; e_F² = Σ_i w_i Σ_g |N_g − N_g,ref|²/m_g / Σ_i w_i Σ_g |N_g,ref|²/m_g, which is the
 ///   M-weighted traction norm where g is one pair;
 /// - e_W = ‖[W] − [W]_ref‖ / (‖[W]_ref‖² + ½‖W_ref‖²)^½ over every copy's jump (M-weighted;
 ///   scaled like e_W of [`IndicatorSums`], so that it stays defined when every point sticks).
@@ -263,11 +241,15 @@ pub fn error_against_reference(
 ) -> (f64, f64) {
     let (mut f_num, mut f_den, mut w_num, mut w_den) = (0.0, 0.0, 0.0, 0.0);
     let sq = |v: f64| v * v;
-    for (members, m_g) in contact_pair_groups(interfaces) {
+    for point in junctions(interfaces) {
+        let m_g = point.weight;
         for (i, &wt) in time_weights.iter().enumerate() {
             for c in 0..2 {
-                let [n_a, n_b, r_a, r_b] = group_forces(interfaces, &members, s, reference, i, c);
-                for &(k, p) in &members {
+                let [n_a, n_b, r_a, r_b] = group_forces(interfaces, &point, s, reference, i, c);
+                for &PointCopy {
+                    interface: k, pair: p, ..
+                } in &point.copies
+                {
                     let (x, r, m) = (&s[k], &reference[k], interfaces[k].weights[p]);
                     let e = 2 * p + c;
                     let jump = x.w_b[(e, i)] - x.w_a[(e, i)];

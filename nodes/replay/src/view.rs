@@ -315,6 +315,9 @@ impl View {
             path: "final state".into(),
             detail,
         })?;
+        // The displacements from each copy's own values, the interfaces drawn with one value per
+        // point, as the run's outputs show them.
+        crate::one_value_per_point(model, &mut self.interfaces);
         let mut final_fields: BTreeMap<u32, Vec<Vec<f64>>> = BTreeMap::new();
         for (&s, per_time) in &final_u {
             let fields = per_time

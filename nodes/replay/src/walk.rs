@@ -134,9 +134,12 @@ pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
             _ => {}
         }
     }
-    let interfaces: Vec<InterfaceSolution> = interfaces.into_values().collect();
+    let mut interfaces: Vec<InterfaceSolution> = interfaces.into_values().collect();
     let mut recovery = Recovery::new(&model);
+    // The displacements from each copy's own values (what each subdomain was sent), then the
+    // outputs' one value per point.
     let u = final_displacements(&model, &mut recovery, &interfaces, &displacements, &last_states).map_err(content)?;
+    crate::one_value_per_point(&model, &mut interfaces);
     Ok(FinalState {
         model,
         u,
