@@ -186,6 +186,46 @@ pub(crate) enum Command {
         #[arg(long, default_value = "recordings")]
         out: PathBuf,
     },
+    /// Check the stop on accuracy on generated scenes no one tuned for (docs/accuracy.md, "The
+    /// validation set"): per seed, a laminate or a Gmsh geometry, its reference, and one run past
+    /// the smallest accuracy; where each accuracy (1e-2, 1e-3, 1e-4) stops and the true error
+    /// there (`validation-<part>.md`, `validation-<part>.json`, the scenes in `scenes/`).
+    Validate {
+        /// Which part of the set: `held-out` (odd seeds: report on these), `calibration` (even
+        /// seeds: tune only on these) or `all`.
+        #[arg(long, value_enum, default_value = "held-out")]
+        part: PartArg,
+        /// Seeds, as `first..end` (end excluded); each part takes its own seeds of the range.
+        #[arg(long, default_value = "0..200", value_parser = parse_seeds)]
+        seeds: std::ops::Range<u64>,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "validation")]
+        out: PathBuf,
+    },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum PartArg {
+    HeldOut,
+    Calibration,
+    All,
+}
+
+/// `first..end` with first < end.
+fn parse_seeds(text: &str) -> Result<std::ops::Range<u64>, String> {
+    let (a, b) = text
+        .split_once("..")
+        .ok_or_else(|| format!("{text:?}: expected first..end, e.g. 0..200"))?;
+    let num = |v: &str| {
+        v.trim()
+            .parse::<u64>()
+            .map_err(|e| format!("{text:?}: {v:?} is not a seed ({e})"))
+    };
+    let (a, b) = (num(a)?, num(b)?);
+    if a >= b {
+        return Err(format!("{text:?}: the range is empty (end is excluded)"));
+    }
+    Ok(a..b)
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]

@@ -17,6 +17,7 @@ pub mod report;
 pub mod run;
 pub mod runner;
 pub mod stability;
+pub mod validate;
 pub mod vtu;
 
 use error::IoWhat;

@@ -9,7 +9,7 @@ use anyhow::Context;
 use clap::Parser;
 use cli::{Cli, Command, GenerateKind, KernelsArg, RoleArg};
 use commands::check_run_id;
-use commands::measure::{bench, reference, reference_options, report, report_variants, stability, Plots};
+use commands::measure::{bench, reference, reference_options, report, report_variants, stability, validate, Plots};
 use commands::replay::{export, replay};
 use commands::run::run;
 use glissade::bus::Joining;
@@ -123,6 +123,7 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 report_variants(&scene, &out, &overrides, &variants, stop_at_error, &ropts, &plots)
             }
         }
+        Command::Validate { part, seeds, out } => validate(part, seeds, &out),
         Command::Stability {
             quick,
             only,

@@ -443,3 +443,65 @@ pub(crate) fn stability(
         ExitCode::from(NOT_CONVERGED)
     })
 }
+
+/// `glissade validate`: the stop on accuracy on the generated validation set.
+pub(crate) fn validate(
+    part: crate::cli::PartArg,
+    seeds: std::ops::Range<u64>,
+    out: &std::path::Path,
+) -> anyhow::Result<ExitCode> {
+    use crate::cli::PartArg;
+    use glissade::validate::{markdown, validate_seed, Part};
+    let (stem, keep): (&str, fn(Part) -> bool) = match part {
+        PartArg::HeldOut => ("validation-held-out", |p| p == Part::HeldOut),
+        PartArg::Calibration => ("validation-calibration", |p| p == Part::Calibration),
+        PartArg::All => ("validation-all", |_| true),
+    };
+    ensure_writable(out)?;
+    ensure_absent(out, &[format!("{stem}.md"), format!("{stem}.json")])?;
+    let scenes = out.join("scenes");
+    let chosen: Vec<u64> = seeds.filter(|&s| keep(Part::of(s))).collect();
+    let mut results = Vec::with_capacity(chosen.len());
+    for (k, &seed) in chosen.iter().enumerate() {
+        let v = validate_seed(seed, &scenes, &Default::default())?;
+        let line = match &v.check {
+            Ok(c) => c
+                .stops
+                .iter()
+                .map(|s| {
+                    format!(
+                        "{:.0e} → {}",
+                        s.accuracy,
+                        match (s.iteration, s.ratio()) {
+                            (Some(i), Some(r)) => format!("{r:.2}× at {i}"),
+                            (Some(i), None) => format!("stop at {i}"),
+                            (None, _) => "NOT converged".into(),
+                        }
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(", "),
+            Err(e) => format!("not checked: {e}"),
+        };
+        eprintln!(
+            "[{}/{}] seed {seed} ({}, {:.1} s): {line}",
+            k + 1,
+            chosen.len(),
+            v.family,
+            v.seconds
+        );
+        results.push(v);
+    }
+    let table = markdown(&results);
+    let md = out.join(format!("{stem}.md"));
+    std::fs::write(&md, &table).with_context(|| format!("cannot write {}", md.display()))?;
+    let j = write_json(out, &format!("{stem}.json"), &serde_json::to_value(&results)?)?;
+    print!("{}", glissade::validate::summary(&results));
+    println!(
+        "table: {}\njson: {}\nscenes: {}",
+        md.display(),
+        j.display(),
+        scenes.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -32,6 +32,7 @@ mod stall;
 mod time_start;
 mod tls;
 mod two_hosts;
+mod validate;
 mod verified_outputs;
 mod vtu;
 
