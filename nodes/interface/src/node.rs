@@ -95,7 +95,8 @@ impl InterfaceNode {
             })
             .collect();
         let decider = (index == 0).then(|| Decider {
-            rule: StopRule::new(&model.solver),
+            rule: StopRule::new(&model.solver)
+                .with_traction_scale(glissade_mechanics::scales::Scales::of(&model).traction()),
             n_nodes: groups.len() as u32,
             groups: groups
                 .iter()

@@ -26,6 +26,10 @@ pub struct StopRule {
     /// The same estimate made on the pointwise steps ([`IndicatorSums::pointwise_step`]).
     pointwise: ErrorEstimate,
     last_pointwise: Option<Estimated>,
+    /// The scene's traction scale T_s ([`glissade_mechanics::scales::Scales::traction`], MPa):
+    /// with every contact point of ŝ separated, s's contact forces are round-off only below the
+    /// accuracy times this. 0 (unknown): never taken for round-off.
+    pub traction_scale: f64,
 }
 
 impl StopRule {
@@ -44,7 +48,14 @@ impl StopRule {
             last: None,
             pointwise: ErrorEstimate::default(),
             last_pointwise: None,
+            traction_scale: 0.0,
         }
+    }
+
+    /// The rule with the scene's traction scale ([`Self::traction_scale`]).
+    pub fn with_traction_scale(mut self, traction_scale: f64) -> Self {
+        self.traction_scale = traction_scale;
+        self
     }
 
     /// The error estimate of the last decided iteration, if the iteration showed a contraction.
@@ -67,10 +78,14 @@ impl StopRule {
             r if r > 0.0 => r,
             _ => eta,
         };
-        // Every contact point of ŝ separated: ŝ has no contact force, and s's are round-off
-        // (relative to nothing); their step carries no information, the tractions are zero.
+        // Every contact point of ŝ separated: ŝ has no contact force. Where s's contact forces
+        // are also below the accuracy times the scene's traction scale, they are round-off
+        // (relative to nothing): their step carries no information, the tractions are zero. Where
+        // s still carries forces above that (a contact the local stage has not found yet, the
+        // linear stage pressing two parts together), their steps are the estimate's as anywhere.
         let separated = sums.counts[0] > 0 && sums.counts[1] + sums.counts[2] == 0;
-        let (step, pointwise) = if separated {
+        let negligible = sums.force_max <= self.accuracy.unwrap_or(f64::EPSILON) * self.traction_scale;
+        let (step, pointwise) = if separated && negligible {
             (0.0, 0.0)
         } else {
             (sums.force_step(), sums.pointwise_step())

@@ -145,6 +145,26 @@ fn accuracy_stops_on_the_estimate_not_on_eta() {
         .expect("converges");
     assert_eq!(stop, 30);
 
+    // Every contact point of ŝ separated, s and ŝ agreeing within the accuracy (e_W halving, η
+    // small), but s still carrying contact forces of 0.26 MPa that move by 5 % an iteration, in a
+    // scene whose traction scale is 6.3 MPa (a gap the local stage has not found closed yet; a
+    // generated two-ply laminate stopped "Converged" at 21 with an estimate of 0 and a true error
+    // of 6.6 so): those forces are not round-off, their steps are the estimate's, and the run goes
+    // on. Forces of 1e-12 MPa instead are round-off: the estimate is 0 and it stops at 20.
+    for (force, stops) in [(0.26, None), (1e-12, Some(20))] {
+        let mut r = StopRule::new(&p).with_traction_scale(6.3);
+        let stop = (0..40).find(|&n| {
+            let mut s = step_sums(1e-6, n);
+            (s.force_num, s.force_den) = (0.0, 0.0);
+            (s.jump_num, s.jump_den) = (0.25f64.powi(n as i32), 1.0);
+            (s.step_num, s.step_den) = (0.05f64.powi(2) * force * force, force * force);
+            (s.step_max, s.force_max) = (0.05 * force, force);
+            s.counts = [100, 0, 0];
+            r.decide(n, &s, None) == Verdict::Converged
+        });
+        assert_eq!(stop, stops, "forces of {force} MPa");
+    }
+
     // The L2 estimate is met from 20 on (as above), but the largest step at one point is 40 times
     // the L2 step (a corner that converges like the rest, 40 times its share): its estimate,
     // 40 · 2⁻⁽ⁿ⁻¹⁰⁾, is at most 1e-3 from n = 26 (40 · 2⁻¹⁶ = 6.1e-4; at 25, 1.2e-3): no

@@ -436,7 +436,7 @@ mod tests {
             // Right copy (pair 0 of interface 1): lower side fx −1, fy −12.
             let side = |lower: [f64; 2], v: usize| -> Vec<f64> {
                 // v even: side a; a lower-side value, negated on the upper side for forces.
-                let sign = if v % 2 == 0 { 1.0 } else { -1.0 };
+                let sign = if v.is_multiple_of(2) { 1.0 } else { -1.0 };
                 let mut out = vec![0.5, -1.0, 0.5, -1.0, 0.5, -1.0];
                 out.splice(0..2, [sign * lower[0], sign * lower[1]]);
                 out
@@ -444,20 +444,23 @@ mod tests {
             let mut v0: Vec<Vec<f64>> = (0..8)
                 .map(|v| {
                     let mut x = side([7.0, 7.0], v);
-                    let s = if v % 2 == 0 { 1.0 } else { -1.0 };
+                    let s = if v.is_multiple_of(2) { 1.0 } else { -1.0 };
                     x[4] = s * 3.0;
                     x[5] = s * -10.0;
                     x
                 })
                 .collect();
-            let mut v1: Vec<Vec<f64>> = (0..8)
+            let mut v1: Vec<Vec<f64>> = (0..8usize)
                 .map(|v| {
                     // Declared down, side a is the upper block: its values are the lower side's
                     // negated.
-                    let lower_is_a = !declared_down;
-                    let s = if (v % 2 == 0) == lower_is_a { 1.0 } else { -1.0 };
+                    let s = if v.is_multiple_of(2) != declared_down {
+                        1.0
+                    } else {
+                        -1.0
+                    };
                     let mut x = side([5.0, 5.0], v);
-                    x[0] = s * -1.0;
+                    x[0] = -s;
                     x[1] = s * -12.0;
                     x
                 })
@@ -483,10 +486,14 @@ mod tests {
                 one_value_per_point(&interfaces, &mut fields);
             }
             // Lower side: x (3·1/3 − 1·1) / (4/3) = 0; y (−10/3 − 12) / (4/3) = −11.5.
-            for v in 0..8 {
-                let lower = if v % 2 == 0 { 1.0 } else { -1.0 };
+            for v in 0..8usize {
+                let lower = if v.is_multiple_of(2) { 1.0 } else { -1.0 };
                 assert_eq!([v0[v][4], v0[v][5]], [0.0, lower * -11.5], "field {v}");
-                let s1_sign = if (v % 2 == 0) == !declared_down { 1.0 } else { -1.0 };
+                let s1_sign = if v.is_multiple_of(2) != declared_down {
+                    1.0
+                } else {
+                    -1.0
+                };
                 assert_eq!([v1[v][0], v1[v][1]], [0.0, s1_sign * -11.5], "field {v}");
                 assert_eq!(&v0[v][..4], &side([7.0, 7.0], v)[..4], "other pairs left alone");
                 assert_eq!(&v1[v][2..], &side([5.0, 5.0], v)[2..], "other pairs left alone");

@@ -110,11 +110,10 @@ pub mod glued;
 mod newton;
 mod numbering;
 mod output;
-mod scales;
 mod sparse;
 mod verify;
 
-pub use scales::{Scales, DISPLACEMENT_BOUND, FORCE_BOUND, LOAD_DISPLACEMENT_BOUND, ROUND_OFF};
+pub use glissade_mechanics::scales::{Scales, DISPLACEMENT_BOUND, FORCE_BOUND, LOAD_DISPLACEMENT_BOUND, ROUND_OFF};
 pub use verify::{verify, Checks};
 
 use faer::Mat;

@@ -1,7 +1,6 @@
 //! Semi-smooth Newton on the Alart–Curnier augmented Lagrangian, one time step at a time.
 
 use crate::numbering::*;
-use crate::scales::{Scales, ROUND_OFF};
 use crate::sparse::*;
 use crate::verify::*;
 use crate::{Attempt, LinearSolver, ReferenceError, ReferenceOptions, NONE};
@@ -13,6 +12,7 @@ use glissade_mechanics::assembly::stiffness_triplets;
 use glissade_mechanics::laws::dot;
 use glissade_mechanics::laws::Status;
 use glissade_mechanics::model::{InterfaceKind, Model};
+use glissade_mechanics::scales::{Scales, ROUND_OFF};
 use std::collections::BTreeMap;
 
 /// Variable Jacobian entries of one pair's two rows (u entries at (A x, A y, B x, B y)).

@@ -1,13 +1,13 @@
 //! Checks of a solution against the discrete problem, from per-subdomain displacements and
 //! per-interface fields alone.
 
-use crate::scales::{Scales, ROUND_OFF};
 use crate::sparse::*;
 use crate::{ReferenceError, ReferenceSolution};
 use faer::Mat;
 use glissade_mechanics::assembly::{stiffness_triplets, AssemblyError};
 use glissade_mechanics::laws::dot;
 use glissade_mechanics::model::{InterfaceKind, Model};
+use glissade_mechanics::scales::{Scales, ROUND_OFF};
 
 /// Largest relative violations of the discrete problem by a solution (see [`verify`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -1,8 +1,9 @@
-//! Force and displacement scales of the convergence checks, from the scene alone (its loads over
-//! the whole time history, its prescribed displacements, gaps, materials and size), and the
-//! bounds beyond which a solution is implausible.
+//! Force and displacement scales of a scene, from the scene alone (its loads over the whole time
+//! history, its prescribed displacements, gaps, materials and size): what the reference's checks
+//! are relative to, the bounds beyond which a solution is implausible, and the traction scale
+//! against which a run tells contact forces from round-off.
 
-use glissade_mechanics::model::{InterfaceKind, Model};
+use crate::model::{InterfaceKind, Model};
 
 /// A solution whose displacement exceeds this many times the scene's size, and also
 /// [`LOAD_DISPLACEMENT_BOUND`] times the displacement scale its loads give, is refused: linear
@@ -106,6 +107,18 @@ impl Scales {
             force: load.max(e_max * motion).max(STRAIN_FLOOR * e_max * size),
             displacement: motion.max(load / e_min).max(STRAIN_FLOOR * size),
             size,
+        }
+    }
+
+    /// T_s = F_s / D (MPa): the traction of the force scale spread over the scene's size. Contact
+    /// tractions below 1e-12 of it are round-off; a run whose local stage finds every contact
+    /// point separated takes the forces its linear stage still carries for round-off only below
+    /// the accuracy times this ([`crate::model::SolverParams`]' stop rule).
+    pub fn traction(&self) -> f64 {
+        if self.size > 0.0 {
+            self.force / self.size
+        } else {
+            self.force
         }
     }
 
