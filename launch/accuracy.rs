@@ -49,18 +49,33 @@ pub struct AccuracyCheck {
     pub trace: Vec<(f64, Option<f64>, f64, f64)>,
 }
 
-/// The check of one report (a run followed past its stop).
-pub fn check_report(name: &str, report: &Report) -> AccuracyCheck {
+/// The check of one report (a run followed past its stop), whose run stagnates as
+/// `stagnation` = (window, ratio) says.
+pub fn check_report(name: &str, report: &Report, stagnation: (usize, f64)) -> AccuracyCheck {
+    use glissade_interface::stagnated;
+    use glissade_mechanics::estimate::STAGNATION_AGREEMENT;
     let stops = ACCURACIES
         .iter()
         .map(|&a| {
             // Where a run asking for `a` stops: both estimates and the agreement of s and ŝ
             // within it (`StopRule::decide`).
-            let at = report.points.iter().find(|p| {
-                p.estimate.is_some_and(|e| e <= a)
-                    && p.pointwise_estimate.is_some_and(|e| e <= a)
-                    && p.contact_indicator.max(p.eta) <= a
-            });
+            let at = report
+                .points
+                .iter()
+                .find(|p| {
+                    p.estimate.is_some_and(|e| e <= a)
+                        && p.pointwise_estimate.is_some_and(|e| e <= a)
+                        && p.contact_indicator.max(p.eta) <= a
+                })
+                .or_else(|| {
+                    // Else the stop at stagnation, where the run stagnated (its last point) with
+                    // s and ŝ agreeing within a / STAGNATION_AGREEMENT (`StopRule::decide`).
+                    let last = report.points.last()?;
+                    let etas: Vec<f64> = report.points.iter().map(|p| p.eta).collect();
+                    (stagnated(&etas, stagnation.0, stagnation.1)
+                        && last.contact_indicator.max(last.eta) <= a / STAGNATION_AGREEMENT)
+                        .then_some(last)
+                });
             AccuracyStop {
                 accuracy: a,
                 iteration: at.map(|p| p.iteration),
@@ -119,7 +134,11 @@ pub fn check_scene(name: &str, scene: &LoadedScene, reference: &ReferenceOptions
         t0.elapsed().as_secs_f64(),
         None,
     )?;
-    Ok(check_report(name, &report))
+    Ok(check_report(
+        name,
+        &report,
+        (sc.model.solver.stagnation_window, sc.model.solver.stagnation_ratio),
+    ))
 }
 
 /// The checks as a markdown table: one row per scene and accuracy.

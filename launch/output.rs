@@ -53,6 +53,28 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     };
     let d = &last.decision;
     let s = &model.solver;
+    // "Converged" with an estimate above the accuracy (or none): the stop at stagnation with s
+    // and ŝ agreeing within the accuracy over STAGNATION_AGREEMENT (`StopRule::decide`).
+    if let (Verdict::Converged, Some(a)) = (&result.verdict, s.accuracy) {
+        let within = |e: Option<f64>| e.is_some_and(|e| e <= a);
+        if !(within(d.estimate) && within(d.pointwise_estimate)) {
+            use glissade_mechanics::estimate::STAGNATION_AGREEMENT;
+            let (name, gap) = if d.contact_indicator >= d.eta {
+                ("e_c", d.contact_indicator)
+            } else {
+                ("η", d.eta)
+            };
+            let estimate = d.estimate.map_or("no contracting estimate".to_string(), |e| {
+                format!("estimated contact-traction error {e:.2e}")
+            });
+            return format!(
+                "Converged at stagnation after {n} iterations: η stopped falling with the fields written (s) and the \
+                 interface laws' (ŝ) agreeing within the accuracy {a:e} over {STAGNATION_AGREEMENT}: {name} = {gap:.2e} \
+                 ≤ {:.2e} ({estimate}, which no longer contracts; docs/accuracy.md, \"Stagnation at a small error\")",
+                a / STAGNATION_AGREEMENT
+            );
+        }
+    }
     let mut met = Vec::new();
     let mut missed = Vec::new();
     // η and e_c where the scene asks no tolerance of them: shown, but neither met nor missed.

@@ -100,6 +100,9 @@ pub struct Report {
     pub reference_failure: Option<String>,
     /// Time points the reference solved (all N + 1 unless it failed).
     pub reference_steps_solved: usize,
+    /// The errors of the points are over this many first time points: all N + 1, or the ones a
+    /// failed reference solved (where at least two), or 0 (no errors).
+    pub errors_over_time_points: usize,
     pub latin_setup_s: f64,
     pub latin_solve_s: f64,
     pub latin_verdict: String,
@@ -433,8 +436,18 @@ pub fn report_against(
     stop_at: Option<f64>,
 ) -> crate::Result<(Report, RunResult)> {
     let model = &scene.model;
-    let complete = reference.failure.is_none().then_some(&reference.solution);
-    let mut tracker = ReferenceErrors::new(model);
+    // Against every time point of a reference that solved them all, or against the ones a failed
+    // reference solved, where they are at least two (time point 0 alone has no load).
+    let solved = reference.solution.newton_iterations.len();
+    let compared = if reference.failure.is_none() {
+        model.time.n_points()
+    } else if solved >= 2 {
+        solved
+    } else {
+        0
+    };
+    let complete = (compared > 0).then_some(&reference.solution);
+    let mut tracker = ReferenceErrors::over(model, compared.max(1));
     let mut errors: Vec<(u32, ErrorsAgainstReference)> = Vec::new();
     let mut anderson = AndersonTally::default();
     let mut bytes: Vec<u64> = Vec::new();
@@ -564,7 +577,8 @@ pub fn report_against(
         reference_newton_iterations: reference.solution.newton_iterations.iter().sum(),
         reference_max_newton_per_step: reference.solution.newton_iterations.iter().copied().max().unwrap_or(0),
         reference_failure: reference.failure.as_ref().map(ToString::to_string),
-        reference_steps_solved: reference.solution.newton_iterations.len(),
+        reference_steps_solved: solved,
+        errors_over_time_points: compared,
         latin_setup_s: result.setup_s,
         latin_solve_s: result.solve_s,
         latin_verdict: match (result.verdict.clone(), stop_at) {
@@ -790,6 +804,7 @@ mod tests {
             reference_max_newton_per_step: 0,
             reference_failure: None,
             reference_steps_solved: 1,
+            errors_over_time_points: 0,
             latin_setup_s: 0.0,
             latin_solve_s: 1.0,
             latin_verdict: String::new(),

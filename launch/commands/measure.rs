@@ -26,6 +26,10 @@ pub(crate) fn reference_options(newton_iterations: u32) -> ReferenceOptions {
 pub(crate) fn reference_outcome(report: &glissade::report::Report, n_points: usize) -> String {
     match report.reference_failure {
         None => format!("{} Newton iterations", report.reference_newton_iterations),
+        Some(_) if report.errors_over_time_points > 0 => format!(
+            "FAILED after {} of {n_points} time points; the errors are over those {} time points only",
+            report.reference_steps_solved, report.errors_over_time_points
+        ),
         Some(_) => format!(
             "FAILED after {} of {n_points} time points; no errors against it",
             report.reference_steps_solved
@@ -268,7 +272,15 @@ pub(crate) fn report(
     );
     match &reference.failure {
         Some(e) => {
-            println!("NO ERRORS AGAINST THE REFERENCE: it failed (see below); the LATIN run above is complete");
+            if report.errors_over_time_points > 0 {
+                println!(
+                    "ERRORS OVER THE FIRST {} OF {} TIME POINTS ONLY: the reference failed at the next (see below); the LATIN run above is complete",
+                    report.errors_over_time_points,
+                    sc.model.time.n_points()
+                );
+            } else {
+                println!("NO ERRORS AGAINST THE REFERENCE: it failed (see below); the LATIN run above is complete");
+            }
             reference_failed(&sc.model, &reference, e, out)
         }
         None => Ok(ExitCode::SUCCESS),

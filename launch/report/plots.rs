@@ -458,6 +458,10 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
     let xr = if beyond { w - right } else { x(report.reference_s) };
     let reference_label = match report.reference_failure {
         None => "monolithic Newton reference".to_string(),
+        Some(_) if report.errors_over_time_points > 0 => format!(
+            "monolithic Newton reference FAILED after {} time points (errors over those)",
+            report.reference_steps_solved
+        ),
         Some(_) => format!(
             "monolithic Newton reference FAILED after {} time points (no errors)",
             report.reference_steps_solved

@@ -29,7 +29,7 @@ mod stop;
 #[cfg(test)]
 mod tests;
 
-pub use stop::StopRule;
+pub use stop::{stagnated, StopRule};
 
 use faer::Mat;
 use glissade_bus::convert::FieldPool;

@@ -1,7 +1,7 @@
 //! The stop decision's rule (DESIGN §3): accuracy on the error estimate, tolerances, max
 //! iterations, stagnation, divergence.
 
-use glissade_mechanics::estimate::{ErrorEstimate, Estimated};
+use glissade_mechanics::estimate::{ErrorEstimate, Estimated, STAGNATION_AGREEMENT};
 use glissade_mechanics::local::IndicatorSums;
 use glissade_messages::Verdict;
 
@@ -131,26 +131,48 @@ impl StopRule {
             return Verdict::MaxIterations;
         }
         let w = self.stagnation_window;
-        if w > 0 && self.history.len() > 2 * w {
+        if stagnated(&self.history, w, self.stagnation_ratio) {
+            // Stagnation at a small error is convergence: s and ŝ agree within the accuracy over
+            // STAGNATION_AGREEMENT (which bounds the true error within the accuracy on the
+            // validation set's calibration part), the tolerances asked are met.
+            if self
+                .accuracy
+                .is_some_and(|a| sums.disagreement() <= a / STAGNATION_AGREEMENT)
+                && eta_ok
+                && contact_ok
+            {
+                return Verdict::Converged;
+            }
             let k = self.history.len();
             let recent = self.history[k - w..].iter().cloned().fold(f64::INFINITY, f64::min);
             let before = self.history[..k - w].iter().cloned().fold(f64::INFINITY, f64::min);
-            if recent > self.stagnation_ratio * before {
-                let mut detail = format!(
-                    "min η over the last {w} iterations is {recent:.3e}, not below {} × the earlier minimum {before:.3e}",
-                    self.stagnation_ratio
-                );
-                if let Some((a, b)) = period_two(&self.history[k - w..]) {
-                    detail.push_str(&format!(
-                        "; η alternates between {a:.3e} and {b:.3e}: the iteration has a mode at −1 \
-                         (an undamped cycle; lower solver.relaxation below 1)"
-                    ));
-                }
-                return Verdict::Stagnated { detail };
+            let mut detail = format!(
+                "min η over the last {w} iterations is {recent:.3e}, not below {} × the earlier minimum {before:.3e}",
+                self.stagnation_ratio
+            );
+            if let Some((a, b)) = period_two(&self.history[k - w..]) {
+                detail.push_str(&format!(
+                    "; η alternates between {a:.3e} and {b:.3e}: the iteration has a mode at −1 \
+                     (an undamped cycle; lower solver.relaxation below 1)"
+                ));
             }
+            return Verdict::Stagnated { detail };
         }
         Verdict::Continue
     }
+}
+
+/// Whether η's history (one value per iteration, the last one the current) has stagnated: it
+/// holds more than two windows of `window` iterations, and the smallest η of the last window is
+/// above `ratio` times the smallest before it. `window` 0: never.
+pub fn stagnated(history: &[f64], window: usize, ratio: f64) -> bool {
+    let k = history.len();
+    if window == 0 || k <= 2 * window {
+        return false;
+    }
+    let recent = history[k - window..].iter().cloned().fold(f64::INFINITY, f64::min);
+    let before = history[..k - window].iter().cloned().fold(f64::INFINITY, f64::min);
+    recent > ratio * before
 }
 
 /// The two values η alternates between when the window is a period-2 cycle: its successive

@@ -618,3 +618,45 @@ fn mode_form_states_give_the_full_fields() {
     assert!(!from_fields.is_empty());
     assert_eq!(from_modes, from_fields, "the same local stage, bit for bit");
 }
+
+/// Stagnation at a small error is convergence: η flat at 1e-5 (no estimate yet, the contraction
+/// window not full) stagnates at iteration 10 with a window of 5; with an accuracy of 1e-3 that is
+/// "Converged", s and ŝ agreeing within 1e-3 / 30. Flat at 1e-4 (above 1e-3 / 30), or without an
+/// accuracy, it stays "Stagnated".
+#[test]
+fn stagnation_within_the_accuracy_over_30_is_convergence() {
+    let p = SolverParams {
+        accuracy: Some(1e-3),
+        tolerance: None,
+        max_iterations: 100,
+        stagnation_window: 5,
+        stagnation_ratio: 0.99,
+        ..Default::default()
+    };
+    for (eta, accuracy, converged) in [(1e-5, Some(1e-3), true), (1e-4, Some(1e-3), false), (1e-5, None, false)] {
+        let mut r = StopRule::new(&SolverParams {
+            accuracy,
+            tolerance: accuracy.map_or(Some(1e-9), |_| None),
+            ..p.clone()
+        });
+        let (n, v) = (0..40)
+            .map(|n| (n, r.decide(n, &sums(eta, 1.0), None)))
+            .find(|(_, v)| v.is_stop())
+            .expect("stops");
+        assert_eq!(n, 10, "η = {eta}");
+        assert_eq!(
+            v == Verdict::Converged,
+            converged,
+            "η = {eta}, accuracy {accuracy:?}: {v:?}"
+        );
+        if !converged {
+            assert!(matches!(v, Verdict::Stagnated { .. }), "{v:?}");
+        }
+    }
+    assert!(stagnated(&[1.0; 11], 5, 0.99) && !stagnated(&[1.0; 10], 5, 0.99));
+    assert!(!stagnated(
+        &[1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 0.5, 0.5, 0.5, 0.5, 0.5],
+        5,
+        0.99
+    ));
+}

@@ -33,6 +33,13 @@
 //! The constants were chosen on the iterations of every shipped scene and stability case against
 //! the reference; docs/accuracy.md has how they were chosen and where the estimate stops early.
 
+/// A run that stagnates with s and ŝ agreeing within the accuracy divided by this factor
+/// (max(e_c, η) ≤ accuracy / 30) is "Converged" at stagnation: its estimate no longer contracts,
+/// but on every scene of the validation set's calibration part that stagnated, the true
+/// contact-traction error at the stagnation was at most 27 times max(e_c, η) (docs/accuracy.md,
+/// "Stagnation at a small error").
+pub const STAGNATION_AGREEMENT: f64 = 30.0;
+
 /// Iterations in the contraction fit.
 pub const RATE_WINDOW: usize = 20;
 /// Iterations whose largest step enters the bound.

@@ -85,11 +85,25 @@ pub struct ReferenceErrors {
 
 impl ReferenceErrors {
     pub fn new(model: &crate::model::Model) -> Self {
+        Self::over(model, model.time.n_points())
+    }
+
+    /// Errors over the first `time_points` time points only (at least 1, at most all): against a
+    /// reference that solved those and failed at the next. The space-time norms take the
+    /// trapezoid weights of that shorter grid.
+    pub fn over(model: &crate::model::Model, time_points: usize) -> Self {
         let k0 = crate::linear::default_k0(model);
         let layouts: Vec<crate::condensed::BoundaryLayout> = (0..model.subdomains.len())
             .map(|s| crate::condensed::BoundaryLayout::new(model, s, &k0))
             .collect();
         let nt = model.time.n_points();
+        let k = time_points.clamp(1, nt);
+        let mut weights = model.time.trapezoid_weights();
+        weights.truncate(k);
+        if k < nt && k > 1 {
+            // The shorter grid's last point is an end point: half its step.
+            weights[k - 1] = 0.5 * (model.time.t(k - 1) - model.time.t(k - 2));
+        }
         Self {
             participants: layouts.iter().filter(|l| !l.is_empty()).count(),
             layouts,
@@ -99,7 +113,7 @@ impl ReferenceErrors {
                 .map(|i| InterfaceFields::zeros(i.n_pairs(), nt))
                 .collect(),
             seen: Default::default(),
-            weights: model.time.trapezoid_weights(),
+            weights,
         }
     }
 
@@ -125,7 +139,7 @@ impl ReferenceErrors {
         Some(ErrorsAgainstReference {
             traction,
             jump,
-            pointwise: pointwise_traction_error(interfaces, &self.fields, reference),
+            pointwise: pointwise_traction_error_over(interfaces, &self.fields, reference, self.weights.len()),
         })
     }
 }
@@ -185,6 +199,16 @@ pub fn pointwise_traction_error(
     s: &[InterfaceFields],
     reference: &[InterfaceFields],
 ) -> PointwiseError {
+    pointwise_traction_error_over(interfaces, s, reference, usize::MAX)
+}
+
+/// [`pointwise_traction_error`] over the first `time_points` time points only.
+pub fn pointwise_traction_error_over(
+    interfaces: &[Interface],
+    s: &[InterfaceFields],
+    reference: &[InterfaceFields],
+    time_points: usize,
+) -> PointwiseError {
     let (mut worst, mut scale) = (PointwiseError::default(), 0.0f64);
     for point in junctions(interfaces) {
         let Some(&PointCopy {
@@ -196,7 +220,7 @@ pub fn pointwise_traction_error(
             continue;
         };
         let m_g = point.weight;
-        for i in 0..s.get(k0).map_or(0, |x| x.f_a.ncols()) {
+        for i in 0..s.get(k0).map_or(0, |x| x.f_a.ncols()).min(time_points) {
             for c in 0..2 {
                 let [n_a, n_b, r_a, r_b] = group_forces(interfaces, &point, s, reference, i, c);
                 let d = (n_a - r_a).abs().max((n_b - r_b).abs()) / m_g;

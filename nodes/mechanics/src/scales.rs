@@ -131,8 +131,9 @@ impl Scales {
             Some(format!(
                 "a displacement of {u_max:.3e} mm, beyond {DISPLACEMENT_BOUND} times the scene's size {:.3e} mm \
                  and {LOAD_DISPLACEMENT_BOUND:e} times the displacement its loads give, {:.3e} mm (a singular \
-                 stiffness solves to such displacements, e.g. where a part is held by nothing but contact \
-                 across an open gap)",
+                 stiffness solves to such displacements: a part held by nothing but contact across an open \
+                 gap, or by nothing but friction under a load larger than the friction can hold, so that it \
+                 slides away as a whole)",
                 self.size, self.displacement
             ))
         } else if f_max.is_nan() || f_max > FORCE_BOUND * self.force {
