@@ -14,6 +14,7 @@ pub mod node_process;
 pub mod output;
 pub mod recording;
 pub mod report;
+pub mod resultants;
 pub mod run;
 pub mod runner;
 pub mod stability;

@@ -224,8 +224,9 @@ pub fn existing_outputs(out: &Path, name: &str, run_id: &str) -> Vec<PathBuf> {
     let stem = format!("{name}-{run_id}");
     let (pvd, vtu) = series_paths(out, &stem);
     let csv = format!("{stem}.interfaces.csv");
+    let resultants = format!("{stem}.resultants.csv");
     names
-        .chain([csv])
+        .chain([csv, resultants])
         .flat_map(|n| [out.join(&n), out.join(format!(".{n}.partial"))])
         .chain([pvd, vtu])
         .filter(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_file() || m.is_dir()))

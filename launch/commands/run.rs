@@ -227,6 +227,8 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         println!("left out: {l}");
     }
     let mut run_summary = summary(&sc, &result, &run_id);
+    let resultants = glissade::resultants::resultants(&sc.model, &result.interfaces)?;
+    run_summary["interface_resultants"] = serde_json::json!(resultants);
     run_summary["linear_stages"] = serde_json::json!(linear_stages.iter().map(|t| t.json()).collect::<Vec<_>>());
     if let Some(traffic) = &bus {
         run_summary["bus"] = serde_json::json!(traffic);
@@ -271,6 +273,13 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         None
     };
+    let resultants_path = args.out.join(format!("{}-{run_id}.resultants.csv", sc.model.name));
+    glissade::vtu::write_new_file(
+        &resultants_path,
+        glissade::resultants::resultants_csv(&sc.model, &resultants).as_bytes(),
+    )
+    .map_err(|e| with_kept(e.into(), &kept))?;
+    kept.push(resultants_path.clone());
     let csv = if args.csv {
         let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
         glissade::vtu::write_new_file(
@@ -292,6 +301,9 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         outputs_started.elapsed().as_secs_f64(),
         started.elapsed().as_secs_f64()
     );
+    for line in glissade::resultants::console_lines(&sc.model, &resultants, 4) {
+        println!("{line}");
+    }
     for t in &linear_stages {
         // Untimed (as processes), the counters alone are a note (`--verbose`).
         match t.seconds {
@@ -307,7 +319,12 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         let path = recording.as_deref().expect("a recording path").display();
         println!("recording: {path} ({:.1} MB)", size as f64 * 1e-6);
     }
-    println!("summary: {}\nfields: {}", summary_path.display(), fields_path.display());
+    println!(
+        "summary: {}\nfields: {}\nresultants: {}",
+        summary_path.display(),
+        fields_path.display(),
+        resultants_path.display()
+    );
     if let Some(path) = &csv {
         println!("csv: {}", path.display());
     }

@@ -25,6 +25,7 @@ mod recovery;
 mod reference;
 mod reference_failure;
 mod replay;
+mod resultants;
 mod run_id;
 mod shared_router;
 mod stability;

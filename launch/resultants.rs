@@ -1,0 +1,161 @@
+//! Interface resultants (docs/outputs.md, "Interface resultants"): per interface and time point,
+//! the force the interface carries, summed over its node pairs, and on contact interfaces the
+//! share of its length that is separated, stuck and slipping. What an engineer plots against
+//! the load: the tangential resultant reaching f times the normal one is the joint slipping.
+
+use crate::output::{csv_field, pair_values};
+use crate::{Error, Result};
+use glissade_mechanics::model::Model;
+use glissade_messages::InterfaceSolution;
+use serde::Serialize;
+
+/// One interface's resultants at every time point. Forces are per unit thickness (N/mm): Σ w·f
+/// over the pairs, w the pair's lumped length (mm), f the traction on side a (MPa).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InterfaceResultants {
+    pub interface: usize,
+    pub a: String,
+    pub b: String,
+    pub contact: bool,
+    /// The force side b exerts on side a, global x and y, per time point (N/mm).
+    pub force_a: Vec<[f64; 2]>,
+    /// Σ w·f_n (N/mm): negative in compression.
+    pub normal: Vec<f64>,
+    /// Σ w·f_t (N/mm), along each pair's tangent.
+    pub tangential: Vec<f64>,
+    /// Contact interfaces: the shares of the interface's length (Σ w) separated, stuck and
+    /// slipping, per time point (0 to 1, summing to 1); empty on perfect interfaces.
+    pub shares: Vec<[f64; 3]>,
+}
+
+/// The resultants of every interface of a run's final solution `interfaces` (s, with the
+/// statuses of ŝ), in interface order.
+pub fn resultants(model: &Model, interfaces: &[InterfaceSolution]) -> Result<Vec<InterfaceResultants>> {
+    let nt = model.time.n_points();
+    let mut out = Vec::with_capacity(interfaces.len());
+    for sol in interfaces {
+        let k = sol.interface as usize;
+        let itf = model.interfaces.get(k).ok_or_else(|| Error::ResultShape {
+            what: format!("a solution of interface {k}"),
+            scene: format!("{} interface(s)", model.interfaces.len()),
+        })?;
+        let np = itf.n_pairs();
+        if sol.f_a.rows() != 2 * np || sol.f_a.cols() != nt || sol.w_a.cols() != nt || sol.w_b.cols() != nt {
+            return Err(Error::ResultShape {
+                what: format!("interface {k}: F_a is {} × {}", sol.f_a.rows(), sol.f_a.cols()),
+                scene: format!("{} × {nt}", 2 * np),
+            });
+        }
+        if itf.is_contact() && sol.status.len() < np * nt {
+            return Err(Error::ResultShape {
+                what: format!("interface {k}: {} statuses", sol.status.len()),
+                scene: format!("{}", np * nt),
+            });
+        }
+        let length: f64 = itf.weights.iter().sum();
+        let mut r = InterfaceResultants {
+            interface: k,
+            a: model.subdomains[itf.a].name.clone(),
+            b: model.subdomains[itf.b].name.clone(),
+            contact: itf.is_contact(),
+            force_a: Vec::with_capacity(nt),
+            normal: Vec::with_capacity(nt),
+            tangential: Vec::with_capacity(nt),
+            shares: Vec::new(),
+        };
+        for i in 0..nt {
+            let (mut f, mut n, mut t, mut share) = ([0.0; 2], 0.0, 0.0, [0.0; 3]);
+            for (p, &w) in itf.weights.iter().enumerate() {
+                let [f_n, f_t, _, _] = pair_values(itf, sol, i, p);
+                f[0] += w * sol.f_a.get(2 * p, i);
+                f[1] += w * sol.f_a.get(2 * p + 1, i);
+                n += w * f_n;
+                t += w * f_t;
+                if itf.is_contact() {
+                    let code = sol.status[i * np + p] as usize;
+                    let slot = share.get_mut(code).ok_or_else(|| Error::ResultShape {
+                        what: format!("interface {k}: status code {code}"),
+                        scene: "codes 0 to 2".into(),
+                    })?;
+                    *slot += w / length;
+                }
+            }
+            r.force_a.push(f);
+            r.normal.push(n);
+            r.tangential.push(t);
+            if itf.is_contact() {
+                r.shares.push(share);
+            }
+        }
+        out.push(r);
+    }
+    Ok(out)
+}
+
+/// The resultants as CSV, one row per interface and time point; units in the header.
+pub fn resultants_csv(model: &Model, all: &[InterfaceResultants]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::from(
+        "time_s,interface,a,b,kind,force_a_x_N_per_mm,force_a_y_N_per_mm,normal_N_per_mm,tangential_N_per_mm,separated_share,stick_share,slip_share\n",
+    );
+    for i in 0..model.time.n_points() {
+        let t = model.time.t(i);
+        for r in all {
+            let kind = if r.contact { "contact" } else { "perfect" };
+            let shares = r
+                .shares
+                .get(i)
+                .map_or(",,".to_string(), |[o, st, sl]| format!("{o:?},{st:?},{sl:?}"));
+            let _ = writeln!(
+                s,
+                "{t:?},{},{},{},{kind},{:?},{:?},{:?},{:?},{shares}",
+                r.interface,
+                csv_field(&r.a),
+                csv_field(&r.b),
+                r.force_a[i][0],
+                r.force_a[i][1],
+                r.normal[i],
+                r.tangential[i],
+            );
+        }
+    }
+    s
+}
+
+/// The console's lines for the contact interfaces at the last time point (at most `max`
+/// interfaces; the rest counted): normal and tangential resultants, their ratio, the shares.
+pub fn console_lines(model: &Model, all: &[InterfaceResultants], max: usize) -> Vec<String> {
+    let last = model.time.n_points() - 1;
+    let t = model.time.t(last);
+    let contact: Vec<&InterfaceResultants> = all.iter().filter(|r| r.contact).collect();
+    let mut lines: Vec<String> = contact
+        .iter()
+        .take(max)
+        .map(|r| {
+            let (n, tg) = (r.normal[last], r.tangential[last]);
+            let [o, st, sl] = r.shares[last];
+            let ratio = if n != 0.0 {
+                format!("{:.3}", (tg / n).abs())
+            } else {
+                "—".into()
+            };
+            format!(
+                "interface {} ({} | {}) at t = {t}: N = {n:.4e} N/mm, T = {tg:.4e} N/mm, |T/N| = {ratio}; \
+                 {:.0} % separated, {:.0} % stick, {:.0} % slip",
+                r.interface,
+                r.a,
+                r.b,
+                100.0 * o,
+                100.0 * st,
+                100.0 * sl
+            )
+        })
+        .collect();
+    if contact.len() > max {
+        lines.push(format!(
+            "… and {} more contact interfaces (every interface and time point in the resultants CSV)",
+            contact.len() - max
+        ));
+    }
+    lines
+}
