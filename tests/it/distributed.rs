@@ -674,8 +674,9 @@ fn rust_log_shows_every_process_log_lines() {
 }
 
 /// The console of a run as processes says what matters: what it records, the verdict, the
-/// recording with its size and the output files (5 lines, the progress line aside, which is
-/// hidden when the output is not a terminal). How it went (shared memory, readiness, bytes on the bus per kind, each
+/// resultants of the first contact interfaces (at most 4, and how many more), the recording with
+/// its size and the output files (6 lines beside the resultants, the progress line aside, which
+/// is hidden when the output is not a terminal). How it went (shared memory, readiness, bytes on the bus per kind, each
 /// node's notes) only with `--verbose`, and the bus statistics are in the summary either way.
 #[test]
 fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
@@ -696,8 +697,18 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
         )
     };
     let (out, err) = run("quiet", false);
-    let lines: Vec<&str> = out.lines().chain(err.lines()).collect();
-    assert_eq!(lines.len(), 5, "{out}{err}");
+    let all: Vec<&str> = out.lines().chain(err.lines()).collect();
+    let resultants = all
+        .iter()
+        .filter(|l| l.starts_with("interface ") || l.starts_with("… and "))
+        .count();
+    assert!((1..=5).contains(&resultants), "{out}{err}");
+    let lines: Vec<&str> = all
+        .iter()
+        .copied()
+        .filter(|l| !(l.starts_with("interface ") || l.starts_with("… and ")))
+        .collect();
+    assert_eq!(lines.len(), 6, "{out}{err}");
     assert!(
         lines[0].starts_with("recording to ") && lines[0].contains("full fields at every iteration, 52 kB each"),
         "{out}"
@@ -727,7 +738,7 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
         "{out}"
     );
     assert!(
-        lines[3].starts_with("summary: ") && lines[4].starts_with("fields: "),
+        lines[3].starts_with("summary: ") && lines[4].starts_with("fields: ") && lines[5].starts_with("resultants: "),
         "{out}"
     );
     let summary: serde_json::Value =

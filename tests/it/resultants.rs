@@ -4,9 +4,11 @@ use crate::common::{glissade_ok, scratch};
 
 /// Two blocks side by side in frictional contact on x = 2, the left one clamped on x = 0, both
 /// on rollers along y = 0, a pressure p = 10·t on x = 4 over a height of 1 mm: the rollers carry
-/// no x force, so the contact carries the whole load, −10·t N/mm normal (compression) and no
-/// tangential force, the interface closed and stuck wherever it is loaded. Checked to 1e-3 of
-/// the load (the run's accuracy is 1e-3 of the largest traction), at every time point.
+/// no x force, so the contact carries the whole load, −10·t N/mm normal (compression), checked to
+/// 1e-3 of the load (the run's accuracy is 1e-3 of the largest traction) at every time point. The
+/// tangential resultant is not zero (the clamped edge holds the left block's Poisson expansion,
+/// the right block's is free), but friction bounds it: |T| ≤ f·|N|, f = 0.3; the interface is
+/// vertical, so the force on side a is (±N, ±T).
 #[test]
 fn the_contact_of_two_blocks_pushed_together_carries_the_whole_load() {
     let dir = scratch("resultants");
@@ -42,12 +44,8 @@ fn the_contact_of_two_blocks_pushed_together_carries_the_whole_load() {
         let num = |i: usize| c[i].parse::<f64>().unwrap_or_else(|e| panic!("{row}: column {i}: {e}"));
         let t = num(0);
         assert!((num(7) + 10.0 * t).abs() <= 1e-2, "normal {row}");
-        assert!(num(8).abs() <= 1e-2, "tangential {row}");
-        // The force on side a is along x, as large as the normal one.
-        assert!(
-            (num(5).abs() - num(7).abs()).abs() <= 1e-2 && num(6).abs() <= 1e-2,
-            "{row}"
-        );
+        assert!(num(8).abs() <= 0.3 * num(7).abs() + 1e-12, "tangential {row}");
+        assert!(num(5).abs() == num(7).abs() && num(6).abs() == num(8).abs(), "{row}");
         let shares = num(9) + num(10) + num(11);
         assert!((shares - 1.0).abs() <= 1e-12, "shares {row}");
         if t > 0.0 {
