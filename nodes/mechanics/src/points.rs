@@ -123,17 +123,29 @@ pub fn contact_points(interfaces: &[Interface]) -> Vec<PhysicalPoint> {
                 });
                 points.len() - 1
             });
-            // The point's orientation is its first copy's.
-            let first_swapped = points[at].copies.first().map_or(swapped, |c| c.swapped);
             points[at].copies.push(PointCopy {
                 interface: k,
                 pair: p,
-                swapped: swapped != first_swapped,
+                // Against the key's order for now; against the first copy's below.
+                swapped,
             });
             points[at].weight += itf.weights[p];
         }
     }
+    oriented_by_first_copy(&mut points);
     points
+}
+
+/// Each point's copies oriented against its first copy's (which then reads `swapped` false):
+/// `swapped` held each copy's orientation against one common reference (a key's order, a line's
+/// direction) until now.
+fn oriented_by_first_copy(points: &mut [PhysicalPoint]) {
+    for pt in points {
+        let first = pt.copies[0].swapped;
+        for c in &mut pt.copies {
+            c.swapped = c.swapped != first;
+        }
+    }
 }
 
 /// The contact pairs grouped by place: copies at one place whose normals lie on one line (a copy
@@ -172,19 +184,13 @@ pub fn junctions(interfaces: &[Interface]) -> Vec<PhysicalPoint> {
             points[at].copies.push(PointCopy {
                 interface: k,
                 pair: p,
-                // The line's orientation for now; relative to the first copy below.
+                // Against the line's direction for now; against the first copy's below.
                 swapped: flip,
             });
             points[at].weight += itf.weights[p];
         }
     }
-    // Orientation relative to each junction's first copy.
-    for pt in &mut points {
-        let first = pt.copies[0].swapped;
-        for c in &mut pt.copies {
-            c.swapped = c.swapped != first;
-        }
-    }
+    oriented_by_first_copy(&mut points);
     points
 }
 
@@ -386,6 +392,12 @@ mod tests {
             assert_eq!(cross[0].copies, vec![copy(0, 2, false), copy(1, 0, declared_down)]);
             assert!((cross[0].weight - (1.0 / 3.0 + 1.0)).abs() < 1e-15);
         }
+        // The copy declared the other way round first: the other copy is the swapped one.
+        let mut interfaces = four_blocks(InterfaceKind::Perfect, true);
+        interfaces.swap(0, 1);
+        let points = contact_points(&interfaces);
+        let cross: Vec<&PhysicalPoint> = points.iter().filter(|p| p.copies.len() > 1).collect();
+        assert_eq!(cross[0].copies, vec![copy(0, 0, false), copy(1, 2, true)]);
     }
 
     /// Where the cuts are contacts themselves, the two pairs at x = 2 are distinct physical
