@@ -53,17 +53,18 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     };
     let d = &last.decision;
     let s = &model.solver;
+    // How far s and ŝ are apart (`IndicatorSums::disagreement`): the larger of e_c and η.
+    let (name, gap) = if d.contact_indicator >= d.eta {
+        ("e_c", d.contact_indicator)
+    } else {
+        ("η", d.eta)
+    };
     // "Converged" with an estimate above the accuracy (or none): the stop at stagnation with s
     // and ŝ agreeing within the accuracy over STAGNATION_AGREEMENT (`StopRule::decide`).
     if let (Verdict::Converged, Some(a)) = (&result.verdict, s.accuracy) {
         let within = |e: Option<f64>| e.is_some_and(|e| e <= a);
         if !(within(d.estimate) && within(d.pointwise_estimate)) {
             use glissade_mechanics::estimate::STAGNATION_AGREEMENT;
-            let (name, gap) = if d.contact_indicator >= d.eta {
-                ("e_c", d.contact_indicator)
-            } else {
-                ("η", d.eta)
-            };
             let estimate = d.estimate.map_or("no contracting estimate".to_string(), |e| {
                 format!("estimated contact-traction error {e:.2e}")
             });
@@ -109,11 +110,6 @@ pub fn outcome(model: &Model, result: &RunResult) -> String {
     // (`IndicatorSums::disagreement`: the larger of e_c and η).
     let mut apart = None;
     if let Some(a) = s.accuracy {
-        let (name, gap) = if d.contact_indicator >= d.eta {
-            ("e_c", d.contact_indicator)
-        } else {
-            ("η", d.eta)
-        };
         if gap > a {
             apart = Some(name);
             missed.push(format!(
@@ -584,6 +580,49 @@ pub fn csv_field(text: &str) -> std::borrow::Cow<'_, str> {
     }
 }
 
+/// The interface of a final solution `sol`, once its shape is checked against the scene: an
+/// interface of the scene, W and F of 2·n_pairs × (N+1), and on a contact interface a status
+/// code of [`STATUS_NAMES`] for every pair and time point (a solution read from a recording may
+/// hold anything).
+pub fn checked_solution<'m>(model: &'m Model, sol: &InterfaceSolution) -> Result<&'m Interface> {
+    let nt = model.time.n_points();
+    let itf = model
+        .interfaces
+        .get(sol.interface as usize)
+        .ok_or_else(|| Error::ResultShape {
+            what: format!("a solution of interface {}", sol.interface),
+            scene: format!("{} interface(s)", model.interfaces.len()),
+        })?;
+    let np = itf.n_pairs();
+    if let Some((name, f)) = [("F_a", &sol.f_a), ("W_a", &sol.w_a), ("W_b", &sol.w_b)]
+        .into_iter()
+        .find(|(_, f)| f.rows() != 2 * np || f.cols() != nt)
+    {
+        return Err(Error::ResultShape {
+            what: format!("interface {}: {name} is {} × {}", sol.interface, f.rows(), f.cols()),
+            scene: format!("{} × {nt}", 2 * np),
+        });
+    }
+    if itf.is_contact() {
+        if sol.status.len() < np * nt {
+            return Err(Error::ResultShape {
+                what: format!("interface {}: {} statuses", sol.interface, sol.status.len()),
+                scene: format!("{}", np * nt),
+            });
+        }
+        if let Some(&code) = sol.status[..np * nt]
+            .iter()
+            .find(|&&c| c as usize >= STATUS_NAMES.len())
+        {
+            return Err(Error::ResultShape {
+                what: format!("interface {}: status code {code}", sol.interface),
+                scene: format!("codes 0 to {}", STATUS_NAMES.len() - 1),
+            });
+        }
+    }
+    Ok(itf)
+}
+
 /// The interface fields of s ([`pair_values`]) as CSV: one row per time point and node pair, with the pair's
 /// position, the tractions on side a and the jumps in the interface's frame, and the status
 /// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface); the parts' names quoted
@@ -596,42 +635,12 @@ pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<
     // joined in time order.
     let mut checked = Vec::with_capacity(interfaces.len());
     for sol in interfaces {
-        let itf = model
-            .interfaces
-            .get(sol.interface as usize)
-            .ok_or_else(|| Error::ResultShape {
-                what: format!("a solution of interface {}", sol.interface),
-                scene: format!("{} interface(s)", model.interfaces.len()),
-            })?;
-        let np = itf.n_pairs();
-        if let Some((name, f)) = [("F_a", &sol.f_a), ("W_a", &sol.w_a), ("W_b", &sol.w_b)]
-            .into_iter()
-            .find(|(_, f)| f.rows() != 2 * np || f.cols() != nt)
-        {
-            return Err(Error::ResultShape {
-                what: format!("interface {}: {name} is {} × {}", sol.interface, f.rows(), f.cols()),
-                scene: format!("{} × {nt}", 2 * np),
-            });
-        }
+        let itf = checked_solution(model, sol)?;
         let statuses: Vec<&str> = if itf.is_contact() {
-            if sol.status.len() < np * nt {
-                return Err(Error::ResultShape {
-                    what: format!("interface {}: {} statuses", sol.interface, sol.status.len()),
-                    scene: format!("{}", np * nt),
-                });
-            }
-            sol.status[..np * nt]
+            sol.status[..itf.n_pairs() * nt]
                 .iter()
-                .map(|&code| {
-                    STATUS_NAMES
-                        .get(code as usize)
-                        .copied()
-                        .ok_or_else(|| Error::ResultShape {
-                            what: format!("interface {}: status code {code}", sol.interface),
-                            scene: format!("codes 0 to {}", STATUS_NAMES.len() - 1),
-                        })
-                })
-                .collect::<Result<_>>()?
+                .map(|&code| STATUS_NAMES[code as usize])
+                .collect()
         } else {
             Vec::new()
         };

@@ -3,8 +3,8 @@
 //! share of its length that is separated, stuck and slipping. What an engineer plots against
 //! the load: the tangential resultant reaching f times the normal one is the joint slipping.
 
-use crate::output::{csv_field, pair_values};
-use crate::{Error, Result};
+use crate::output::{checked_solution, csv_field, pair_values};
+use crate::Result;
 use glissade_mechanics::model::Model;
 use glissade_messages::InterfaceSolution;
 use serde::Serialize;
@@ -35,23 +35,8 @@ pub fn resultants(model: &Model, interfaces: &[InterfaceSolution]) -> Result<Vec
     let mut out = Vec::with_capacity(interfaces.len());
     for sol in interfaces {
         let k = sol.interface as usize;
-        let itf = model.interfaces.get(k).ok_or_else(|| Error::ResultShape {
-            what: format!("a solution of interface {k}"),
-            scene: format!("{} interface(s)", model.interfaces.len()),
-        })?;
+        let itf = checked_solution(model, sol)?;
         let np = itf.n_pairs();
-        if sol.f_a.rows() != 2 * np || sol.f_a.cols() != nt || sol.w_a.cols() != nt || sol.w_b.cols() != nt {
-            return Err(Error::ResultShape {
-                what: format!("interface {k}: F_a is {} × {}", sol.f_a.rows(), sol.f_a.cols()),
-                scene: format!("{} × {nt}", 2 * np),
-            });
-        }
-        if itf.is_contact() && sol.status.len() < np * nt {
-            return Err(Error::ResultShape {
-                what: format!("interface {k}: {} statuses", sol.status.len()),
-                scene: format!("{}", np * nt),
-            });
-        }
         let length: f64 = itf.weights.iter().sum();
         let mut r = InterfaceResultants {
             interface: k,
@@ -72,12 +57,7 @@ pub fn resultants(model: &Model, interfaces: &[InterfaceSolution]) -> Result<Vec
                 n += w * f_n;
                 t += w * f_t;
                 if itf.is_contact() {
-                    let code = sol.status[i * np + p] as usize;
-                    let slot = share.get_mut(code).ok_or_else(|| Error::ResultShape {
-                        what: format!("interface {k}: status code {code}"),
-                        scene: "codes 0 to 2".into(),
-                    })?;
-                    *slot += w / length;
+                    share[sol.status[i * np + p] as usize] += w / length;
                 }
             }
             r.force_a.push(f);

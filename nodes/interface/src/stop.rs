@@ -131,7 +131,7 @@ impl StopRule {
             return Verdict::MaxIterations;
         }
         let w = self.stagnation_window;
-        if stagnated(&self.history, w, self.stagnation_ratio) {
+        if let Some((recent, before)) = stagnation(&self.history, w, self.stagnation_ratio) {
             // Stagnation at a small error is convergence: s and ŝ agree within the accuracy over
             // STAGNATION_AGREEMENT (which bounds the true error within the accuracy on the
             // validation set's calibration part), the tolerances asked are met.
@@ -144,8 +144,6 @@ impl StopRule {
                 return Verdict::Converged;
             }
             let k = self.history.len();
-            let recent = self.history[k - w..].iter().cloned().fold(f64::INFINITY, f64::min);
-            let before = self.history[..k - w].iter().cloned().fold(f64::INFINITY, f64::min);
             let mut detail = format!(
                 "min η over the last {w} iterations is {recent:.3e}, not below {} × the earlier minimum {before:.3e}",
                 self.stagnation_ratio
@@ -166,13 +164,18 @@ impl StopRule {
 /// holds more than two windows of `window` iterations, and the smallest η of the last window is
 /// above `ratio` times the smallest before it. `window` 0: never.
 pub fn stagnated(history: &[f64], window: usize, ratio: f64) -> bool {
+    stagnation(history, window, ratio).is_some()
+}
+
+/// [`stagnated`], with the two minima it compared: (the last window's, the one before it).
+fn stagnation(history: &[f64], window: usize, ratio: f64) -> Option<(f64, f64)> {
     let k = history.len();
     if window == 0 || k <= 2 * window {
-        return false;
+        return None;
     }
     let recent = history[k - window..].iter().cloned().fold(f64::INFINITY, f64::min);
     let before = history[..k - window].iter().cloned().fold(f64::INFINITY, f64::min);
-    recent > ratio * before
+    (recent > ratio * before).then_some((recent, before))
 }
 
 /// The two values η alternates between when the window is a period-2 cycle: its successive
