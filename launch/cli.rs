@@ -186,6 +186,32 @@ pub(crate) enum Command {
         #[arg(long, default_value = "recordings")]
         out: PathBuf,
     },
+    /// Solve many variants of one scene (docs/studies.md): the friction or gap of an interface
+    /// rule, a factor on a boundary rule's values, E or ν of a material, over lists, ranges, a
+    /// grid or a seeded sample; each variant warm-started from the nearest solved one, with the
+    /// operators it leaves valid reused. Writes `<study>.csv`, `<study>.json` and SVG plots of each
+    /// quantity against each parameter; exit code 3 when a variant did not converge.
+    Sweep {
+        /// Study file (TOML); with `--vary`, the scene file itself.
+        study: PathBuf,
+        /// A parameter and its values, `name=from:to:count` or `name=v1,v2,…` (repeat for a
+        /// grid), e.g. `--vary friction=0.1:0.3:5 --vary boundary[1].scale=0.5,1,1.5`.
+        #[arg(long)]
+        vary: Vec<String>,
+        /// Run every variant from ŝ = 0 with operators built anew, as separate runs would (to
+        /// measure what the warm starts gain); outputs are named `<study>-cold.*`.
+        #[arg(long)]
+        cold: bool,
+        /// Every variant's accuracy (overrides the study's and the scene's `solver.accuracy`).
+        #[arg(long, allow_negative_numbers = true)]
+        accuracy: Option<f64>,
+        /// Record every variant (`<study>-v<k>.mcap`).
+        #[arg(long)]
+        record: bool,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "studies")]
+        out: PathBuf,
+    },
     /// Check the stop on accuracy on generated scenes no one tuned for (docs/accuracy.md, "The
     /// validation set"): per seed, a laminate or a Gmsh geometry, its reference, and one run past
     /// the smallest accuracy; where each accuracy (1e-2, 1e-3, 1e-4) stops and the true error

@@ -18,6 +18,7 @@ pub mod resultants;
 pub mod run;
 pub mod runner;
 pub mod stability;
+pub mod study;
 pub mod validate;
 pub mod vtu;
 

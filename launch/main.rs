@@ -12,6 +12,7 @@ use commands::check_run_id;
 use commands::measure::{bench, reference, reference_options, report, report_variants, stability, validate, Plots};
 use commands::replay::{export, replay};
 use commands::run::run;
+use commands::study::sweep;
 use glissade::bus::Joining;
 use glissade::children::{NodeName, NodeRole};
 use glissade::distributed::Supervision;
@@ -124,6 +125,14 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             }
         }
         Command::Validate { part, seeds, out } => validate(part, seeds, &out),
+        Command::Sweep {
+            study,
+            vary,
+            cold,
+            accuracy,
+            record,
+            out,
+        } => sweep(&study, &vary, cold, accuracy, record, &out),
         Command::Stability {
             quick,
             only,

@@ -10,7 +10,7 @@
 
 use crate::distributed::{Network, Traffic};
 use crate::recording::{create_recorder, RecordingOutcome};
-use crate::runner::{run_logged, IterationRecord, RunError, RunOptions, RunResult};
+use crate::runner::{run_logged, IterationRecord, Prepared, RunError, RunOptions, RunResult};
 use glissade_bus::HandleTime;
 use glissade_messages::Message;
 use glissade_scene::LoadedScene;
@@ -56,6 +56,7 @@ pub struct Run<'a> {
     observe: Option<Observer<'a>>,
     linear_stages: bool,
     handle_times: bool,
+    prepared: Option<Prepared>,
 }
 
 /// What a run gave.
@@ -87,7 +88,15 @@ impl<'a> Run<'a> {
             observe: None,
             linear_stages: false,
             handle_times: false,
+            prepared: None,
         }
+    }
+
+    /// Runs with operators already built and/or from a given start ([`Prepared`]): what a study
+    /// does for its variants. In-process only.
+    pub fn prepared(mut self, prepared: Prepared) -> Self {
+        self.prepared = Some(prepared);
+        self
     }
 
     /// Records every message of the run to `path` (MCAP), when given. In-process, the launcher
@@ -147,7 +156,9 @@ impl<'a> Run<'a> {
             observe,
             linear_stages,
             handle_times,
+            prepared,
         } = self;
+        let prepared = prepared.unwrap_or_default();
         let mut on_iteration = |r: &IterationRecord| {
             if let Some(f) = watch.as_mut() {
                 f(r);
@@ -161,7 +172,7 @@ impl<'a> Run<'a> {
         let timing = handle_times.then_some(&mut times);
         let (result, recording) = match &recording {
             None => (
-                run_logged(scene, &opts, on_iteration, observe, log, timing, None)?,
+                run_logged(scene, &opts, on_iteration, observe, log, timing, prepared)?,
                 None,
             ),
             Some(path) => {
@@ -181,7 +192,7 @@ impl<'a> Run<'a> {
                     },
                     log,
                     timing,
-                    None,
+                    prepared,
                 )?;
                 let recorder = recorder.into_inner();
                 let stopped = recorder.failure().is_some();
@@ -229,10 +240,12 @@ impl<'a> Run<'a> {
             observe,
             linear_stages,
             handle_times,
+            prepared,
         } = self;
         for (asked, what) in [
             (until.is_some(), "stopping a run early (until)"),
             (handle_times, "handling times"),
+            (prepared.is_some(), "operators built before or a given start (prepared)"),
         ] {
             if asked {
                 return Err(RunError::InProcessOnly(what).into());

@@ -24,6 +24,9 @@ pub struct RunOptions {
     pub run_id: String,
     /// Collect every subdomain's full displacement field at the end.
     pub interior: bool,
+    /// Keep the run's own final state ([`RunResult::state`]): what a study's next variant starts
+    /// from.
+    pub keep_state: bool,
 }
 
 impl RunOptions {
@@ -32,6 +35,7 @@ impl RunOptions {
         Self {
             run_id: run_id.into(),
             interior: false,
+            keep_state: false,
         }
     }
 }
@@ -56,8 +60,13 @@ pub struct RunResult {
     pub solve_s: f64,
     pub iterations: Vec<IterationRecord>,
     pub verdict: Verdict,
-    /// s and ŝ of every interface at the stop.
+    /// s and ŝ of every interface at the stop, each copy of a point given the point's values
+    /// ([`glissade_replay::one_value_per_point`]).
     pub interfaces: Vec<InterfaceSolution>,
+    /// The same before the copies of a point are given one value: the iteration's own state, from
+    /// which a given start ([`Prepared::start`]) resumes it exactly. Kept when asked for
+    /// ([`RunOptions::keep_state`]), in-process.
+    pub state: Option<Vec<InterfaceSolution>>,
     /// (subdomain, n_dofs × (N+1)) when asked for, or when the scene has no interface.
     pub displacements: Vec<(u32, Field)>,
     pub k0: Vec<f64>,
@@ -116,6 +125,20 @@ impl AndersonTally {
     }
 }
 
+/// What a run may be given beyond its scene (in-process only): operators already built, and
+/// the state to start from.
+#[derive(Default)]
+pub struct Prepared {
+    /// Every participant's operators, in participant order, built for this scene's operators
+    /// (its materials and search directions): a time-coarse start's coarse solve, or a study's
+    /// variant that changes loads, gaps or friction only ([`SubdomainSolver::retimed`]).
+    pub solvers: Option<Vec<SubdomainSolver>>,
+    /// A given start: ŝ of every interface (W and F of both sides, on this scene's time grid, in
+    /// interface order), e.g. a solved variant of the same scene in a study. Iteration 0 starts
+    /// from q̂ = F̂ + k⁻Ŵ of it instead of ŝ = 0; it replaces a time-coarse start.
+    pub start: Option<Vec<InterfaceSolution>>,
+}
+
 /// Errors of a run.
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
@@ -137,6 +160,8 @@ pub enum RunError {
         iterations: usize,
         cause: glissade_recorder::RecorderError,
     },
+    #[error("given start: {0}")]
+    GivenStart(String),
     #[error("{0} is available in-process only")]
     InProcessOnly(&'static str),
 }
@@ -144,8 +169,8 @@ pub enum RunError {
 /// The in-process run behind [`crate::run::Run::in_process`]: `on_iteration` sees each
 /// decision and stops the run when it returns false; `observe` sees every message and returns
 /// the wall time it spent, left out of the iterations' elapsed times; `log` and `timing` collect
-/// the linear-stage records and the handling times; `solvers`: operators already built (a
-/// time-coarse start's coarse solve reuses the fine run's).
+/// the linear-stage records and the handling times; `prepared`: operators already built (a
+/// time-coarse start's coarse solve reuses the fine run's) and a given start.
 pub(crate) fn run_logged(
     scene: &LoadedScene,
     opts: &RunOptions,
@@ -153,9 +178,14 @@ pub(crate) fn run_logged(
     mut observe: impl FnMut(&Message) -> Duration,
     log: Option<&mut Vec<LinearStageRecord>>,
     timing: Option<&mut Vec<HandleTime>>,
-    solvers: Option<Vec<SubdomainSolver>>,
+    prepared: Prepared,
 ) -> Result<RunResult, RunError> {
-    let model = Arc::new(scene.model.clone());
+    let mut model = scene.model.clone();
+    if prepared.start.is_some() {
+        model.solver.time_start = None;
+        model.solver.given_start = true;
+    }
+    let model = Arc::new(model);
     let t0 = Instant::now();
     if model.interfaces.is_empty() {
         // One part, nothing to iterate: a direct solve.
@@ -172,6 +202,7 @@ pub(crate) fn run_logged(
             iterations: Vec::new(),
             verdict: Verdict::Converged,
             interfaces: Vec::new(),
+            state: None,
             displacements,
             k0: Vec::new(),
             nodes: vec!["none: direct solve".into()],
@@ -186,18 +217,27 @@ pub(crate) fn run_logged(
     };
     let plan = Plan::new(&model).with_scene(scene);
     let selection = Selection::everything(&plan);
-    let solvers = match solvers {
-        Some(s) => s,
+    let solvers = match prepared.solvers {
+        Some(s) => {
+            check_prepared(&model, &plan, &s)?;
+            s
+        }
         None => build_solvers(&model, &plan, &selection.subdomains)?,
     };
-    let start = time_start(scene, &ctx, &plan, Some(&solvers))?;
+    let start = match &prepared.start {
+        Some(given) => Some((
+            "launcher: given start (ŝ of a solved variant)".to_string(),
+            given_start(&model, &ctx, &plan, given)?,
+        )),
+        None => time_start(scene, &ctx, &plan, Some(&solvers))?.map(|t| (t.describe(), t.messages)),
+    };
     let mut nodes = build_nodes_with(&model, &ctx, opts.interior, &plan, &selection, solvers)?;
     let (mut names, left_out) = plan.describe(&model, 1);
-    if let Some(start) = start {
-        names.push(start.describe());
+    if let Some((describe, messages)) = start {
+        names.push(describe);
         nodes.push(Box::new(LauncherNode {
             id: launcher_id(),
-            out: start.messages,
+            out: messages,
         }));
     }
     let k0 = plan.k0.clone();
@@ -242,6 +282,7 @@ pub(crate) fn run_logged(
     }
     // Several interface nodes publish their interfaces' solutions in node order.
     interfaces.sort_by_key(|s| s.interface);
+    let state = opts.keep_state.then(|| interfaces.clone());
     glissade_replay::one_value_per_point(&model, &mut interfaces);
     let verdict = iterations
         .last()
@@ -253,6 +294,7 @@ pub(crate) fn run_logged(
         iterations,
         verdict,
         interfaces,
+        state,
         displacements,
         k0,
         nodes: names,
@@ -318,8 +360,11 @@ pub fn time_start(
     let opts = RunOptions::new(format!("{}-coarse", ctx.run_id));
     let on_iteration: fn(&IterationRecord) -> bool = |_| true;
     let observe: fn(&Message) -> Duration = |_| Duration::ZERO;
-    let solvers = fine.map(|f| f.iter().map(|s| s.retimed(&coarse.model)).collect());
-    let r = run_logged(&coarse, &opts, on_iteration, observe, None, None, solvers)?;
+    let prepared = Prepared {
+        solvers: fine.map(|f| f.iter().map(|s| s.retimed(&coarse.model)).collect()),
+        start: None,
+    };
+    let r = run_logged(&coarse, &opts, on_iteration, observe, None, None, prepared)?;
     let last = r.iterations.last().map(|i| i.decision.clone());
     let (eta, verdict) = last.map_or((f64::NAN, Verdict::MaxIterations), |d| (d.eta, d.verdict));
     if matches!(verdict, Verdict::Diverged { .. }) || r.interfaces.len() != model.interfaces.len() {
@@ -329,12 +374,32 @@ pub fn time_start(
             r.iterations.len()
         )));
     }
-    let messages = plan
-        .participants
+    let messages = initial_directions(model, &coarse.model.time, ctx, plan, &r.interfaces);
+    Ok(Some(TimeStartRun {
+        coarse_steps: coarse.model.time.n_steps,
+        iterations: r.iterations.len(),
+        eta,
+        verdict,
+        seconds: t0.elapsed().as_secs_f64(),
+        messages,
+    }))
+}
+
+/// One `local_directions` message per participant of `plan`, from launcher:0 at iteration 0:
+/// q̂ = F̂ + k⁻Ŵ over its whole boundary, from `solutions` (ŝ on the grid `grid`, whose points
+/// are every c-th point of the run's) interpolated linearly in time.
+fn initial_directions(
+    model: &Model,
+    grid: &TimeGrid,
+    ctx: &RunContext,
+    plan: &Plan,
+    solutions: &[InterfaceSolution],
+) -> Vec<Message> {
+    plan.participants
         .iter()
         .map(|&s| {
             let layout = BoundaryLayout::new(model, s as usize, &plan.k0);
-            let q = coarse_directions(model, &coarse.model.time, &layout, &r.interfaces);
+            let q = coarse_directions(model, grid, &layout, solutions);
             Message {
                 envelope: ctx.envelope(launcher_id(), 0, Stage::Local),
                 payload: Payload::LocalDirections {
@@ -344,15 +409,65 @@ pub fn time_start(
                 },
             }
         })
-        .collect();
-    Ok(Some(TimeStartRun {
-        coarse_steps: coarse.model.time.n_steps,
-        iterations: r.iterations.len(),
-        eta,
-        verdict,
-        seconds: t0.elapsed().as_secs_f64(),
-        messages,
-    }))
+        .collect()
+}
+
+/// The initial directions of a given start, once `given` is checked against the model: one
+/// solution per interface in interface order, Ŵ and F̂ of both sides 2·n_pairs × (N+1), finite.
+fn given_start(
+    model: &Model,
+    ctx: &RunContext,
+    plan: &Plan,
+    given: &[InterfaceSolution],
+) -> Result<Vec<Message>, RunError> {
+    let nt = model.time.n_points();
+    if given.len() != model.interfaces.len() {
+        return Err(RunError::GivenStart(format!(
+            "{} interface solution(s) for a scene of {} interface(s)",
+            given.len(),
+            model.interfaces.len()
+        )));
+    }
+    for (k, (sol, itf)) in given.iter().zip(&model.interfaces).enumerate() {
+        let rows = 2 * itf.n_pairs();
+        for (name, f) in [
+            ("W_a_hat", &sol.w_a_hat),
+            ("W_b_hat", &sol.w_b_hat),
+            ("F_a_hat", &sol.f_a_hat),
+            ("F_b_hat", &sol.f_b_hat),
+        ] {
+            if sol.interface as usize != k || f.rows() != rows || f.cols() != nt {
+                return Err(RunError::GivenStart(format!(
+                    "interface {k}: {name} of interface {} is {} × {}, the scene's is {rows} × {nt}",
+                    sol.interface,
+                    f.rows(),
+                    f.cols()
+                )));
+            }
+            if f.data.iter().any(|v| !v.is_finite()) {
+                return Err(RunError::GivenStart(format!(
+                    "interface {k}: {name} holds a non-finite value"
+                )));
+            }
+        }
+    }
+    Ok(initial_directions(model, &model.time, ctx, plan, given))
+}
+
+/// Operators given to a run must be its participants', in order, on its boundary layout with
+/// its search directions.
+fn check_prepared(model: &Model, plan: &Plan, solvers: &[SubdomainSolver]) -> Result<(), RunError> {
+    let same = solvers.len() == plan.participants.len()
+        && solvers.iter().zip(&plan.participants).all(|(s, &p)| {
+            s.subdomain == p as usize && s.op.layout.k == BoundaryLayout::new(model, p as usize, &plan.k0).k
+        });
+    if same {
+        Ok(())
+    } else {
+        Err(RunError::GivenStart(
+            "the operators given are not this scene's participants' (subdomains or boundaries differ)".into(),
+        ))
+    }
 }
 
 /// q̂ = F̂ + k⁻Ŵ of one subdomain's boundary at the fine time points, from the coarse solve's

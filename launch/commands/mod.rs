@@ -6,6 +6,7 @@ pub(crate) mod measure;
 pub(crate) mod replay;
 pub(crate) mod run;
 pub(crate) mod soak;
+pub(crate) mod study;
 
 pub(crate) use crate::cli::{ColorByArg, ReplayArgs, RunArgs};
 pub(crate) use anyhow::Context;

@@ -122,6 +122,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let opts = RunOptions {
         run_id: run_id.clone(),
         interior: args.interior || args.vtu,
+        keep_state: false,
     };
     let progress = |r: &IterationRecord| {
         bar.set_position(r.iteration as u64 + 1);

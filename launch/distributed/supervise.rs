@@ -850,6 +850,7 @@ impl Collected {
             verdict: self.iterations.last().map_or(verdict, |r| r.decision.verdict.clone()),
             iterations: self.iterations,
             interfaces: self.interfaces,
+            state: None,
             displacements: self.displacements,
             k0: plan.k0.clone(),
             nodes,

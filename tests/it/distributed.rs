@@ -491,6 +491,7 @@ fn shared_memory_processes_match_in_process_bit_for_bit() {
     let opts = |run_id: &str| RunOptions {
         run_id: run_id.into(),
         interior: true,
+        keep_state: false,
     };
     let local = Run::new(&sc, &opts("local")).in_process().map(|o| o.result).unwrap();
     let remote = Run::new(&sc, &opts("distributed-shm"))

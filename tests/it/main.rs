@@ -30,6 +30,7 @@ mod run_id;
 mod shared_router;
 mod stability;
 mod stall;
+mod studies;
 mod time_start;
 mod tls;
 mod two_hosts;

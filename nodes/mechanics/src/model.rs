@@ -276,6 +276,10 @@ pub struct SolverParams {
     pub macro_degree: Option<usize>,
     /// Start from a solve on a coarser time grid ([`TimeStart`]); None: from ŝ = 0.
     pub time_start: Option<TimeStart>,
+    /// Start from ŝ given by the launcher (a study's warm start from a solved variant): iteration 0
+    /// waits for its initial directions, as with a time-coarse start. Never set by a scene file.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub given_start: bool,
 }
 
 /// Time-coarse start: the scene is first solved on every `coarsening`-th time point (N/c steps,
@@ -305,6 +309,12 @@ impl SolverParams {
         let mu = self.relaxation;
         2.0 * (1.0 - mu) / (2.0 - mu)
     }
+
+    /// Whether iteration 0 starts from directions the launcher sends (a time-coarse start or a
+    /// given start) instead of ŝ = 0.
+    pub fn launcher_start(&self) -> bool {
+        self.time_start.is_some() || self.given_start
+    }
 }
 
 impl Default for SolverParams {
@@ -327,6 +337,7 @@ impl Default for SolverParams {
             },
             macro_degree: None,
             time_start: None,
+            given_start: false,
         }
     }
 }

@@ -9,13 +9,13 @@ use glissade_bus::{expect_finite, expect_origin, expect_shape, Node, NodeError};
 use glissade_messages::{role_field_topic, Awaited, Field, Message, NodeId, Payload, Role, Stage};
 
 impl SubdomainNode {
-    /// Time-coarse start (`solver.time_coarsening`): iteration 0 waits for q̂ from the launcher
-    /// instead of starting from ŝ = 0.
+    /// Time-coarse start (`solver.time_coarsening`) or given start (a study's warm start):
+    /// iteration 0 waits for q̂ from the launcher instead of starting from ŝ = 0.
     fn time_start(&self) -> bool {
-        self.model.solver.time_start.is_some()
+        self.model.solver.launcher_start()
     }
 
-    /// Iteration 0 of a time-coarse start: q̂ over the whole boundary (every interface of the
+    /// Iteration 0 of a time-coarse or given start: q̂ over the whole boundary (every interface of the
     /// layout, in layout order) from the launcher, checked in full before it is taken.
     fn initial_directions(
         &mut self,

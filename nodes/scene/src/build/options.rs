@@ -66,6 +66,7 @@ impl Ctx<'_> {
             },
             acceleration: self.acceleration(r, d.acceleration)?,
             time_start: None,
+            given_start: false,
         };
         let positive = |v: f64| v > 0.0 && v.is_finite();
         self.check(positive(s.k0_factor), "solver.k0_factor", || {

@@ -1,0 +1,110 @@
+//! `glissade sweep`: a study's variants through the run pipeline, then its tables and plots.
+
+use super::{ensure_absent, ensure_writable, ExitCode, NOT_CONVERGED};
+use anyhow::Context;
+use glissade::study::PipelineSolver;
+use glissade_studies::driver::run;
+use glissade_studies::study::Study;
+use glissade_studies::{plot, table};
+use std::path::Path;
+
+pub(crate) fn sweep(
+    path: &Path,
+    vary: &[String],
+    cold: bool,
+    accuracy: Option<f64>,
+    record: bool,
+    out: &Path,
+) -> anyhow::Result<ExitCode> {
+    let mut study = if vary.is_empty() {
+        Study::read(path)?
+    } else {
+        Study::from_vary(path, vary, None)?
+    };
+    if let Some(a) = accuracy {
+        if !(a > 0.0 && a < 1.0) {
+            anyhow::bail!("--accuracy {a}: must be in (0, 1)");
+        }
+        study.accuracy = Some(a);
+    }
+    // The name becomes part of file names and of run ids.
+    study.name = study
+        .name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(48)
+        .collect();
+    if cold {
+        study.name.push_str("-cold");
+    }
+    // The scene as a file: its text is what each variant rewrites; a scene that does not load
+    // as it is stops the study before any variant.
+    let base =
+        glissade::load_scene(&study.scene).with_context(|| format!("the study's scene {}", study.scene.display()))?;
+    let text =
+        std::fs::read_to_string(&study.scene).with_context(|| format!("cannot read {}", study.scene.display()))?;
+    ensure_writable(out)?;
+    let (csv_name, json_name) = (format!("{}.csv", study.name), format!("{}.json", study.name));
+    let mut names = vec![csv_name.clone(), json_name.clone()];
+    names.extend(plot::file_names(&study));
+    ensure_absent(out, &names)?;
+    let n = glissade_studies::variants::variants(&study).len();
+    eprintln!(
+        "study {}: {n} variants of {} ({} subdomains, {} interfaces, N = {}), {}",
+        study.name,
+        study.scene.display(),
+        base.model.subdomains.len(),
+        base.model.interfaces.len(),
+        base.model.time.n_steps,
+        if cold { "cold" } else { "warm-started" }
+    );
+    let mut solver = PipelineSolver::new(record.then(|| (out.to_path_buf(), study.name.clone())));
+    let result = run(&study, &text, &mut solver, cold, |o| {
+        let what = match &o.result {
+            Ok((s, _)) => format!("{} iterations, {}", s.iterations, s.verdict_text),
+            Err(e) => e.clone(),
+        };
+        let values: Vec<String> = study
+            .parameters
+            .iter()
+            .zip(&o.variant.values)
+            .map(|(p, v)| format!("{} = {v}", p.name))
+            .collect();
+        let from = o
+            .started_from
+            .map_or("from ŝ = 0".into(), |f| format!("from variant {f}"));
+        eprintln!(
+            "[{}/{n}] {} ({from}, {:.2} s): {what}",
+            o.variant.index + 1,
+            values.join(", "),
+            o.wall_s
+        );
+    })?;
+    for line in table::summary(&result) {
+        println!("{line}");
+    }
+    glissade::output::write_bytes_new(out, &csv_name, &[table::csv(&result).into_bytes()])?;
+    glissade::output::write_json_new(out, &json_name, &table::json(&result))?;
+    let plots = plot::plots(&result);
+    for (name, svg) in &plots {
+        glissade::output::write_bytes_new(out, name, &[svg.clone().into_bytes()])?;
+    }
+    println!(
+        "wrote {csv_name}, {json_name} and {} plots ({}-<quantity>-vs-<parameter>.svg) in {}",
+        plots.len(),
+        study.name,
+        out.display()
+    );
+    let all = result.outcomes.iter().all(|o| o.converged());
+    Ok(if all {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(NOT_CONVERGED)
+    })
+}
