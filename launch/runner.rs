@@ -18,6 +18,9 @@ use glissade_subdomain::{LinearStageRecord, LinearStageRecords};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// The point moments of boundary forces are taken about (mm): the origin of the scene.
+pub const MOMENT_ABOUT: [f64; 2] = [0.0, 0.0];
+
 /// Options of an in-process run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunOptions {
@@ -67,6 +70,9 @@ pub struct RunResult {
     /// which a given start ([`Prepared::start`]) resumes it exactly. Kept when asked for
     /// ([`RunOptions::keep_state`]), in-process.
     pub state: Option<Vec<InterfaceSolution>>,
+    /// Every boundary rule's force on the parts (supports' reactions, loads' resultants), from
+    /// each copy's own fields (before they are given one value per point).
+    pub boundary: Vec<crate::resultants::RuleResultants>,
     /// (subdomain, n_dofs × (N+1)) when asked for, or when the scene has no interface.
     pub displacements: Vec<(u32, Field)>,
     pub k0: Vec<f64>,
@@ -203,6 +209,7 @@ pub(crate) fn run_logged(
             verdict: Verdict::Converged,
             interfaces: Vec::new(),
             state: None,
+            boundary: crate::resultants::boundary_resultants(&model, &[], MOMENT_ABOUT),
             displacements,
             k0: Vec::new(),
             nodes: vec!["none: direct solve".into()],
@@ -283,6 +290,7 @@ pub(crate) fn run_logged(
     // Several interface nodes publish their interfaces' solutions in node order.
     interfaces.sort_by_key(|s| s.interface);
     let state = opts.keep_state.then(|| interfaces.clone());
+    let boundary = crate::resultants::boundary_resultants(&model, &interfaces, MOMENT_ABOUT);
     glissade_replay::one_value_per_point(&model, &mut interfaces);
     let verdict = iterations
         .last()
@@ -295,6 +303,7 @@ pub(crate) fn run_logged(
         verdict,
         interfaces,
         state,
+        boundary,
         displacements,
         k0,
         nodes: names,

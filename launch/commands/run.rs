@@ -230,6 +230,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let mut run_summary = summary(&sc, &result, &run_id);
     let resultants = glissade::resultants::resultants(&sc.model, &result.interfaces)?;
     run_summary["interface_resultants"] = serde_json::json!(resultants);
+    run_summary["boundary_resultants"] = serde_json::json!(result.boundary);
     run_summary["linear_stages"] = serde_json::json!(linear_stages.iter().map(|t| t.json()).collect::<Vec<_>>());
     if let Some(traffic) = &bus {
         run_summary["bus"] = serde_json::json!(traffic);
@@ -281,6 +282,13 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     )
     .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(resultants_path.clone());
+    let boundaries_path = args.out.join(format!("{}-{run_id}.boundaries.csv", sc.model.name));
+    glissade::vtu::write_new_file(
+        &boundaries_path,
+        glissade::resultants::boundary_csv(&sc.model, &result.boundary).as_bytes(),
+    )
+    .map_err(|e| with_kept(e.into(), &kept))?;
+    kept.push(boundaries_path.clone());
     let csv = if args.csv {
         let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
         glissade::vtu::write_new_file(
@@ -305,6 +313,9 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     for line in glissade::resultants::console_lines(&sc.model, &resultants, 4) {
         println!("{line}");
     }
+    for line in glissade::resultants::boundary_console_lines(&sc.model, &result.boundary, 4) {
+        println!("{line}");
+    }
     for t in &linear_stages {
         // Untimed (as processes), the counters alone are a note (`--verbose`).
         match t.seconds {
@@ -321,10 +332,11 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         println!("recording: {path} ({:.1} MB)", size as f64 * 1e-6);
     }
     println!(
-        "summary: {}\nfields: {}\nresultants: {}",
+        "summary: {}\nfields: {}\nresultants: {}\nboundaries: {}",
         summary_path.display(),
         fields_path.display(),
-        resultants_path.display()
+        resultants_path.display(),
+        boundaries_path.display()
     );
     if let Some(path) = &csv {
         println!("csv: {}", path.display());

@@ -699,17 +699,12 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
     };
     let (out, err) = run("quiet", false);
     let all: Vec<&str> = out.lines().chain(err.lines()).collect();
-    let resultants = all
-        .iter()
-        .filter(|l| l.starts_with("interface ") || l.starts_with("… and "))
-        .count();
-    assert!((1..=5).contains(&resultants), "{out}{err}");
-    let lines: Vec<&str> = all
-        .iter()
-        .copied()
-        .filter(|l| !(l.starts_with("interface ") || l.starts_with("… and ")))
-        .collect();
-    assert_eq!(lines.len(), 6, "{out}{err}");
+    // The resultants' lines: interfaces, then supports, at most 4 of each and a count of the rest.
+    let resultant = |l: &str| l.starts_with("interface ") || l.starts_with("support ") || l.starts_with("… and ");
+    let resultants = all.iter().filter(|l| resultant(l)).count();
+    assert!((2..=10).contains(&resultants), "{out}{err}");
+    let lines: Vec<&str> = all.iter().copied().filter(|l| !resultant(l)).collect();
+    assert_eq!(lines.len(), 7, "{out}{err}");
     assert!(
         lines[0].starts_with("recording to ") && lines[0].contains("full fields at every iteration, 52 kB each"),
         "{out}"
@@ -739,7 +734,10 @@ fn a_run_prints_its_verdict_and_files_and_the_rest_with_verbose() {
         "{out}"
     );
     assert!(
-        lines[3].starts_with("summary: ") && lines[4].starts_with("fields: ") && lines[5].starts_with("resultants: "),
+        lines[3].starts_with("summary: ")
+            && lines[4].starts_with("fields: ")
+            && lines[5].starts_with("resultants: ")
+            && lines[6].starts_with("boundaries: "),
         "{out}"
     );
     let summary: serde_json::Value =

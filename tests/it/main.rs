@@ -19,6 +19,7 @@ mod layout;
 mod monolithic;
 mod node_failures;
 mod pgd;
+mod reactions;
 mod real_router;
 mod recording;
 mod recovery;

@@ -366,4 +366,31 @@ pub struct Model {
     pub subdomains: Vec<Subdomain>,
     pub interfaces: Vec<Interface>,
     pub solver: SolverParams,
+    /// The scene's boundary rules, in file order, with the dofs and load cases each made: what
+    /// reaction forces and load resultants are reported by (empty for a model built otherwise).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub boundary_rules: Vec<BoundaryRule>,
+}
+
+/// One boundary rule of the scene as the outputs report it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BoundaryRule {
+    /// `boundary[k]`, with its curve for a mesh scene: `boundary[0] (bore)`.
+    pub name: String,
+    /// Whether it prescribes displacements (else it applies tractions).
+    pub prescribes_displacement: bool,
+    /// Per subdomain it acts on, what it made there.
+    pub parts: Vec<RulePart>,
+}
+
+/// What a boundary rule made in one subdomain.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RulePart {
+    pub subdomain: usize,
+    /// The dofs whose displacement it prescribes (those a later rule took over are the later
+    /// rule's).
+    pub dofs: Vec<usize>,
+    /// Its load cases (indices into the subdomain's `loads`; tractions, or displacements not zero
+    /// everywhere).
+    pub cases: Vec<usize>,
 }

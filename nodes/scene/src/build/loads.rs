@@ -188,11 +188,12 @@ impl Ctx<'_> {
 
     /// Prescribes `cases` (full-length patterns and their time functions) at `dofs` of one
     /// subdomain: a later rule takes the dofs over from an earlier one.
-    fn prescribe(sl: &mut SubLoads, dofs: &[usize], cases: Vec<(Vec<f64>, TimeFunction)>) {
+    fn prescribe(sl: &mut SubLoads, rule: usize, dofs: &[usize], cases: Vec<(Vec<f64>, TimeFunction)>) {
         let first = sl.loads.len();
         let last = first + cases.len();
         for &dof in dofs {
             sl.constrained[dof] = true;
+            sl.dof_rule[dof] = Some(rule);
             let (p0, p1) = sl.owner[dof];
             for prev in p0..p1 {
                 if prev < first {
@@ -207,6 +208,7 @@ impl Ctx<'_> {
                 displacement: pattern,
                 time,
             });
+            sl.case_rule.push(rule);
         }
     }
 
@@ -249,7 +251,7 @@ impl Ctx<'_> {
                     (s, Target { nodes, edges })
                 })
                 .collect();
-            self.apply_rule(rule, &key, time, subs, &targets, &mut out)?;
+            self.apply_rule((r, rule), &key, time, subs, &targets, &mut out)?;
         }
         Ok(drop_empty_cases(out))
     }
@@ -258,7 +260,7 @@ impl Ctx<'_> {
     /// in each subdomain.
     fn apply_rule(
         &self,
-        rule: &RawBoundary,
+        (r, rule): (usize, &RawBoundary),
         key: &str,
         time: TimeGrid,
         subs: &[Sub],
@@ -272,7 +274,7 @@ impl Ctx<'_> {
             for (&s, target) in targets {
                 let dofs: Vec<usize> = target.nodes.iter().map(|&node| 2 * node + c).collect();
                 let cases = self.displacement_cases(&bv, &ckey, time, &subs[s].mesh, &dofs)?;
-                Self::prescribe(&mut out[s], &dofs, cases);
+                Self::prescribe(&mut out[s], r, &dofs, cases);
             }
         }
         for (comp, value) in [
@@ -292,6 +294,7 @@ impl Ctx<'_> {
                         force,
                         time,
                     });
+                    out[s].case_rule.push(r);
                 }
             }
         }
@@ -502,7 +505,7 @@ impl Ctx<'_> {
                     (s, Target { nodes, edges })
                 })
                 .collect();
-            self.apply_rule(rule, &key, time, subs, &targets, &mut out)?;
+            self.apply_rule((r, rule), &key, time, subs, &targets, &mut out)?;
         }
         Ok(drop_empty_cases(out))
     }
@@ -588,8 +591,15 @@ impl Ctx<'_> {
 /// has been applied, since rules refer to the cases of earlier ones by position.
 fn drop_empty_cases(mut out: Vec<SubLoads>) -> Vec<SubLoads> {
     for sl in &mut out {
-        sl.loads
-            .retain(|c| c.force.iter().chain(&c.displacement).any(|&v| v != 0.0));
+        let keep: Vec<bool> = sl
+            .loads
+            .iter()
+            .map(|c| c.force.iter().chain(&c.displacement).any(|&v| v != 0.0))
+            .collect();
+        let mut k = keep.iter();
+        sl.loads.retain(|_| *k.next().unwrap_or(&true));
+        let mut k = keep.iter();
+        sl.case_rule.retain(|_| *k.next().unwrap_or(&true));
     }
     out
 }
@@ -603,6 +613,8 @@ fn empty_loads(subs: &[Sub]) -> Vec<SubLoads> {
                 constrained: vec![false; n],
                 loads: Vec::new(),
                 owner: vec![(0, 0); n],
+                dof_rule: vec![None; n],
+                case_rule: Vec::new(),
             }
         })
         .collect()

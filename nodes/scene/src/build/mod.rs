@@ -105,6 +105,10 @@ pub(crate) struct SubLoads {
     pub(crate) loads: Vec<LoadCase>,
     /// Load cases (a range) currently prescribing each dof (empty: none).
     pub(crate) owner: Vec<(usize, usize)>,
+    /// The boundary rule prescribing each dof (the last one to), if any.
+    pub(crate) dof_rule: Vec<Option<usize>>,
+    /// The boundary rule of each load case (parallel to `loads`).
+    pub(crate) case_rule: Vec<usize>,
 }
 
 /// A name in the scene: a block (all its subdomains) or one subdomain.
@@ -280,6 +284,7 @@ impl Ctx<'_> {
         self.check_rigid_modes(&subs, &interfaces, &sub_loads)?;
         self.interface_groups(&raw.deployment, &mut deployment, &names, &subs, &interfaces)?;
 
+        let boundary_rules = boundary_rules(raw, &sub_loads);
         let subdomains = subs
             .into_iter()
             .zip(sub_loads)
@@ -298,6 +303,7 @@ impl Ctx<'_> {
             subdomains,
             interfaces,
             solver,
+            boundary_rules,
         };
         let mut recording = recording;
         if recording.full_fields_auto
@@ -487,4 +493,31 @@ impl Ctx<'_> {
 
 pub(crate) fn block_dimension(b: &RawBlock) -> f64 {
     (b.x[1] - b.x[0]).abs().max((b.y[1] - b.y[0]).abs())
+}
+
+/// The boundary rules as the model reports them: per rule, per subdomain, the dofs it prescribes
+/// and its load cases.
+fn boundary_rules(raw: &RawScene, sub_loads: &[SubLoads]) -> Vec<glissade_mechanics::model::BoundaryRule> {
+    use glissade_mechanics::model::{BoundaryRule, RulePart};
+    raw.boundary
+        .iter()
+        .enumerate()
+        .map(|(r, rule)| BoundaryRule {
+            name: match &rule.curve {
+                Some(c) => format!("boundary[{r}] ({c})"),
+                None => format!("boundary[{r}]"),
+            },
+            prescribes_displacement: rule.ux.is_some() || rule.uy.is_some(),
+            parts: sub_loads
+                .iter()
+                .enumerate()
+                .map(|(s, l)| RulePart {
+                    subdomain: s,
+                    dofs: (0..l.dof_rule.len()).filter(|&d| l.dof_rule[d] == Some(r)).collect(),
+                    cases: (0..l.case_rule.len()).filter(|&c| l.case_rule[c] == r).collect(),
+                })
+                .filter(|p| !p.dofs.is_empty() || !p.cases.is_empty())
+                .collect(),
+        })
+        .collect()
 }

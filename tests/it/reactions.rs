@@ -1,0 +1,127 @@
+//! Reactions at supports and load resultants of every boundary rule (docs/outputs.md,
+//! "Reactions and loads").
+
+use crate::common::{glissade_ok, scene, scene_text, scratch};
+use glissade::resultants::RuleKind;
+use glissade::run::Run;
+use glissade::runner::RunOptions;
+use glissade_mechanics::assembly::{stiffness_triplets, triplet_matvec};
+
+/// Two blocks pressed and sheared through their contact (two-blocks.toml: the lower block
+/// clamped on y = 0, the upper one's top moved by ux = 0.004·sin 2πt, uy = −0.01): the reaction
+/// the run reports for each support, from each subdomain's equilibrium, is the reaction of the
+/// discrete problem, Σ (K u − f) over the support's dofs, with u the subdomains' own displacement
+/// fields recovered from the same iterate: to round-off (1e-14 of the largest reaction measured;
+/// 1e-10 allowed, which a reaction missing one node's force would exceed by far). The two
+/// supports hold each other (no load) to the run's accuracy (the blocks' interface forces of s
+/// balance to it), and the prescribed displacement beside the top's reaction is the scene's.
+#[test]
+fn a_supports_reaction_is_the_discrete_problems() {
+    let mut sc = scene(&scene_text("two-blocks").replace("N = 40", "N = 8"));
+    sc.model.solver.accuracy = Some(1e-4);
+    let mut opts = RunOptions::new("reactions");
+    opts.interior = true;
+    let r = Run::new(&sc, &opts).in_process().unwrap().result;
+    assert_eq!(r.verdict, glissade_messages::Verdict::Converged);
+    let model = &sc.model;
+    let nt = model.time.n_points();
+    let support = |name: &str| {
+        r.boundary
+            .iter()
+            .find(|b| b.rule == name)
+            .unwrap_or_else(|| panic!("{name}: {:?}", r.boundary))
+    };
+    let (bottom, top) = (support("boundary[0]"), support("boundary[1]"));
+    assert_eq!((bottom.kind, top.kind), (RuleKind::Support, RuleKind::Support));
+    let largest = (0..nt).map(|i| bottom.force[i][1].abs()).fold(0.0, f64::max);
+    assert!(largest > 1e3, "{largest}");
+    for (rule, s) in [(bottom, 0usize), (top, 1usize)] {
+        let sub = &model.subdomains[s];
+        let k = stiffness_triplets(&sub.mesh, sub.material, model.plane).unwrap();
+        let (_, u) = r.displacements.iter().find(|(i, _)| *i as usize == s).unwrap();
+        let dofs = &model.boundary_rules.iter().find(|b| b.name == rule.rule).unwrap().parts[0].dofs;
+        let mut ku = vec![0.0; sub.n_dofs()];
+        for i in 0..nt {
+            let ui: Vec<f64> = (0..sub.n_dofs()).map(|d| u.get(d, i)).collect();
+            triplet_matvec(&k, &ui, &mut ku);
+            // No traction acts on the supports' dofs: f = 0 there.
+            let exact = [0, 1].map(|c| dofs.iter().filter(|&&d| d % 2 == c).map(|&d| ku[d]).sum::<f64>());
+            for (c, exact) in exact.into_iter().enumerate() {
+                assert!(
+                    (rule.force[i][c] - exact).abs() <= 1e-10 * largest,
+                    "{} at t = {}: component {c}: {} reported, {} from K u",
+                    rule.rule,
+                    model.time.t(i),
+                    rule.force[i][c],
+                    exact
+                );
+            }
+            assert!((bottom.force[i][1] + top.force[i][1]).abs() <= 1e-3 * largest);
+            let t = model.time.t(i);
+            let expected = [0.004 * (2.0 * std::f64::consts::PI * t).sin(), -0.01];
+            let [ux, uy] = top.displacement[i];
+            assert!((ux.unwrap() - expected[0]).abs() < 1e-12 && (uy.unwrap() - expected[1]).abs() < 1e-12);
+        }
+    }
+}
+
+/// The shrink fit twisted by a shear τ = 1.5·t MPa on its outside (r = 50 mm): the load's
+/// moment is 2π·50²·τ to the mesh's circle (4e-7 measured; 1e-5 allowed), and the bore's reaction
+/// holds it: the same moment the other way within the run's accuracy 1e-4 (2.5e-5 measured: the
+/// two rings' interface forces of s balance to the accuracy), no net force (1e-6 of τ·2π·50).
+/// The command writes them to `<scene>-<run>.boundaries.csv` and prints the support's line.
+#[test]
+fn the_bore_holds_the_twist_of_the_shrink_fit() {
+    let dir = scratch("reactions-shrink-fit");
+    let scene_path = format!("{}/launch/scenes/shrink-fit.toml", env!("CARGO_MANIFEST_DIR"));
+    let out = glissade_ok(&[&"run", &scene_path, &"--in-process", &"--no-record", &"--out", &dir.0]);
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("support boundary[0] (bore) at t = 1:")),
+        "{out}"
+    );
+    let path = std::fs::read_dir(&dir.0)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.to_string_lossy().ends_with(".boundaries.csv"))
+        .expect("a boundaries CSV");
+    let csv = std::fs::read_to_string(&path).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("time_s,rule,kind,force_x_N_per_mm,force_y_N_per_mm,moment_N,about_x_mm,about_y_mm,prescribed_ux_mm,prescribed_uy_mm")
+    );
+    let (mut loads, mut supports) = (0, 0);
+    let mut load_moment = std::collections::BTreeMap::new();
+    for row in lines {
+        let c: Vec<&str> = row.split(',').collect();
+        let num = |i: usize| c[i].parse::<f64>().unwrap();
+        let t = num(0);
+        let full = 1.5 * t * 2.0 * std::f64::consts::PI * 50.0;
+        match (c[1], c[2]) {
+            ("boundary[1] (outside)", "load") => {
+                loads += 1;
+                assert!(
+                    (num(5) - full * 50.0).abs() <= 1e-5 * 1.5 * 2.0 * std::f64::consts::PI * 2500.0,
+                    "{row}"
+                );
+                load_moment.insert(c[0].to_string(), num(5));
+            }
+            ("boundary[0] (bore)", "support") => {
+                supports += 1;
+                let m = load_moment[c[0]];
+                assert!(
+                    (num(5) + m).abs() <= 1e-4 * m.abs().max(1.0),
+                    "{row}: load's moment {m}"
+                );
+                assert!(
+                    num(3).abs() <= 1e-6 * full.max(1.0) && num(4).abs() <= 1e-6 * full.max(1.0),
+                    "{row}"
+                );
+                assert_eq!((c[8], c[9]), ("0.0", "0.0"), "{row}");
+            }
+            _ => panic!("unexpected row {row}"),
+        }
+    }
+    assert_eq!((loads, supports), (11, 11));
+}
