@@ -212,6 +212,33 @@ pub(crate) enum Command {
         #[arg(long, default_value = "studies")]
         out: PathBuf,
     },
+    /// The load at which a joint slips (docs/studies.md, "Slip onset"): the smallest factor on
+    /// a boundary rule's values at which a contact interface first slips at a point, and the one
+    /// at which one slips over its whole length (beyond it a part held by friction has no
+    /// equilibrium), each bracketed by warm-started solves; writes `<scene>-onset.json`.
+    Onset {
+        /// Scene file (TOML).
+        scene: PathBuf,
+        /// The boundary rule whose values are scaled (its index in the file, from 0).
+        #[arg(long)]
+        rule: usize,
+        /// A contact interface to watch (as `glissade check` numbers them; repeat for several);
+        /// every contact interface by default.
+        #[arg(long)]
+        interface: Vec<usize>,
+        /// Relative width of each bracket at the end.
+        #[arg(long, default_value_t = 1e-2)]
+        bracket: f64,
+        /// The first factor tried (the brackets grow from it by ×2 or ÷2).
+        #[arg(long, default_value_t = 1.0)]
+        start: f64,
+        /// Every trial's accuracy (overrides the scene's `solver.accuracy`).
+        #[arg(long, allow_negative_numbers = true)]
+        accuracy: Option<f64>,
+        /// Folder for the outputs.
+        #[arg(long, default_value = "studies")]
+        out: PathBuf,
+    },
     /// Check the stop on accuracy on generated scenes no one tuned for (docs/accuracy.md, "The
     /// validation set"): per seed, a laminate or a Gmsh geometry, its reference, and one run past
     /// the smallest accuracy; where each accuracy (1e-2, 1e-3, 1e-4) stops and the true error

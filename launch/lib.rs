@@ -3,6 +3,7 @@
 
 pub mod accuracy;
 pub mod bench;
+pub mod boundary;
 pub mod bus;
 pub mod children;
 pub mod console;

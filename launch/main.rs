@@ -12,7 +12,7 @@ use commands::check_run_id;
 use commands::measure::{bench, reference, reference_options, report, report_variants, stability, validate, Plots};
 use commands::replay::{export, replay};
 use commands::run::run;
-use commands::study::sweep;
+use commands::study::{onset, sweep};
 use glissade::bus::Joining;
 use glissade::children::{NodeName, NodeRole};
 use glissade::distributed::Supervision;
@@ -83,6 +83,9 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             for line in plan.deployment_lines(&plan.groups(sc.deployment.subdomain_nodes)) {
                 println!("{line}");
             }
+            for warning in glissade_scene::free_motions(m) {
+                glissade::console::warn(&warning);
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Reference {
@@ -133,6 +136,25 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
             record,
             out,
         } => sweep(&study, &vary, cold, accuracy, record, &out),
+        Command::Onset {
+            scene,
+            rule,
+            interface,
+            bracket,
+            start,
+            accuracy,
+            out,
+        } => onset(
+            &scene,
+            glissade_studies::onset::OnsetRequest {
+                rule,
+                interfaces: interface,
+                bracket,
+                start,
+                accuracy,
+            },
+            &out,
+        ),
         Command::Stability {
             quick,
             only,

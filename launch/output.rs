@@ -222,8 +222,9 @@ pub fn existing_outputs(out: &Path, name: &str, run_id: &str) -> Vec<PathBuf> {
     let csv = format!("{stem}.interfaces.csv");
     let resultants = format!("{stem}.resultants.csv");
     let boundaries = format!("{stem}.boundaries.csv");
+    let plot = format!("{stem}.boundaries.svg");
     names
-        .chain([csv, resultants, boundaries])
+        .chain([csv, resultants, boundaries, plot])
         .flat_map(|n| [out.join(&n), out.join(format!(".{n}.partial"))])
         .chain([pvd, vtu])
         .filter(|p| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_file() || m.is_dir()))

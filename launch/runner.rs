@@ -72,7 +72,7 @@ pub struct RunResult {
     pub state: Option<Vec<InterfaceSolution>>,
     /// Every boundary rule's force on the parts (supports' reactions, loads' resultants), from
     /// each copy's own fields (before they are given one value per point).
-    pub boundary: Vec<crate::resultants::RuleResultants>,
+    pub boundary: Vec<crate::boundary::RuleResultants>,
     /// (subdomain, n_dofs × (N+1)) when asked for, or when the scene has no interface.
     pub displacements: Vec<(u32, Field)>,
     pub k0: Vec<f64>,
@@ -209,7 +209,7 @@ pub(crate) fn run_logged(
             verdict: Verdict::Converged,
             interfaces: Vec::new(),
             state: None,
-            boundary: crate::resultants::boundary_resultants(&model, &[], MOMENT_ABOUT),
+            boundary: crate::boundary::boundary_resultants(&model, &[], MOMENT_ABOUT),
             displacements,
             k0: Vec::new(),
             nodes: vec!["none: direct solve".into()],
@@ -290,7 +290,7 @@ pub(crate) fn run_logged(
     // Several interface nodes publish their interfaces' solutions in node order.
     interfaces.sort_by_key(|s| s.interface);
     let state = opts.keep_state.then(|| interfaces.clone());
-    let boundary = crate::resultants::boundary_resultants(&model, &interfaces, MOMENT_ABOUT);
+    let boundary = crate::boundary::boundary_resultants(&model, &interfaces, MOMENT_ABOUT);
     glissade_replay::one_value_per_point(&model, &mut interfaces);
     let verdict = iterations
         .last()

@@ -289,6 +289,13 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     )
     .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(boundaries_path.clone());
+    let plot_path = args.out.join(format!("{}-{run_id}.boundaries.svg", sc.model.name));
+    glissade::vtu::write_new_file(
+        &plot_path,
+        glissade::resultants::boundary_svg(&sc.model, &result.boundary).as_bytes(),
+    )
+    .map_err(|e| with_kept(e.into(), &kept))?;
+    kept.push(plot_path);
     let csv = if args.csv {
         let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
         glissade::vtu::write_new_file(
@@ -312,6 +319,11 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     );
     for line in glissade::resultants::console_lines(&sc.model, &resultants, 4) {
         println!("{line}");
+    }
+    if result.verdict != Verdict::Converged {
+        for line in glissade::resultants::whole_slip_lines(&sc.model, &resultants, 4) {
+            glissade::console::warn(&line);
+        }
     }
     for line in glissade::resultants::boundary_console_lines(&sc.model, &result.boundary, 4) {
         println!("{line}");

@@ -108,3 +108,81 @@ pub(crate) fn sweep(
         ExitCode::from(NOT_CONVERGED)
     })
 }
+
+pub(crate) fn onset(scene: &Path, req: glissade_studies::onset::OnsetRequest, out: &Path) -> anyhow::Result<ExitCode> {
+    let base = glissade::load_scene(scene)?;
+    let text = std::fs::read_to_string(scene).with_context(|| format!("cannot read {}", scene.display()))?;
+    let rules = base.model.boundary_rules.len();
+    if req.rule >= rules {
+        anyhow::bail!(
+            "--rule {}: the scene has {rules} boundary rule(s), numbered from 0",
+            req.rule
+        );
+    }
+    if let Some(a) = req.accuracy {
+        if !(a > 0.0 && a < 1.0) {
+            anyhow::bail!("--accuracy {a}: must be in (0, 1)");
+        }
+    }
+    ensure_writable(out)?;
+    let name = format!("{}-onset.json", base.model.name);
+    ensure_absent(out, std::slice::from_ref(&name))?;
+    eprintln!(
+        "onset of {}: the factor on its values at which {} first slips at a point, and over its whole length",
+        base.model.boundary_rules[req.rule].name,
+        if req.interfaces.is_empty() {
+            "a contact interface".to_string()
+        } else {
+            format!("interface {:?}", req.interfaces)
+        }
+    );
+    let mut solver = PipelineSolver::new(None);
+    let mut k = 0;
+    let result = glissade_studies::onset::onset(scene, &text, &req, &mut solver, |t| {
+        k += 1;
+        let at = |v: Option<f64>| v.map_or("never".to_string(), |t| format!("from t = {t}"));
+        eprintln!(
+            "[{k}] factor {:.6}: {} iterations, {:.2} s: slips at a point {}, over a whole interface {}; {}",
+            t.scale,
+            t.iterations,
+            t.seconds,
+            at(t.first_slip_at),
+            at(t.full_slip_at),
+            if t.converged {
+                "converged".to_string()
+            } else {
+                t.verdict.clone()
+            }
+        );
+    })?;
+    let line = |what: &str, b: &glissade_studies::onset::Bracket| match (b.below, b.above) {
+        (Some(lo), Some(hi)) => format!("{what}: factor between {lo:.6} (held) and {hi:.6} (did not)"),
+        (Some(lo), None) => format!("{what}: not reached; held up to factor {lo:.6}"),
+        (None, Some(hi)) => format!("{what}: already at factor {hi:.6}, the smallest tried"),
+        (None, None) => format!("{what}: no trial"),
+    };
+    println!("{}", line("first slip at a point", &result.first_slip));
+    println!(
+        "{}",
+        line(
+            "slip over a whole interface (no equilibrium beyond it for a part held by friction)",
+            &result.full_slip
+        )
+    );
+    let iterations: usize = result.trials.iter().map(|t| t.iterations).sum();
+    println!(
+        "{} solves, {iterations} iterations, {:.2} s in all",
+        result.trials.len(),
+        result.seconds
+    );
+    if let Some(why) = &result.unfinished {
+        println!("stopped short of the bracket asked: {why}");
+    }
+    glissade::output::write_json_new(out, &name, &serde_json::json!(result))?;
+    println!("wrote {}", out.join(&name).display());
+    Ok(if result.unfinished.is_none() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(NOT_CONVERGED)
+    })
+}

@@ -63,6 +63,17 @@ fn a_supports_reaction_is_the_discrete_problems() {
             assert!((ux.unwrap() - expected[0]).abs() < 1e-12 && (uy.unwrap() - expected[1]).abs() < 1e-12);
         }
     }
+    // The load–displacement plot: the top's reaction along x against its prescribed ux (the
+    // component that moves), one point per time point; the clamped bottom does not move.
+    let svg = glissade::resultants::boundary_svg(model, &r.boundary);
+    assert!(
+        svg.contains("two-blocks: load–displacement") && svg.contains("boundary[1]: Rx against ux"),
+        "{svg}"
+    );
+    assert_eq!(
+        (svg.matches("<polyline").count(), svg.matches("<circle").count()),
+        (1, nt)
+    );
 }
 
 /// The shrink fit twisted by a shear τ = 1.5·t MPa on its outside (r = 50 mm): the load's
@@ -124,4 +135,59 @@ fn the_bore_holds_the_twist_of_the_shrink_fit() {
         }
     }
     assert_eq!((loads, supports), (11, 11));
+    // The plot beside it: the bore's support holds still, so the forces against time, a line per
+    // rule and component, 11 time points each.
+    let svg = std::fs::read_to_string(path.with_extension("svg")).unwrap();
+    assert!(
+        svg.contains("shrink-fit: boundary forces (reactions and loads)"),
+        "{svg}"
+    );
+    assert_eq!(svg.matches("<polyline").count(), 4);
+    assert_eq!(svg.matches("<circle").count(), 44);
+}
+
+/// The shrink fit twisted twice as hard as its scene (3·t MPa, beyond the 1.962 MPa friction
+/// holds from t = 0.7 on: 2.1 MPa there, 1.8 at t = 0.6) has no equilibrium: the run ends not
+/// converged and says which interface slips over its whole length, and from which time point;
+/// `check` of the same fit without friction warns that the outer ring is held in no way against
+/// turning about the fit's centre.
+#[test]
+fn loads_beyond_what_friction_holds_are_said_as_such() {
+    let dir = scratch("no-equilibrium");
+    let text = scene_text("shrink-fit")
+        .replace("shear = \"1.5*t\"", "shear = \"3.0*t\"")
+        .replace(
+            "meshes/shrink-fit-2.msh",
+            &format!("{}/launch/scenes/meshes/shrink-fit-2.msh", env!("CARGO_MANIFEST_DIR")),
+        );
+    let over = dir.0.join("over.toml");
+    std::fs::write(&over, &text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["run", "--in-process", "--no-record", "--out"])
+        .arg(&dir.0)
+        .arg(&over)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(
+            "warning: interface 0 (inner | outer) slips over its whole length from t = 0.7: the loads there may exceed"
+        ),
+        "{err}"
+    );
+    let frictionless = dir.0.join("frictionless.toml");
+    std::fs::write(&frictionless, text.replace("friction = 0.2", "friction = 0.0")).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .arg("check")
+        .arg(&frictionless)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("warning: part [outer] is held in a rotation about (")
+            && err.contains("by nothing but frictionless contact"),
+        "{err}"
+    );
 }

@@ -151,3 +151,52 @@ fn bad_studies_are_refused_with_the_place_of_the_mistake() {
         "nothing written but the study file"
     );
 }
+
+/// `glissade onset` on the shrink fit's twist (shear 1.5·t MPa on the outside, rule 1): the
+/// outer ring slips as a whole, and has no equilibrium beyond, at the closed form f·p·b²/c² =
+/// 1.962 MPa (Lamé's pressure 27.25 MPa, f = 0.2, b = 30, c = 50), a factor 1.962/1.5 = 1.308 on
+/// the rule. The search brackets that factor to the 1 % asked (the bound; measured: the
+/// bracket's middle within 0.05 % of it), finds the first slip at a point no later (the pressure
+/// along the fit is uniform to the mesh, so the pairs go within 1 % of each other), names the
+/// first time point beyond capacity in the trials (t = 0.7 at a factor of 2: 2.1 > 1.962 MPa
+/// there, 1.8 at t = 0.6), and warm-starts each trial from the last that held.
+#[test]
+fn the_onset_of_slip_of_the_shrink_fit_is_the_closed_form() {
+    let dir = scratch("onset");
+    let scene = format!("{}/launch/scenes/shrink-fit.toml", env!("CARGO_MANIFEST_DIR"));
+    let out = glissade_ok(&[&"onset", &scene, &"--rule", &"1", &"--out", &dir.0]);
+    assert!(out.contains("slip over a whole interface"), "{out}");
+    let r = read_json(&dir.0.join("shrink-fit-onset.json"));
+    let closed = 1.962 / 1.5;
+    let (lo, hi) = (
+        r["full_slip"]["below"].as_f64().unwrap(),
+        r["full_slip"]["above"].as_f64().unwrap(),
+    );
+    assert!(lo < hi && hi - lo <= 1e-2 * hi, "[{lo}, {hi}]");
+    let middle = 0.5 * (lo + hi);
+    assert!(
+        (middle - closed).abs() <= 1e-2 * closed,
+        "full slip at {middle}, closed form {closed}"
+    );
+    let first = r["first_slip"]["above"].as_f64().unwrap();
+    assert!(
+        first <= hi && first >= 0.99 * lo,
+        "first slip {first}, full slip [{lo}, {hi}]"
+    );
+    let trials = r["trials"].as_array().unwrap();
+    let at_two = trials
+        .iter()
+        .find(|t| t["scale"] == 2.0)
+        .expect("the bracket grows to 2");
+    assert_eq!(at_two["full_slip_at"].as_f64(), Some(0.7), "{at_two}");
+    assert_eq!(at_two["converged"], false);
+    // Every trial after the first held one starts from a trial that held.
+    for t in trials.iter().skip(1) {
+        let from = t["started_from"].as_u64().expect("warm-started") as usize;
+        let source = &trials[from];
+        assert!(
+            source["converged"] == true && source["full_slip_at"].is_null(),
+            "{t} from {source}"
+        );
+    }
+}

@@ -24,6 +24,7 @@
 mod build;
 pub use build::memory::{set_machine_memory, MemoryEstimate};
 pub use build::options::{auto_coarsening, AUTO_COARSENING_MIN_STEPS, AUTO_COARSE_STEPS};
+pub use build::rigid::free_motions;
 pub use build::{is_file_stem, MAX_NAME_CHARS};
 mod diagnostics;
 pub mod msh;

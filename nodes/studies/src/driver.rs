@@ -30,6 +30,27 @@ pub struct Solved {
     pub interfaces: Vec<InterfaceSolution>,
     /// The iteration's own final state, from which another variant starts; None if not kept.
     pub state: Option<Vec<InterfaceSolution>>,
+    /// Every boundary rule's force on the parts (supports' reactions, loads' resultants).
+    pub rules: Vec<RuleForce>,
+}
+
+/// One boundary rule's force on the parts at every time point (the run's boundaries CSV).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RuleForce {
+    pub rule: String,
+    /// `support` (the force is its reaction) or `load` (the resultant of its tractions).
+    pub kind: String,
+    /// Global x and y (N/mm) per time point.
+    pub force: Vec<[f64; 2]>,
+    /// About the scene's origin (N·mm/mm) per time point.
+    pub moment: Vec<f64>,
+}
+
+impl RuleForce {
+    /// The largest |force| over the time points.
+    pub fn peak(&self) -> f64 {
+        self.force.iter().map(|f| f[0].hypot(f[1])).fold(0.0, f64::max)
+    }
 }
 
 /// Solves one variant: the launcher's run pipeline.

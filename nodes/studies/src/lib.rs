@@ -16,6 +16,7 @@
 //! runs each variant through its own pipeline (operators reused, given start).
 
 pub mod driver;
+pub mod onset;
 pub mod patch;
 pub mod plot;
 pub mod quantities;

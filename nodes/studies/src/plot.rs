@@ -135,10 +135,44 @@ fn plot(run: &StudyRun, p: usize, label: &str, values: &[Option<f64>]) -> String
             None => series.push((key, vec![(x, y)])),
         }
     }
-    for (_, pts) in series.iter_mut() {
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
-    let all = series.iter().flat_map(|(_, p)| p.iter());
+    let others: Vec<&str> = run
+        .study
+        .parameters
+        .iter()
+        .enumerate()
+        .filter(|&(k, _)| k != p)
+        .map(|(_, q)| q.name.as_str())
+        .collect();
+    let lines: Vec<Line> = series
+        .into_iter()
+        .map(|(key, mut points)| {
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let label = others
+                .iter()
+                .zip(&key)
+                .map(|(n, v)| format!("{n} = {}", fmt(f64::from_bits(*v))))
+                .collect::<Vec<_>>()
+                .join(", ");
+            Line { label, points }
+        })
+        .collect();
+    let title = format!("{}: {} against {}", run.study.name, label, param.name);
+    line_plot(&title, &param.name, label, &lines)
+}
+
+/// A line of [`line_plot`]: its legend (none when empty) and its points in drawing order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Line {
+    pub label: String,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// An SVG plot of `lines` (each a polyline with markers, in its own colour), with round ticks
+/// on both axes, the axes' labels, a title and a legend of the labelled lines (16 at most).
+/// Non-finite points are left out.
+pub fn line_plot(title: &str, x_label: &str, y_label: &str, lines: &[Line]) -> String {
+    let finite = |&(x, y): &(f64, f64)| x.is_finite() && y.is_finite();
+    let all = lines.iter().flat_map(|l| l.points.iter().filter(|p| finite(p)));
     let (mut x0, mut x1, mut y0, mut y1) = all.fold(
         (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY),
         |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
@@ -164,12 +198,11 @@ fn plot(run: &StudyRun, p: usize, label: &str, values: &[Option<f64>]) -> String
         r##"<svg xmlns="http://www.w3.org/2000/svg" width="{W}" height="{H}" viewBox="0 0 {W} {H}" font-family="sans-serif" font-size="12">"##
     );
     let _ = writeln!(s, r##"<rect width="{W}" height="{H}" fill="white"/>"##);
-    let title = format!("{}: {} against {}", run.study.name, label, param.name);
     let _ = writeln!(
         s,
         r##"<text x="{}" y="22" text-anchor="middle" font-size="14">{}</text>"##,
         W / 2.0,
-        escape(&title)
+        escape(title)
     );
     let _ = writeln!(
         s,
@@ -203,39 +236,30 @@ fn plot(run: &StudyRun, p: usize, label: &str, values: &[Option<f64>]) -> String
         r##"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"##,
         LEFT + pw / 2.0,
         H - 15.0,
-        escape(&param.name)
+        escape(x_label)
     );
     let _ = writeln!(
         s,
         r##"<text transform="translate(18 {:.1}) rotate(-90)" text-anchor="middle">{}</text>"##,
         TOP + ph / 2.0,
-        escape(label)
+        escape(y_label)
     );
-    let others: Vec<&str> = run
-        .study
-        .parameters
-        .iter()
-        .enumerate()
-        .filter(|&(k, _)| k != p)
-        .map(|(_, q)| q.name.as_str())
-        .collect();
-    for (k, (key, pts)) in series.iter().enumerate() {
+    for (k, line) in lines.iter().enumerate() {
         let c = COLOURS[k % COLOURS.len()];
-        let path: Vec<String> = pts.iter().map(|&(x, y)| format!("{:.1},{:.1}", sx(x), sy(y))).collect();
+        let pts: Vec<&(f64, f64)> = line.points.iter().filter(|p| finite(p)).collect();
+        let path: Vec<String> = pts
+            .iter()
+            .map(|&&(x, y)| format!("{:.1},{:.1}", sx(x), sy(y)))
+            .collect();
         let _ = writeln!(
             s,
             r##"<polyline points="{}" fill="none" stroke="{c}" stroke-width="1.5"/>"##,
             path.join(" ")
         );
-        for &(x, y) in pts {
+        for &&(x, y) in &pts {
             let _ = writeln!(s, r##"<circle cx="{:.1}" cy="{:.1}" r="3" fill="{c}"/>"##, sx(x), sy(y));
         }
-        if !others.is_empty() && k < 16 {
-            let text: Vec<String> = others
-                .iter()
-                .zip(key)
-                .map(|(n, v)| format!("{n} = {}", fmt(f64::from_bits(*v))))
-                .collect();
+        if !line.label.is_empty() && k < 16 {
             let y = TOP + 14.0 * k as f64 + 8.0;
             let _ = writeln!(
                 s,
@@ -244,7 +268,7 @@ fn plot(run: &StudyRun, p: usize, label: &str, values: &[Option<f64>]) -> String
                 W - RIGHT + 28.0,
                 W - RIGHT + 32.0,
                 y + 3.5,
-                escape(&text.join(", "))
+                escape(&line.label)
             );
         }
     }

@@ -116,6 +116,7 @@ fn variant_json(run: &StudyRun, o: &VariantOutcome) -> Value {
             v["setup_s"] = json!(s.setup_s);
             v["solve_s"] = json!(s.solve_s);
             v["operators"] = json!(s.operators);
+            v["boundary_rules"] = json!(s.rules);
             v["interfaces"] = qs
                 .iter()
                 .map(|q| {
@@ -159,7 +160,7 @@ pub fn summary(run: &StudyRun) -> Vec<String> {
         let (n, u) = QUANTITIES[q];
         let _ = write!(head, " | peak {n} ({u})");
     }
-    head.push_str(" | verdict");
+    head.push_str(" | peak support reaction (N/mm) | verdict");
     let mut lines = vec![head];
     for o in &run.outcomes {
         let mut l = format!("{:>7}", o.variant.index);
@@ -176,7 +177,13 @@ pub fn summary(run: &StudyRun) -> Vec<String> {
                 for &q in &report {
                     let _ = write!(l, " | {:.4e}", peak(qs, q));
                 }
-                let _ = write!(l, " | {}", short(&s.verdict));
+                let reaction = s
+                    .rules
+                    .iter()
+                    .filter(|r| r.kind == "support")
+                    .map(|r| r.peak())
+                    .fold(0.0, f64::max);
+                let _ = write!(l, " | {reaction:.4e} | {}", short(&s.verdict));
             }
         }
         lines.push(l);

@@ -8,7 +8,7 @@ mod loads;
 pub(crate) mod memory;
 pub(crate) mod options;
 mod parts;
-mod rigid;
+pub(crate) mod rigid;
 
 use crate::raw::*;
 use crate::{

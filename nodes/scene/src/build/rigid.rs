@@ -125,25 +125,144 @@ pub(crate) fn part_held_only_by_contact(
 }
 
 /// How many of the three rigid-body motions the constrained dofs `rows` (coordinates, component)
-/// block: the rank of the rows [δ_c0, δ_c1, c = 0 ? −(y − ȳ) : (x − x̄)] (x̄ the rows' mean, lengths
-/// over `scale`, the body's size), eigenvalues of their Gram matrix below 1e-10 of the largest
-/// counted as zero.
+/// block: [`rigid_modes`] of the rows along the axes.
 fn blocked_rigid_modes(rows: &[([f64; 2], usize)], scale: f64) -> usize {
+    let along: Vec<([f64; 2], [f64; 2])> = rows
+        .iter()
+        .map(|&(p, c)| (p, if c == 0 { [1.0, 0.0] } else { [0.0, 1.0] }))
+        .collect();
+    rigid_modes(&along, scale).0
+}
+
+/// How many of the three rigid-body motions the constraints `rows` (a point and the direction
+/// the motion is held along there) block: the rank of the rows [d_x, d_y, (p − p̄) × d / scale]
+/// (p̄ the points' mean, `scale` the body's size), eigenvalues of their Gram matrix below 1e-10
+/// of the largest counted as zero; and a motion left free, if any, as (translation, rotation
+/// about p̄ in rad per unit of `scale`), the eigenvector of the smallest eigenvalue.
+fn rigid_modes(rows: &[([f64; 2], [f64; 2])], scale: f64) -> (usize, Option<([f64; 2], f64)>, [f64; 2]) {
     let n = rows.len().max(1) as f64;
     let mean = [
         rows.iter().map(|r| r.0[0]).sum::<f64>() / n,
         rows.iter().map(|r| r.0[1]).sum::<f64>() / n,
     ];
     let mut gram = nalgebra::Matrix3::<f64>::zeros();
-    for &(p, c) in rows {
-        let row = if c == 0 {
-            nalgebra::Vector3::new(1.0, 0.0, -(p[1] - mean[1]) / scale)
-        } else {
-            nalgebra::Vector3::new(0.0, 1.0, (p[0] - mean[0]) / scale)
-        };
+    for &(p, d) in rows {
+        let cross = ((p[0] - mean[0]) * d[1] - (p[1] - mean[1]) * d[0]) / scale;
+        let row = nalgebra::Vector3::new(d[0], d[1], cross);
         gram += row * row.transpose();
     }
-    let eig = gram.symmetric_eigenvalues();
-    let max = eig.iter().fold(0.0f64, |m, &v| m.max(v));
-    eig.iter().filter(|&&v| v > 1e-10 * max && max > 0.0).count()
+    let eig = gram.symmetric_eigen();
+    let max = eig.eigenvalues.iter().fold(0.0f64, |m, &v| m.max(v));
+    let rank = eig
+        .eigenvalues
+        .iter()
+        .filter(|&&v| v > 1e-10 * max && max > 0.0)
+        .count();
+    let free = (rank < 3).then(|| {
+        let k = (0..3)
+            .min_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]))
+            .unwrap_or(0);
+        let v = eig.eigenvectors.column(k);
+        ([v[0], v[1]], v[2])
+    });
+    (rank, free, mean)
+}
+
+/// The warnings of `glissade check` for parts whose rigid motion in some direction is held by
+/// nothing but frictionless contact pushing along its normals, or not at all: a part is a group
+/// of subdomains joined by perfect interfaces; it is held by its prescribed displacements, by the
+/// normals of its contact pairs, and by their tangents where the friction is not zero. A load with
+/// a component along the motion left free has no equilibrium (the part would slide away), and a
+/// run of it stalls.
+pub fn free_motions(model: &glissade_mechanics::model::Model) -> Vec<String> {
+    let ns = model.subdomains.len();
+    let mut parent: Vec<usize> = (0..ns).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for itf in model.interfaces.iter().filter(|i| !i.is_contact()) {
+        let (ra, rb) = (root(&mut parent, itf.a), root(&mut parent, itf.b));
+        if ra != rb {
+            parent[ra.max(rb)] = ra.min(rb);
+        }
+    }
+    let mut parts: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for s in 0..ns {
+        let r = root(&mut parent, s);
+        parts.entry(r).or_default().push(s);
+    }
+    let mut warnings = Vec::new();
+    for members in parts.values() {
+        let mut rows: Vec<([f64; 2], [f64; 2])> = Vec::new();
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let mut frictionless = Vec::new();
+        for &s in members {
+            let sub = &model.subdomains[s];
+            for x in &sub.mesh.coords {
+                lo = [lo[0].min(x[0]), lo[1].min(x[1])];
+                hi = [hi[0].max(x[0]), hi[1].max(x[1])];
+            }
+            for (d, &c) in sub.constrained.iter().enumerate() {
+                if c {
+                    rows.push((sub.mesh.coords[d / 2], if d % 2 == 0 { [1.0, 0.0] } else { [0.0, 1.0] }));
+                }
+            }
+        }
+        for (k, itf) in model.interfaces.iter().enumerate() {
+            let glissade_mechanics::model::InterfaceKind::Contact { friction, .. } = &itf.kind else {
+                continue;
+            };
+            if members.contains(&itf.a) == members.contains(&itf.b) {
+                continue;
+            }
+            for p in 0..itf.n_pairs() {
+                rows.push((itf.coords[p], itf.normal(p)));
+                if *friction > 0.0 {
+                    rows.push((itf.coords[p], itf.tangent(p)));
+                }
+            }
+            if *friction == 0.0 {
+                frictionless.push(k);
+            }
+        }
+        let scale = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let (rank, free, centre) = rigid_modes(&rows, scale);
+        let Some((t, w)) = free.filter(|_| rank < 3) else {
+            continue;
+        };
+        let names: Vec<&str> = members
+            .iter()
+            .take(6)
+            .map(|&s| model.subdomains[s].name.as_str())
+            .collect();
+        let motion = if w.abs() < 1e-6 {
+            let n = t[0].hypot(t[1]);
+            format!("a translation along ({:.3}, {:.3})", t[0] / n, t[1] / n)
+        } else if t[0].hypot(t[1]) < 1e-6 {
+            format!("a rotation about ({:.4}, {:.4})", centre[0], centre[1])
+        } else {
+            // v = t + ω × (x − p̄) vanishes at p̄ + (−t_y, t_x)·scale/ω.
+            let c = [centre[0] - t[1] * scale / w, centre[1] + t[0] * scale / w];
+            format!("a rotation about ({:.4}, {:.4})", c[0], c[1])
+        };
+        let by = if frictionless.is_empty() {
+            "nothing".to_string()
+        } else {
+            format!("nothing but frictionless contact (interfaces {frictionless:?}) pushing along its normals")
+        };
+        warnings.push(format!(
+            "part [{}{}] is held in {motion} by {by}: a load with a component along it has no equilibrium",
+            names.join(", "),
+            if members.len() > names.len() {
+                format!(", … ({} in all)", members.len())
+            } else {
+                String::new()
+            }
+        ));
+    }
+    warnings
 }
