@@ -58,20 +58,16 @@ pub struct Generated {
 }
 
 /// SplitMix64: a small, well-mixed generator, so that a seed's scene is the same everywhere.
-struct Draw(u64);
+struct Draw(glissade_studies::variants::SplitMix64);
 
 impl Draw {
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in [0, 1).
     fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.unit()
     }
 
     fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
@@ -122,7 +118,7 @@ fn steps(d: &mut Draw) -> usize {
 
 /// The scene of `seed`.
 pub fn generate(seed: u64) -> Generated {
-    let mut d = Draw(seed ^ 0x6C61_7469_6E5F_7631);
+    let mut d = Draw(glissade_studies::variants::SplitMix64(seed ^ 0x6C61_7469_6E5F_7631));
     if d.chance(0.75) {
         laminate(seed, &mut d)
     } else {

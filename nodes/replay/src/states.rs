@@ -211,6 +211,37 @@ impl BoundaryStates {
     }
 }
 
+/// The final solutions as every output shows them: one value per physical point where copies of
+/// a node pair sit on several contact interfaces
+/// ([`glissade_mechanics::points::one_value_per_point`]). The run's messages (and its recording)
+/// keep each copy's own share; the launcher's result, fields.json, the CSV, the VTU files and
+/// Rerun show the point's.
+pub fn one_value_per_point(model: &Model, solutions: &mut [glissade_messages::InterfaceSolution]) {
+    use glissade_mechanics::points::FinalColumns;
+    let mut fields: Vec<Option<FinalColumns<'_>>> = (0..model.interfaces.len()).map(|_| None).collect();
+    for s in solutions.iter_mut() {
+        let Some(slot) = fields.get_mut(s.interface as usize) else {
+            continue;
+        };
+        let values = [
+            &mut s.w_a,
+            &mut s.w_b,
+            &mut s.f_a,
+            &mut s.f_b,
+            &mut s.w_a_hat,
+            &mut s.w_b_hat,
+            &mut s.f_a_hat,
+            &mut s.f_b_hat,
+        ]
+        .map(|f| &mut *f.data);
+        *slot = Some(FinalColumns {
+            values,
+            status: &mut s.status,
+        });
+    }
+    glissade_mechanics::points::one_value_per_point(&model.interfaces, &mut fields);
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -283,35 +314,4 @@ mod tests {
         let e = states.fields(&part(s, 3, 0, vec![999], 2, 0.0)).unwrap().unwrap_err();
         assert!(e.contains("interface 999 is not on its boundary"), "{e}");
     }
-}
-
-/// The final solutions as every output shows them: one value per physical point where copies of
-/// a node pair sit on several contact interfaces
-/// ([`glissade_mechanics::points::one_value_per_point`]). The run's messages (and its recording)
-/// keep each copy's own share; the launcher's result, fields.json, the CSV, the VTU files and
-/// Rerun show the point's.
-pub fn one_value_per_point(model: &Model, solutions: &mut [glissade_messages::InterfaceSolution]) {
-    use glissade_mechanics::points::FinalColumns;
-    let mut fields: Vec<Option<FinalColumns<'_>>> = (0..model.interfaces.len()).map(|_| None).collect();
-    for s in solutions.iter_mut() {
-        let Some(slot) = fields.get_mut(s.interface as usize) else {
-            continue;
-        };
-        let values = [
-            &mut s.w_a,
-            &mut s.w_b,
-            &mut s.f_a,
-            &mut s.f_b,
-            &mut s.w_a_hat,
-            &mut s.w_b_hat,
-            &mut s.f_a_hat,
-            &mut s.f_b_hat,
-        ]
-        .map(|f| &mut *f.data);
-        *slot = Some(FinalColumns {
-            values,
-            status: &mut s.status,
-        });
-    }
-    glissade_mechanics::points::one_value_per_point(&model.interfaces, &mut fields);
 }

@@ -124,11 +124,11 @@ pub fn nearest<'a>(study: &Study, v: &Variant, solved: impl IntoIterator<Item = 
 }
 
 /// SplitMix64 (Steele, Lea and Flood 2014): a small generator whose sequence is fixed by its
-/// seed on every platform, which is all a seeded sample needs.
-struct SplitMix64(u64);
+/// seed on every platform, which is all a seeded sample (and the validation set's scenes) need.
+pub struct SplitMix64(pub u64);
 
 impl SplitMix64 {
-    fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
@@ -137,8 +137,8 @@ impl SplitMix64 {
     }
 
     /// Uniform in [0, 1) with 53 random bits.
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 

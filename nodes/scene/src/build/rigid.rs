@@ -134,12 +134,15 @@ fn blocked_rigid_modes(rows: &[([f64; 2], usize)], scale: f64) -> usize {
     rigid_modes(&along, scale).0
 }
 
+/// A rigid motion: (translation, rotation in rad per unit of the body's size).
+type FreeMotion = ([f64; 2], f64);
+
 /// How many of the three rigid-body motions the constraints `rows` (a point and the direction
 /// the motion is held along there) block: the rank of the rows [d_x, d_y, (p − p̄) × d / scale]
 /// (p̄ the points' mean, `scale` the body's size), eigenvalues of their Gram matrix below 1e-10
 /// of the largest counted as zero; and a motion left free, if any, as (translation, rotation
 /// about p̄ in rad per unit of `scale`), the eigenvector of the smallest eigenvalue.
-fn rigid_modes(rows: &[([f64; 2], [f64; 2])], scale: f64) -> (usize, Option<([f64; 2], f64)>, [f64; 2]) {
+fn rigid_modes(rows: &[([f64; 2], [f64; 2])], scale: f64) -> (usize, Option<FreeMotion>, [f64; 2]) {
     let n = rows.len().max(1) as f64;
     let mean = [
         rows.iter().map(|r| r.0[0]).sum::<f64>() / n,
