@@ -3,7 +3,8 @@
 
 pub mod accuracy;
 pub mod bench;
-pub mod boundary;
+/// Every boundary rule's force on the parts ([`glissade_studies::boundary`]).
+pub use glissade_studies::boundary;
 pub mod bus;
 pub mod children;
 pub mod console;

@@ -18,9 +18,6 @@ use glissade_subdomain::{LinearStageRecord, LinearStageRecords};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// The point moments of boundary forces are taken about (mm): the origin of the scene.
-pub const MOMENT_ABOUT: [f64; 2] = [0.0, 0.0];
-
 /// Options of an in-process run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunOptions {
@@ -209,7 +206,7 @@ pub(crate) fn run_logged(
             verdict: Verdict::Converged,
             interfaces: Vec::new(),
             state: None,
-            boundary: crate::boundary::boundary_resultants(&model, &[], MOMENT_ABOUT),
+            boundary: crate::boundary::boundary_resultants(&model, &[], model.moment_about),
             displacements,
             k0: Vec::new(),
             nodes: vec!["none: direct solve".into()],
@@ -290,7 +287,7 @@ pub(crate) fn run_logged(
     // Several interface nodes publish their interfaces' solutions in node order.
     interfaces.sort_by_key(|s| s.interface);
     let state = opts.keep_state.then(|| interfaces.clone());
-    let boundary = crate::boundary::boundary_resultants(&model, &interfaces, MOMENT_ABOUT);
+    let boundary = crate::boundary::boundary_resultants(&model, &interfaces, model.moment_about);
     glissade_replay::one_value_per_point(&model, &mut interfaces);
     let verdict = iterations
         .last()

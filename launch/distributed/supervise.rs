@@ -837,7 +837,7 @@ impl Collected {
         left_out: Vec<String>,
     ) -> RunResult {
         self.interfaces.sort_by_key(|s| s.interface);
-        let boundary = crate::boundary::boundary_resultants(model, &self.interfaces, crate::runner::MOMENT_ABOUT);
+        let boundary = crate::boundary::boundary_resultants(model, &self.interfaces, model.moment_about);
         glissade_replay::one_value_per_point(model, &mut self.interfaces);
         self.displacements.sort_by_key(|d| d.0);
         RunResult {

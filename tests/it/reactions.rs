@@ -63,6 +63,25 @@ fn a_supports_reaction_is_the_discrete_problems() {
             assert!((ux.unwrap() - expected[0]).abs() < 1e-12 && (uy.unwrap() - expected[1]).abs() < 1e-12);
         }
     }
+    // Moments about the scene's `moment_about` (here (20, 40)): M_p = M_0 − (p × F).
+    let moved = scene(
+        &scene_text("two-blocks")
+            .replace("N = 40", "N = 8")
+            .replace("plane = \"strain\"", "plane = \"strain\"\nmoment_about = [20.0, 40.0]"),
+    );
+    assert_eq!(moved.model.moment_about, [20.0, 40.0]);
+    let about = glissade::boundary::boundary_resultants(&moved.model, &r.interfaces, moved.model.moment_about);
+    for (b, a) in r.boundary.iter().zip(&about) {
+        assert_eq!(a.about, [20.0, 40.0]);
+        for i in 0..nt {
+            let expected = b.moment[i] - (20.0 * b.force[i][1] - 40.0 * b.force[i][0]);
+            assert!(
+                (a.moment[i] - expected).abs() <= 1e-9 * expected.abs().max(1.0),
+                "{} {i}",
+                a.rule
+            );
+        }
+    }
     // The load–displacement plot: the top's reaction along x against its prescribed ux (the
     // component that moves), one point per time point; the clamped bottom does not move.
     let svg = glissade::resultants::boundary_svg(model, &r.boundary);
@@ -188,6 +207,101 @@ fn loads_beyond_what_friction_holds_are_said_as_such() {
     assert!(
         err.contains("warning: part [outer] is held in a rotation about (")
             && err.contains("by nothing but frictionless contact"),
+        "{err}"
+    );
+}
+
+/// The shipped lap joint (launch/scenes/lap-joint.toml): the upper plate pressed by 80 MPa over a
+/// 20 mm overlap and pulled at its end to 0.04 mm and back. At every time point the reaction at
+/// the pulled end balances the contact's tangential resultant (the upper plate's equilibrium,
+/// exact for s: 1e-9 of the capacity allowed, 2e-13 measured); it reaches the capacity f·N =
+/// 0.2 · 1600 N/mm = 320 N/mm when the whole overlap slips (1e-5 allowed: the run's accuracy is
+/// 1e-4 of the tractions, 1e-6 measured) and never exceeds it; the load–displacement plot draws it
+/// against the end's displacement. Pulled instead by a traction of 1.2 times the capacity at its
+/// peak, the joint has no equilibrium from t = 0.425 on (76.8·t/0.5 MPa · 5 mm > 320 N/mm from
+/// t = 0.417): the run ends not converged naming that time point.
+#[test]
+fn a_lap_joint_holds_what_friction_holds_and_says_when_it_cannot() {
+    let dir = scratch("lap-joint");
+    let scene_path = format!("{}/launch/scenes/lap-joint.toml", env!("CARGO_MANIFEST_DIR"));
+    let out = glissade_ok(&[&"run", &scene_path, &"--in-process", &"--no-record", &"--out", &dir.0]);
+    assert!(out.contains("Converged"), "{out}");
+    let file = |ending: &str| {
+        std::fs::read_dir(&dir.0)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.to_string_lossy().ends_with(ending))
+            .unwrap_or_else(|| panic!("no {ending}"))
+    };
+    let rows = |ending: &str| -> Vec<Vec<String>> {
+        std::fs::read_to_string(file(ending))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect()
+    };
+    let pulled: Vec<(f64, f64, f64)> = rows(".boundaries.csv")
+        .into_iter()
+        .filter(|c| c[1] == "boundary[3]")
+        .map(|c| (c[0].parse().unwrap(), c[3].parse().unwrap(), c[8].parse().unwrap()))
+        .collect();
+    let contact: Vec<(f64, f64, f64)> = rows(".resultants.csv")
+        .into_iter()
+        .filter(|c| c[4] == "contact")
+        .map(|c| (c[7].parse().unwrap(), c[8].parse().unwrap(), c[11].parse().unwrap()))
+        .collect();
+    assert_eq!((pulled.len(), contact.len()), (41, 41));
+    let capacity = 0.2 * 80.0 * 20.0;
+    let mut gross = 0;
+    for (&(t, r, u), &(n, tangential, slip)) in pulled.iter().zip(&contact) {
+        // The interface's tangent is (−1, 0) (its normal +y out of the lower plate): the force on
+        // the lower plate along it is −(force on the upper plate along x) = the pulled end's Rx.
+        assert!(
+            (r + tangential).abs() <= 1e-9 * capacity,
+            "t = {t}: reaction {r}, contact {tangential}"
+        );
+        assert!((n + 1600.0).abs() <= 1e-6 * 1600.0, "t = {t}: N = {n}");
+        assert!(r.abs() <= capacity * (1.0 + 1e-5), "t = {t}: {r} beyond the capacity");
+        if slip >= 1.0 - 1e-9 {
+            gross += 1;
+            assert!(
+                (r.abs() - capacity).abs() <= 1e-5 * capacity,
+                "t = {t}: gross slip at {r}"
+            );
+        }
+        let expected = if t <= 0.5 { 0.08 * t } else { 0.08 * (1.0 - t) };
+        assert!((u - expected).abs() < 1e-12, "t = {t}: u = {u}");
+    }
+    assert!(
+        gross >= 3,
+        "the joint slips as a whole near the peak ({gross} time points)"
+    );
+    let svg = std::fs::read_to_string(file(".boundaries.svg")).unwrap();
+    assert!(
+        svg.contains("lap-joint: load–displacement") && svg.contains("boundary[3]: Rx against ux"),
+        "{svg}"
+    );
+
+    let text = std::fs::read_to_string(&scene_path)
+        .unwrap()
+        .replace(
+            "ux = { t = [0.0, 0.5, 1.0], v = [0.0, 0.04, 0.0] }",
+            "tx = { t = [0.0, 0.5, 1.0], v = [0.0, 76.8, 0.0] }",
+        )
+        .replace("accuracy = 1e-4", "accuracy = 1e-4\nmax_iterations = 300");
+    let over = dir.0.join("over.toml");
+    std::fs::write(&over, text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["run", "--in-process", "--no-record", "--out"])
+        .arg(&dir.0)
+        .arg(&over)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("interface 0 (lower | upper.1) slips over its whole length from t = 0.425"),
         "{err}"
     );
 }

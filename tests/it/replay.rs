@@ -261,7 +261,7 @@ fn von_mises_percentiles(recording: &Path) -> (f64, f64, f64, f64) {
 /// convergence plot and the counts, no automatic layout; the legend's range is `range` (lower,
 /// upper, min, max) up to the last bits (the same order statistics and interpolation formula).
 fn assert_opens_ready(rrd: &Path, range: (f64, f64, f64, f64)) {
-    use glissade_replay::blueprint::{CONVERGENCE_VIEW, COUNTS_VIEW, STRUCTURE_VIEW};
+    use glissade_replay::blueprint::{CONVERGENCE_VIEW, COUNTS_VIEW, FORCES_VIEW, STRUCTURE_VIEW};
     let c = glissade_replay::rrd::RrdContents::read(rrd).unwrap();
     assert_eq!((c.blueprints, c.activations), (1, 1), "{}", rrd.display());
     assert_eq!((c.auto_layout, c.auto_views), (Some(false), Some(false)));
@@ -270,6 +270,7 @@ fn assert_opens_ready(rrd: &Path, range: (f64, f64, f64, f64)) {
         (STRUCTURE_VIEW, "3D"),
         (CONVERGENCE_VIEW, "TimeSeries"),
         (COUNTS_VIEW, "TimeSeries"),
+        (FORCES_VIEW, "TimeSeries"),
     ] {
         assert!(classes.contains(&view), "{view:?} in {classes:?}");
     }
@@ -418,6 +419,14 @@ fn replay_and_live_run_write_rrd_files_the_rerun_cli_accepts() {
     assert_opens_ready(&live, von_mises_percentiles(&recorded));
     let c = glissade_replay::rrd::RrdContents::read(&replayed).unwrap();
     assert_eq!(c.blueprints, 1);
+    // The forces over time: each contact interface's resultants, each boundary rule's force.
+    for entity in [
+        "resultants/interface_1/normal",
+        "resultants/interface_1/tangential",
+        "boundary/boundary_0/force_x",
+    ] {
+        assert!(c.entities.iter().any(|e| e == entity), "{entity} in {:?}", c.entities);
+    }
     assert!(c.legend_range["upper"] < 1.0, "|u| in mm: {:?}", c.legend_range);
 }
 

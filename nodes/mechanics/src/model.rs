@@ -370,6 +370,14 @@ pub struct Model {
     /// reaction forces and load resultants are reported by (empty for a model built otherwise).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub boundary_rules: Vec<BoundaryRule>,
+    /// The point the boundary rules' moments are reported about (mm): the scene's
+    /// `moment_about`, the origin by default.
+    #[serde(default, skip_serializing_if = "is_origin")]
+    pub moment_about: [f64; 2],
+}
+
+fn is_origin(p: &[f64; 2]) -> bool {
+    *p == [0.0, 0.0]
 }
 
 /// One boundary rule of the scene as the outputs report it.

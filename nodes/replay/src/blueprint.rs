@@ -38,6 +38,7 @@ pub const CONVERGENCE: [&str; 4] = [
 pub const STRUCTURE_VIEW: &str = "structure";
 pub const CONVERGENCE_VIEW: &str = "log10 η, e_c, traction error (with --reference) per iteration";
 pub const COUNTS_VIEW: &str = "stick / slip / separated";
+pub const FORCES_VIEW: &str = "interface resultants and boundary forces (N/mm) over time";
 
 /// A view of the layout: its class, name and entity-path filter.
 struct ViewSpec {
@@ -87,7 +88,8 @@ pub(crate) fn send(rec: &rerun::RecordingStream, frame: &Frame) -> Result<(), Re
         COUNTS_VIEW,
         quoted(&["contact/**", "contact_over_time/**"]),
     );
-    for v in [&structure, &convergence, &counts] {
+    let forces = ViewSpec::new("TimeSeries", FORCES_VIEW, quoted(&["resultants/**", "boundary/**"]));
+    for v in [&structure, &convergence, &counts, &forces] {
         bp_rec
             .log(
                 format!("{}/ViewContents", v.path()),
@@ -128,8 +130,8 @@ pub(crate) fn send(rec: &rerun::RecordingStream, frame: &Frame) -> Result<(), Re
         .log(
             container(right),
             &bp::ContainerBlueprint::new(ContainerKind::Vertical)
-                .with_contents([convergence.path(), counts.path()].map(IncludedContent::from))
-                .with_row_shares([3.0, 2.0].map(RowShare::from)),
+                .with_contents([convergence.path(), counts.path(), forces.path()].map(IncludedContent::from))
+                .with_row_shares([3.0, 2.0, 2.0].map(RowShare::from)),
         )
         .map_err(rerr)?;
     bp_rec

@@ -315,9 +315,12 @@ impl View {
             path: "final state".into(),
             detail,
         })?;
-        // The displacements from each copy's own values, the interfaces drawn with one value per
-        // point, as the run's outputs show them.
+        // The displacements and the boundary forces from each copy's own values, the interfaces
+        // drawn with one value per point, as the run's outputs show them.
+        let boundary = glissade_studies::boundary::boundary_resultants(model, &self.interfaces, model.moment_about);
         crate::one_value_per_point(model, &mut self.interfaces);
+        // A solution whose shape does not fit is named by the loop below.
+        let resultants = glissade_studies::quantities::quantities(model, &self.interfaces).unwrap_or_default();
         let mut final_fields: BTreeMap<u32, Vec<Vec<f64>>> = BTreeMap::new();
         for (&s, per_time) in &final_u {
             let fields = per_time
@@ -439,6 +442,27 @@ impl View {
                     .map_err(rerr)?;
                 }
             }
+            // The interface resultants and the boundary rules' forces, as the run's CSVs hold them.
+            for q in &resultants {
+                for (name, k) in [("normal", 0), ("tangential", 1), ("slip_share", 4)] {
+                    rec.log(
+                        format!("resultants/interface_{}/{name}", q.interface),
+                        &rerun::Scalars::single(q.values[k][i]),
+                    )
+                    .map_err(rerr)?;
+                }
+            }
+            for b in &boundary {
+                let path = entity_name(&b.rule);
+                for (name, v) in [
+                    ("force_x", b.force[i][0]),
+                    ("force_y", b.force[i][1]),
+                    ("moment", b.moment[i]),
+                ] {
+                    rec.log(format!("boundary/{path}/{name}"), &rerun::Scalars::single(v))
+                        .map_err(rerr)?;
+                }
+            }
             if self
                 .interfaces
                 .iter()
@@ -461,4 +485,18 @@ impl View {
         self.summary.incomplete_states = self.states.incomplete().to_vec();
         Ok(self.summary)
     }
+}
+
+/// A boundary rule's name as one entity path part: letters and digits kept, every run of other
+/// characters one `_` (`boundary[0] (bore)` → `boundary_0_bore`).
+fn entity_name(rule: &str) -> String {
+    let mut out = String::new();
+    for c in rule.chars() {
+        if c.is_ascii_alphanumeric() {
+            out.push(c);
+        } else if !out.ends_with('_') {
+            out.push('_');
+        }
+    }
+    out.trim_matches('_').to_string()
 }

@@ -9,6 +9,8 @@ use std::collections::BTreeMap;
 pub(crate) struct RawScene {
     pub(crate) name: Option<String>,
     pub(crate) plane: Option<RawPlane>,
+    /// The point boundary forces' moments are taken about (mm).
+    pub(crate) moment_about: Option<[f64; 2]>,
     pub(crate) time: RawTime,
     #[serde(default)]
     pub(crate) materials: BTreeMap<String, RawMaterial>,

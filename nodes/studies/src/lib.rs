@@ -8,6 +8,8 @@
 //! - [`patch`]: each variant's scene, as the scene's text with the varied values written in;
 //! - [`driver`]: the loop over the variants, which asks a [`driver::Solver`] (the run pipeline,
 //!   given by the launcher) to solve each, warm-started from its nearest solved variant;
+//! - [`boundary`]: every boundary rule's force on the parts (supports' reactions, loads'
+//!   resultants), from any run's final fields;
 //! - [`quantities`]: what the project computes of every variant at every time point (interface
 //!   resultants, contact pressures, slip, dissipation);
 //! - [`table`] and [`plot`]: the CSV and JSON tables, the console summary and the SVG plots.
@@ -15,6 +17,7 @@
 //! The crate holds no solver: it depends on the scene and numerics crates only, and the launcher
 //! runs each variant through its own pipeline (operators reused, given start).
 
+pub mod boundary;
 pub mod driver;
 pub mod onset;
 pub mod patch;

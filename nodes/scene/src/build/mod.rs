@@ -304,6 +304,7 @@ impl Ctx<'_> {
             interfaces,
             solver,
             boundary_rules,
+            moment_about: self.moment_about(raw.moment_about)?,
         };
         let mut recording = recording;
         if recording.full_fields_auto
@@ -520,4 +521,15 @@ fn boundary_rules(raw: &RawScene, sub_loads: &[SubLoads]) -> Vec<glissade_mechan
                 .collect(),
         })
         .collect()
+}
+
+impl Ctx<'_> {
+    /// `moment_about`: a point with finite coordinates (mm), the origin when absent.
+    fn moment_about(&self, p: Option<[f64; 2]>) -> Result<[f64; 2], SceneError> {
+        let p = p.unwrap_or([0.0, 0.0]);
+        self.check(p.iter().all(|v| v.is_finite()), "moment_about", || {
+            format!("({}, {}) is not a point with finite coordinates", p[0], p[1])
+        })?;
+        Ok(p)
+    }
 }

@@ -1,7 +1,8 @@
 //! The force of every boundary rule on the parts (docs/outputs.md, "boundaries.csv"): a
 //! support's reaction, a load's resultant, their moments and the prescribed displacement beside
 //! them, from a run's final fields. Computed by both run modes before the copies of a point are
-//! given one value; written by [`crate::resultants`].
+//! given one value (the launcher writes them to the boundaries CSV and plot, the replay draws them
+//! in Rerun, studies report them per variant).
 
 use glissade_mechanics::model::Model;
 use glissade_messages::InterfaceSolution;
