@@ -12,7 +12,7 @@ use glissade_messages::{
     SCHEMA_VERSION,
 };
 use glissade_recorder::{Recorder, RecorderOptions, Recording, RunInfo};
-use glissade_replay::blueprint::{CONVERGENCE, CONVERGENCE_VIEW, COUNTS_VIEW, STRUCTURE_VIEW};
+use glissade_replay::blueprint::{CONVERGENCE, CONVERGENCE_VIEW, COUNTS_VIEW, FORCES_VIEW, STRUCTURE_VIEW};
 use glissade_replay::rrd::RrdContents;
 use glissade_replay::{final_state, replay, ColorBy, ReplayOptions, Sink};
 use glissade_scene::load_str;
@@ -176,7 +176,7 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
     assert_eq!((c.blueprints, c.activations), (1, 1), "{c:?}");
     assert_eq!((c.auto_layout, c.auto_views), (Some(false), Some(false)));
     assert_eq!(c.time_panel_timeline.as_deref(), Some("iteration"));
-    assert_eq!(c.views.len(), 3, "{:?}", c.views);
+    assert_eq!(c.views.len(), 4, "{:?}", c.views);
     let structure = c.view(STRUCTURE_VIEW).expect("structure view");
     assert_eq!(structure.class, "3D");
     for q in ["+ /subdomains/**", "+ /interfaces/**", "+ /legend/**"] {
@@ -194,6 +194,9 @@ fn replay_writes_an_rrd_the_rerun_cli_accepts() {
     assert_eq!(convergence.class, "TimeSeries");
     assert_eq!(convergence.contents, CONVERGENCE.map(|e| format!("+ /{e}")));
     assert_eq!(c.view(COUNTS_VIEW).expect("counts view").class, "TimeSeries");
+    let forces = c.view(FORCES_VIEW).expect("forces view");
+    assert_eq!(forces.class, "TimeSeries");
+    assert_eq!(forces.contents, ["+ /resultants/**", "+ /boundary/**"]);
     for e in [
         "legend/strip",
         "legend/ticks",
