@@ -417,6 +417,9 @@ pub(crate) struct RunArgs {
     /// `solver.accuracy`, default 1e-3).
     #[arg(long, allow_negative_numbers = true)]
     pub(crate) accuracy: Option<f64>,
+    /// Iteration cap (overrides the scene's `solver.max_iterations`, default 1000).
+    #[arg(long)]
+    pub(crate) max_iterations: Option<usize>,
     /// Also write every subdomain's displacement field.
     #[arg(long)]
     pub(crate) interior: bool,

@@ -217,14 +217,19 @@ pub fn boundary_console_lines(model: &Model, all: &[RuleResultants], max: usize)
 }
 
 /// For a run that did not converge: the contact interfaces that slip over their whole length at
-/// some time point, each with the first such time point, said as what it likely means (a part
+/// some time point (every pair not separated slips), each with the first such time point, said as what it likely means (a part
 /// whose loads exceed what friction and its supports hold has no equilibrium, and LATIN then
 /// stalls with every pair slipping).
 pub fn whole_slip_lines(model: &Model, all: &[InterfaceResultants], max: usize) -> Vec<String> {
     let slipping: Vec<(&InterfaceResultants, usize)> = all
         .iter()
         .filter(|r| r.contact)
-        .filter_map(|r| r.shares.iter().position(|s| s[2] >= 1.0 - 1e-9).map(|i| (r, i)))
+        .filter_map(|r| {
+            r.shares
+                .iter()
+                .position(|s| glissade_studies::quantities::closed_slip_share(s[2], s[0]) >= 1.0 - 1e-9)
+                .map(|i| (r, i))
+        })
         .collect();
     let mut lines: Vec<String> = slipping
         .iter()

@@ -143,6 +143,7 @@ impl Solver for PipelineSolver {
                     },
                     force: b.force.clone(),
                     moment: b.moment.clone(),
+                    about: b.about,
                 })
                 .collect(),
             interfaces: r.interfaces,

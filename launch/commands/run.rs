@@ -81,6 +81,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     glissade::console::set_verbose(args.verbose);
     let overrides = Overrides {
         accuracy: args.accuracy,
+        max_iterations: args.max_iterations,
         record: match (args.no_record, args.record) {
             (true, _) | (false, Some(crate::cli::RecordArg::Off)) => Some(RecordOverride::Off),
             (false, Some(crate::cli::RecordArg::Full)) => Some(RecordOverride::Full),

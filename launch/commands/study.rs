@@ -53,8 +53,11 @@ pub(crate) fn sweep(
     let (csv_name, json_name) = (format!("{}.csv", study.name), format!("{}.json", study.name));
     let mut names = vec![csv_name.clone(), json_name.clone()];
     names.extend(plot::file_names(&study));
-    ensure_absent(out, &names)?;
     let n = glissade_studies::variants::variants(&study).len();
+    if record {
+        names.extend((0..n).map(|k| format!("{}-v{k}.mcap", study.name)));
+    }
+    ensure_absent(out, &names)?;
     eprintln!(
         "study {}: {n} variants of {} ({} subdomains, {} interfaces, N = {}), {}",
         study.name,

@@ -182,7 +182,7 @@ fn loads_beyond_what_friction_holds_are_said_as_such() {
     let over = dir.0.join("over.toml");
     std::fs::write(&over, &text).unwrap();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["run", "--in-process", "--no-record", "--out"])
+        .args(["run", "--in-process", "--no-record", "--max-iterations", "300", "--out"])
         .arg(&dir.0)
         .arg(&over)
         .output()
@@ -293,7 +293,7 @@ fn a_lap_joint_holds_what_friction_holds_and_says_when_it_cannot() {
     let over = dir.0.join("over.toml");
     std::fs::write(&over, text).unwrap();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["run", "--in-process", "--no-record", "--out"])
+        .args(["run", "--in-process", "--no-record", "--max-iterations", "300", "--out"])
         .arg(&dir.0)
         .arg(&over)
         .output()

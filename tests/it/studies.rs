@@ -200,3 +200,58 @@ fn the_onset_of_slip_of_the_shrink_fit_is_the_closed_form() {
         );
     }
 }
+
+/// Measurement (docs/studies.md, "What warm starts gain"): the 32-variant study of the stratified
+/// scene at N = 100, warm-started, and three of its variants (the first, one in the middle, the
+/// last: friction 0.15, 0.2 and 0.3) against the reference Newton solve of their own scene: the
+/// contact-force error e_F of each variant's written fields within its accuracy 1e-3. About 3
+/// minutes: `cargo test --test integration -- --ignored warm_started_variants_against_the_reference --nocapture`.
+#[test]
+#[ignore]
+fn warm_started_variants_against_the_reference() {
+    use glissade::study::PipelineSolver;
+    use glissade_bus::convert::mat_of;
+    use glissade_mechanics::local::{error_against_reference, InterfaceFields};
+    use glissade_studies::study::Study;
+    let dir = scratch("study-reference");
+    let scene = dir.0.join("strat100.toml");
+    std::fs::write(
+        &scene,
+        crate::common::scene_text("stratified").replace("N = 1000", "N = 100"),
+    )
+    .unwrap();
+    let study = Study::from_vary(
+        &scene,
+        &["friction=0.15:0.3:4".into(), "boundary[3].scale=0.6:1.3:8".into()],
+        None,
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(&scene).unwrap();
+    let mut solver = PipelineSolver::new(None);
+    let run = glissade_studies::driver::run(&study, &text, &mut solver, false, |_| {}).unwrap();
+    assert!(run.outcomes.iter().all(|o| o.converged()));
+    for k in [0, 15, 31] {
+        let o = &run.outcomes[k];
+        let (solved, _) = o.result.as_ref().unwrap();
+        let variant_text = glissade_studies::patch::variant_text(&study, &text, &o.variant).unwrap();
+        let sc = glissade_scene::load_str(&variant_text, scene.to_str().unwrap()).unwrap();
+        let reference = glissade_reference::solve_reference(&sc.model, &Default::default()).expect("reference");
+        let fields: Vec<InterfaceFields> = solved
+            .interfaces
+            .iter()
+            .map(|s| InterfaceFields {
+                w_a: mat_of(&s.w_a),
+                w_b: mat_of(&s.w_b),
+                f_a: mat_of(&s.f_a),
+                f_b: mat_of(&s.f_b),
+            })
+            .collect();
+        let w = sc.model.time.trapezoid_weights();
+        let (e_f, e_w) = error_against_reference(&sc.model.interfaces, &fields, &reference.interfaces, &w);
+        println!(
+            "variant {k} {:?}: {} iterations from {:?}, e_F = {e_f:.2e}, e_W = {e_w:.2e}",
+            o.variant.values, solved.iterations, o.started_from
+        );
+        assert!(e_f <= 1e-3, "variant {k}: e_F = {e_f}");
+    }
+}

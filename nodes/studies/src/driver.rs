@@ -42,8 +42,10 @@ pub struct RuleForce {
     pub kind: String,
     /// Global x and y (N/mm) per time point.
     pub force: Vec<[f64; 2]>,
-    /// About the scene's origin (N·mm/mm) per time point.
+    /// About `about` (N·mm/mm) per time point.
     pub moment: Vec<f64>,
+    /// The scene's `moment_about` (mm).
+    pub about: [f64; 2],
 }
 
 impl RuleForce {

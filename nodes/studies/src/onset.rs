@@ -39,6 +39,9 @@ pub struct OnsetRequest {
 /// Most trials one search makes.
 pub const MAX_TRIALS: usize = 60;
 
+/// How far from `--start` a bracket may grow (×2 / ÷2 steps): 2²⁰ ≈ 10⁶ either way.
+pub const MAX_REACH: f64 = 1_048_576.0;
+
 /// One trial: a scale factor solved.
 #[derive(Debug, Clone, Serialize)]
 pub struct Trial {
@@ -51,9 +54,10 @@ pub struct Trial {
     pub seconds: f64,
     /// The first time point (s) at which a watched pair slips, if any.
     pub first_slip_at: Option<f64>,
-    /// The first time point (s) at which a watched interface slips over its whole length.
+    /// The first time point (s) at which a watched interface slips over its whole closed length
+    /// (every pair not separated slips).
     pub full_slip_at: Option<f64>,
-    /// The largest slip share of a watched interface over the time points.
+    /// The largest slip share of a watched interface's closed length over the time points.
     pub max_slip_share: f64,
 }
 
@@ -85,7 +89,13 @@ impl Bracket {
 
     /// Found to `width` (relative to the upper end).
     pub fn found(&self, width: f64) -> bool {
-        matches!((self.below, self.above), (Some(b), Some(a)) if a - b <= width * a.abs())
+        matches!((self.below, self.above), (Some(b), Some(a)) if b < a && a - b <= width * a.abs())
+    }
+
+    /// Whether a factor that held lies above one that did not: trials near the threshold whose
+    /// statuses disagree with their order (each is only as good as its accuracy).
+    pub fn inverted(&self) -> bool {
+        matches!((self.below, self.above), (Some(b), Some(a)) if b >= a)
     }
 
     /// The next scale to try: the middle of the bracket, or beyond its one end (×2 / ÷2).
@@ -118,6 +128,9 @@ pub struct Onset {
     pub seconds: f64,
     /// Why the search stopped short of the bracket, if it did.
     pub unfinished: Option<String>,
+    /// Why the first-slip bracket was given up while the full-slip one was searched (a pair slips
+    /// at every factor tried down to `--start` / 2²⁰), if it was.
+    pub first_slip_unbracketed: Option<String>,
 }
 
 /// Searches both thresholds of boundary rule `req.rule` of the scene `scene_text` (read from
@@ -165,6 +178,7 @@ pub fn onset(
         ..Overrides::default()
     };
     let slip = index_of("slip_share").expect("slip_share is a quantity");
+    let open = index_of("separated_share").expect("separated_share is a quantity");
     let mut out = Onset {
         rule: format!("boundary[{}]", req.rule),
         interfaces: req.interfaces.clone(),
@@ -174,6 +188,7 @@ pub fn onset(
         trials: Vec::new(),
         seconds: 0.0,
         unfinished: None,
+        first_slip_unbracketed: None,
     };
     // The state of the last trial that held, and its index.
     let mut held: Option<(usize, Vec<InterfaceSolution>)> = None;
@@ -216,11 +231,13 @@ pub fn onset(
             .map_err(|e| StudyError::new(format!("{name} = {scale}"), e))?;
         let q = quantities(model, &solved.interfaces).map_err(|e| StudyError::new(format!("{name} = {scale}"), e))?;
         let nt = model.time.n_points();
+        // Per time point, the largest share of a watched interface's closed length (its pairs not
+        // separated) that slips: 1 is the whole contact slipping, even where part of it is open.
         let shares: Vec<f64> = (0..nt)
             .map(|i| {
                 q.iter()
                     .filter(|iq| watched.contains(&iq.interface))
-                    .map(|iq| iq.values[slip][i])
+                    .map(|iq| crate::quantities::closed_slip_share(iq.values[slip][i], iq.values[open][i]))
                     .fold(0.0, f64::max)
             })
             .collect();
@@ -245,20 +262,56 @@ pub fn onset(
         }
         on_trial(&trial);
         out.trials.push(trial);
-        let (a, b) = (out.first_slip.found(req.bracket), out.full_slip.found(req.bracket));
-        if a && b {
+        for (name, b) in [
+            ("first slip", &out.first_slip),
+            ("slip over a whole interface", &out.full_slip),
+        ] {
+            if b.inverted() {
+                out.unfinished = Some(format!(
+                    "inconsistent trials for {name}: factor {} held and {} did not; the statuses near the \
+                     threshold are only as good as each trial's accuracy (ask a smaller `--accuracy`)",
+                    b.below.unwrap_or(f64::NAN),
+                    b.above.unwrap_or(f64::NAN)
+                ));
+            }
+        }
+        if out.unfinished.is_some() {
+            break;
+        }
+        let first_done = out.first_slip.found(req.bracket) || out.first_slip_unbracketed.is_some();
+        if first_done && out.full_slip.found(req.bracket) {
             break;
         }
         if out.trials.len() >= MAX_TRIALS {
             out.unfinished = Some(format!("{MAX_TRIALS} trials without bracketing both thresholds"));
             break;
         }
+        let reach = |f: f64| f.is_finite() && f >= req.start / MAX_REACH && f <= req.start * MAX_REACH;
         // The first-slip bracket first (it lies below the other), then the full-slip one.
-        let next = if a { out.full_slip.next() } else { out.first_slip.next() };
-        if !(next.is_finite() && next > 0.0 && next < 1e12 && next > 1e-12) {
+        let mut next = if first_done {
+            out.full_slip.next()
+        } else {
+            out.first_slip.next()
+        };
+        if !first_done && !reach(next) {
+            // A pair slips at every factor tried (or none does): give that bracket up, go on with
+            // the whole-interface one.
+            out.first_slip_unbracketed = Some(format!(
+                "the interface {} at every factor tried, {} to {}",
+                if out.first_slip.above.is_some() {
+                    "slips at a point"
+                } else {
+                    "never slips"
+                },
+                req.start / MAX_REACH,
+                req.start * MAX_REACH
+            ));
+            next = out.full_slip.next();
+        }
+        if !reach(next) {
             out.unfinished = Some(format!(
-                "the next factor ({next}) is out of reach: the interface does not {} within the factors tried",
-                if a { "slip everywhere" } else { "slip" }
+                "the next factor ({next}) is beyond 2^20 times --start: no interface slips over its whole length \
+                 within the factors tried"
             ));
             break;
         }
@@ -289,5 +342,10 @@ mod tests {
         let mut d = Bracket::default();
         d.update(1.0, true);
         assert_eq!(d.next(), 0.5);
+        // A factor that held above one that did not is never a found bracket.
+        let mut e = Bracket::default();
+        e.update(1.30, true);
+        e.update(1.31, false);
+        assert!(e.inverted() && !e.found(0.5));
     }
 }

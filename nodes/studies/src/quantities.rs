@@ -39,8 +39,8 @@ pub struct InterfaceQuantities {
     /// - the shares of the interface's length separated, stuck and slipping (0 to 1);
     /// - mean_pressure: −Σ w·f_n / Σ w over the pairs in contact (0 with none), max_pressure:
     ///   the largest −f_n;
-    /// - max_slip: the largest |[u_t](t) − [u_t](0)| over the pairs, [u_t] the tangential jump
-    ///   w_b − w_a;
+    /// - max_slip: the largest |[u_t](t) − [u_t](0)| over the pairs in contact at t, [u_t] the
+    ///   tangential jump w_b − w_a;
     /// - dissipation: Σ over the steps up to t and the pairs slipping at its end of
     ///   w·|f_t·Δ[u_t]|, the work friction has taken (N·mm per mm of thickness).
     pub values: Vec<Vec<f64>>,
@@ -107,7 +107,9 @@ fn one(model: &Model, k: usize, itf: &Interface, sol: &InterfaceSolution) -> Int
                 pressed_length += w;
             }
             max_p = max_p.max(-f_n);
-            max_slip = max_slip.max((jump_t(p, i) - jump_t(p, 0)).abs());
+            if status != 0 {
+                max_slip = max_slip.max((jump_t(p, i) - jump_t(p, 0)).abs());
+            }
             if i > 0 && status == 2 {
                 dissipated += w * (f_t * (jump_t(p, i) - jump_t(p, i - 1))).abs();
             }
@@ -136,6 +138,17 @@ fn one(model: &Model, k: usize, itf: &Interface, sol: &InterfaceSolution) -> Int
         a: model.subdomains[itf.a].name.clone(),
         b: model.subdomains[itf.b].name.clone(),
         values,
+    }
+}
+
+/// The share of an interface's closed length (its pairs not separated) that slips, from its
+/// slip and separated shares of the whole length; 0 when the whole interface is open.
+pub fn closed_slip_share(slip: f64, separated: f64) -> f64 {
+    let closed = 1.0 - separated;
+    if closed > 1e-12 {
+        (slip / closed).min(1.0)
+    } else {
+        0.0
     }
 }
 
@@ -202,6 +215,10 @@ mod tests {
             assert!(close(v("slip_share", i), slipping) && close(v("stick_share", i), 1.0 - slipping));
         }
         assert!(close(peak(&q, index_of("normal").unwrap()), -1200.0));
+        // Slip over the closed length: half open, the other half slipping, is whole slip.
+        assert_eq!(closed_slip_share(0.5, 0.5), 1.0);
+        assert_eq!(closed_slip_share(0.25, 0.5), 0.5);
+        assert_eq!(closed_slip_share(0.0, 1.0), 0.0);
         let bad = InterfaceSolution {
             interface: 0,
             f_a: Field::zeros(2, nt),

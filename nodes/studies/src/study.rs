@@ -206,9 +206,14 @@ pub fn parse_values(text: &str) -> Result<Vec<f64>, String> {
                     if i == n - 1 {
                         to
                     } else {
-                        // 12 significant digits: 0.1:0.4:4 gives 0.3, not 0.30000000000000004.
+                        // 12 significant digits: 0.1:0.4:4 gives 0.3, not 0.30000000000000004;
+                        // and 0 where the step lands on it within round-off of the span.
                         let v = from + s * (to - from);
-                        format!("{v:.11e}").parse().unwrap_or(v)
+                        if v.abs() <= 1e-12 * (to - from).abs() {
+                            0.0
+                        } else {
+                            format!("{v:.11e}").parse().unwrap_or(v)
+                        }
                     }
                 })
                 .collect()),
@@ -350,7 +355,7 @@ impl Study {
             for &v in &p.values {
                 p.target.check(v).map_err(|problem| StudyError { problem, ..place() })?;
             }
-            if let Some(j) = self.parameters[..i].iter().position(|q| q.target == p.target) {
+            if let Some(j) = self.parameters[..i].iter().position(|q| overlap(&q.target, &p.target)) {
                 return Err(StudyError {
                     problem: format!("varies what {} varies", places[j]),
                     ..place()
@@ -365,7 +370,13 @@ impl Study {
                 ));
             }
         }
-        for q in &self.report {
+        for (i, q) in self.report.iter().enumerate() {
+            if self.report[..i].contains(q) {
+                return Err(StudyError::new(
+                    format!("{file}: report"),
+                    format!("`{q}` is named twice"),
+                ));
+            }
             if !crate::quantities::QUANTITIES.iter().any(|(n, _)| n == q) {
                 let names: Vec<&str> = crate::quantities::QUANTITIES.iter().map(|(n, _)| *n).collect();
                 return Err(StudyError::new(
@@ -382,6 +393,16 @@ impl Study {
                 .unwrap_or(usize::MAX),
             Design::Sample { count, .. } => count,
         };
+        let names = crate::plot::file_names(self);
+        if let Some(n) = (0..names.len())
+            .find(|&k| names[..k].contains(&names[k]))
+            .map(|k| &names[k])
+        {
+            return Err(StudyError::new(
+                file,
+                format!("two plots would be written to `{n}`: parameter names that differ only in characters other than letters, digits, `-` and `_`"),
+            ));
+        }
         if count > MAX_VARIANTS {
             return Err(StudyError::new(
                 file,
@@ -394,6 +415,16 @@ impl Study {
 
 /// The quantities plotted and printed when a study does not say (the CSV and JSON hold all).
 pub const DEFAULT_REPORT: [&str; 4] = ["normal", "tangential", "slip_share", "max_pressure"];
+
+/// Whether two parameters change the same value of the scene: the same target, or every contact
+/// rule's friction (gap) and one rule's.
+fn overlap(a: &Target, b: &Target) -> bool {
+    match (a, b) {
+        (Target::Friction { rule: x }, Target::Friction { rule: y })
+        | (Target::Gap { rule: x }, Target::Gap { rule: y }) => x.is_none() || y.is_none() || x == y,
+        _ => a == b,
+    }
+}
 
 fn default_report() -> Vec<String> {
     DEFAULT_REPORT.iter().map(|n| n.to_string()).collect()
@@ -433,6 +464,7 @@ mod tests {
     fn ranges_include_both_ends() {
         assert_eq!(parse_values("0.1:0.3:3").unwrap(), vec![0.1, 0.2, 0.3]);
         assert_eq!(parse_values("0.1:0.4:4").unwrap(), vec![0.1, 0.2, 0.3, 0.4]);
+        assert_eq!(parse_values("-0.1:0.2:4").unwrap(), vec![-0.1, 0.0, 0.1, 0.2]);
         assert_eq!(parse_values("1:2:2").unwrap(), vec![1.0, 2.0]);
         assert_eq!(parse_values("0.5,1,2").unwrap(), vec![0.5, 1.0, 2.0]);
         assert_eq!(parse_values("3:3:1").unwrap(), vec![3.0]);

@@ -74,27 +74,29 @@ fn snake(counts: &[usize]) -> Vec<Vec<usize>> {
     out
 }
 
-/// `drawn` reordered: the first as drawn, then each time the nearest to any already placed.
-fn greedy_order(study: &Study, mut drawn: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
-    let mut out: Vec<Vec<f64>> = Vec::with_capacity(drawn.len());
-    while !drawn.is_empty() {
-        let k = if out.is_empty() {
-            0
-        } else {
-            (0..drawn.len())
-                .min_by(|&a, &b| {
-                    let d = |i: usize| {
-                        out.iter()
-                            .map(|o| distance(study, o, &drawn[i]))
-                            .fold(f64::INFINITY, f64::min)
-                    };
-                    d(a).total_cmp(&d(b))
-                })
-                .unwrap_or(0)
-        };
-        out.push(drawn.remove(k));
+/// `drawn` reordered: the first as drawn, then each time the nearest to any already placed
+/// (each candidate's distance to the placed ones kept up to date: n² distances in all).
+fn greedy_order(study: &Study, drawn: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
+    let n = drawn.len();
+    let mut placed = vec![false; n];
+    let mut nearest = vec![f64::INFINITY; n];
+    let mut order = Vec::with_capacity(n);
+    let mut last = 0;
+    for step in 0..n {
+        if step > 0 {
+            last = (0..n)
+                .filter(|&i| !placed[i])
+                .min_by(|&a, &b| nearest[a].total_cmp(&nearest[b]).then(a.cmp(&b)))
+                .unwrap_or(0);
+        }
+        placed[last] = true;
+        order.push(last);
+        for i in (0..n).filter(|&i| !placed[i]) {
+            nearest[i] = nearest[i].min(distance(study, &drawn[last], &drawn[i]));
+        }
     }
-    out
+    let mut drawn: Vec<Option<Vec<f64>>> = drawn.into_iter().map(Some).collect();
+    order.into_iter().filter_map(|i| drawn[i].take()).collect()
 }
 
 /// The distance between two variants' values, each parameter measured in its own span (its
