@@ -255,3 +255,48 @@ fn warm_started_variants_against_the_reference() {
         assert!(e_f <= 1e-3, "variant {k}: e_F = {e_f}");
     }
 }
+
+/// A variant that does not converge does not stop the study: the shrink fit at interferences of
+/// 0.005 mm (the twist beyond what friction holds there: the run stagnates) and 0.010 mm. The
+/// study ends with exit status 3, both variants reported with their verdicts, the second
+/// started cold (no converged variant to start from). With `--record`, each variant's recording
+/// is written and replays like a run's.
+#[test]
+fn a_failed_variant_is_reported_and_the_study_goes_on() {
+    let dir = scratch("study-failed-variant");
+    let scene = format!("{}/launch/scenes/shrink-fit.toml", env!("CARGO_MANIFEST_DIR"));
+    let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(["sweep", &scene, "--vary", "gap=-0.005,-0.01", "--record", "--out"])
+        .arg(&dir.0)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert_eq!(out.status.code(), Some(3), "{stdout}{stderr}");
+    let json = read_json(&dir.0.join("shrink-fit-sweep.json"));
+    let v = json["variants"].as_array().unwrap();
+    assert_eq!(v.len(), 2);
+    assert_eq!(v[0]["converged"], false, "{}", v[0]);
+    assert!(
+        v[0]["verdict"].as_str().unwrap().starts_with("NOT converged"),
+        "{}",
+        v[0]
+    );
+    assert_eq!(
+        (v[1]["converged"].clone(), v[1]["started_from"].clone()),
+        (true.into(), serde_json::Value::Null)
+    );
+    assert!(
+        stdout.contains("2 variants (warm") && stdout.contains("1 converged"),
+        "{stdout}"
+    );
+    for k in 0..2 {
+        let mcap = dir.0.join(format!("shrink-fit-sweep-v{k}.mcap"));
+        assert!(mcap.is_file(), "{}", mcap.display());
+        let rrd = dir.0.join(format!("v{k}.rrd"));
+        glissade_ok(&[&"replay", &"--save", &rrd, &mcap]);
+        assert!(std::fs::metadata(&rrd).unwrap().len() > 1000);
+    }
+}
