@@ -6,14 +6,12 @@ use crate::quantities::{index_of, peak, QUANTITIES};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 
-/// `text` as one field of a CSV row (RFC 4180): as it is, unless it holds a comma, a double quote
-/// or a line break (a Gmsh physical name may), then between double quotes with each of its double
-/// quotes doubled. Every CSV of the project writes its names through it.
-pub fn csv_field(text: &str) -> std::borrow::Cow<'_, str> {
+/// `text` as one CSV field (RFC 4180): quoted when it holds a comma, a quote or a line break.
+fn csv_field(text: &str) -> String {
     if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\"")).into()
+        format!("\"{}\"", text.replace('"', "\"\""))
     } else {
-        text.into()
+        text.to_string()
     }
 }
 
@@ -182,7 +180,7 @@ pub fn summary(run: &StudyRun) -> Vec<String> {
                 let reaction = s
                     .rules
                     .iter()
-                    .filter(|r| r.kind == crate::boundary::RuleKind::Support)
+                    .filter(|r| r.kind == "support")
                     .map(|r| r.peak())
                     .fold(0.0, f64::max);
                 let _ = write!(l, " | {reaction:.4e} | {}", short(&s.verdict));
