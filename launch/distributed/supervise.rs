@@ -730,20 +730,31 @@ impl<'r> Supervisor<'r> {
         Ok(false)
     }
 
+    /// Whether an interface solution, or a subdomain's linear-stage counters of the last decided
+    /// iteration, has yet to arrive. The counters travel on each subdomain's own key, so the
+    /// decision they preceded (it needed every subdomain's state, sent just before them) may
+    /// overtake them.
+    fn missing_outputs(&self) -> bool {
+        let model = &self.scene.model;
+        self.got.interfaces.len() < model.interfaces.len()
+            || self.got.iterations.last().is_some_and(|last| {
+                (0..model.subdomains.len() as u32).any(|k| !self.got.linear_stages.has(last.iteration, k))
+            })
+    }
+
     /// Takes the messages still queued (sent before their nodes left), and the ones the router
     /// has yet to hand to this process's subscriber: a node's last puts may arrive after the node
-    /// exited. Waits for them up to [`STRAGGLER_TIMEOUT`] while interface solutions are missing.
+    /// exited. Waits for them up to [`STRAGGLER_TIMEOUT`] while [`Self::missing_outputs`].
     pub(super) fn drain(
         &mut self,
         mut on_iteration: impl FnMut(&IterationRecord),
         observe: &mut Option<impl FnMut(&Message)>,
     ) {
         let drain_until = Instant::now() + STRAGGLER_TIMEOUT;
-        let interfaces = self.scene.model.interfaces.len();
         loop {
             let next = match self.set_up.arrivals.try_recv() {
                 Ok(m) => Some(m),
-                Err(_) if self.got.interfaces.len() < interfaces && Instant::now() < drain_until => {
+                Err(_) if self.missing_outputs() && Instant::now() < drain_until => {
                     self.set_up.arrivals.recv_timeout(Duration::from_millis(50)).ok()
                 }
                 Err(_) => break,

@@ -67,6 +67,13 @@ impl LinearStageRecords {
         }
     }
 
+    /// Whether subdomain `subdomain`'s counters of iteration `iteration` were observed.
+    pub fn has(&self, iteration: u32, subdomain: u32) -> bool {
+        self.stats
+            .iter()
+            .any(|(it, s)| *it == iteration && s.subdomain == subdomain)
+    }
+
     /// One record per counters' message observed, sorted by (iteration, subdomain), each with the
     /// time `times` give its stage (0 where they give none, e.g. without timing).
     pub fn records(&self, times: &[IterationTime]) -> Vec<LinearStageRecord> {
