@@ -12,26 +12,8 @@ impl Ctx<'_> {
         interfaces: &[Interface],
         loads: &[SubLoads],
     ) -> Result<(), SceneError> {
-        let mut parent: Vec<usize> = (0..subs.len()).collect();
-        fn root(parent: &mut [usize], mut i: usize) -> usize {
-            while parent[i] != i {
-                parent[i] = parent[parent[i]];
-                i = parent[i];
-            }
-            i
-        }
-        for itf in interfaces {
-            let (ra, rb) = (root(&mut parent, itf.a), root(&mut parent, itf.b));
-            if ra != rb {
-                parent[ra.max(rb)] = ra.min(rb);
-            }
-        }
-        let mut groups: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-        for s in 0..subs.len() {
-            let r = root(&mut parent, s);
-            groups.entry(r).or_default().push(s);
-        }
-        for members in groups.values() {
+        let groups = connected_groups(subs.len(), interfaces.iter().map(|i| (i.a, i.b)));
+        for members in &groups {
             // Constrained (coordinates, component).
             let mut rows: Vec<([f64; 2], usize)> = Vec::new();
             let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -178,28 +160,10 @@ fn rigid_modes(rows: &[([f64; 2], [f64; 2])], scale: f64) -> (usize, Option<Free
 /// a component along the motion left free has no equilibrium (the part would slide away), and a
 /// run of it stalls.
 pub fn free_motions(model: &glissade_mechanics::model::Model) -> Vec<String> {
-    let ns = model.subdomains.len();
-    let mut parent: Vec<usize> = (0..ns).collect();
-    fn root(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
-        }
-        i
-    }
-    for itf in model.interfaces.iter().filter(|i| !i.is_contact()) {
-        let (ra, rb) = (root(&mut parent, itf.a), root(&mut parent, itf.b));
-        if ra != rb {
-            parent[ra.max(rb)] = ra.min(rb);
-        }
-    }
-    let mut parts: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-    for s in 0..ns {
-        let r = root(&mut parent, s);
-        parts.entry(r).or_default().push(s);
-    }
+    let perfect = model.interfaces.iter().filter(|i| !i.is_contact()).map(|i| (i.a, i.b));
+    let parts = connected_groups(model.subdomains.len(), perfect);
     let mut warnings = Vec::new();
-    for members in parts.values() {
+    for members in &parts {
         let mut rows: Vec<([f64; 2], [f64; 2])> = Vec::new();
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         let mut frictionless = Vec::new();

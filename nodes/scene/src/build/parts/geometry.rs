@@ -174,15 +174,8 @@ impl Ctx<'_> {
             }
             // One piece: elements connected through shared edges (parts touching at a node only
             // are hinges, not one body).
-            let mut parent: Vec<usize> = (0..local_elements.len()).collect();
-            fn root(parent: &mut [usize], mut i: usize) -> usize {
-                while parent[i] != i {
-                    parent[i] = parent[parent[i]];
-                    i = parent[i];
-                }
-                i
-            }
             let mut owner: HashMap<(usize, usize), usize> = HashMap::new();
+            let mut joined = Vec::new();
             for (e, el) in local_elements.iter().enumerate() {
                 for side in SIDES {
                     let (a, b) = (el[side[0]], el[side[2]]);
@@ -190,16 +183,15 @@ impl Ctx<'_> {
                         None => {
                             owner.insert((a.min(b), a.max(b)), e);
                         }
-                        Some(&o) => {
-                            let (ra, rb) = (root(&mut parent, o), root(&mut parent, e));
-                            if ra != rb {
-                                parent[ra.max(rb)] = ra.min(rb);
-                            }
-                        }
+                        Some(&o) => joined.push((o, e)),
                     }
                 }
             }
-            if let Some(e) = (0..local_elements.len()).find(|&e| root(&mut parent, e) != 0) {
+            // The first element not connected to element 0: the smallest of the second group.
+            if let Some(e) = crate::build::connected_groups(local_elements.len(), joined)
+                .get(1)
+                .map(|g| g[0])
+            {
                 return Err(self.err(
                     key,
                     format!(
