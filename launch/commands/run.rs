@@ -276,35 +276,22 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     } else {
         None
     };
-    let resultants_path = args.out.join(format!("{}-{run_id}.resultants.csv", sc.model.name));
-    glissade::vtu::write_new_file(
-        &resultants_path,
-        glissade::resultants::resultants_csv(&sc.model, &resultants).as_bytes(),
-    )
-    .map_err(|e| with_kept(e.into(), &kept))?;
-    kept.push(resultants_path.clone());
-    let boundaries_path = args.out.join(format!("{}-{run_id}.boundaries.csv", sc.model.name));
-    glissade::vtu::write_new_file(
-        &boundaries_path,
-        glissade::resultants::boundary_csv(&sc.model, &result.boundary).as_bytes(),
-    )
-    .map_err(|e| with_kept(e.into(), &kept))?;
-    kept.push(boundaries_path.clone());
-    let plot_path = args.out.join(format!("{}-{run_id}.boundaries.svg", sc.model.name));
-    glissade::vtu::write_new_file(
-        &plot_path,
-        glissade::resultants::boundary_svg(&sc.model, &result.boundary).as_bytes(),
-    )
-    .map_err(|e| with_kept(e.into(), &kept))?;
-    kept.push(plot_path);
-    let csv = if args.csv {
-        let path = args.out.join(format!("{}-{run_id}.interfaces.csv", sc.model.name));
-        glissade::vtu::write_new_file(
-            &path,
-            glissade::output::interface_csv(&sc.model, &result.interfaces)?.as_bytes(),
-        )
-        .map_err(|e| with_kept(e.into(), &kept))?;
+    // A file beside the others, `<scene>-<run>.<suffix>`, written new and kept.
+    let write_beside = |kept: &mut Vec<std::path::PathBuf>, suffix: &str, bytes: &[u8]| {
+        let path = args.out.join(format!("{}-{run_id}.{suffix}", sc.model.name));
+        glissade::vtu::write_new_file(&path, bytes).map_err(|e| with_kept(e.into(), kept))?;
         kept.push(path.clone());
+        anyhow::Ok(path)
+    };
+    let resultants_csv = glissade::resultants::resultants_csv(&sc.model, &resultants);
+    let resultants_path = write_beside(&mut kept, "resultants.csv", resultants_csv.as_bytes())?;
+    let boundaries_csv = glissade::resultants::boundary_csv(&sc.model, &result.boundary);
+    let boundaries_path = write_beside(&mut kept, "boundaries.csv", boundaries_csv.as_bytes())?;
+    let boundaries_svg = glissade::resultants::boundary_svg(&sc.model, &result.boundary);
+    write_beside(&mut kept, "boundaries.svg", boundaries_svg.as_bytes())?;
+    let csv = if args.csv {
+        let table = glissade::output::interface_csv(&sc.model, &result.interfaces)?;
+        let path = write_beside(&mut kept, "interfaces.csv", table.as_bytes())?;
         Some(path)
     } else {
         None
