@@ -571,16 +571,7 @@ pub fn status_name(c: u8) -> String {
         .map_or_else(|| format!("invalid status code {c}"), |s| s.to_string())
 }
 
-/// `text` as one field of a CSV row (RFC 4180): as it is, unless it holds a comma, a double quote
-/// or a line break (a Gmsh physical name may), then between double quotes with each of its double
-/// quotes doubled.
-pub fn csv_field(text: &str) -> std::borrow::Cow<'_, str> {
-    if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\"")).into()
-    } else {
-        text.into()
-    }
-}
+pub use glissade_studies::table::csv_field;
 
 /// The interface of a final solution `sol`, once its shape is checked against the scene: an
 /// interface of the scene, W and F of 2·n_pairs × (N+1), and on a contact interface a status

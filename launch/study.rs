@@ -7,7 +7,6 @@
 //! it changes.
 
 use crate::output::outcome;
-use crate::resultants::RuleKind;
 use crate::run::Run;
 use crate::runner::{Prepared, RunOptions};
 use glissade_deploy::{build_solvers, Plan};
@@ -15,7 +14,7 @@ use glissade_mechanics::condensed::BoundaryLayout;
 use glissade_mechanics::linear::SubdomainSolver;
 use glissade_messages::InterfaceSolution;
 use glissade_scene::LoadedScene;
-use glissade_studies::driver::{RuleForce, Solved, Solver};
+use glissade_studies::driver::{Solved, Solver};
 use glissade_studies::variants::Variant;
 use std::path::PathBuf;
 
@@ -132,20 +131,7 @@ impl Solver for PipelineSolver {
             setup_s: wall - r.solve_s,
             solve_s: r.solve_s,
             operators,
-            rules: r
-                .boundary
-                .iter()
-                .map(|b| RuleForce {
-                    rule: b.rule.clone(),
-                    kind: match b.kind {
-                        RuleKind::Support => "support".into(),
-                        RuleKind::Load => "load".into(),
-                    },
-                    force: b.force.clone(),
-                    moment: b.moment.clone(),
-                    about: b.about,
-                })
-                .collect(),
+            rules: r.boundary,
             interfaces: r.interfaces,
             state: r.state,
         })

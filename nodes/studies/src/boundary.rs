@@ -38,11 +38,25 @@ pub struct RuleResultants {
     pub displacement: Vec<[Option<f64>; 2]>,
 }
 
+impl RuleResultants {
+    /// The largest |force| over the time points (N/mm).
+    pub fn peak(&self) -> f64 {
+        self.force.iter().map(|f| f[0].hypot(f[1])).fold(0.0, f64::max)
+    }
+}
+
 /// Force and moment sums of nodal forces: (Fx, Fy, M about a point).
 #[derive(Clone, Copy, Default)]
 struct Wrench([f64; 3]);
 
 impl Wrench {
+    /// `self` += `scale` · `w`.
+    fn add_scaled(&mut self, w: &Wrench, scale: f64) {
+        for (a, b) in self.0.iter_mut().zip(w.0) {
+            *a += scale * b;
+        }
+    }
+
     fn add(&mut self, x: [f64; 2], f: [f64; 2], about: [f64; 2]) {
         self.0[0] += f[0];
         self.0[1] += f[1];
@@ -60,28 +74,49 @@ impl Wrench {
 /// Solutions whose shape does not fit the model are left out (the outputs' own check names them).
 pub fn boundary_resultants(model: &Model, interfaces: &[InterfaceSolution], about: [f64; 2]) -> Vec<RuleResultants> {
     let nt = model.time.n_points();
-    let ns = model.subdomains.len();
-    // Per subdomain and time point: its loads' and its interfaces' forces.
-    let mut others = vec![vec![Wrench::default(); nt]; ns];
-    let phi = |c: &glissade_mechanics::model::LoadCase| -> Vec<f64> {
-        (0..nt).map(|i| c.time.eval(model.time.t(i))).collect()
-    };
-    for (s, sub) in model.subdomains.iter().enumerate() {
-        for c in &sub.loads {
-            if c.force.iter().all(|&f| f == 0.0) {
-                continue;
-            }
-            let phi = phi(c);
-            for (n, x) in sub.mesh.coords.iter().enumerate() {
-                let f = [c.force[2 * n], c.force[2 * n + 1]];
-                if f != [0.0, 0.0] {
-                    for (i, w) in others[s].iter_mut().enumerate() {
-                        w.add(*x, [f[0] * phi[i], f[1] * phi[i]], about);
+    let times: Vec<f64> = (0..nt).map(|i| model.time.t(i)).collect();
+    // Per subdomain and load case: φ at every time point, and the force and moment of its
+    // pattern (the case's nodal forces are the pattern times φ).
+    let phi: Vec<Vec<Vec<f64>>> = model
+        .subdomains
+        .iter()
+        .map(|sub| {
+            sub.loads
+                .iter()
+                .map(|c| times.iter().map(|&t| c.time.eval(t)).collect())
+                .collect()
+        })
+        .collect();
+    let patterns: Vec<Vec<Wrench>> = model
+        .subdomains
+        .iter()
+        .map(|sub| {
+            sub.loads
+                .iter()
+                .map(|c| {
+                    let mut w = Wrench::default();
+                    for (n, x) in sub.mesh.coords.iter().enumerate() {
+                        w.add(*x, [c.force[2 * n], c.force[2 * n + 1]], about);
                     }
-                }
+                    w
+                })
+                .collect()
+        })
+        .collect();
+    // The wrench of load cases `cases` of subdomain `s` at time point i.
+    let loads_of = |s: usize, cases: &mut dyn Iterator<Item = usize>| -> Vec<Wrench> {
+        let mut out = vec![Wrench::default(); nt];
+        for c in cases {
+            for (i, w) in out.iter_mut().enumerate() {
+                w.add_scaled(&patterns[s][c], phi[s][c][i]);
             }
         }
-    }
+        out
+    };
+    // Per subdomain and time point: its loads' and its interfaces' forces.
+    let mut others: Vec<Vec<Wrench>> = (0..model.subdomains.len())
+        .map(|s| loads_of(s, &mut (0..model.subdomains[s].loads.len())))
+        .collect();
     for sol in interfaces {
         let Some(itf) = model.interfaces.get(sol.interface as usize) else {
             continue;
@@ -100,7 +135,10 @@ pub fn boundary_resultants(model: &Model, interfaces: &[InterfaceSolution], abou
         }
     }
     let mut out: Vec<RuleResultants> = Vec::new();
-    let entry = |out: &mut Vec<RuleResultants>, rule: String, kind: RuleKind| -> usize {
+    // Per entry of `out`: Σ and count of the prescribed displacement of each component.
+    let mut prescribed = Vec::new();
+    type Prescribed = Vec<(Vec<[f64; 2]>, [usize; 2])>;
+    let entry = |out: &mut Vec<RuleResultants>, prescribed: &mut Prescribed, rule: String, kind: RuleKind| -> usize {
         if let Some(k) = out.iter().position(|r| r.rule == rule) {
             return k;
         }
@@ -113,74 +151,68 @@ pub fn boundary_resultants(model: &Model, interfaces: &[InterfaceSolution], abou
             about,
             displacement: vec![[None; 2]; nt],
         });
+        prescribed.push((vec![[0.0; 2]; nt], [0; 2]));
         out.len() - 1
+    };
+    let add = |r: &mut RuleResultants, wrenches: &[Wrench], sign: f64| {
+        for (i, w) in wrenches.iter().enumerate() {
+            r.force[i][0] += sign * w.0[0];
+            r.force[i][1] += sign * w.0[1];
+            r.moment[i] += sign * w.0[2];
+        }
     };
     // Loads: their own nodal forces.
     for rule in model.boundary_rules.iter().filter(|r| !r.prescribes_displacement) {
-        let k = entry(&mut out, rule.name.clone(), RuleKind::Load);
+        let k = entry(&mut out, &mut prescribed, rule.name.clone(), RuleKind::Load);
         for part in &rule.parts {
-            let sub = &model.subdomains[part.subdomain];
-            out[k].subdomains.push(sub.name.clone());
-            let mut w = vec![Wrench::default(); nt];
-            for &c in &part.cases {
-                let case = &sub.loads[c];
-                let phi = phi(case);
-                for (n, x) in sub.mesh.coords.iter().enumerate() {
-                    let f = [case.force[2 * n], case.force[2 * n + 1]];
-                    for (i, wi) in w.iter_mut().enumerate() {
-                        wi.add(*x, [f[0] * phi[i], f[1] * phi[i]], about);
-                    }
-                }
-            }
-            for (i, wi) in w.iter().enumerate() {
-                out[k].force[i][0] += wi.0[0];
-                out[k].force[i][1] += wi.0[1];
-                out[k].moment[i] += wi.0[2];
-            }
+            out[k].subdomains.push(model.subdomains[part.subdomain].name.clone());
+            add(
+                &mut out[k],
+                &loads_of(part.subdomain, &mut part.cases.iter().copied()),
+                1.0,
+            );
         }
     }
-    // Supports: each subdomain's reaction, to the support (or supports) holding it.
+    // Supports: each subdomain's reaction, to the support (or supports) holding it, and the
+    // displacement they prescribe there.
     for (s, own) in others.iter().enumerate() {
-        let holding: Vec<&glissade_mechanics::model::BoundaryRule> = model
+        let held: Vec<(&str, &[usize])> = model
             .boundary_rules
             .iter()
-            .filter(|r| r.prescribes_displacement && r.parts.iter().any(|p| p.subdomain == s && !p.dofs.is_empty()))
+            .filter(|r| r.prescribes_displacement)
+            .filter_map(|r| {
+                let part = r.parts.iter().find(|p| p.subdomain == s && !p.dofs.is_empty())?;
+                Some((r.name.as_str(), part.dofs.as_slice()))
+            })
             .collect();
-        if holding.is_empty() {
+        if held.is_empty() {
             continue;
         }
-        let name = holding.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(" + ");
-        let k = entry(&mut out, name, RuleKind::Support);
+        let name = held.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(" + ");
+        let k = entry(&mut out, &mut prescribed, name, RuleKind::Support);
         out[k].subdomains.push(model.subdomains[s].name.clone());
-        for (i, w) in own.iter().enumerate() {
-            out[k].force[i][0] -= w.0[0];
-            out[k].force[i][1] -= w.0[1];
-            out[k].moment[i] -= w.0[2];
+        add(&mut out[k], own, -1.0);
+        let sub = &model.subdomains[s];
+        let (sum, count) = &mut prescribed[k];
+        for &dof in held.iter().flat_map(|(_, dofs)| dofs.iter()) {
+            for (i, total) in sum.iter_mut().enumerate() {
+                total[dof % 2] += sub
+                    .loads
+                    .iter()
+                    .zip(&phi[s])
+                    .map(|(c, f)| c.displacement[dof] * f[i])
+                    .sum::<f64>();
+            }
+            count[dof % 2] += 1;
         }
     }
-    // A support's prescribed displacement beside its reaction.
-    for r in out.iter_mut().filter(|r| r.kind == RuleKind::Support) {
-        let rules: Vec<&glissade_mechanics::model::BoundaryRule> = model
-            .boundary_rules
-            .iter()
-            .filter(|b| r.rule.split(" + ").any(|n| n == b.name))
-            .collect();
-        for (i, d) in r.displacement.iter_mut().enumerate() {
-            let t = model.time.t(i);
-            let (mut sum, mut count) = ([0.0; 2], [0usize; 2]);
-            for part in rules.iter().flat_map(|b| &b.parts) {
-                let sub = &model.subdomains[part.subdomain];
-                if !r.subdomains.contains(&sub.name) {
-                    continue;
+    // A support's prescribed displacement beside its reaction: the mean over its dofs.
+    for (r, (sum, count)) in out.iter_mut().zip(&prescribed) {
+        if r.kind == RuleKind::Support {
+            for (d, total) in r.displacement.iter_mut().zip(sum) {
+                for c in 0..2 {
+                    d[c] = (count[c] > 0).then(|| total[c] / count[c] as f64);
                 }
-                for &dof in &part.dofs {
-                    let u: f64 = sub.loads.iter().map(|c| c.displacement[dof] * c.time.eval(t)).sum();
-                    sum[dof % 2] += u;
-                    count[dof % 2] += 1;
-                }
-            }
-            for k in 0..2 {
-                d[k] = (count[k] > 0).then(|| sum[k] / count[k] as f64);
             }
         }
     }

@@ -3,12 +3,12 @@
 //! (or from ŝ = 0 when cold), and its quantities computed. A variant that fails is reported with
 //! its reason and the study goes on.
 
-use crate::patch::variant_text;
+use crate::patch::variant_scene;
 use crate::quantities::{quantities, InterfaceQuantities};
 use crate::study::Study;
 use crate::variants::{nearest, variants, Variant};
 use crate::StudyError;
-use glissade_messages::{Field, InterfaceSolution, Overrides, Verdict};
+use glissade_messages::{Field, InterfaceSolution, Verdict};
 use glissade_scene::LoadedScene;
 use std::time::Instant;
 
@@ -30,29 +30,9 @@ pub struct Solved {
     pub interfaces: Vec<InterfaceSolution>,
     /// The iteration's own final state, from which another variant starts; None if not kept.
     pub state: Option<Vec<InterfaceSolution>>,
-    /// Every boundary rule's force on the parts (supports' reactions, loads' resultants).
-    pub rules: Vec<RuleForce>,
-}
-
-/// One boundary rule's force on the parts at every time point (the run's boundaries CSV).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct RuleForce {
-    pub rule: String,
-    /// `support` (the force is its reaction) or `load` (the resultant of its tractions).
-    pub kind: String,
-    /// Global x and y (N/mm) per time point.
-    pub force: Vec<[f64; 2]>,
-    /// About `about` (N·mm/mm) per time point.
-    pub moment: Vec<f64>,
-    /// The scene's `moment_about` (mm).
-    pub about: [f64; 2],
-}
-
-impl RuleForce {
-    /// The largest |force| over the time points.
-    pub fn peak(&self) -> f64 {
-        self.force.iter().map(|f| f[0].hypot(f[1])).fold(0.0, f64::max)
-    }
+    /// Every boundary rule's force on the parts (supports' reactions, loads' resultants), as the
+    /// run's boundaries CSV holds them.
+    pub rules: Vec<crate::boundary::RuleResultants>,
 }
 
 /// Solves one variant: the launcher's run pipeline.
@@ -113,19 +93,13 @@ pub fn run(
     mut on_variant: impl FnMut(&VariantOutcome),
 ) -> Result<StudyRun, StudyError> {
     let t0 = Instant::now();
-    let file = study.scene.display().to_string();
-    let overrides = Overrides {
-        accuracy: study.accuracy,
-        ..Overrides::default()
-    };
     let mut kept: Vec<(Variant, Vec<InterfaceSolution>)> = Vec::new();
     let mut outcomes = Vec::new();
     for variant in variants(study) {
         let t = Instant::now();
         // A study file that names what the scene lacks is the study's error, found at the first
         // variant; a value the scene refuses is the variant's.
-        let text = variant_text(study, scene_text, &variant)?;
-        let scene = glissade_scene::load_str(&text, &file).and_then(|s| s.with_overrides(&file, &overrides));
+        let scene = variant_scene(study, scene_text, &variant)?;
         let time: Vec<f64> = scene
             .as_ref()
             .map(|s| (0..s.model.time.n_points()).map(|i| s.model.time.t(i)).collect())

@@ -15,7 +15,7 @@ use crate::quantities::{index_of, quantities};
 use crate::study::{Design, Parameter, Study, Target};
 use crate::variants::Variant;
 use crate::StudyError;
-use glissade_messages::{InterfaceSolution, Overrides, Verdict};
+use glissade_messages::{InterfaceSolution, Verdict};
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
@@ -173,10 +173,6 @@ pub fn onset(
         ));
     }
     let file = scene.display().to_string();
-    let overrides = Overrides {
-        accuracy: req.accuracy,
-        ..Overrides::default()
-    };
     let slip = index_of("slip_share").expect("slip_share is a quantity");
     let open = index_of("separated_share").expect("separated_share is a quantity");
     let mut out = Onset {
@@ -199,9 +195,7 @@ pub fn onset(
             index: k,
             values: vec![scale],
         };
-        let text = crate::patch::variant_text(&study, scene_text, &variant)?;
-        let built = glissade_scene::load_str(&text, &file)
-            .and_then(|s| s.with_overrides(&file, &overrides))
+        let built = crate::patch::variant_scene(&study, scene_text, &variant)?
             .map_err(|e| StudyError::new(format!("{name} = {scale}"), e.to_string()))?;
         let model = &built.model;
         let watched: Vec<usize> = if req.interfaces.is_empty() {

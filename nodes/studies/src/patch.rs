@@ -35,6 +35,23 @@ pub fn variant_text(study: &Study, scene_text: &str, variant: &Variant) -> Resul
     ))
 }
 
+/// `variant`'s scene, built and checked by the scene crate as a file is, with the study's accuracy
+/// when it sets one. The outer error is the study's (it names what the scene lacks); the inner
+/// one the variant's (the scene refuses one of its values).
+pub fn variant_scene(
+    study: &Study,
+    scene_text: &str,
+    variant: &Variant,
+) -> Result<Result<glissade_scene::LoadedScene, glissade_scene::SceneError>, StudyError> {
+    let text = variant_text(study, scene_text, variant)?;
+    let file = study.scene.display().to_string();
+    let overrides = glissade_scene::Overrides {
+        accuracy: study.accuracy,
+        ..Default::default()
+    };
+    Ok(glissade_scene::load_str(&text, &file).and_then(|s| s.with_overrides(&file, &overrides)))
+}
+
 /// Writes value `v` of `target` into the scene `table`.
 fn apply(table: &mut Table, target: &Target, v: f64) -> Result<(), String> {
     match target {

@@ -6,12 +6,14 @@ use crate::quantities::{index_of, peak, QUANTITIES};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 
-/// `text` as one CSV field (RFC 4180): quoted when it holds a comma, a quote or a line break.
-fn csv_field(text: &str) -> String {
+/// `text` as one field of a CSV row (RFC 4180): as it is, unless it holds a comma, a double quote
+/// or a line break (a Gmsh physical name may), then between double quotes with each of its double
+/// quotes doubled. Every CSV of the project writes its names through it.
+pub fn csv_field(text: &str) -> std::borrow::Cow<'_, str> {
     if text.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", text.replace('"', "\"\""))
+        format!("\"{}\"", text.replace('"', "\"\"")).into()
     } else {
-        text.to_string()
+        text.into()
     }
 }
 
@@ -180,7 +182,7 @@ pub fn summary(run: &StudyRun) -> Vec<String> {
                 let reaction = s
                     .rules
                     .iter()
-                    .filter(|r| r.kind == "support")
+                    .filter(|r| r.kind == crate::boundary::RuleKind::Support)
                     .map(|r| r.peak())
                     .fold(0.0, f64::max);
                 let _ = write!(l, " | {reaction:.4e} | {}", short(&s.verdict));
