@@ -126,3 +126,32 @@ pub fn glissade_ok(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
     );
     stdout
 }
+
+/// Runs the `glissade` binary with `args`, asserts that it exits with `code` (printing both
+/// streams if not), and returns its standard error.
+pub fn glissade_exits(code: i32, args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
+        .args(args.iter().map(|a| a.as_ref()))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(
+        out.status.code(),
+        Some(code),
+        "glissade {:?}: {}{stderr}",
+        args.iter().map(|a| a.as_ref().to_string_lossy()).collect::<Vec<_>>(),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    stderr
+}
+
+/// The one file in `dir` whose name ends with `suffix`.
+pub fn output_file(dir: &Path, suffix: &str) -> PathBuf {
+    let found: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().ends_with(suffix))
+        .collect();
+    assert_eq!(found.len(), 1, "{suffix} in {}: {found:?}", dir.display());
+    found.into_iter().next().unwrap()
+}

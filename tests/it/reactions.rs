@@ -1,7 +1,7 @@
 //! Reactions at supports and load resultants of every boundary rule (docs/outputs.md,
 //! "Reactions and loads").
 
-use crate::common::{glissade_ok, scene, scene_text, scratch};
+use crate::common::{glissade_exits, glissade_ok, output_file, scene, scene_text, scratch};
 use glissade::resultants::RuleKind;
 use glissade::run::Run;
 use glissade::runner::RunOptions;
@@ -110,11 +110,7 @@ fn the_bore_holds_the_twist_of_the_shrink_fit() {
             .any(|l| l.starts_with("support boundary[0] (bore) at t = 1:")),
         "{out}"
     );
-    let path = std::fs::read_dir(&dir.0)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.to_string_lossy().ends_with(".boundaries.csv"))
-        .expect("a boundaries CSV");
+    let path = output_file(&dir.0, ".boundaries.csv");
     let csv = std::fs::read_to_string(&path).unwrap();
     let mut lines = csv.lines();
     assert_eq!(
@@ -181,14 +177,19 @@ fn loads_beyond_what_friction_holds_are_said_as_such() {
         );
     let over = dir.0.join("over.toml");
     std::fs::write(&over, &text).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["run", "--in-process", "--no-record", "--max-iterations", "300", "--out"])
-        .arg(&dir.0)
-        .arg(&over)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(3));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = glissade_exits(
+        3,
+        &[
+            &"run",
+            &"--in-process",
+            &"--no-record",
+            &"--max-iterations",
+            &"300",
+            &"--out",
+            &dir.0,
+            &over,
+        ],
+    );
     assert!(
         err.contains(
             "warning: interface 0 (inner | outer) slips over its whole length from t = 0.7: the loads there may exceed"
@@ -197,13 +198,7 @@ fn loads_beyond_what_friction_holds_are_said_as_such() {
     );
     let frictionless = dir.0.join("frictionless.toml");
     std::fs::write(&frictionless, text.replace("friction = 0.2", "friction = 0.0")).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .arg("check")
-        .arg(&frictionless)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = glissade_exits(0, &[&"check", &frictionless]);
     assert!(
         err.contains("warning: part [outer] is held in a rotation about (")
             && err.contains("by nothing but frictionless contact"),
@@ -226,13 +221,7 @@ fn a_lap_joint_holds_what_friction_holds_and_says_when_it_cannot() {
     let scene_path = format!("{}/launch/scenes/lap-joint.toml", env!("CARGO_MANIFEST_DIR"));
     let out = glissade_ok(&[&"run", &scene_path, &"--in-process", &"--no-record", &"--out", &dir.0]);
     assert!(out.contains("Converged"), "{out}");
-    let file = |ending: &str| {
-        std::fs::read_dir(&dir.0)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .find(|p| p.to_string_lossy().ends_with(ending))
-            .unwrap_or_else(|| panic!("no {ending}"))
-    };
+    let file = |ending: &str| output_file(&dir.0, ending);
     let rows = |ending: &str| -> Vec<Vec<String>> {
         std::fs::read_to_string(file(ending))
             .unwrap()
@@ -283,23 +272,25 @@ fn a_lap_joint_holds_what_friction_holds_and_says_when_it_cannot() {
         "{svg}"
     );
 
-    let text = std::fs::read_to_string(&scene_path)
-        .unwrap()
-        .replace(
-            "ux = { t = [0.0, 0.5, 1.0], v = [0.0, 0.04, 0.0] }",
-            "tx = { t = [0.0, 0.5, 1.0], v = [0.0, 76.8, 0.0] }",
-        )
-        .replace("accuracy = 1e-4", "accuracy = 1e-4\nmax_iterations = 300");
+    let text = std::fs::read_to_string(&scene_path).unwrap().replace(
+        "ux = { t = [0.0, 0.5, 1.0], v = [0.0, 0.04, 0.0] }",
+        "tx = { t = [0.0, 0.5, 1.0], v = [0.0, 76.8, 0.0] }",
+    );
     let over = dir.0.join("over.toml");
     std::fs::write(&over, text).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["run", "--in-process", "--no-record", "--max-iterations", "300", "--out"])
-        .arg(&dir.0)
-        .arg(&over)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(3));
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = glissade_exits(
+        3,
+        &[
+            &"run",
+            &"--in-process",
+            &"--no-record",
+            &"--max-iterations",
+            &"300",
+            &"--out",
+            &dir.0,
+            &over,
+        ],
+    );
     assert!(
         err.contains("interface 0 (lower | upper.1) slips over its whole length from t = 0.425"),
         "{err}"

@@ -1,6 +1,6 @@
 //! Interface resultants of a run (docs/outputs.md, "Interface resultants").
 
-use crate::common::{glissade_ok, scratch};
+use crate::common::{glissade_ok, output_file, scratch};
 
 /// Two blocks side by side in frictional contact on x = 2, the left one clamped on x = 0, both
 /// on rollers along y = 0, a pressure p = 10·t on x = 4 over a height of 1 mm: the rollers carry
@@ -21,11 +21,7 @@ fn the_contact_of_two_blocks_pushed_together_carries_the_whole_load() {
             .any(|l| l.starts_with("interface ") && l.contains("at t = 1: N = -1.00") && l.contains("100 % stick")),
         "{out}"
     );
-    let csv_path = std::fs::read_dir(&dir.0)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.to_string_lossy().ends_with(".resultants.csv"))
-        .expect("a resultants CSV");
+    let csv_path = output_file(&dir.0, ".resultants.csv");
     assert!(out.contains(&format!("resultants: {}", csv_path.display())), "{out}");
     let csv = std::fs::read_to_string(&csv_path).unwrap();
     let mut lines = csv.lines();
@@ -54,11 +50,7 @@ fn the_contact_of_two_blocks_pushed_together_carries_the_whole_load() {
     }
     assert_eq!(contact_rows, 5, "one contact interface, N = 4");
     // The same numbers in the summary.
-    let summary_path = std::fs::read_dir(&dir.0)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .find(|p| p.to_string_lossy().ends_with(".summary.json"))
-        .expect("a summary");
+    let summary_path = output_file(&dir.0, ".summary.json");
     let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(summary_path).unwrap()).unwrap();
     let r = &summary["interface_resultants"];
     let contact = r

@@ -4,7 +4,7 @@
 //! ends with the same results as an undisturbed one; a message that cannot be had again ends the
 //! run with that diagnosis, the recording readable and showing it in `glissade replay`.
 
-use crate::common::{scene_text, scratch};
+use crate::common::{output_file, scene_text, scratch};
 use glissade_messages::{Payload, StallReport};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -38,20 +38,9 @@ fn run(scene: &Path, out: &Path, drop: Option<&str>) -> (Output, f64) {
     (output, t0.elapsed().as_secs_f64())
 }
 
-/// The one file in `dir` whose name ends with `suffix`.
-fn file(dir: &Path, suffix: &str) -> PathBuf {
-    let found: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.to_string_lossy().ends_with(suffix))
-        .collect();
-    assert_eq!(found.len(), 1, "{suffix} in {}: {found:?}", dir.display());
-    found.into_iter().next().unwrap()
-}
-
 /// The launcher's stall reports in the run's recording.
 fn stall_reports(out: &Path) -> Vec<StallReport> {
-    let r = glissade_recorder::Recording::open(&file(out, ".mcap")).expect("the recording reads");
+    let r = glissade_recorder::Recording::open(&output_file(out, ".mcap")).expect("the recording reads");
     r.messages()
         .filter(|m| m.topic.ends_with("/launcher/0/stall"))
         .map(|m| match r.decode(&m).expect("the report decodes").payload {
@@ -80,9 +69,9 @@ fn a_lost_message_of_each_role_is_asked_again_and_the_run_ends_as_undisturbed() 
     let base_out = dir.join("base");
     let (base, _) = run(&scene, &base_out, None);
     assert!(base.status.success(), "{}", text_of(&base));
-    let fields = std::fs::read(file(&base_out, ".fields.json")).unwrap();
+    let fields = std::fs::read(output_file(&base_out, ".fields.json")).unwrap();
     let summary: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(file(&base_out, ".summary.json")).unwrap()).unwrap();
+        serde_json::from_slice(&std::fs::read(output_file(&base_out, ".summary.json")).unwrap()).unwrap();
     let last = summary["iterations"].as_u64().unwrap();
     assert!(last > 5, "the scene takes {last} iterations");
     assert!(
@@ -117,7 +106,7 @@ fn a_lost_message_of_each_role_is_asked_again_and_the_run_ends_as_undisturbed() 
             "{hook}: {said}"
         );
         assert_eq!(
-            std::fs::read(file(&out, ".fields.json")).unwrap(),
+            std::fs::read(output_file(&out, ".fields.json")).unwrap(),
             fields,
             "{hook}: the interface fields differ from the undisturbed run's"
         );
@@ -152,7 +141,7 @@ fn a_lost_message_of_each_role_is_asked_again_and_the_run_ends_as_undisturbed() 
             // re-executes from it bit for bit.
             let replay = Command::new(env!("CARGO_BIN_EXE_glissade"))
                 .arg("replay")
-                .arg(file(&out, ".mcap"))
+                .arg(output_file(&out, ".mcap"))
                 .args(["--node", "all"])
                 .output()
                 .unwrap();
@@ -195,7 +184,7 @@ fn a_message_lost_for_good_ends_the_run_with_a_diagnosis() {
     let rrd = dir.join("replay.rrd");
     let replay = Command::new(env!("CARGO_BIN_EXE_glissade"))
         .arg("replay")
-        .arg(file(&out, ".mcap"))
+        .arg(output_file(&out, ".mcap"))
         .arg("--save")
         .arg(&rrd)
         .output()

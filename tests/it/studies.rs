@@ -1,6 +1,6 @@
 //! Design studies (docs/studies.md): `glissade sweep` end to end, warm-started against cold.
 
-use crate::common::{glissade_ok, scratch};
+use crate::common::{glissade_exits, glissade_ok, scratch};
 use std::process::Command;
 
 /// Lamé's contact pressure of shrink-fit.toml at an interference of 0.010 mm (the scene's
@@ -92,16 +92,8 @@ fn a_warm_started_study_agrees_with_cold_runs_in_fewer_iterations() {
         assert_eq!(svg.matches("<circle").count(), 5, "{q}: one marker per variant");
     }
     // A second study into the same folder overwrites nothing: refused before it solves.
-    let again = Command::new(env!("CARGO_BIN_EXE_glissade"))
-        .args(["sweep", &study, "--out"])
-        .arg(&dir.0)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&again.stderr);
-    assert!(
-        !again.status.success() && err.contains("shrink-fit-interference.csv"),
-        "{err}"
-    );
+    let err = glissade_exits(2, &[&"sweep", &study, &"--out", &dir.0]);
+    assert!(err.contains("shrink-fit-interference.csv"), "{err}");
     assert!(!err.contains("[1/5]"), "{err}");
 }
 
@@ -111,15 +103,11 @@ fn bad_studies_are_refused_with_the_place_of_the_mistake() {
     let dir = scratch("study-bad");
     let scene = format!("{}/launch/scenes/shrink-fit.toml", env!("CARGO_MANIFEST_DIR"));
     let refuse = |args: &[&str], expected: &str| {
-        let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
-            .arg("sweep")
-            .args(args)
-            .arg("--out")
-            .arg(&dir.0)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success() && err.contains(expected), "{args:?}: {err}");
+        let mut all: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![&"sweep"];
+        all.extend(args.iter().map(|a| a as &dyn AsRef<std::ffi::OsStr>));
+        all.extend([&"--out" as &dyn AsRef<std::ffi::OsStr>, &dir.0]);
+        let err = glissade_exits(2, &all);
+        assert!(err.contains(expected), "{args:?}: {err}");
     };
     refuse(
         &[&scene, "--vary", "friction=-0.1,0.2"],
