@@ -77,8 +77,9 @@ pub fn resultants(model: &Model, interfaces: &[InterfaceSolution]) -> Result<Vec
 /// The resultants as CSV, one row per interface and time point; units in the header.
 pub fn resultants_csv(model: &Model, all: &[InterfaceResultants]) -> String {
     use std::fmt::Write as _;
-    let mut s = String::from(
-        "time_s,interface,a,b,kind,force_a_x_N_per_mm,force_a_y_N_per_mm,normal_N_per_mm,tangential_N_per_mm,separated_share,stick_share,slip_share\n",
+    let u = model.plane.force_column_unit();
+    let mut s = format!(
+        "time_s,interface,a,b,kind,force_a_x_{u},force_a_y_{u},normal_{u},tangential_{u},separated_share,stick_share,slip_share\n",
     );
     for i in 0..model.time.n_points() {
         let t = model.time.t(i);
@@ -110,6 +111,7 @@ pub fn console_lines(model: &Model, all: &[InterfaceResultants], max: usize) -> 
     let last = model.time.n_points() - 1;
     let t = model.time.t(last);
     let contact: Vec<&InterfaceResultants> = all.iter().filter(|r| r.contact).collect();
+    let unit = model.plane.force_unit();
     let mut lines: Vec<String> = contact
         .iter()
         .take(max)
@@ -122,7 +124,7 @@ pub fn console_lines(model: &Model, all: &[InterfaceResultants], max: usize) -> 
                 "—".into()
             };
             format!(
-                "interface {} ({} | {}) at t = {t}: N = {n:.4e} N/mm, T = {tg:.4e} N/mm, |T/N| = {ratio}; \
+                "interface {} ({} | {}) at t = {t}: N = {n:.4e} {unit}, T = {tg:.4e} {unit}, |T/N| = {ratio}; \
                  {:.0} % separated, {:.0} % stick, {:.0} % slip",
                 r.interface,
                 r.a,
@@ -145,8 +147,9 @@ pub fn console_lines(model: &Model, all: &[InterfaceResultants], max: usize) -> 
 /// The rules' forces as CSV, one row per rule and time point; units in the header.
 pub fn boundary_csv(model: &Model, all: &[RuleResultants]) -> String {
     use std::fmt::Write as _;
-    let mut s = String::from(
-        "time_s,rule,kind,force_x_N_per_mm,force_y_N_per_mm,moment_N,about_x_mm,about_y_mm,prescribed_ux_mm,prescribed_uy_mm\n",
+    let u = model.plane.force_column_unit();
+    let mut s = format!(
+        "time_s,rule,kind,force_x_{u},force_y_{u},moment_N,about_x_mm,about_y_mm,prescribed_ux_mm,prescribed_uy_mm\n",
     );
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:?}"));
     for i in 0..model.time.n_points() {
@@ -178,14 +181,30 @@ pub fn boundary_csv(model: &Model, all: &[RuleResultants]) -> String {
 pub fn boundary_console_lines(model: &Model, all: &[RuleResultants], max: usize) -> Vec<String> {
     let supports: Vec<&RuleResultants> = all.iter().filter(|r| r.kind == RuleKind::Support).collect();
     let last = model.time.n_points() - 1;
+    let unit = model.plane.force_unit();
     let mut lines: Vec<String> = supports
         .iter()
         .take(max)
         .map(|r| {
-            let norm = |f: &[f64; 2]| f[0].hypot(f[1]);
+            // In axisymmetry a support's radial force and moment are not resultants (NaN): the
+            // axial force alone is said.
+            let defined = |v: f64| if v.is_finite() { v } else { 0.0 };
+            let norm = |f: &[f64; 2]| defined(f[0]).hypot(defined(f[1]));
             let peak = (0..r.force.len())
                 .max_by(|&a, &b| norm(&r.force[a]).total_cmp(&norm(&r.force[b])))
                 .unwrap_or(0);
+            let value = |v: f64| {
+                if v.is_finite() {
+                    format!("{v:.4e}")
+                } else {
+                    "—".to_string()
+                }
+            };
+            let moment = if r.moment[last].is_finite() {
+                format!(", M = {:.4e} N about ({}, {})", r.moment[last], r.about[0], r.about[1])
+            } else {
+                String::new()
+            };
             let u = match r.displacement[last] {
                 [None, None] => String::new(),
                 [x, y] => {
@@ -194,14 +213,11 @@ pub fn boundary_console_lines(model: &Model, all: &[RuleResultants], max: usize)
                 }
             };
             format!(
-                "support {} at t = {}: R = ({:.4e}, {:.4e}) N/mm, M = {:.4e} N about ({}, {}){u}; largest |R| {:.4e} N/mm at t = {}",
+                "support {} at t = {}: R = ({}, {}) {unit}{moment}{u}; largest |R| {:.4e} {unit} at t = {}",
                 r.rule,
                 model.time.t(last),
-                r.force[last][0],
-                r.force[last][1],
-                r.moment[last],
-                r.about[0],
-                r.about[1],
+                value(r.force[last][0]),
+                value(r.force[last][1]),
                 norm(&r.force[peak]),
                 model.time.t(peak)
             )
@@ -284,7 +300,7 @@ pub fn boundary_svg(model: &Model, all: &[RuleResultants]) -> String {
         return line_plot(
             &format!("{}: load–displacement", model.name),
             "prescribed displacement (mm)",
-            "reaction (N/mm)",
+            &format!("reaction ({})", model.plane.force_unit()),
             &curves,
         );
     }
@@ -302,7 +318,7 @@ pub fn boundary_svg(model: &Model, all: &[RuleResultants]) -> String {
     line_plot(
         &format!("{}: boundary forces (reactions and loads)", model.name),
         "t (s)",
-        "force (N/mm)",
+        &format!("force ({})", model.plane.force_unit()),
         &lines,
     )
 }

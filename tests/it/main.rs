@@ -4,6 +4,7 @@
 mod acceleration;
 mod allocations;
 mod analytic;
+mod axisymmetric;
 mod bad_input;
 mod bench;
 mod bus_auth;

@@ -227,6 +227,14 @@ fn a_short_soak_under_load_converges_every_run_to_the_in_process_numbers() {
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("soak.json")).unwrap_or_else(|e| panic!("{e}: {said}")))
             .unwrap();
+    // What the runs that did not agree printed last (their diagnosis), for the failure message.
+    let disagreed: Vec<&serde_json::Value> = summary["runs_detail"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|r| r["outcome"] != "Same")
+        .collect();
+    let said = format!("{said}\n{disagreed:#?}");
     assert!(o.status.success(), "{said}");
     assert_eq!(summary["runs"], 20, "{said}");
     assert_eq!(summary["same_as_in_process"], 20, "{said}");

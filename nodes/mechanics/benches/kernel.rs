@@ -39,7 +39,7 @@ fn four_side_layout(mesh: &Mesh, k: f64) -> BoundaryLayout {
         let mut w = vec![0.0; nodes.len()];
         for (e, edge) in mesh.sides[side as usize].iter().enumerate() {
             let x: [[f64; 2]; 3] = std::array::from_fn(|j| mesh.coords[edge[j]]);
-            for (j, m) in element::edge_lumped_mass(&x).into_iter().enumerate() {
+            for (j, m) in element::edge_lumped_mass(&x, Plane::Strain).into_iter().enumerate() {
                 w[2 * e + j] += m;
             }
         }

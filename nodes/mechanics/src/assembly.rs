@@ -27,11 +27,11 @@ pub fn stiffness_triplets(
     material: Material,
     plane: Plane,
 ) -> Result<Vec<(usize, usize, f64)>, AssemblyError> {
-    let d = element::elasticity(material, plane);
     let mut out = Vec::with_capacity(mesh.elements.len() * 256);
     for (e, conn) in mesh.elements.iter().enumerate() {
         let x: [[f64; 2]; 8] = std::array::from_fn(|k| mesh.coords[conn[k]]);
-        let ke = element::stiffness(&x, &d).map_err(|source| AssemblyError::BadElement { element: e, source })?;
+        let ke = element::element_stiffness(&x, material, plane)
+            .map_err(|source| AssemblyError::BadElement { element: e, source })?;
         for a in 0..16 {
             let ga = 2 * conn[a / 2] + a % 2;
             for b in 0..16 {

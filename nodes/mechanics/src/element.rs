@@ -1,5 +1,6 @@
 //! The QUA8 element: serendipity shape functions, 3×3 Gauss quadrature, isotropic elasticity
-//! (plane strain or plane stress, unit thickness) and 3-node edge integrals.
+//! (plane strain or plane stress of unit thickness, or axisymmetric with 2πr in every integral)
+//! and 3-node edge integrals.
 
 use crate::model::{Material, Plane};
 use nalgebra::{SMatrix, SVector};
@@ -48,11 +49,13 @@ pub fn shape(xi: f64, eta: f64) -> ([f64; 8], [[f64; 2]; 8]) {
     (n, d)
 }
 
-/// Elasticity matrix D (MPa) for Voigt strains (ε_xx, ε_yy, γ_xy).
+/// Elasticity matrix D (MPa) for Voigt strains (ε_xx, ε_yy, γ_xy); in axisymmetry its in-plane
+/// block (ε_rr, ε_zz, γ_rz), the plane-strain one ([`elasticity_axisymmetric`] has the hoop
+/// strain too).
 pub fn elasticity(m: Material, plane: Plane) -> SMatrix<f64, 3, 3> {
     let (e, nu) = (m.e, m.nu);
     match plane {
-        Plane::Strain => {
+        Plane::Strain | Plane::Axisymmetric => {
             let c = e / ((1.0 + nu) * (1.0 - 2.0 * nu));
             SMatrix::<f64, 3, 3>::new(
                 c * (1.0 - nu),
@@ -71,6 +74,14 @@ pub fn elasticity(m: Material, plane: Plane) -> SMatrix<f64, 3, 3> {
             SMatrix::<f64, 3, 3>::new(c, c * nu, 0.0, c * nu, c, 0.0, 0.0, 0.0, c * (1.0 - nu) / 2.0)
         }
     }
+}
+
+/// Elasticity matrix D (MPa) of axisymmetry for strains (ε_rr, ε_zz, γ_rz, ε_θθ).
+pub fn elasticity_axisymmetric(m: Material) -> SMatrix<f64, 4, 4> {
+    let (e, nu) = (m.e, m.nu);
+    let c = e / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    let (a, b, g) = (c * (1.0 - nu), c * nu, c * (1.0 - 2.0 * nu) / 2.0);
+    SMatrix::<f64, 4, 4>::new(a, b, 0.0, b, b, a, 0.0, b, 0.0, 0.0, g, 0.0, b, b, 0.0, a)
 }
 
 /// Error raised for an element whose Jacobian is not positive at a Gauss point.
@@ -114,6 +125,80 @@ pub fn strain_displacement(x: &[[f64; 2]; 8], xi: f64, eta: f64) -> Result<(SMat
         b[(2, 2 * k + 1)] = dx;
     }
     Ok((b, det))
+}
+
+/// Axisymmetric strain–displacement matrix B (4 × 16: ε_rr, ε_zz, γ_rz, ε_θθ = u_r/r), det J
+/// and the radius r at (ξ, η). On the axis (r = 0, where u_r = 0) the hoop strain is its limit
+/// ∂u_r/∂r; quadrature points are never there.
+pub fn strain_displacement_axisymmetric(
+    x: &[[f64; 2]; 8],
+    xi: f64,
+    eta: f64,
+) -> Result<(SMatrix<f64, 4, 16>, f64, f64), BadElement> {
+    let (b3, det) = strain_displacement(x, xi, eta)?;
+    let (n, _) = shape(xi, eta);
+    let r: f64 = (0..8).map(|k| n[k] * x[k][0]).sum();
+    let mut b = SMatrix::<f64, 4, 16>::zeros();
+    b.fixed_view_mut::<3, 16>(0, 0).copy_from(&b3);
+    let scale = element_size(x);
+    for k in 0..8 {
+        b[(3, 2 * k)] = if r > 1e-12 * scale { n[k] / r } else { b3[(0, 2 * k)] };
+    }
+    Ok((b, det, r))
+}
+
+/// The largest coordinate extent of an element (mm), the scale "on the axis" is judged at.
+fn element_size(x: &[[f64; 2]; 8]) -> f64 {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in x {
+        for c in 0..2 {
+            lo[c] = lo[c].min(p[c]);
+            hi[c] = hi[c].max(p[c]);
+        }
+    }
+    (hi[0] - lo[0]).max(hi[1] - lo[1])
+}
+
+/// Element stiffness of `material` under `plane`: [`stiffness`] in plane strain or stress,
+/// Σ_gp Bᵀ D B det J w 2πr with the hoop strain in axisymmetry.
+pub fn element_stiffness(x: &[[f64; 2]; 8], material: Material, plane: Plane) -> Result<ElementMatrix, BadElement> {
+    if plane != Plane::Axisymmetric {
+        return stiffness(x, &elasticity(material, plane));
+    }
+    let d = elasticity_axisymmetric(material);
+    let mut k = ElementMatrix::zeros();
+    for &(xi, wx) in &GAUSS3 {
+        for &(eta, wy) in &GAUSS3 {
+            let (b, det, r) = strain_displacement_axisymmetric(x, xi, eta)?;
+            let db = d * b;
+            k += b.transpose() * db * (det * wx * wy * plane.measure([r, 0.0]));
+        }
+    }
+    Ok(k)
+}
+
+/// Stress (σ_xx, σ_yy, σ_zz, σ_xy) at (ξ, η) from element nodal displacements `u` (16): σ_zz is
+/// ν(σ_xx + σ_yy) in plane strain, 0 in plane stress, and in axisymmetry the hoop stress σ_θθ
+/// (x = r, y = z).
+pub fn stress_in(
+    x: &[[f64; 2]; 8],
+    material: Material,
+    plane: Plane,
+    u: &SVector<f64, 16>,
+    xi: f64,
+    eta: f64,
+) -> Result<[f64; 4], BadElement> {
+    if plane == Plane::Axisymmetric {
+        let (b, _, _) = strain_displacement_axisymmetric(x, xi, eta)?;
+        let s = elasticity_axisymmetric(material) * (b * u);
+        return Ok([s[0], s[1], s[3], s[2]]);
+    }
+    let s = stress(x, &elasticity(material, plane), u, xi, eta)?;
+    let sz = match plane {
+        Plane::Strain => material.nu * (s[0] + s[1]),
+        _ => 0.0,
+    };
+    Ok([s[0], s[1], sz, s[2]])
 }
 
 /// Element stiffness K_e = Σ_gp Bᵀ D B det J w (3 × 3 Gauss), unit thickness.
@@ -165,18 +250,24 @@ pub fn edge_frame(x: &[[f64; 2]; 3], s: f64) -> ([f64; 2], [f64; 2], f64) {
     (p, [tan[0] / jac, tan[1] / jac], jac)
 }
 
-/// Consistent nodal forces (N) of a traction `traction(position, tangent)` (MPa, global axes) on
-/// a 3-node edge (3-point Gauss), the unit tangent taken along the edge's node order: a caller
-/// whose edge runs with the body on its left has the outward normal (t_y, −t_x).
-pub fn edge_load_along(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2], [f64; 2]) -> [f64; 2]) -> [[f64; 2]; 3] {
+/// Consistent nodal forces (N; in axisymmetry totals over the circumference) of a traction
+/// `traction(position, tangent)` (MPa, global axes) on a 3-node edge (3-point Gauss, against
+/// [`Plane::measure`]), the unit tangent taken along the edge's node order: a caller whose edge
+/// runs with the body on its left has the outward normal (t_y, −t_x).
+pub fn edge_load_along(
+    x: &[[f64; 2]; 3],
+    plane: Plane,
+    traction: impl Fn([f64; 2], [f64; 2]) -> [f64; 2],
+) -> [[f64; 2]; 3] {
     let mut f = [[0.0; 2]; 3];
     for &(s, w) in &GAUSS3 {
         let (n, _) = edge_shape(s);
         let (p, t, jac) = edge_frame(x, s);
         let tr = traction(p, t);
+        let measure = plane.measure(p);
         for k in 0..3 {
             for c in 0..2 {
-                f[k][c] += n[k] * tr[c] * jac * w;
+                f[k][c] += n[k] * tr[c] * jac * w * measure;
             }
         }
     }
@@ -184,20 +275,16 @@ pub fn edge_load_along(x: &[[f64; 2]; 3], traction: impl Fn([f64; 2], [f64; 2]) 
 }
 
 /// Lumped edge mass of a 3-node edge: L/6, 4L/6, L/6 with L the edge length (mm); for a curved
-/// edge the row sums of the consistent mass. DESIGN §2.
-pub fn edge_lumped_mass(x: &[[f64; 2]; 3]) -> [f64; 3] {
+/// edge the row sums of the consistent mass; in axisymmetry the row sums of ∫ N_i N_j 2πr ds
+/// (mm²). DESIGN §2.
+pub fn edge_lumped_mass(x: &[[f64; 2]; 3], plane: Plane) -> [f64; 3] {
     let mut m = [0.0; 3];
     for &(s, w) in &GAUSS3 {
-        let (n, dn) = edge_shape(s);
-        let mut tan = [0.0; 2];
+        let (n, _) = edge_shape(s);
+        let (p, _, jac) = edge_frame(x, s);
+        let measure = plane.measure(p);
         for k in 0..3 {
-            for c in 0..2 {
-                tan[c] += dn[k] * x[k][c];
-            }
-        }
-        let jac = (tan[0] * tan[0] + tan[1] * tan[1]).sqrt();
-        for k in 0..3 {
-            m[k] += n[k] * jac * w;
+            m[k] += n[k] * jac * w * measure;
         }
     }
     m
@@ -221,9 +308,46 @@ mod tests {
         assert!(d.iter().map(|g| g[1]).sum::<f64>().abs() < 1e-15);
     }
 
+    /// An axisymmetric element off the axis has one zero-energy mode, the axial translation: a
+    /// radial one stretches the hoop. Its stiffness is symmetric. Tolerances: round-off of sums
+    /// of 9 Gauss terms of size ‖K‖.
+    #[test]
+    fn an_axisymmetric_element_moves_freely_along_the_axis_only() {
+        let x: [[f64; 2]; 8] = std::array::from_fn(|k| {
+            let [a, b] = NODE_XI[k];
+            [5.0 + 1.5 * (a + 1.0) + 0.2 * b, 2.0 * (b + 1.0) + 0.1 * a]
+        });
+        let k = element_stiffness(&x, Material { e: 210e3, nu: 0.3 }, Plane::Axisymmetric).unwrap();
+        let norm = k.norm();
+        assert!((k - k.transpose()).norm() < 1e-12 * norm);
+        let axial = SVector::<f64, 16>::from_fn(|r, _| (r % 2) as f64);
+        let radial = SVector::<f64, 16>::from_fn(|r, _| ((r + 1) % 2) as f64);
+        assert!((k * axial).norm() < 1e-10 * norm);
+        assert!((k * radial).norm() > 1e-3 * norm);
+        let eig = k.symmetric_eigenvalues();
+        let zero = eig.iter().filter(|v| v.abs() < 1e-9 * norm).count();
+        assert_eq!(zero, 1, "{eig:?}");
+    }
+
+    /// In axisymmetry an edge's weights are ∫ N_i 2πr ds: a radial edge from r = 1 to 3 has the
+    /// annulus' area π(3² − 1²) in all; straight edges make them exact for 3-point Gauss.
+    #[test]
+    fn axisymmetric_edge_weights_sum_to_the_surface_they_sweep() {
+        let m = edge_lumped_mass(&[[1.0, 4.0], [2.0, 4.0], [3.0, 4.0]], Plane::Axisymmetric);
+        let area = std::f64::consts::PI * (9.0 - 1.0);
+        assert!((m.iter().sum::<f64>() - area).abs() < 1e-12 * area);
+        // ∫ N_0 2πr dr over [1, 3]: the end at r = 1 carries less than the one at r = 3.
+        assert!(m[0] < m[2]);
+        let f = edge_load_along(&[[2.0, 0.0], [2.0, 1.0], [2.0, 3.0]], Plane::Axisymmetric, |_, _| {
+            [1.0, 0.0]
+        });
+        let total: f64 = f.iter().map(|v| v[0]).sum();
+        assert!((total - std::f64::consts::TAU * 2.0 * 3.0).abs() < 1e-12);
+    }
+
     #[test]
     fn lumped_edge_mass_is_l6_4l6_l6() {
-        let m = edge_lumped_mass(&[[0.0, 0.0], [1.5, 0.0], [3.0, 0.0]]);
+        let m = edge_lumped_mass(&[[0.0, 0.0], [1.5, 0.0], [3.0, 0.0]], Plane::Strain);
         assert!((m[0] - 0.5).abs() < 1e-14 && (m[1] - 2.0).abs() < 1e-14 && (m[2] - 0.5).abs() < 1e-14);
     }
 }

@@ -5,11 +5,42 @@
 use crate::expr::Expr;
 use crate::mesh::Mesh;
 
-/// Plane strain or plane stress (unit thickness).
+/// Plane strain or plane stress (unit thickness), or axisymmetric: x is the radius r ≥ 0, y the
+/// axis z, and every integral carries 2πr (forces are totals over the circumference).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Plane {
     Strain,
     Stress,
+    Axisymmetric,
+}
+
+impl Plane {
+    /// The measure of the third direction at point `p`: 1 mm of thickness in plane strain and
+    /// stress, the circumference 2πr in axisymmetry (r = p[0]). Every area and edge integral is
+    /// taken against it.
+    pub fn measure(self, p: [f64; 2]) -> f64 {
+        match self {
+            Plane::Strain | Plane::Stress => 1.0,
+            Plane::Axisymmetric => std::f64::consts::TAU * p[0],
+        }
+    }
+
+    /// The unit of a force summed over nodes: per mm of thickness in plane strain and stress, a
+    /// total over the circumference in axisymmetry.
+    pub fn force_unit(self) -> &'static str {
+        match self {
+            Plane::Strain | Plane::Stress => "N/mm",
+            Plane::Axisymmetric => "N",
+        }
+    }
+
+    /// [`Self::force_unit`] as it ends a CSV column's name.
+    pub fn force_column_unit(self) -> &'static str {
+        match self {
+            Plane::Strain | Plane::Stress => "N_per_mm",
+            Plane::Axisymmetric => "N",
+        }
+    }
 }
 
 /// Isotropic linear elastic material. `e` in MPa.
@@ -22,14 +53,14 @@ pub struct Material {
 impl Material {
     /// The stiffness the default search direction is scaled by: √(2G·M), the geometric mean of
     /// the shear modulus 2G and the P-wave modulus M (M = E(1 − ν)/((1 + ν)(1 − 2ν)) in plane
-    /// strain, E/(1 − ν²) in plane stress). It equals E at ν = 0 and stays within 4 % of E for
+    /// strain and axisymmetry, E/(1 − ν²) in plane stress). It equals E at ν = 0 and stays within 4 % of E for
     /// 0 ≤ ν ≤ 0.3, but follows the normal stiffness as ν → 0.5 in plane strain, where E alone
     /// underestimates it (M = 167 E at ν = 0.499).
     pub fn interface_modulus(&self, plane: Plane) -> f64 {
         let (e, nu) = (self.e, self.nu);
         let two_g = e / (1.0 + nu);
         let m = match plane {
-            Plane::Strain => e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+            Plane::Strain | Plane::Axisymmetric => e * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu)),
             Plane::Stress => e / (1.0 - nu * nu),
         };
         (two_g * m).sqrt()

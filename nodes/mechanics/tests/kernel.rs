@@ -96,7 +96,7 @@ fn boundary_nodes(mesh: &Mesh) -> Vec<bool> {
 fn add_side_load(mesh: &Mesh, side: BlockSide, f: &mut [f64], traction: impl Fn([f64; 2]) -> [f64; 2]) {
     for edge in &mesh.sides[side as usize] {
         let x: [[f64; 2]; 3] = std::array::from_fn(|k| mesh.coords[edge[k]]);
-        let fe = element::edge_load_along(&x, |p, _| traction(p));
+        let fe = element::edge_load_along(&x, Plane::Strain, |p, _| traction(p));
         for k in 0..3 {
             f[2 * edge[k]] += fe[k][0];
             f[2 * edge[k] + 1] += fe[k][1];
@@ -489,7 +489,7 @@ fn condensed_fixture(rng: &mut XorShift) -> (Subdomain, BoundaryLayout) {
         let mut w = vec![0.0; nodes.len()];
         for (e, edge) in mesh.sides[side as usize].iter().enumerate() {
             let x: [[f64; 2]; 3] = std::array::from_fn(|j| mesh.coords[edge[j]]);
-            let m = element::edge_lumped_mass(&x);
+            let m = element::edge_lumped_mass(&x, Plane::Strain);
             for j in 0..3 {
                 assert_eq!(nodes[2 * e + j], edge[j]);
                 w[2 * e + j] += m[j];

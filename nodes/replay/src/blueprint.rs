@@ -38,7 +38,7 @@ pub const CONVERGENCE: [&str; 4] = [
 pub const STRUCTURE_VIEW: &str = "structure";
 pub const CONVERGENCE_VIEW: &str = "log10 η, e_c, traction error (with --reference) per iteration";
 pub const COUNTS_VIEW: &str = "stick / slip / separated";
-pub const FORCES_VIEW: &str = "interface resultants and boundary forces (N/mm) over time";
+pub const FORCES_VIEW: &str = "interface resultants and boundary forces (N/mm; N in axisymmetry) over time";
 
 /// A view of the layout: its class, name and entity-path filter.
 struct ViewSpec {

@@ -142,7 +142,10 @@ pub fn fingerprint_with(text: &str, overrides: &Overrides) -> u64 {
 /// default model name (its file stem).
 pub fn load_str(text: &str, file: &str) -> Result<LoadedScene, SceneError> {
     let raw = parse_raw(text, file)?;
-    let ctx = Ctx { file };
+    let ctx = Ctx {
+        file,
+        plane: raw.plane(),
+    };
     let built = ctx.build(&raw)?;
     // A scene with a mesh file travels with its mesh: the text gets the bytes the model was
     // built from.
@@ -228,7 +231,10 @@ impl LoadedScene {
     /// Sets the overrides of a scene that has none yet.
     fn apply(&mut self, file: &str, overrides: &Overrides) -> Result<(), SceneError> {
         debug_assert!(self.overrides.is_none());
-        let ctx = Ctx { file };
+        let ctx = Ctx {
+            file,
+            plane: self.model.plane,
+        };
         let solver = &mut self.model.solver;
         // A refused value is said of the flag that gave it.
         if let Some(a) = overrides.accuracy {

@@ -36,6 +36,19 @@ pub(crate) struct RawScene {
 pub(crate) enum RawPlane {
     Strain,
     Stress,
+    Axisymmetric,
+}
+
+impl RawScene {
+    /// The scene's `plane` (plane strain unless it says otherwise).
+    pub(crate) fn plane(&self) -> glissade_mechanics::model::Plane {
+        use glissade_mechanics::model::Plane;
+        match self.plane {
+            None | Some(RawPlane::Strain) => Plane::Strain,
+            Some(RawPlane::Stress) => Plane::Stress,
+            Some(RawPlane::Axisymmetric) => Plane::Axisymmetric,
+        }
+    }
 }
 
 #[derive(Deserialize)]

@@ -4,7 +4,7 @@
 //! given one value (the launcher writes them to the boundaries CSV and plot, the replay draws them
 //! in Rerun, studies report them per variant).
 
-use glissade_mechanics::model::Model;
+use glissade_mechanics::model::{Model, Plane};
 use glissade_messages::InterfaceSolution;
 use serde::Serialize;
 
@@ -39,9 +39,14 @@ pub struct RuleResultants {
 }
 
 impl RuleResultants {
-    /// The largest |force| over the time points (N/mm).
+    /// The largest |force| over the time points (N/mm), of the components that are defined (in
+    /// axisymmetry a support's axial force).
     pub fn peak(&self) -> f64 {
-        self.force.iter().map(|f| f[0].hypot(f[1])).fold(0.0, f64::max)
+        let defined = |v: f64| if v.is_finite() { v } else { 0.0 };
+        self.force
+            .iter()
+            .map(|f| defined(f[0]).hypot(defined(f[1])))
+            .fold(0.0, f64::max)
     }
 }
 
@@ -213,6 +218,17 @@ pub fn boundary_resultants(model: &Model, interfaces: &[InterfaceSolution], abou
                 for c in 0..2 {
                     d[c] = (count[c] > 0).then(|| total[c] / count[c] as f64);
                 }
+            }
+        }
+    }
+    if model.plane == Plane::Axisymmetric {
+        // Only the axial force balances over a subdomain (its one rigid motion): a support's
+        // radial reaction and every moment are not resultants there, and are left out (NaN). A
+        // load's radial column stays the total of its radial nodal forces, ∫ t_r 2πr ds.
+        for r in &mut out {
+            r.moment.fill(f64::NAN);
+            if r.kind == RuleKind::Support {
+                r.force.iter_mut().for_each(|f| f[0] = f64::NAN);
             }
         }
     }

@@ -8,6 +8,7 @@ use crate::quantities::{quantities, InterfaceQuantities};
 use crate::study::Study;
 use crate::variants::{nearest, variants, Variant};
 use crate::StudyError;
+use glissade_mechanics::model::Plane;
 use glissade_messages::{Field, InterfaceSolution, Verdict};
 use glissade_scene::LoadedScene;
 use std::time::Instant;
@@ -73,6 +74,8 @@ impl VariantOutcome {
 #[derive(Debug, Clone)]
 pub struct StudyRun {
     pub study: Study,
+    /// The scene's plane (the units of its forces), as its first variant that loads says.
+    pub plane: Plane,
     pub cold: bool,
     pub outcomes: Vec<VariantOutcome>,
     pub wall_s: f64,
@@ -95,6 +98,7 @@ pub fn run(
     let t0 = Instant::now();
     let mut kept: Vec<(Variant, Vec<InterfaceSolution>)> = Vec::new();
     let mut outcomes = Vec::new();
+    let mut plane = None;
     for variant in variants(study) {
         let t = Instant::now();
         // A study file that names what the scene lacks is the study's error, found at the first
@@ -112,6 +116,9 @@ pub fn run(
         let start = from
             .and_then(|f| kept.iter().find(|(v, _)| v.index == f))
             .map(|(_, s)| s.as_slice());
+        if let Ok(scene) = &scene {
+            plane.get_or_insert(scene.model.plane);
+        }
         let result = match scene {
             Err(e) => Err(format!("scene refused: {e}")),
             Ok(scene) => solver.solve(&variant, &scene, start, cold).and_then(|mut solved| {
@@ -137,6 +144,7 @@ pub fn run(
     }
     Ok(StudyRun {
         study: study.clone(),
+        plane: plane.unwrap_or(Plane::Strain),
         cold,
         outcomes,
         wall_s: t0.elapsed().as_secs_f64(),

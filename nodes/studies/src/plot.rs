@@ -4,7 +4,7 @@
 //! (plotters' SVG backend needs a font backend to lay out its text).
 
 use crate::driver::StudyRun;
-use crate::quantities::{index_of, peak, QUANTITIES};
+use crate::quantities::{index_of, peak, unit};
 use std::fmt::Write as _;
 
 const W: f64 = 640.0;
@@ -32,7 +32,7 @@ pub fn plots(run: &StudyRun) -> Vec<(String, String)> {
                 .iter()
                 .map(|o| o.result.as_ref().ok().map(|(_, qs)| peak(qs, i)))
                 .collect();
-            (q.clone(), format!("peak {q} ({})", QUANTITIES[i].1), values)
+            (q.clone(), format!("peak {q} ({})", unit(i, run.plane)), values)
         })
         .collect();
     ys.push((

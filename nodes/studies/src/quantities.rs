@@ -3,12 +3,12 @@
 //! joint without summing anything by hand.
 
 use glissade_mechanics::laws::dot;
-use glissade_mechanics::model::{Interface, Model};
+use glissade_mechanics::model::{Interface, Model, Plane};
 use glissade_messages::InterfaceSolution;
 use serde::Serialize;
 
 /// Every quantity's name and unit, in the order of [`InterfaceQuantities::values`]. Forces are
-/// per unit thickness (plane problems).
+/// per unit thickness (plane problems); [`unit`] gives them for a scene's plane.
 pub const QUANTITIES: [(&str, &str); 9] = [
     ("normal", "N/mm"),
     ("tangential", "N/mm"),
@@ -20,6 +20,16 @@ pub const QUANTITIES: [(&str, &str); 9] = [
     ("max_slip", "mm"),
     ("dissipation", "N"),
 ];
+
+/// The unit of quantity `q` of [`QUANTITIES`] under `plane`: in axisymmetry forces are totals
+/// over the circumference (N) and the dissipation is N·mm.
+pub fn unit(q: usize, plane: Plane) -> &'static str {
+    match (QUANTITIES[q], plane) {
+        ((_, "N/mm"), p) => p.force_unit(),
+        (("dissipation", _), Plane::Axisymmetric) => "N·mm",
+        ((_, u), _) => u,
+    }
+}
 
 /// The position of quantity `name` in [`QUANTITIES`].
 pub fn index_of(name: &str) -> Option<usize> {

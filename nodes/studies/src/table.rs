@@ -2,7 +2,7 @@
 //! document with every variant, and the console's one-screen summary.
 
 use crate::driver::{StudyRun, VariantOutcome};
-use crate::quantities::{index_of, peak, QUANTITIES};
+use crate::quantities::{index_of, peak, unit, QUANTITIES};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 
@@ -26,8 +26,8 @@ pub fn csv(run: &StudyRun) -> String {
         let _ = write!(s, ",{}", csv_field(&p.name));
     }
     s.push_str(",verdict,iterations,started_from,time_s,interface,a,b");
-    for (name, unit) in QUANTITIES {
-        let unit = unit.replace('/', "_per_");
+    for (q, (name, _)) in QUANTITIES.iter().enumerate() {
+        let unit = unit(q, run.plane).replace('/', "_per_").replace('·', "_");
         let _ = write!(s, ",{name}_{unit}");
     }
     s.push('\n');
@@ -80,7 +80,11 @@ pub fn json(run: &StudyRun) -> Value {
         .iter()
         .map(|p| json!({ "name": p.name, "values": p.values }))
         .collect();
-    let units: serde_json::Map<String, Value> = QUANTITIES.iter().map(|(n, u)| (n.to_string(), json!(u))).collect();
+    let units: serde_json::Map<String, Value> = QUANTITIES
+        .iter()
+        .enumerate()
+        .map(|(q, (n, _))| (n.to_string(), json!(unit(q, run.plane))))
+        .collect();
     let variants: Vec<Value> = run.outcomes.iter().map(|o| variant_json(run, o)).collect();
     json!({
         "study": run.study.name,
@@ -159,10 +163,9 @@ pub fn summary(run: &StudyRun) -> Vec<String> {
     }
     head.push_str(" | iterations | from | s");
     for &q in &report {
-        let (n, u) = QUANTITIES[q];
-        let _ = write!(head, " | peak {n} ({u})");
+        let _ = write!(head, " | peak {} ({})", QUANTITIES[q].0, unit(q, run.plane));
     }
-    head.push_str(" | peak support reaction (N/mm) | verdict");
+    let _ = write!(head, " | peak support reaction ({}) | verdict", run.plane.force_unit());
     let mut lines = vec![head];
     for o in &run.outcomes {
         let mut l = format!("{:>7}", o.variant.index);

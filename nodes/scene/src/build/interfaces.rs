@@ -104,7 +104,7 @@ impl Ctx<'_> {
                     continue;
                 }
                 let x = [sa.mesh.coords[e[0]], sa.mesh.coords[e[1]], sa.mesh.coords[e[2]]];
-                for (k, m) in edge_lumped_mass(&x).into_iter().enumerate() {
+                for (k, m) in edge_lumped_mass(&x, self.plane).into_iter().enumerate() {
                     weights[pair_of[e[k]]] += m;
                 }
                 length += ((x[2][0] - x[0][0]).powi(2) + (x[2][1] - x[0][1]).powi(2)).sqrt();
@@ -251,8 +251,9 @@ impl Ctx<'_> {
             .collect()
     }
 
-    /// Final interfaces: kinds and gaps, pairs clamped on both sides left out, empty interfaces
-    /// dropped, centroids.
+    /// Final interfaces: kinds and gaps, pairs clamped on both sides left out (in axisymmetry
+    /// also the pairs on the axis: their u_r is held on both sides and their weight, ∫ N 2πr ds,
+    /// is zero, so they carry no force), empty interfaces dropped, centroids.
     pub(crate) fn finish_interfaces(
         &self,
         raw: &RawScene,
@@ -262,10 +263,18 @@ impl Ctx<'_> {
         loads: &[SubLoads],
     ) -> Result<Vec<Interface>, SceneError> {
         let clamped = |s: usize, n: usize| loads[s].constrained[2 * n] && loads[s].constrained[2 * n + 1];
+        let radial_held = |s: usize, n: usize| loads[s].constrained[2 * n];
         let mut out = Vec::new();
         for (g, kind) in geo.into_iter().zip(kinds) {
+            let heaviest = g.weights.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+            let on_axis = |p: usize| {
+                self.plane == Plane::Axisymmetric
+                    && g.weights[p].abs() <= 1e-12 * heaviest
+                    && radial_held(g.a, g.pairs[p].0)
+                    && radial_held(g.b, g.pairs[p].1)
+            };
             let keep: Vec<usize> = (0..g.pairs.len())
-                .filter(|&p| !(clamped(g.a, g.pairs[p].0) && clamped(g.b, g.pairs[p].1)))
+                .filter(|&p| !(on_axis(p) || clamped(g.a, g.pairs[p].0) && clamped(g.b, g.pairs[p].1)))
                 .collect();
             if keep.is_empty() {
                 continue;

@@ -361,7 +361,7 @@ impl Ctx<'_> {
             let mut force = vec![0.0; n];
             for (e, side_normal) in edges {
                 let x = [mesh.coords[e[0]], mesh.coords[e[1]], mesh.coords[e[2]]];
-                let f = edge_load_along(&x, |p, t| {
+                let f = edge_load_along(&x, self.plane, |p, t| {
                     let normal = match side_normal {
                         EdgeNormal::Fixed(n) => *n,
                         EdgeNormal::Left => [t[1], -t[0]],

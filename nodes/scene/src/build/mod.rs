@@ -2,6 +2,7 @@
 //! into subdomains, names, and (in the child modules) settings, interfaces, loads and the
 //! rigid-mode check.
 
+mod axis;
 mod gmsh;
 mod interfaces;
 mod loads;
@@ -28,6 +29,9 @@ use std::collections::BTreeMap;
 
 pub(crate) struct Ctx<'a> {
     pub(crate) file: &'a str,
+    /// The scene's `plane`: every edge integral (loads, interface weights) is taken against its
+    /// measure.
+    pub(crate) plane: Plane,
 }
 
 pub(crate) struct Built {
@@ -204,10 +208,7 @@ impl Ctx<'_> {
             None => file_stem_name(self.file),
         };
         self.check_memory(raw)?;
-        let plane = match raw.plane {
-            None | Some(RawPlane::Strain) => Plane::Strain,
-            Some(RawPlane::Stress) => Plane::Stress,
-        };
+        let plane = self.plane;
         let time = self.time_grid(&raw.time)?;
         let mut solver = self.solver(&raw.solver)?;
         let pgd = self.pgd(raw.solver.pgd.as_ref())?;
@@ -233,7 +234,7 @@ impl Ctx<'_> {
             }
             None => None,
         };
-        let (subs, names, geo, sub_loads, curve_names) = match parts {
+        let (subs, names, geo, mut sub_loads, curve_names) = match parts {
             Some(pm) => self.build_parts(raw, pm, &materials, time)?,
             None => {
                 self.blocks(raw, &materials)?;
@@ -251,6 +252,7 @@ impl Ctx<'_> {
                 (subs, names, geo, sub_loads, Vec::new())
             }
         };
+        self.hold_the_axis(&subs, &mut sub_loads, time)?;
         // Only now: choosing the time-coarse grid tries divisors of N, and a mesh scene's size is
         // known (and checked against the memory) once its parts are read: N = 10¹¹ took minutes
         // before its refusal.
@@ -266,7 +268,7 @@ impl Ctx<'_> {
         if matches!(solver.acceleration, Acceleration::Anderson { .. }) {
             let constrained: Vec<&[bool]> = sub_loads.iter().map(|l| l.constrained.as_slice()).collect();
             let coords: Vec<&[[f64; 2]]> = subs.iter().map(|s| s.mesh.coords.as_slice()).collect();
-            if let Some(s) = rigid::part_held_only_by_contact(&interfaces, &coords, &constrained) {
+            if let Some(s) = rigid::part_held_only_by_contact(&interfaces, &coords, &constrained, plane) {
                 let part = &subs[s].name;
                 if raw.solver.coarse == Some(true) {
                     return Err(self.err(

@@ -26,7 +26,7 @@ impl Ctx<'_> {
                     }
                 }
             }
-            let rank = blocked_rigid_modes(&rows, (hi[0] - lo[0]).max(hi[1] - lo[1]));
+            let rank = blocked_rigid_modes(&rows, (hi[0] - lo[0]).max(hi[1] - lo[1]), self.plane);
             if rank == 3 {
                 continue;
             }
@@ -85,6 +85,7 @@ pub(crate) fn part_held_only_by_contact(
     interfaces: &[Interface],
     coords: &[&[[f64; 2]]],
     constrained: &[&[bool]],
+    plane: Plane,
 ) -> Option<usize> {
     (0..constrained.len()).find(|&s| {
         let own: Vec<&Interface> = interfaces.iter().filter(|i| i.side_of(s).is_some()).collect();
@@ -102,18 +103,18 @@ pub(crate) fn part_held_only_by_contact(
             .fold(([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]), |(lo, hi), x| {
                 ([lo[0].min(x[0]), lo[1].min(x[1])], [hi[0].max(x[0]), hi[1].max(x[1])])
             });
-        blocked_rigid_modes(&rows, (hi[0] - lo[0]).max(hi[1] - lo[1])) < 3
+        blocked_rigid_modes(&rows, (hi[0] - lo[0]).max(hi[1] - lo[1]), plane) < 3
     })
 }
 
 /// How many of the three rigid-body motions the constrained dofs `rows` (coordinates, component)
 /// block: [`rigid_modes`] of the rows along the axes.
-fn blocked_rigid_modes(rows: &[([f64; 2], usize)], scale: f64) -> usize {
+fn blocked_rigid_modes(rows: &[([f64; 2], usize)], scale: f64, plane: Plane) -> usize {
     let along: Vec<([f64; 2], [f64; 2])> = rows
         .iter()
         .map(|&(p, c)| (p, if c == 0 { [1.0, 0.0] } else { [0.0, 1.0] }))
         .collect();
-    rigid_modes(&along, scale).0
+    rigid_modes(&along, scale, plane).0
 }
 
 /// A rigid motion: (translation, rotation in rad per unit of the body's size).
@@ -123,13 +124,25 @@ type FreeMotion = ([f64; 2], f64);
 /// the motion is held along there) block: the rank of the rows [d_x, d_y, (p − p̄) × d / scale]
 /// (p̄ the points' mean, `scale` the body's size), eigenvalues of their Gram matrix below 1e-10
 /// of the largest counted as zero; and a motion left free, if any, as (translation, rotation
-/// about p̄ in rad per unit of `scale`), the eigenvector of the smallest eigenvalue.
-fn rigid_modes(rows: &[([f64; 2], [f64; 2])], scale: f64) -> (usize, Option<FreeMotion>, [f64; 2]) {
+/// about p̄ in rad per unit of `scale`), the eigenvector of the smallest eigenvalue. In
+/// axisymmetry the only rigid motion is the axial translation (a radial one stretches the hoop,
+/// and there is no rotation): the radial translation and the rotation count as blocked, the axial
+/// one as blocked by any row with an axial component.
+fn rigid_modes(rows: &[([f64; 2], [f64; 2])], scale: f64, plane: Plane) -> (usize, Option<FreeMotion>, [f64; 2]) {
     let n = rows.len().max(1) as f64;
     let mean = [
         rows.iter().map(|r| r.0[0]).sum::<f64>() / n,
         rows.iter().map(|r| r.0[1]).sum::<f64>() / n,
     ];
+    if plane == Plane::Axisymmetric {
+        let largest = rows.iter().fold(0.0f64, |m, r| m.max(r.1[0].abs()).max(r.1[1].abs()));
+        let axial = rows.iter().any(|r| r.1[1].abs() > 1e-10 * largest);
+        return if axial {
+            (3, None, mean)
+        } else {
+            (2, Some(([0.0, 1.0], 0.0)), mean)
+        };
+    }
     let mut gram = nalgebra::Matrix3::<f64>::zeros();
     for &(p, d) in rows {
         let cross = ((p[0] - mean[0]) * d[1] - (p[1] - mean[1]) * d[0]) / scale;
@@ -197,7 +210,7 @@ pub fn free_motions(model: &glissade_mechanics::model::Model) -> Vec<String> {
             }
         }
         let scale = (hi[0] - lo[0]).max(hi[1] - lo[1]);
-        let (rank, free, centre) = rigid_modes(&rows, scale);
+        let (rank, free, centre) = rigid_modes(&rows, scale, model.plane);
         let Some((t, w)) = free.filter(|_| rank < 3) else {
             continue;
         };

@@ -8,6 +8,7 @@ use glissade_mechanics::model::{
 };
 use glissade_mechanics::pgd::PgdCriterion;
 
+mod axisymmetric;
 mod rejections;
 mod settings;
 

@@ -414,7 +414,7 @@ impl Ctx<'_> {
 
         let mut interfaces = Vec::with_capacity(matched.len());
         for ((a, b), edges) in matched {
-            let itf = part_interface(&meshes, &boundary, &edge_curves, a, b, &edges).map_err(|n| {
+            let itf = part_interface(&meshes, &boundary, &edge_curves, a, b, &edges, self.plane).map_err(|n| {
                 self.err(
                     key,
                     format!(

@@ -5,7 +5,7 @@ use super::*;
 use glissade_mechanics::element::edge_frame;
 
 /// The interface of parts a < b from their matched edges: pairs ordered along chains of a's
-/// edges, weights and normals from a's isoparametric edges.
+/// edges, weights (against `plane`'s measure) and normals from a's isoparametric edges.
 pub(super) fn part_interface(
     meshes: &[Mesh],
     boundary: &[Vec<Edge>],
@@ -13,6 +13,7 @@ pub(super) fn part_interface(
     a: usize,
     b: usize,
     edges: &[(usize, usize)],
+    plane: Plane,
 ) -> Result<GeoInterface, usize> {
     let ea: Vec<Edge> = edges.iter().map(|&(k, _)| boundary[a][k]).collect();
     // Node of b facing each node of a's matched edges.
@@ -111,7 +112,7 @@ pub(super) fn part_interface(
     }
     for &(_, e, reversed) in &ordered {
         let x = e.map(|n| meshes[a].coords[n]);
-        let m = edge_lumped_mass(&x);
+        let m = edge_lumped_mass(&x, plane);
         // The edge's outward normal out of a: (t_y, −t_x) for a's own way round, reversed if the
         // edge runs the other way here.
         let sign = if reversed { -1.0 } else { 1.0 };

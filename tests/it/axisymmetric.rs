@@ -1,0 +1,102 @@
+//! Axisymmetric scenes end to end: the shipped press fit, pushed axially out of its hub, as
+//! LATIN solves it in-process and as processes, against the reference and against what friction
+//! can hold. (The element and the interface weights are checked against Lamé in the reference
+//! crate's tests.)
+
+use crate::common::{glissade_ok, output_file, scene, scene_text, scratch};
+use glissade_messages::Verdict;
+
+/// The press fit's run: converged; the push on the shaft's top balances the axial friction force
+/// on the fit at every time point (the shaft's axial equilibrium, its one rigid motion), and the
+/// hub's seat carries the same force back; the radial column and the moments, not resultants in
+/// axisymmetry, are empty (NaN); forces are in N (totals over the circumference) as the headers
+/// say. Once the whole fit slips the push is f = 0.15 times the normal force. The load rises
+/// with the push until then, never beyond.
+///
+/// Tolerances: the balances hold to round-off of sums over 33 pairs (1e-9 of the capacity, as
+/// for the lap joint); the slip limit holds at the accuracy asked (1e-4 of the tractions; the
+/// local stage puts slipping pairs exactly on the cone, 1e-6 measured), 1e-5 asserted.
+#[test]
+fn a_press_fit_pushed_out_of_its_hub_holds_f_times_its_normal_force() {
+    let dir = scratch("press-fit-axisymmetric");
+    let scene_path = format!(
+        "{}/launch/scenes/press-fit-axisymmetric.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = glissade_ok(&[&"run", &scene_path, &"--in-process", &"--no-record", &"--out", &dir.0]);
+    assert!(out.contains("Converged"), "{out}");
+    assert!(out.contains("support boundary[1] at t = 1: R = (—, "), "{out}");
+    let text = |ending: &str| std::fs::read_to_string(output_file(&dir.0, ending)).unwrap();
+    let boundaries = text(".boundaries.csv");
+    let resultants = text(".resultants.csv");
+    assert!(
+        boundaries.starts_with("time_s,rule,kind,force_x_N,force_y_N,"),
+        "{boundaries}"
+    );
+    assert!(resultants.contains(",normal_N,tangential_N,"), "{resultants}");
+    let rows = |csv: &str, keep: &dyn Fn(&[&str]) -> bool| -> Vec<Vec<f64>> {
+        csv.lines()
+            .skip(1)
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .filter(|c| keep(c))
+            .map(|c| c.iter().map(|v| v.parse().unwrap_or(f64::NAN)).collect())
+            .collect()
+    };
+    let press = rows(&boundaries, &|c| c[1] == "boundary[1]");
+    let seat = rows(&boundaries, &|c| c[1] == "boundary[0]");
+    let fit = rows(&resultants, &|c| c[4] == "contact");
+    assert_eq!((press.len(), seat.len(), fit.len()), (41, 41, 41));
+    let capacity = 0.15 * fit.iter().map(|r| r[7].abs()).fold(0.0, f64::max);
+    let (mut gross, mut previous) = (0, 0.0f64);
+    for ((p, s), c) in press.iter().zip(&seat).zip(&fit) {
+        let (t, push, normal, tangential, slip) = (p[0], p[4], c[7], c[8], c[11]);
+        assert!(p[3].is_nan() && p[5].is_nan() && s[3].is_nan(), "t = {t}: {p:?}");
+        // The fit's normal is +r out of the shaft (side a), its tangent +z: the hub's friction on
+        // the shaft along +z balances the press.
+        assert!(
+            (push + tangential).abs() <= 1e-9 * capacity,
+            "t = {t}: {push} vs {tangential}"
+        );
+        assert!((push + s[4]).abs() <= 1e-9 * capacity, "t = {t}: seat {}", s[4]);
+        assert!(tangential.abs() <= 0.15 * normal.abs() * (1.0 + 1e-5), "t = {t}");
+        if slip >= 1.0 - 1e-9 {
+            gross += 1;
+            assert!(
+                (tangential.abs() - 0.15 * normal.abs()).abs() <= 1e-5 * capacity,
+                "t = {t}"
+            );
+        }
+        if t >= 0.2 {
+            assert!(
+                push.abs() >= previous * (1.0 - 1e-6),
+                "t = {t}: {push} after {previous}"
+            );
+            previous = push.abs();
+        }
+    }
+    assert!(gross >= 10, "the shaft slides out from t ≈ 0.65 ({gross} time points)");
+    assert!(text(".boundaries.svg").contains("boundary[1]: Ry against uy"));
+}
+
+/// LATIN on the axisymmetric press fit against the monolithic reference on the same discrete
+/// problem: at each accuracy the run's stop on its estimate (1e-2, 1e-3, 1e-4) the true
+/// contact-traction error is within it (DESIGN §3 promises 3×; measured: 1e-4 reached at
+/// iteration 43 of 94, final error 2.3e-6); and as processes the run is the in-process one bit
+/// for bit.
+#[test]
+fn the_axisymmetric_press_fit_meets_its_accuracy_and_runs_as_processes() {
+    let sc = scene(&scene_text("press-fit-axisymmetric"));
+    assert_eq!(sc.model.plane, glissade_mechanics::model::Plane::Axisymmetric);
+    let check = glissade::accuracy::check_scene("press-fit-axisymmetric", &sc, &Default::default()).unwrap();
+    for stop in &check.stops {
+        let err = stop.true_error.expect("a stop with a true error");
+        assert!(
+            err <= stop.accuracy,
+            "accuracy {:e}: true error {err:e} at iteration {:?}",
+            stop.accuracy,
+            stop.iteration
+        );
+    }
+    let local = crate::distributed::in_process_equals_processes(&sc, "axisymmetric-processes");
+    assert_eq!(local.verdict, Verdict::Converged);
+}
