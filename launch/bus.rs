@@ -26,6 +26,14 @@ pub(crate) fn local_endpoint(listen: &str) -> String {
     listen.replace("/0.0.0.0:", "/127.0.0.1:").replace("/[::]:", "/[::1]:")
 }
 
+/// The endpoint other hosts reach a router listening on `listen` by: a wildcard address
+/// replaced by `host`.
+pub(crate) fn host_endpoint(listen: &str, host: &str) -> String {
+    listen
+        .replace("/0.0.0.0:", &format!("/{host}:"))
+        .replace("/[::]:", &format!("/{host}:"))
+}
+
 /// Least room in `/dev/shm` for the launcher to choose shared memory: the processes' 16 MiB
 /// pools and the lenders' pools of a run of the stratified scene at N = 1000, with room to spare.
 pub const SHARED_MEMORY_ROOM: u64 = 512 << 20;
@@ -405,11 +413,14 @@ pub(crate) fn join_bus(
     }
     // The bus: a router hosted here, or a client of the given router.
     let (session, node_connect, description) = if hosting {
-        let listen = if net.listen.is_empty() {
-            let scheme = if tls.is_some() { "tls" } else { "tcp" };
-            vec![format!("{scheme}/127.0.0.1:{}", free_port()?)]
-        } else {
-            net.listen.clone()
+        // Node processes that may run on other hosts (Slurm job steps) reach the router by this
+        // host's name, on every interface unless --listen says where.
+        let advertised = net.starter.advertised_host()?;
+        let scheme = if tls.is_some() { "tls" } else { "tcp" };
+        let listen = match (net.listen.is_empty(), &advertised) {
+            (true, None) => vec![format!("{scheme}/127.0.0.1:{}", free_port()?)],
+            (true, Some(_)) => vec![format!("{scheme}/0.0.0.0:{}", free_port()?)],
+            (false, _) => net.listen.clone(),
         };
         // The router reads its users when it opens; their file goes right after.
         let users: Vec<transport::Credentials> = credentials.values().cloned().collect();
@@ -423,7 +434,10 @@ pub(crate) fn join_bus(
                 source,
             })?;
         drop(dictionary);
-        let connect = vec![local_endpoint(&listen[0])];
+        let connect = vec![match &advertised {
+            Some(host) => host_endpoint(&listen[0], host),
+            None => local_endpoint(&listen[0]),
+        }];
         (
             session,
             connect,
@@ -523,6 +537,8 @@ pub struct Network {
     /// Folder where the credentials of the nodes started by hand (`remote`) are written, one
     /// file each, readable by this user only, removed when the run ends (the run's `--out`).
     pub credentials: Option<std::path::PathBuf>,
+    /// Where the launcher starts the other node processes: here, or as Slurm job steps.
+    pub starter: crate::starter::Starter,
 }
 
 /// Why a dead node process could not resume from the recording of a run (`recorded` or not) of

@@ -6,7 +6,6 @@
 use crate::error::{IoWhat, Result};
 use glissade_messages::Role;
 use std::io::{BufRead, BufReader};
-use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -180,15 +179,16 @@ impl ChildOutput {
     }
 }
 
-/// Starts node process `name` with `args`: its own process group, killed with the launcher;
-/// `credentials`, when given, are written to its standard input.
+/// Starts node process `name` with `args` through `cmd` (the executable, or `srun` running it as
+/// a Slurm job step: `crate::starter::Starter::command`): its own process group, killed with the
+/// launcher; `credentials`, when given, are written to its standard input.
 pub(crate) fn spawn_node(
-    exe: &Path,
+    mut cmd: Command,
     name: NodeName,
     args: &[String],
     credentials: Option<glissade_zenoh::Credentials>,
 ) -> Result<NodeProcess> {
-    let mut cmd = Command::new(exe);
+    let program = cmd.get_program().to_string_lossy().into_owned();
     cmd.args(args);
     {
         use std::os::unix::process::CommandExt;
@@ -197,7 +197,7 @@ pub(crate) fn spawn_node(
         cmd.process_group(0);
     }
     let (child, output) = spawn_child(cmd, &name.to_string(), libc::SIGKILL, credentials.as_ref())
-        .what(|| format!("cannot start node process {name} ({})", exe.display()))?;
+        .what(|| format!("cannot start node process {name} ({program})"))?;
     Ok(NodeProcess {
         name,
         child,

@@ -212,6 +212,10 @@ pub(crate) enum Command {
         #[arg(long, default_value = "studies")]
         out: PathBuf,
     },
+    /// Submit a run to Slurm (docs/operations.md, "On a cluster"): writes a batch script that
+    /// runs `glissade run <scene> --slurm` (its node processes as job steps of the job) into the
+    /// output folder, submits it with sbatch and prints the job id and where the outputs will be.
+    Submit(SubmitArgs),
     /// The load at which a joint slips (docs/studies.md, "Slip onset"): the smallest factor on
     /// a boundary rule's values at which a contact interface first slips at a point, and the one
     /// at which one slips over its whole length (beyond it a part held by friction has no
@@ -399,6 +403,38 @@ pub(crate) struct ReplayArgs {
 }
 
 #[derive(clap::Args)]
+pub(crate) struct SubmitArgs {
+    /// Scene file (TOML).
+    pub(crate) scene: PathBuf,
+    /// Folder for the outputs, the batch script and the job's console (on a file system every
+    /// host of the job sees).
+    #[arg(long, default_value = "recordings")]
+    pub(crate) out: PathBuf,
+    /// Hosts to spread the node processes over (`sbatch --nodes`).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) nodes: u32,
+    /// Time limit of the job, in a form sbatch takes (`30`, `2:00:00`, `1-00:00:00`).
+    #[arg(long)]
+    pub(crate) time: Option<String>,
+    /// Partition to submit to (the cluster's default when not given).
+    #[arg(long)]
+    pub(crate) partition: Option<String>,
+    /// Run id (default: 128 random bits in hex, chosen now so that the outputs' names are known).
+    #[arg(long)]
+    pub(crate) run_id: Option<String>,
+    /// Stop once the estimated contact-traction error is at most this (the scene's
+    /// `solver.accuracy` otherwise).
+    #[arg(long, allow_negative_numbers = true)]
+    pub(crate) accuracy: Option<f64>,
+    /// Iteration cap (the scene's `solver.max_iterations` otherwise).
+    #[arg(long)]
+    pub(crate) max_iterations: Option<usize>,
+    /// Record nothing.
+    #[arg(long)]
+    pub(crate) no_record: bool,
+}
+
+#[derive(clap::Args)]
 pub(crate) struct RunArgs {
     /// Scene file (TOML).
     pub(crate) scene: PathBuf,
@@ -460,6 +496,11 @@ pub(crate) struct RunArgs {
     /// subdomain:1,interface (role[:index]).
     #[arg(long, value_delimiter = ',', conflicts_with = "in_process")]
     pub(crate) remote: Vec<NodeName>,
+    /// Start the node processes as Slurm job steps of the allocation this command runs in (in a
+    /// batch script or under salloc), spread over its hosts, the router listening on this host's
+    /// name (docs/operations.md, "On a cluster").
+    #[arg(long, conflicts_with = "in_process")]
+    pub(crate) slurm: bool,
     /// Longest wait for the nodes of --remote to be ready (s).
     #[arg(long, default_value_t = 300)]
     pub(crate) remote_timeout: u64,

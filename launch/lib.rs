@@ -20,6 +20,7 @@ pub mod resultants;
 pub mod run;
 pub mod runner;
 pub mod stability;
+pub mod starter;
 pub mod study;
 pub mod validate;
 pub mod vtu;

@@ -13,6 +13,7 @@ use commands::measure::{bench, reference, reference_options, report, report_vari
 use commands::replay::{export, replay};
 use commands::run::run;
 use commands::study::{onset, sweep};
+use commands::submit::submit;
 use glissade::bus::Joining;
 use glissade::children::{NodeName, NodeRole};
 use glissade::distributed::Supervision;
@@ -64,6 +65,7 @@ fn keep_freed_memory() {
 fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Run(args) => run(args),
+        Command::Submit(args) => submit(&args),
         Command::Check { scene } => {
             let sc = load_scene(&scene)?;
             let m = &sc.model;

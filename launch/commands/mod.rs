@@ -7,8 +7,9 @@ pub(crate) mod replay;
 pub(crate) mod run;
 pub(crate) mod soak;
 pub(crate) mod study;
+pub(crate) mod submit;
 
-pub(crate) use crate::cli::{ColorByArg, ReplayArgs, RunArgs};
+pub(crate) use crate::cli::{ColorByArg, ReplayArgs, RunArgs, SubmitArgs};
 pub(crate) use anyhow::Context;
 pub(crate) use glissade::distributed::{install_interrupt_handler, Interrupted, Network};
 pub(crate) use glissade::load_scene;
@@ -18,6 +19,7 @@ pub(crate) use glissade::output::{
 pub(crate) use glissade::report::{build_report_with, linear_stage_table, plot_svg, TimeAxis};
 pub(crate) use glissade::run::Run;
 pub(crate) use glissade::runner::{IterationRecord, RunOptions};
+pub(crate) use glissade::starter::{SlurmAllocation, Starter};
 pub(crate) use glissade_messages::Verdict;
 pub(crate) use glissade_reference::{verify, Checks, ReferenceError, ReferenceOptions, ReferenceRun};
 pub(crate) use glissade_scene::{LoadedScene, Overrides, RecordOverride};

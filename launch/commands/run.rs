@@ -174,6 +174,11 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             remote: args.remote.clone(),
             remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
             credentials: Some(args.out.clone()),
+            starter: if args.slurm {
+                Starter::Slurm(SlurmAllocation::from_env()?)
+            } else {
+                Starter::Local
+            },
         };
         match run.processes(&exe, &net) {
             Ok(outcome) => {

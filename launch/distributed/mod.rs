@@ -198,6 +198,9 @@ pub(crate) fn run_processes(
             left_out.push(format!("recording: {problem}"));
         }
     }
+    if let Some(where_) = net.starter.describe() {
+        names.push(where_);
+    }
     if !net.remote.is_empty() {
         names.push(format!(
             "started by hand: {}",

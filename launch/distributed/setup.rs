@@ -49,6 +49,14 @@ pub(super) struct SetUp {
 }
 
 impl SetUp {
+    /// How many subdomain and interface node processes the run has.
+    pub(super) fn node_counts(&self) -> crate::starter::NodeCounts {
+        let count = |role| self.all_nodes.iter().filter(|n| n.role == role).count() as u32;
+        crate::starter::NodeCounts {
+            subdomain: count(crate::children::NodeRole::Subdomain),
+            interface: count(crate::children::NodeRole::Interface),
+        }
+    }
     /// The liveliness token key of node `n`, and the nodes by token key.
     pub(super) fn tokens(&self, run_id: &str) -> BTreeMap<String, NodeName> {
         self.all_nodes.iter().map(|&n| (token_of(run_id, n), n)).collect()

@@ -71,9 +71,12 @@ pub(super) fn spawn(
             set_up.supervised,
             node_args(name, run_id, &bus.node_connect, opts.interior, &bus.node_args),
         );
-        children
-            .0
-            .push(spawn_node(exe, name, &args, bus.credentials.get(&name.id()).cloned())?);
+        children.0.push(spawn_node(
+            net.starter.command(exe, name, set_up.node_counts()),
+            name,
+            &args,
+            bus.credentials.get(&name.id()).cloned(),
+        )?);
     }
     let recorder = match recording {
         Some(path) => Some(crate::recording::spawn_recorder_process(

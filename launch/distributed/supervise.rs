@@ -413,7 +413,12 @@ impl<'r> Supervisor<'r> {
         let mut args = base.clone();
         args.push("--resume".into());
         let credentials = p.credentials.clone();
-        *p = spawn_node(self.exe, name, &args, credentials)?;
+        *p = spawn_node(
+            self.net.starter.command(self.exe, name, self.set_up.node_counts()),
+            name,
+            &args,
+            credentials,
+        )?;
         p.args = base;
         Ok(None)
     }

@@ -30,6 +30,7 @@ mod replay;
 mod resultants;
 mod run_id;
 mod shared_router;
+mod slurm;
 mod stability;
 mod stall;
 mod studies;

@@ -1,0 +1,112 @@
+//! `glissade submit`: a run as a Slurm batch job (docs/operations.md, "On a cluster").
+
+use super::*;
+use std::io::Write as _;
+use std::path::Path;
+
+/// A path as one word of a bash command line (single-quoted).
+fn quoted(p: &Path) -> String {
+    format!("'{}'", p.display().to_string().replace('\'', r"'\''"))
+}
+
+/// Writes the batch script of a `glissade run <scene> --slurm` beside the run's outputs, submits
+/// it with `sbatch` and says the job id and where its outputs will be. Nothing is written if the
+/// scene is refused or the run id already has outputs there.
+pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
+    let sc = load_scene(&args.scene)?;
+    let run_id = match args.run_id.clone() {
+        Some(id) => id,
+        None => glissade::run::random_run_id()?,
+    };
+    check_run_id("--run-id", &run_id)?;
+    if let Some(a) = args.accuracy {
+        anyhow::ensure!(a.is_finite() && a > 0.0, "--accuracy {a}: must be a finite number > 0");
+    }
+    ensure_writable(&args.out)?;
+    let existing = glissade::output::existing_outputs(&args.out, &sc.model.name, &run_id);
+    anyhow::ensure!(
+        existing.is_empty(),
+        "--out {}: run {run_id} of scene `{}` already has outputs there; nothing was written",
+        args.out.display(),
+        sc.model.name
+    );
+    let absolute = |p: &Path| std::path::absolute(p).with_context(|| format!("cannot resolve {}", p.display()));
+    let (out, scene) = (absolute(&args.out)?, absolute(&args.scene)?);
+    let exe = std::env::current_exe().context("cannot locate the glissade executable for the batch script")?;
+    let stem = format!("{}-{run_id}", sc.model.name);
+    let script_path = out.join(format!("{stem}.sbatch"));
+    let mut lines = vec![
+        "#!/bin/bash".to_string(),
+        format!("#SBATCH --job-name=glissade-{}", sc.model.name),
+        format!("#SBATCH --nodes={}", args.nodes),
+        "#SBATCH --ntasks-per-node=1".to_string(),
+        format!(
+            "#SBATCH --output={}",
+            out.join(format!("{stem}.slurm-%j.out")).display()
+        ),
+    ];
+    if let Some(t) = &args.time {
+        lines.push(format!("#SBATCH --time={t}"));
+    }
+    if let Some(p) = &args.partition {
+        lines.push(format!("#SBATCH --partition={p}"));
+    }
+    lines.push(
+        "# The launcher runs here; its node processes are job steps of this job (`srun`), spread over its hosts."
+            .to_string(),
+    );
+    lines.push("# scancel sends SIGTERM: the run ends Interrupted with its recording and summary written.".to_string());
+    let mut run = format!(
+        "exec {} run {} --slurm --quiet --out {} --run-id {run_id}",
+        quoted(&exe),
+        quoted(&scene),
+        quoted(&out)
+    );
+    if let Some(a) = args.accuracy {
+        run += &format!(" --accuracy {a:e}");
+    }
+    if let Some(n) = args.max_iterations {
+        run += &format!(" --max-iterations {n}");
+    }
+    if args.no_record {
+        run += " --no-record";
+    }
+    lines.push(run);
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&script_path)
+        .with_context(|| format!("cannot write the batch script {}", script_path.display()))?;
+    file.write_all((lines.join("\n") + "\n").as_bytes())
+        .with_context(|| format!("cannot write the batch script {}", script_path.display()))?;
+    drop(file);
+    let sbatch = std::process::Command::new("sbatch")
+        .arg("--parsable")
+        .arg(&script_path)
+        .output()
+        .with_context(|| {
+            format!(
+                "cannot run sbatch (is this a Slurm cluster's login node?); the batch script is {}",
+                script_path.display()
+            )
+        })?;
+    anyhow::ensure!(
+        sbatch.status.success(),
+        "sbatch refused {}: {}",
+        script_path.display(),
+        String::from_utf8_lossy(&sbatch.stderr).trim()
+    );
+    let said = String::from_utf8_lossy(&sbatch.stdout);
+    let job = said.trim().split(';').next().unwrap_or("").to_string();
+    anyhow::ensure!(
+        !job.is_empty() && job.chars().all(|c| c.is_ascii_digit()),
+        "sbatch said `{}` instead of a job id",
+        said.trim()
+    );
+    println!("submitted Slurm job {job}: run {run_id} of scene `{}`", sc.model.name);
+    println!("batch script: {}", script_path.display());
+    println!("outputs: {}/{stem}.*", out.display());
+    println!("console: {}", out.join(format!("{stem}.slurm-{job}.out")).display());
+    println!("cancel with `scancel {job}`: the run ends Interrupted, its recording and summary written");
+    Ok(ExitCode::SUCCESS)
+}
