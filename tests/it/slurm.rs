@@ -55,14 +55,21 @@ fn finalised(mcap: &Path) -> bool {
     std::fs::read(mcap).is_ok_and(|b| b.ends_with(b"\x89MCAP0\r\n"))
 }
 
-/// Whether a process's environment says it is a Slurm job step of `job`.
-fn is_step_of(pid: i32, job: &str) -> bool {
+/// The Slurm node a process runs on as a job step of `job` (its environment's
+/// `SLURMD_NODENAME`), None if it is not one.
+fn step_of(pid: i32, job: &str) -> Option<String> {
     let env = std::fs::read(format!("/proc/{pid}/environ")).unwrap_or_default();
     let vars: Vec<String> = env
         .split(|&b| b == 0)
         .map(|v| String::from_utf8_lossy(v).into_owned())
         .collect();
-    vars.iter().any(|v| v.starts_with("SLURM_STEP_ID=")) && vars.iter().any(|v| *v == format!("SLURM_JOB_ID={job}"))
+    let step = vars.iter().any(|v| v.starts_with("SLURM_STEP_ID="))
+        && vars.iter().any(|v| *v == format!("SLURM_JOB_ID={job}"));
+    if !step {
+        return None;
+    }
+    vars.iter()
+        .find_map(|v| v.strip_prefix("SLURMD_NODENAME=").map(str::to_string))
 }
 
 /// Waits (up to `limit`) for job `job` to leave the queue.
@@ -99,9 +106,9 @@ fn job_of(said: &str) -> String {
         .to_string()
 }
 
-/// `glissade run --slurm` under `salloc`: converged, its node processes said to be job steps,
-/// the recording finished, and the fields the in-process run's bit for bit (as local processes
-/// are). Outside an allocation `--slurm` is refused, naming what to do.
+/// `glissade run --slurm` under `salloc` on two nodes: converged, its node processes said to be
+/// job steps over both, the recording finished, and the fields the in-process run's bit for bit
+/// (as local processes are). Outside an allocation `--slurm` is refused, naming what to do.
 #[test]
 fn a_run_inside_an_allocation_starts_its_nodes_as_job_steps_and_is_the_in_process_run() {
     if !slurm_ready() {
@@ -112,7 +119,13 @@ fn a_run_inside_an_allocation_starts_its_nodes_as_job_steps_and_is_the_in_proces
     let expected = in_process_fields(&scene, &dir);
     let out = dir.join("slurm");
     let run = Command::new("salloc")
-        .args(["--ntasks=1", "--overcommit", "--time=10", "--job-name=glissade-test"])
+        .args([
+            "--nodes=2",
+            "--ntasks-per-node=1",
+            "--overcommit",
+            "--time=10",
+            "--job-name=glissade-test",
+        ])
         .arg(env!("CARGO_BIN_EXE_glissade"))
         .args(["run"])
         .arg(&scene)
@@ -129,7 +142,10 @@ fn a_run_inside_an_allocation_starts_its_nodes_as_job_steps_and_is_the_in_proces
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(output_file(&out, ".summary.json")).unwrap()).unwrap();
     let nodes = summary["nodes"].to_string();
-    assert!(nodes.contains("started as job steps of Slurm job"), "{nodes}");
+    assert!(
+        nodes.contains("started as job steps of Slurm job") && nodes.contains(" on n1, n2"),
+        "{nodes}"
+    );
     assert_eq!(std::fs::read(output_file(&out, ".fields.json")).unwrap(), expected);
     assert!(finalised(&output_file(&out, ".mcap")));
 
@@ -150,9 +166,10 @@ fn a_run_inside_an_allocation_starts_its_nodes_as_job_steps_and_is_the_in_proces
 }
 
 /// `glissade submit` writes its batch script beside the outputs and submits it: the job's run
-/// converges to the in-process numbers. A second, endless job runs its node processes as job
-/// steps of the job; `scancel` ends it as Interrupted, with the summary written, the recording
-/// finished and no process of the run left.
+/// converges to the in-process numbers. A second, endless job on two nodes runs its node
+/// processes as job steps of the job over both; `scancel` ends it as Interrupted, with the
+/// summary written, the recording finished (it opens in `glissade replay`) and no process of the
+/// run left.
 #[test]
 fn a_submitted_run_is_the_in_process_run_and_scancel_interrupts_one() {
     if !slurm_ready() {
@@ -201,7 +218,7 @@ fn a_submitted_run_is_the_in_process_run_and_scancel_interrupts_one() {
     let said = Command::new(exe)
         .args(["submit"])
         .arg(&endless)
-        .args(["--time", "10", "--run-id", &run_id, "--out"])
+        .args(["--nodes", "2", "--time", "10", "--run-id", &run_id, "--out"])
         .arg(&out)
         .output()
         .unwrap();
@@ -226,10 +243,12 @@ fn a_submitted_run_is_the_in_process_run_and_scancel_interrupts_one() {
         );
         std::thread::sleep(Duration::from_millis(200));
     };
-    assert!(
-        nodes.iter().all(|&p| is_step_of(p, &job)),
-        "node processes not steps of job {job}"
-    );
+    // Steps of the job, over both of its nodes.
+    let on: std::collections::BTreeSet<String> = nodes
+        .iter()
+        .map(|&p| step_of(p, &job).unwrap_or_else(|| panic!("process {p} is not a step of job {job}")))
+        .collect();
+    assert_eq!(on.into_iter().collect::<Vec<_>>(), ["n1", "n2"]);
     std::thread::sleep(Duration::from_secs(2));
     assert!(Command::new("scancel").arg(&job).status().unwrap().success());
     wait_gone(&job, Duration::from_secs(120));
@@ -239,7 +258,12 @@ fn a_submitted_run_is_the_in_process_run_and_scancel_interrupts_one() {
         serde_json::from_slice(&std::fs::read(output_file(&out, ".summary.json")).unwrap()).unwrap();
     assert_eq!(summary["interrupted"], serde_json::json!(true), "{console}");
     assert!(summary["iterations"].as_u64().unwrap() > 0, "{summary}");
-    assert!(finalised(&output_file(&out, ".mcap")), "{console}");
+    let mcap = output_file(&out, ".mcap");
+    assert!(finalised(&mcap), "{console}");
+    // The cancelled run's recording opens in the replay.
+    let rrd = dir.join("cancelled.rrd");
+    glissade_ok(&[&"replay", &"--save", &rrd, &mcap]);
+    assert!(std::fs::metadata(&rrd).is_ok_and(|m| m.len() > 0));
     assert!(
         processes_with(&run_id, &[]).is_empty(),
         "processes of run {run_id} remain"
