@@ -374,7 +374,9 @@ pub(crate) fn join_bus(
         None => {
             let host = Host {
                 recorded,
-                remote_nodes: !net.remote.is_empty(),
+                // Nodes started by hand, or job steps of an allocation of several hosts, may run
+                // on other machines.
+                remote_nodes: !net.remote.is_empty() || net.starter.hosts() > 1,
                 room: transport::shared_memory_room(),
                 lockable: transport::shared_memory_lockable(),
             };
@@ -416,6 +418,21 @@ pub(crate) fn join_bus(
         // Node processes that may run on other hosts (Slurm job steps) reach the router by this
         // host's name, on every interface unless --listen says where.
         let advertised = net.starter.advertised_host()?;
+        if advertised.is_some() {
+            if let Some(l) = net
+                .listen
+                .iter()
+                .find(|l| l.contains("/127.") || l.contains("/[::1]") || l.contains("/localhost:"))
+            {
+                return Err(Error::Option {
+                    option: "--listen".into(),
+                    why: format!(
+                        "{l} is this host's loopback, which node processes on the allocation's other hosts cannot \
+                         reach; with --slurm listen on tcp/0.0.0.0:<port> or on an address the other hosts reach"
+                    ),
+                });
+            }
+        }
         let scheme = if tls.is_some() { "tls" } else { "tcp" };
         let listen = match (net.listen.is_empty(), &advertised) {
             (true, None) => vec![format!("{scheme}/127.0.0.1:{}", free_port()?)],

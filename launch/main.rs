@@ -79,6 +79,15 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 m.time.n_points(),
                 m.subdomains.iter().map(|s| s.n_dofs()).sum::<usize>()
             );
+            println!(
+                "plane: {}",
+                match m.plane {
+                    glissade_mechanics::model::Plane::Strain => "strain (unit thickness; forces in N/mm)",
+                    glissade_mechanics::model::Plane::Stress => "stress (unit thickness; forces in N/mm)",
+                    glissade_mechanics::model::Plane::Axisymmetric =>
+                        "axisymmetric (x = r, y = z; forces are totals over the circumference, in N)",
+                }
+            );
             // How a run as processes deploys it: which subdomains each process hosts, which
             // interfaces each interface node owns.
             let plan = glissade_deploy::Plan::new(m).with_scene(&sc);

@@ -113,6 +113,14 @@ impl Starter {
         }
     }
 
+    /// How many hosts node processes may start on (1 on this machine).
+    pub fn hosts(&self) -> usize {
+        match self {
+            Starter::Local => 1,
+            Starter::Slurm(a) => a.hosts.len(),
+        }
+    }
+
     /// What the run's node list says of where its processes were started.
     pub fn describe(&self) -> Option<String> {
         match self {

@@ -22,6 +22,29 @@ pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
     if let Some(a) = args.accuracy {
         anyhow::ensure!(a.is_finite() && a > 0.0, "--accuracy {a}: must be a finite number > 0");
     }
+    // What goes into `#SBATCH` lines: one word each, nothing a line break or a space could split,
+    // and no `%` in the output path (Slurm expands it as a file-name pattern).
+    let plain = |what: &str, v: &str| -> anyhow::Result<()> {
+        anyhow::ensure!(
+            !v.is_empty() && v.chars().all(|c| c.is_ascii_alphanumeric() || "-_:.,+".contains(c)),
+            "{what} `{v}`: only letters, digits and - _ : . , + are taken into the batch script"
+        );
+        Ok(())
+    };
+    if let Some(t) = &args.time {
+        plain("--time", t)?;
+    }
+    if let Some(p) = &args.partition {
+        plain("--partition", p)?;
+    }
+    let absolute = |p: &Path| std::path::absolute(p).with_context(|| format!("cannot resolve {}", p.display()));
+    let (out, scene) = (absolute(&args.out)?, absolute(&args.scene)?);
+    let shown = out.display().to_string();
+    anyhow::ensure!(
+        !shown.chars().any(|c| c.is_whitespace() || c.is_control() || c == '%'),
+        "--out {shown}: the job's console is written there through `#SBATCH --output`, which takes no \
+         space, control character or `%` in its path; choose another --out"
+    );
     ensure_writable(&args.out)?;
     let existing = glissade::output::existing_outputs(&args.out, &sc.model.name, &run_id);
     anyhow::ensure!(
@@ -30,8 +53,6 @@ pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
         args.out.display(),
         sc.model.name
     );
-    let absolute = |p: &Path| std::path::absolute(p).with_context(|| format!("cannot resolve {}", p.display()));
-    let (out, scene) = (absolute(&args.out)?, absolute(&args.scene)?);
     let exe = std::env::current_exe().context("cannot locate the glissade executable for the batch script")?;
     let stem = format!("{}-{run_id}", sc.model.name);
     let script_path = out.join(format!("{stem}.sbatch"));

@@ -24,6 +24,9 @@ use std::collections::{BTreeMap, HashSet};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+/// How long a node step's exit waits, under Slurm, for the launcher's own SIGTERM of a `scancel`
+/// before it counts as the node's failure ([`Supervisor::failure`]).
+const SLURM_SIGNAL_GRACE: Duration = Duration::from_secs(2);
 /// The state of a run's supervision, from the start of its processes to their exit.
 pub(super) struct Supervisor<'r> {
     run_id: &'r str,
@@ -227,6 +230,25 @@ impl<'r> Supervisor<'r> {
     /// a node started by hand that left, the recorder's failure before the start, nodes not
     /// ready in time. Starts the iterations once every node is ready.
     fn failure(&mut self, spawned: &mut Spawned) -> Result<Option<String>> {
+        if matches!(self.net.starter, crate::starter::Starter::Slurm(_)) && !self.done_sent {
+            // `scancel` signals the job's steps and the launcher each on their own: a node step
+            // can end before the launcher hears its own SIGTERM. A node exit is taken for a
+            // failure (or restarted) only once the launcher was not interrupted meanwhile.
+            let exited = spawned
+                .children
+                .0
+                .iter_mut()
+                .any(|p| p.status.is_none() && matches!(p.child.try_wait(), Ok(Some(_))));
+            if exited {
+                let until = Instant::now() + SLURM_SIGNAL_GRACE;
+                while Instant::now() < until && !interrupted() {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                if interrupted() {
+                    return Ok(None);
+                }
+            }
+        }
         let mut child_failure = if self.done_sent {
             // The launcher holds every result: a node process that fails now (killed on its way
             // out, say) costs nothing, and a replacement would wait for a `done` already sent. One

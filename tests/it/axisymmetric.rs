@@ -6,7 +6,7 @@
 use crate::common::{glissade_ok, output_file, scene, scene_text, scratch};
 use glissade_messages::Verdict;
 
-/// The press fit's run: converged; the push on the shaft's top balances the axial friction force
+/// `check` says the plane; the press fit's run: converged; the push on the shaft's top balances the axial friction force
 /// on the fit at every time point (the shaft's axial equilibrium, its one rigid motion), and the
 /// hub's seat carries the same force back; the radial column and the moments, not resultants in
 /// axisymmetry, are empty (NaN); forces are in N (totals over the circumference) as the headers
@@ -23,6 +23,8 @@ fn a_press_fit_pushed_out_of_its_hub_holds_f_times_its_normal_force() {
         "{}/launch/scenes/press-fit-axisymmetric.toml",
         env!("CARGO_MANIFEST_DIR")
     );
+    let checked = glissade_ok(&[&"check", &scene_path]);
+    assert!(checked.contains("plane: axisymmetric (x = r, y = z;"), "{checked}");
     let out = glissade_ok(&[&"run", &scene_path, &"--in-process", &"--no-record", &"--out", &dir.0]);
     assert!(out.contains("Converged"), "{out}");
     assert!(out.contains("support boundary[1] at t = 1: R = (—, "), "{out}");

@@ -257,6 +257,13 @@ fn a_submitted_run_is_the_in_process_run_and_scancel_interrupts_one() {
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(output_file(&out, ".summary.json")).unwrap()).unwrap();
     assert_eq!(summary["interrupted"], serde_json::json!(true), "{console}");
+    // The launcher's exit code, as Slurm kept it: 130, as after Ctrl-C.
+    let shown = Command::new("scontrol").args(["show", "job", &job]).output().unwrap();
+    let shown = String::from_utf8_lossy(&shown.stdout);
+    assert!(
+        shown.contains("JobState=CANCELLED") && shown.contains("ExitCode=130:0"),
+        "{shown}"
+    );
     assert!(summary["iterations"].as_u64().unwrap() > 0, "{summary}");
     let mcap = output_file(&out, ".mcap");
     assert!(finalised(&mcap), "{console}");
@@ -268,4 +275,106 @@ fn a_submitted_run_is_the_in_process_run_and_scancel_interrupts_one() {
         processes_with(&run_id, &[]).is_empty(),
         "processes of run {run_id} remain"
     );
+}
+
+/// A node process that dies in a job ends the run naming it, as a local one does: an endless
+/// submitted run without restarts, its subdomain process 1 (a job step) killed with SIGKILL.
+#[test]
+fn a_node_step_that_dies_ends_the_run_naming_it() {
+    if !slurm_ready() {
+        return;
+    }
+    let dir = scratch("slurm-node-death");
+    let scene = scene_file(&dir, "small-three-layer");
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(text.contains("accuracy = 1e-3\n") && text.contains("\n[deployment]\n"));
+    let text = text
+        .replace(
+            "accuracy = 1e-3\n",
+            "tolerance = 1e-300\nmax_iterations = 1000000\nstagnation_window = 1000000\n",
+        )
+        .replace("\n[deployment]\n", "\n[deployment]\nrestarts = 0\n");
+    let endless = dir.join("endless.toml");
+    std::fs::write(&endless, text).unwrap();
+    let run_id = format!("node-death-{}", std::process::id());
+    let out = dir.join("out");
+    let said = glissade_ok(&[
+        &"submit",
+        &endless,
+        &"--time",
+        &"10",
+        &"--run-id",
+        &run_id,
+        &"--out",
+        &out,
+    ]);
+    let job = job_of(&said);
+    let _cancel = Job(job.clone());
+    let t = Instant::now();
+    let victim = loop {
+        let found: Vec<i32> = processes_with(&run_id, &["node", "subdomain", "--index", "1"])
+            .into_iter()
+            .filter(|p| std::fs::read_to_string(format!("/proc/{p}/comm")).is_ok_and(|c| c.trim() == "glissade"))
+            .collect();
+        if let [p] = found[..] {
+            break p;
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(180),
+            "subdomain process 1 did not start"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(
+        step_of(victim, &job).is_some(),
+        "subdomain process 1 is not a step of job {job}"
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    // SAFETY: a plain kill(2) of a process this test found by its command line.
+    assert_eq!(unsafe { libc::kill(victim, libc::SIGKILL) }, 0);
+    wait_gone(&job, Duration::from_secs(120));
+    let console = std::fs::read_to_string(output_file(&out, &format!(".slurm-{job}.out"))).unwrap();
+    let error = console
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .unwrap_or_else(|| panic!("no error line in:\n{console}"));
+    assert!(error.contains("node subdomain:1 failed"), "{error}");
+    assert!(
+        processes_with(&run_id, &[]).is_empty(),
+        "processes of run {run_id} remain"
+    );
+}
+
+/// What would break the batch script is refused before anything is written or submitted (no
+/// cluster needed): a `--time` or `--partition` that would add lines to it, an output folder
+/// whose path `#SBATCH --output` cannot take.
+#[test]
+fn submit_refuses_what_would_break_its_batch_script() {
+    let dir = scratch("slurm-submit-refusals");
+    let scene = scene_file(&dir, "small-three-layer");
+    for (args, said) in [
+        (
+            vec!["--time", "10\n#SBATCH --wrap=x", "--out", "a"],
+            "--time `10\n#SBATCH --wrap=x`: only letters, digits",
+        ),
+        (
+            vec!["--partition", "main debug", "--out", "b"],
+            "--partition `main debug`: only",
+        ),
+        (vec!["--out", "with space"], "takes no space, control character or `%`"),
+        (vec!["--out", "100%"], "takes no space, control character or `%`"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_glissade"))
+            .current_dir(&*dir)
+            .arg("submit")
+            .arg(&scene)
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(said), "{args:?}: {err}");
+        let folder = args[args.iter().position(|a| *a == "--out").unwrap() + 1];
+        assert!(!dir.join(folder).exists(), "{args:?}: {folder} was created");
+    }
 }

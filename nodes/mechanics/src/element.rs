@@ -127,6 +127,10 @@ pub fn strain_displacement(x: &[[f64; 2]; 8], xi: f64, eta: f64) -> Result<(SMat
     Ok((b, det))
 }
 
+/// A point within this fraction of its element's size (or, for the scene builder, of the scene's
+/// size) from r = 0 is on the axis: its u_r is held and its hoop strain is ∂u_r/∂r.
+pub const AXIS_TOLERANCE: f64 = 1e-9;
+
 /// Axisymmetric strain–displacement matrix B (4 × 16: ε_rr, ε_zz, γ_rz, ε_θθ = u_r/r), det J
 /// and the radius r at (ξ, η). On the axis (r = 0, where u_r = 0) the hoop strain is its limit
 /// ∂u_r/∂r; quadrature points are never there.
@@ -142,7 +146,11 @@ pub fn strain_displacement_axisymmetric(
     b.fixed_view_mut::<3, 16>(0, 0).copy_from(&b3);
     let scale = element_size(x);
     for k in 0..8 {
-        b[(3, 2 * k)] = if r > 1e-12 * scale { n[k] / r } else { b3[(0, 2 * k)] };
+        b[(3, 2 * k)] = if r > AXIS_TOLERANCE * scale {
+            n[k] / r
+        } else {
+            b3[(0, 2 * k)]
+        };
     }
     Ok((b, det, r))
 }

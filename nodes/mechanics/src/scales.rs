@@ -44,6 +44,10 @@ pub struct Scales {
     pub displacement: f64,
     /// D: the largest side of the bounding box of every node of the scene (mm).
     pub size: f64,
+    /// The thickness forces are per: 1 mm in plane strain and stress; in axisymmetry, where
+    /// forces are totals over the circumference, the circumference 2π·r_max at the scene's
+    /// largest radius (mm).
+    pub thickness: f64,
 }
 
 impl Scales {
@@ -56,6 +60,10 @@ impl Scales {
     ///   section of size D);
     /// - U_s = max(U_d, P/E_min, 1e-12·D): the prescribed motion, or the displacement of a part
     ///   of size D under the mean traction P/D (strain P/(D·E_min)).
+    ///
+    /// In axisymmetry P is a total over the circumference: the forces of a strain are taken over
+    /// the thickness 2π·r_max (F_s = max(P, E_max·U_d·t, 1e-12·E_max·D·t), U_s = max(U_d,
+    /// P/(E_min·t), 1e-12·D)), so that both scales mean what they mean in a plane problem.
     ///
     /// Maxima over the whole history, so a time point of zero load is checked against the same
     /// (positive) scales as the loaded ones. Neither depends on the solution checked.
@@ -70,6 +78,7 @@ impl Scales {
             }
         }
         let size = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.0);
+        let thickness = model.plane.measure([hi[0].max(0.0), 0.0]);
         let e_min = model
             .subdomains
             .iter()
@@ -104,19 +113,23 @@ impl Scales {
             }
         }
         Self {
-            force: load.max(e_max * motion).max(STRAIN_FLOOR * e_max * size),
-            displacement: motion.max(load / e_min).max(STRAIN_FLOOR * size),
+            force: load
+                .max(e_max * motion * thickness)
+                .max(STRAIN_FLOOR * e_max * size * thickness),
+            displacement: motion.max(load / (e_min * thickness)).max(STRAIN_FLOOR * size),
             size,
+            thickness,
         }
     }
 
-    /// T_s = F_s / D (MPa): the traction of the force scale spread over the scene's size. Contact
+    /// T_s = F_s / (D·t) (MPa): the traction of the force scale spread over the scene's size (and
+    /// its thickness t, [`Self::thickness`]). Contact
     /// tractions below 1e-12 of it are round-off; a run whose local stage finds every contact
     /// point separated takes the forces its linear stage still carries for round-off only below
     /// the accuracy times this ([`crate::model::SolverParams`]' stop rule).
     pub fn traction(&self) -> f64 {
         if self.size > 0.0 {
-            self.force / self.size
+            self.force / (self.size * self.thickness)
         } else {
             self.force
         }

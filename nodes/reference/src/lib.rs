@@ -24,7 +24,7 @@
 //! C_t = λ_t − proj_[−τ, τ](λ_t + r Δs), τ = f·max(0, −ν);
 //! r_m = r_factor · E_m · W_m / h_Γ (E_m the mean Young modulus of the two sides, W_m the merged
 //! weight, h_Γ = 1.5 × the largest pair weight of the interface = the edge length of a uniform
-//! edge mesh: GetFEM's r·α_i). Each step is warm-started from the previous one. Steps are
+//! edge mesh: GetFEM's r·α_i; in axisymmetry each weight over its 2πr, a length again). Each step is warm-started from the previous one. Steps are
 //! globalised by backtracking on ψ = ‖[R_u; C]‖² (full steps whenever they decrease ψ; without
 //! it, full steps cycle between two all-slip active sets at load reversals of the small
 //! three-layer scene). A step is tried by [`Attempt`]s in turn, each from the previous converged

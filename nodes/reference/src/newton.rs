@@ -96,7 +96,15 @@ impl<'m> Problem<'m> {
             let InterfaceKind::Contact { friction, gap } = &itf.kind else {
                 continue;
             };
-            let h = 1.5 * itf.weights.iter().copied().fold(0.0, f64::max);
+            // The largest edge length about a pair (its weight, per unit of the plane's measure:
+            // in axisymmetry a weight is ∫ N 2πr ds).
+            let h = 1.5
+                * itf
+                    .weights
+                    .iter()
+                    .zip(&itf.coords)
+                    .map(|(w, x)| w / model.plane.measure(*x))
+                    .fold(0.0, f64::max);
             let e_mean = 0.5 * (model.subdomains[itf.a].material.e + model.subdomains[itf.b].material.e);
             for (p, &(na, nb)) in itf.pairs.iter().enumerate() {
                 let (ga, gb) = (num.node(itf.a, na), num.node(itf.b, nb));

@@ -15,7 +15,7 @@ impl Ctx<'_> {
             .iter()
             .flat_map(|s| s.mesh.coords.iter())
             .fold(0.0f64, |m, p| m.max(p[0].abs()).max(p[1].abs()));
-        let tol = 1e-9 * size;
+        let tol = glissade_mechanics::element::AXIS_TOLERANCE * size;
         for (sub, l) in subs.iter().zip(loads.iter_mut()) {
             for (n, p) in sub.mesh.coords.iter().enumerate() {
                 self.check(p[0] >= -tol, "plane", || {

@@ -269,7 +269,7 @@ impl Ctx<'_> {
             let heaviest = g.weights.iter().fold(0.0f64, |m, w| m.max(w.abs()));
             let on_axis = |p: usize| {
                 self.plane == Plane::Axisymmetric
-                    && g.weights[p].abs() <= 1e-12 * heaviest
+                    && g.weights[p].abs() <= glissade_mechanics::element::AXIS_TOLERANCE * heaviest
                     && radial_held(g.a, g.pairs[p].0)
                     && radial_held(g.b, g.pairs[p].1)
             };

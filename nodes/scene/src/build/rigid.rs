@@ -31,14 +31,19 @@ impl Ctx<'_> {
                 continue;
             }
             let mut free = Vec::new();
-            if !rows.iter().any(|r| r.1 == 0) {
-                free.push("x-translation");
-            }
-            if !rows.iter().any(|r| r.1 == 1) {
-                free.push("y-translation");
-            }
-            if free.len() < 3 - rank {
-                free.push("rotation");
+            if self.plane == Plane::Axisymmetric {
+                // Its one rigid motion.
+                free.push("y-translation (along the axis)");
+            } else {
+                if !rows.iter().any(|r| r.1 == 0) {
+                    free.push("x-translation");
+                }
+                if !rows.iter().any(|r| r.1 == 1) {
+                    free.push("y-translation");
+                }
+                if free.len() < 3 - rank {
+                    free.push("rotation");
+                }
             }
             let shown: Vec<&str> = members.iter().take(6).map(|&s| subs[s].name.as_str()).collect();
             let more = if members.len() > shown.len() {

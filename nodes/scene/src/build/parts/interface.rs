@@ -124,11 +124,16 @@ pub(super) fn part_interface(
             normal_sum[p][1] -= sign * t[0];
         }
         // A straight edge (middle node at the chord's middle) measures its chord, as the block
-        // mesher's edges do; a curved one its arc (Gauss).
+        // mesher's edges do; a curved one its arc (Gauss: the plane weights' sum, whatever the
+        // plane, as the length is a length in axisymmetry too).
         let chord = ((x[2][0] - x[0][0]).powi(2) + (x[2][1] - x[0][1]).powi(2)).sqrt();
         let middle = [0.5 * (x[0][0] + x[2][0]) - x[1][0], 0.5 * (x[0][1] + x[2][1]) - x[1][1]];
         let straight = middle[0].abs().max(middle[1].abs()) <= 1e-12 * chord;
-        length += if straight { chord } else { m.iter().sum::<f64>() };
+        length += if straight {
+            chord
+        } else {
+            edge_lumped_mass(&x, Plane::Strain).iter().sum::<f64>()
+        };
     }
     // Each edge adds a unit normal at its node: a sum far below one means edges that turn back
     // (or a tangent that vanishes, a NaN).
