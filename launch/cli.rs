@@ -402,6 +402,18 @@ pub(crate) struct ReplayArgs {
     pub(crate) node: Vec<String>,
 }
 
+/// The solver settings a run's command line may override.
+#[derive(clap::Args)]
+pub(crate) struct SolverOverrideArgs {
+    /// Stop once the estimated contact-traction error is at most this (overrides the scene's
+    /// `solver.accuracy`, default 1e-3).
+    #[arg(long, allow_negative_numbers = true)]
+    pub(crate) accuracy: Option<f64>,
+    /// Iteration cap (overrides the scene's `solver.max_iterations`, default 1000).
+    #[arg(long)]
+    pub(crate) max_iterations: Option<usize>,
+}
+
 #[derive(clap::Args)]
 pub(crate) struct SubmitArgs {
     /// Scene file (TOML).
@@ -422,13 +434,8 @@ pub(crate) struct SubmitArgs {
     /// Run id (default: 128 random bits in hex, chosen now so that the outputs' names are known).
     #[arg(long)]
     pub(crate) run_id: Option<String>,
-    /// Stop once the estimated contact-traction error is at most this (the scene's
-    /// `solver.accuracy` otherwise).
-    #[arg(long, allow_negative_numbers = true)]
-    pub(crate) accuracy: Option<f64>,
-    /// Iteration cap (the scene's `solver.max_iterations` otherwise).
-    #[arg(long)]
-    pub(crate) max_iterations: Option<usize>,
+    #[command(flatten)]
+    pub(crate) solver: SolverOverrideArgs,
     /// Record nothing.
     #[arg(long)]
     pub(crate) no_record: bool,
@@ -449,13 +456,8 @@ pub(crate) struct RunArgs {
     /// so that nobody on a shared router can guess the run's key expressions.
     #[arg(long)]
     pub(crate) run_id: Option<String>,
-    /// Stop once the estimated contact-traction error is at most this (overrides the scene's
-    /// `solver.accuracy`, default 1e-3).
-    #[arg(long, allow_negative_numbers = true)]
-    pub(crate) accuracy: Option<f64>,
-    /// Iteration cap (overrides the scene's `solver.max_iterations`, default 1000).
-    #[arg(long)]
-    pub(crate) max_iterations: Option<usize>,
+    #[command(flatten)]
+    pub(crate) solver: SolverOverrideArgs,
     /// Also write every subdomain's displacement field.
     #[arg(long)]
     pub(crate) interior: bool,

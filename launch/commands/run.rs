@@ -80,8 +80,8 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     let started = std::time::Instant::now();
     glissade::console::set_verbose(args.verbose);
     let overrides = Overrides {
-        accuracy: args.accuracy,
-        max_iterations: args.max_iterations,
+        accuracy: args.solver.accuracy,
+        max_iterations: args.solver.max_iterations,
         record: match (args.no_record, args.record) {
             (true, _) | (false, Some(crate::cli::RecordArg::Off)) => Some(RecordOverride::Off),
             (false, Some(crate::cli::RecordArg::Full)) => Some(RecordOverride::Full),

@@ -19,7 +19,7 @@ pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
         None => glissade::run::random_run_id()?,
     };
     check_run_id("--run-id", &run_id)?;
-    if let Some(a) = args.accuracy {
+    if let Some(a) = args.solver.accuracy {
         anyhow::ensure!(a.is_finite() && a > 0.0, "--accuracy {a}: must be a finite number > 0");
     }
     // What goes into `#SBATCH` lines: one word each, nothing a line break or a space could split,
@@ -83,10 +83,10 @@ pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
         quoted(&scene),
         quoted(&out)
     );
-    if let Some(a) = args.accuracy {
+    if let Some(a) = args.solver.accuracy {
         run += &format!(" --accuracy {a:e}");
     }
-    if let Some(n) = args.max_iterations {
+    if let Some(n) = args.solver.max_iterations {
         run += &format!(" --max-iterations {n}");
     }
     if args.no_record {

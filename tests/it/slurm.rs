@@ -108,7 +108,8 @@ fn job_of(said: &str) -> String {
 
 /// `glissade run --slurm` under `salloc` on two nodes: converged, its node processes said to be
 /// job steps over both, the recording finished, and the fields the in-process run's bit for bit
-/// (as local processes are). Outside an allocation `--slurm` is refused, naming what to do.
+/// (as local processes are). Outside an allocation `--slurm` is refused, naming what to do, and
+/// inside one so is a loopback `--listen`.
 #[test]
 fn a_run_inside_an_allocation_starts_its_nodes_as_job_steps_and_is_the_in_process_run() {
     if !slurm_ready() {
@@ -161,6 +162,23 @@ fn a_run_inside_an_allocation_starts_its_nodes_as_job_steps_and_is_the_in_proces
     assert_eq!(outside.status.code(), Some(2), "{err}");
     assert!(
         err.contains("not inside a Slurm allocation") && err.contains("glissade submit"),
+        "{err}"
+    );
+
+    // Inside one, a loopback --listen is refused: the other hosts' steps could not reach it.
+    let loopback = Command::new("salloc")
+        .args(["--nodes=2", "--ntasks-per-node=1", "--overcommit", "--time=5"])
+        .arg(env!("CARGO_BIN_EXE_glissade"))
+        .args(["run"])
+        .arg(&scene)
+        .args(["--slurm", "--quiet", "--listen", "tcp/127.0.0.1:17447", "--out"])
+        .arg(dir.join("loopback"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&loopback.stderr);
+    assert_eq!(loopback.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--listen: tcp/127.0.0.1:17447 is this host's loopback"),
         "{err}"
     );
 }
