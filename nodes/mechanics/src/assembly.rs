@@ -27,10 +27,12 @@ pub fn stiffness_triplets(
     material: Material,
     plane: Plane,
 ) -> Result<Vec<(usize, usize, f64)>, AssemblyError> {
+    let elasticity = element::Elasticity::new(material, plane);
     let mut out = Vec::with_capacity(mesh.elements.len() * 256);
     for (e, conn) in mesh.elements.iter().enumerate() {
         let x: [[f64; 2]; 8] = std::array::from_fn(|k| mesh.coords[conn[k]]);
-        let ke = element::element_stiffness(&x, material, plane)
+        let ke = elasticity
+            .stiffness(&x)
             .map_err(|source| AssemblyError::BadElement { element: e, source })?;
         for a in 0..16 {
             let ga = 2 * conn[a / 2] + a % 2;

@@ -167,46 +167,67 @@ fn element_size(x: &[[f64; 2]; 8]) -> f64 {
     (hi[0] - lo[0]).max(hi[1] - lo[1])
 }
 
-/// Element stiffness of `material` under `plane`: [`stiffness`] in plane strain or stress,
-/// Σ_gp Bᵀ D B det J w 2πr with the hoop strain in axisymmetry.
-pub fn element_stiffness(x: &[[f64; 2]; 8], material: Material, plane: Plane) -> Result<ElementMatrix, BadElement> {
-    if plane != Plane::Axisymmetric {
-        return stiffness(x, &elasticity(material, plane));
-    }
-    let d = elasticity_axisymmetric(material);
-    let mut k = ElementMatrix::zeros();
-    for &(xi, wx) in &GAUSS3 {
-        for &(eta, wy) in &GAUSS3 {
-            let (b, det, r) = strain_displacement_axisymmetric(x, xi, eta)?;
-            let db = d * b;
-            k += b.transpose() * db * (det * wx * wy * plane.measure([r, 0.0]));
-        }
-    }
-    Ok(k)
+/// Isotropic elasticity of one material under a plane, built once for all the elements of a
+/// part: the element stiffness and the stresses, in the plane or with the hoop strain.
+#[derive(Debug, Clone, Copy)]
+pub enum Elasticity {
+    /// Plane strain or stress: D on (ε_xx, ε_yy, γ_xy); σ_zz = ν(σ_xx + σ_yy) with `nu_zz =
+    /// Some(ν)` (plane strain), 0 with None (plane stress).
+    Plane { d: SMatrix<f64, 3, 3>, nu_zz: Option<f64> },
+    /// Axisymmetry: D on (ε_rr, ε_zz, γ_rz, ε_θθ).
+    Axisymmetric(SMatrix<f64, 4, 4>),
 }
 
-/// Stress (σ_xx, σ_yy, σ_zz, σ_xy) at (ξ, η) from element nodal displacements `u` (16): σ_zz is
-/// ν(σ_xx + σ_yy) in plane strain, 0 in plane stress, and in axisymmetry the hoop stress σ_θθ
-/// (x = r, y = z).
-pub fn stress_in(
-    x: &[[f64; 2]; 8],
-    material: Material,
-    plane: Plane,
-    u: &SVector<f64, 16>,
-    xi: f64,
-    eta: f64,
-) -> Result<[f64; 4], BadElement> {
-    if plane == Plane::Axisymmetric {
-        let (b, _, _) = strain_displacement_axisymmetric(x, xi, eta)?;
-        let s = elasticity_axisymmetric(material) * (b * u);
-        return Ok([s[0], s[1], s[3], s[2]]);
+impl Elasticity {
+    pub fn new(material: Material, plane: Plane) -> Self {
+        match plane {
+            Plane::Axisymmetric => Elasticity::Axisymmetric(elasticity_axisymmetric(material)),
+            Plane::Strain => Elasticity::Plane {
+                d: elasticity(material, plane),
+                nu_zz: Some(material.nu),
+            },
+            Plane::Stress => Elasticity::Plane {
+                d: elasticity(material, plane),
+                nu_zz: None,
+            },
+        }
     }
-    let s = stress(x, &elasticity(material, plane), u, xi, eta)?;
-    let sz = match plane {
-        Plane::Strain => material.nu * (s[0] + s[1]),
-        _ => 0.0,
-    };
-    Ok([s[0], s[1], sz, s[2]])
+
+    /// Element stiffness: [`stiffness`] in plane strain or stress, Σ_gp Bᵀ D B det J w 2πr with
+    /// the hoop strain in axisymmetry.
+    pub fn stiffness(&self, x: &[[f64; 2]; 8]) -> Result<ElementMatrix, BadElement> {
+        let d = match self {
+            Elasticity::Plane { d, .. } => return stiffness(x, d),
+            Elasticity::Axisymmetric(d) => d,
+        };
+        let mut k = ElementMatrix::zeros();
+        for &(xi, wx) in &GAUSS3 {
+            for &(eta, wy) in &GAUSS3 {
+                let (b, det, r) = strain_displacement_axisymmetric(x, xi, eta)?;
+                let db = d * b;
+                k += b.transpose() * db * (det * wx * wy * Plane::Axisymmetric.measure([r, 0.0]));
+            }
+        }
+        Ok(k)
+    }
+
+    /// Stress (σ_xx, σ_yy, σ_zz, σ_xy) at (ξ, η) from element nodal displacements `u` (16): σ_zz
+    /// is ν(σ_xx + σ_yy) in plane strain, 0 in plane stress, and in axisymmetry the hoop stress
+    /// σ_θθ (x = r, y = z).
+    pub fn stress(&self, x: &[[f64; 2]; 8], u: &SVector<f64, 16>, xi: f64, eta: f64) -> Result<[f64; 4], BadElement> {
+        match self {
+            Elasticity::Plane { d, nu_zz } => {
+                let s = stress(x, d, u, xi, eta)?;
+                let sz = nu_zz.map_or(0.0, |nu| nu * (s[0] + s[1]));
+                Ok([s[0], s[1], sz, s[2]])
+            }
+            Elasticity::Axisymmetric(d) => {
+                let (b, _, _) = strain_displacement_axisymmetric(x, xi, eta)?;
+                let s = d * (b * u);
+                Ok([s[0], s[1], s[3], s[2]])
+            }
+        }
+    }
 }
 
 /// Element stiffness K_e = Σ_gp Bᵀ D B det J w (3 × 3 Gauss), unit thickness.
@@ -325,7 +346,9 @@ mod tests {
             let [a, b] = NODE_XI[k];
             [5.0 + 1.5 * (a + 1.0) + 0.2 * b, 2.0 * (b + 1.0) + 0.1 * a]
         });
-        let k = element_stiffness(&x, Material { e: 210e3, nu: 0.3 }, Plane::Axisymmetric).unwrap();
+        let k = Elasticity::new(Material { e: 210e3, nu: 0.3 }, Plane::Axisymmetric)
+            .stiffness(&x)
+            .unwrap();
         let norm = k.norm();
         assert!((k - k.transpose()).norm() < 1e-12 * norm);
         let axial = SVector::<f64, 16>::from_fn(|r, _| (r % 2) as f64);

@@ -1,7 +1,7 @@
 //! Post-processing of a subdomain's displacement: nodal stresses (the average, over the elements
 //! sharing a node, of each element's stress at that node) and the von Mises stress.
 
-use crate::element::{stress_in, BadElement, NODE_XI};
+use crate::element::{BadElement, Elasticity, NODE_XI};
 use crate::model::{Plane, Subdomain};
 use nalgebra::SVector;
 
@@ -23,13 +23,14 @@ pub fn nodal_stresses_into(
     assert_eq!(u.len(), 2 * n, "displacement of {} values for {n} nodes", u.len());
     assert_eq!(out.len(), n);
     assert_eq!(count.len(), n);
+    let elasticity = Elasticity::new(sub.material, plane);
     out.fill([0.0; 4]);
     count.fill(0);
     for el in &sub.mesh.elements {
         let x: [[f64; 2]; 8] = std::array::from_fn(|a| sub.mesh.coords[el[a]]);
         let ue = SVector::<f64, 16>::from_fn(|r, _| u[2 * el[r / 2] + r % 2]);
         for (a, xi) in NODE_XI.iter().enumerate() {
-            let sig = stress_in(&x, sub.material, plane, &ue, xi[0], xi[1])?;
+            let sig = elasticity.stress(&x, &ue, xi[0], xi[1])?;
             let s = &mut out[el[a]];
             for c in 0..4 {
                 s[c] += sig[c];
