@@ -79,15 +79,14 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 m.time.n_points(),
                 m.subdomains.iter().map(|s| s.n_dofs()).sum::<usize>()
             );
-            println!(
-                "plane: {}",
-                match m.plane {
-                    glissade_mechanics::model::Plane::Strain => "strain (unit thickness; forces in N/mm)",
-                    glissade_mechanics::model::Plane::Stress => "stress (unit thickness; forces in N/mm)",
-                    glissade_mechanics::model::Plane::Axisymmetric =>
-                        "axisymmetric (x = r, y = z; forces are totals over the circumference, in N)",
+            let plane = match m.plane {
+                glissade_mechanics::model::Plane::Strain => "strain (unit thickness",
+                glissade_mechanics::model::Plane::Stress => "stress (unit thickness",
+                glissade_mechanics::model::Plane::Axisymmetric => {
+                    "axisymmetric (x = r, y = z; totals over the circumference"
                 }
-            );
+            };
+            println!("plane: {plane}; forces in {})", m.plane.force_unit());
             // How a run as processes deploys it: which subdomains each process hosts, which
             // interfaces each interface node owns.
             let plan = glissade_deploy::Plan::new(m).with_scene(&sc);

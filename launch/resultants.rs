@@ -188,10 +188,8 @@ pub fn boundary_console_lines(model: &Model, all: &[RuleResultants], max: usize)
         .map(|r| {
             // In axisymmetry a support's radial force and moment are not resultants (NaN): the
             // axial force alone is said.
-            let defined = |v: f64| if v.is_finite() { v } else { 0.0 };
-            let norm = |f: &[f64; 2]| defined(f[0]).hypot(defined(f[1]));
             let peak = (0..r.force.len())
-                .max_by(|&a, &b| norm(&r.force[a]).total_cmp(&norm(&r.force[b])))
+                .max_by(|&a, &b| r.magnitude(a).total_cmp(&r.magnitude(b)))
                 .unwrap_or(0);
             let value = |v: f64| {
                 if v.is_finite() {
@@ -218,7 +216,7 @@ pub fn boundary_console_lines(model: &Model, all: &[RuleResultants], max: usize)
                 model.time.t(last),
                 value(r.force[last][0]),
                 value(r.force[last][1]),
-                norm(&r.force[peak]),
+                r.magnitude(peak),
                 model.time.t(peak)
             )
         })

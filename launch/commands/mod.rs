@@ -109,3 +109,32 @@ pub(crate) fn load_with_overrides(
 pub(crate) fn default_run_id() -> glissade::Result<String> {
     glissade::run::random_run_id()
 }
+
+/// The run id `--run-id` gave, checked, or a new random one.
+pub(crate) fn run_id_of(given: Option<&str>) -> anyhow::Result<String> {
+    let run_id = match given {
+        Some(id) => id.to_string(),
+        None => default_run_id()?,
+    };
+    check_run_id("--run-id", &run_id)?;
+    Ok(run_id)
+}
+
+/// Refuses, before anything is solved or written, a run id that already has outputs of scene
+/// `name` in `out`: nothing is overwritten.
+pub(crate) fn ensure_new_run(out: &std::path::Path, name: &str, run_id: &str) -> anyhow::Result<()> {
+    let existing = glissade::output::existing_outputs(out, name, run_id);
+    if !existing.is_empty() {
+        anyhow::bail!(
+            "--out {}: run {run_id} of scene `{name}` already has outputs there ({}); nothing was overwritten: \
+             choose another --run-id (or leave it out for a new random one) or another --out",
+            out.display(),
+            existing
+                .iter()
+                .map(|p| p.file_name().unwrap_or_default().to_string_lossy().into_owned())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(())
+}

@@ -89,27 +89,10 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         },
         ..Default::default()
     };
-    let run_id = match args.run_id.clone() {
-        Some(id) => id,
-        None => default_run_id()?,
-    };
-    check_run_id("--run-id", &run_id)?;
+    let run_id = run_id_of(args.run_id.as_deref())?;
     // Fails before solving if the outputs cannot be written.
     let sc = load_with_overrides(&args.scene, &args.out, &overrides)?;
-    let existing = glissade::output::existing_outputs(&args.out, &sc.model.name, &run_id);
-    if !existing.is_empty() {
-        anyhow::bail!(
-            "--out {}: run {run_id} of scene `{}` already has outputs there ({}); nothing was overwritten: \
-             choose another --run-id (or leave it out for a new random one) or another --out",
-            args.out.display(),
-            sc.model.name,
-            existing
-                .iter()
-                .map(|p| p.file_name().unwrap_or_default().to_string_lossy().into_owned())
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
+    ensure_new_run(&args.out, &sc.model.name, &run_id)?;
     let bar = if args.quiet {
         ProgressBar::hidden()
     } else {

@@ -13,15 +13,14 @@ fn quoted(p: &Path) -> String {
 /// it with `sbatch` and says the job id and where its outputs will be. Nothing is written if the
 /// scene is refused or the run id already has outputs there.
 pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
-    let sc = load_scene(&args.scene)?;
-    let run_id = match args.run_id.clone() {
-        Some(id) => id,
-        None => glissade::run::random_run_id()?,
+    // The scene and the solver overrides, checked as `glissade run` will check them in the job.
+    let overrides = Overrides {
+        accuracy: args.solver.accuracy,
+        max_iterations: args.solver.max_iterations,
+        ..Default::default()
     };
-    check_run_id("--run-id", &run_id)?;
-    if let Some(a) = args.solver.accuracy {
-        anyhow::ensure!(a.is_finite() && a > 0.0, "--accuracy {a}: must be a finite number > 0");
-    }
+    let sc = load_scene(&args.scene)?.with_overrides(&args.scene.display().to_string(), &overrides)?;
+    let run_id = run_id_of(args.run_id.as_deref())?;
     // What goes into `#SBATCH` lines: one word each, nothing a line break or a space could split,
     // and no `%` in the output path (Slurm expands it as a file-name pattern).
     let plain = |what: &str, v: &str| -> anyhow::Result<()> {
@@ -46,13 +45,7 @@ pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
          space, control character or `%` in its path; choose another --out"
     );
     ensure_writable(&args.out)?;
-    let existing = glissade::output::existing_outputs(&args.out, &sc.model.name, &run_id);
-    anyhow::ensure!(
-        existing.is_empty(),
-        "--out {}: run {run_id} of scene `{}` already has outputs there; nothing was written",
-        args.out.display(),
-        sc.model.name
-    );
+    ensure_new_run(&args.out, &sc.model.name, &run_id)?;
     let exe = std::env::current_exe().context("cannot locate the glissade executable for the batch script")?;
     let stem = format!("{}-{run_id}", sc.model.name);
     let script_path = out.join(format!("{stem}.sbatch"));

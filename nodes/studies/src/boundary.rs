@@ -39,14 +39,17 @@ pub struct RuleResultants {
 }
 
 impl RuleResultants {
-    /// The largest |force| over the time points (N/mm), of the components that are defined (in
-    /// axisymmetry a support's axial force).
-    pub fn peak(&self) -> f64 {
+    /// |force| at time point `i`, of the components that are defined (in axisymmetry a support's
+    /// radial force is NaN: its axial force alone).
+    pub fn magnitude(&self, i: usize) -> f64 {
         let defined = |v: f64| if v.is_finite() { v } else { 0.0 };
-        self.force
-            .iter()
-            .map(|f| defined(f[0]).hypot(defined(f[1])))
-            .fold(0.0, f64::max)
+        let f = self.force[i];
+        defined(f[0]).hypot(defined(f[1]))
+    }
+
+    /// The largest [`Self::magnitude`] over the time points (N/mm; N in axisymmetry).
+    pub fn peak(&self) -> f64 {
+        (0..self.force.len()).map(|i| self.magnitude(i)).fold(0.0, f64::max)
     }
 }
 
