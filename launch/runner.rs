@@ -487,7 +487,7 @@ fn coarse_directions(
 ) -> Mat<f64> {
     let nt = model.time.n_points();
     let c = model.time.n_steps / coarse.n_steps;
-    let mut q = Mat::<f64>::zeros(layout.dofs.len(), nt);
+    let mut q = Mat::<f64>::zeros(layout.len(), nt);
     for slot in &layout.slots {
         let sol = &solutions[slot.interface];
         debug_assert_eq!(sol.interface as usize, slot.interface);

@@ -19,6 +19,7 @@ mod latin_perfect;
 mod layout;
 mod monolithic;
 mod node_failures;
+mod non_matching;
 mod pgd;
 mod reactions;
 mod real_router;

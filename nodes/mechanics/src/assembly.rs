@@ -18,6 +18,20 @@ pub enum AssemblyError {
     NotPositiveDefinite { what: String, detail: String },
     #[error("sparse matrix of {what} could not be built: {detail}")]
     Sparse { what: String, detail: String },
+    #[error(
+        "interface {interface} is non-matching (its sides meshed on their own): the monolithic solvers merge or pair \
+         coinciding nodes and solve only interfaces whose nodes coincide"
+    )]
+    NonMatching { interface: usize },
+}
+
+/// The first non-matching interface of `model`, as the error of a solver that needs coinciding
+/// nodes.
+pub fn refuse_non_matching(model: &crate::model::Model) -> Result<(), AssemblyError> {
+    match model.interfaces.iter().position(|i| i.is_non_matching()) {
+        Some(interface) => Err(AssemblyError::NonMatching { interface }),
+        None => Ok(()),
+    }
 }
 
 /// Element stiffness triplets (row, col, value) of a whole mesh, in global dof numbering

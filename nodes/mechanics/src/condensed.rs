@@ -12,11 +12,15 @@ use faer::{Mat, MatMut, MatRef};
 
 /// Where each boundary entry of a subdomain lives. The boundary vector stacks, interface by
 /// interface (in the model's interface order), the x and y traces of that interface's node copies
-/// (DESIGN §2: one copy of a node per interface).
+/// (DESIGN §2: one copy of a node per interface). An entry is a combination of subdomain dofs:
+/// one dof with coefficient 1 on a conforming interface, side b's projection on a non-matching
+/// one ([`crate::mortar`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BoundaryLayout {
-    /// Subdomain dof of each boundary entry (n_b entries).
+    /// Entry b is Σ coefs[k]·u[dofs[k]] for k in start[b]..start[b + 1] (n_b + 1 starts).
+    pub start: Vec<usize>,
     pub dofs: Vec<usize>,
+    pub coefs: Vec<f64>,
     /// Diagonal of the lumped interface mass M (mm) per entry.
     pub mass: Vec<f64>,
     /// Search direction k⁻ (MPa/mm) per entry.
@@ -38,7 +42,9 @@ pub struct InterfaceSlot {
 impl BoundaryLayout {
     /// Layout of subdomain `s` of `model`, with k⁻ = `k_interface[i]` on interface i.
     pub fn new(model: &Model, s: usize, k_interface: &[f64]) -> Self {
+        let mut start = vec![0];
         let mut dofs = Vec::new();
+        let mut coefs = Vec::new();
         let mut mass = Vec::new();
         let mut k = Vec::new();
         let mut slots = Vec::new();
@@ -47,28 +53,59 @@ impl BoundaryLayout {
             slots.push(InterfaceSlot {
                 interface: i,
                 side,
-                offset: dofs.len(),
+                offset: mass.len(),
                 n_pairs: itf.n_pairs(),
             });
             for p in 0..itf.n_pairs() {
-                let node = itf.node(side, p);
+                let trace = itf.trace(side, p);
                 for c in 0..2 {
-                    dofs.push(2 * node + c);
+                    for &(node, coef) in &trace {
+                        dofs.push(2 * node + c);
+                        coefs.push(coef);
+                    }
+                    start.push(dofs.len());
                     mass.push(itf.weights[p]);
                     k.push(k_interface[i]);
                 }
             }
         }
-        Self { dofs, mass, k, slots }
+        Self {
+            start,
+            dofs,
+            coefs,
+            mass,
+            k,
+            slots,
+        }
     }
 
     /// n_b, the length of the boundary vector.
     pub fn len(&self) -> usize {
-        self.dofs.len()
+        self.mass.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.dofs.is_empty()
+        self.mass.is_empty()
+    }
+
+    /// (dof, coefficient) terms of entry b.
+    pub fn terms(&self, b: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let r = self.start[b]..self.start[b + 1];
+        self.dofs[r.clone()].iter().copied().zip(self.coefs[r].iter().copied())
+    }
+
+    /// The dof of entry b when it is one dof with coefficient 1 (every entry of a conforming
+    /// interface), else None.
+    pub fn single_dof(&self, b: usize) -> Option<usize> {
+        let r = self.start[b]..self.start[b + 1];
+        (r.len() == 1 && self.coefs[r.start] == 1.0).then(|| self.dofs[r.start])
+    }
+
+    /// Entry b of the trace of a full displacement vector u: Σ coef·u[dof].
+    pub fn trace_of(&self, u: impl Fn(usize) -> f64, b: usize) -> f64 {
+        let mut terms = self.terms(b);
+        let Some((d, c)) = terms.next() else { return 0.0 };
+        terms.fold(c * u(d), |acc, (d, c)| acc + c * u(d))
     }
 
     /// Per slot, the interface node that owns its interface: the one whose group (`groups`, by
@@ -190,9 +227,16 @@ impl CondensedOperator {
             .filter(|&&(i, j, _)| free[i] != usize::MAX && free[j] != usize::MAX)
             .map(|&(i, j, v)| (free[i], free[j], v))
             .collect();
-        for (b, &d) in layout.dofs.iter().enumerate() {
-            if free[d] != usize::MAX {
-                trip.push((free[d], free[d], layout.k[b] * layout.mass[b]));
+        // Bᵀ k⁻ M B: one diagonal term per entry of a conforming interface; the outer product of
+        // the entry's free terms on a non-matching one.
+        for b in 0..layout.len() {
+            let km = layout.k[b] * layout.mass[b];
+            for (di, ci) in layout.terms(b) {
+                for (dj, cj) in layout.terms(b) {
+                    if free[di] != usize::MAX && free[dj] != usize::MAX {
+                        trip.push((free[di], free[dj], ci * cj * km));
+                    }
+                }
             }
         }
         // Supernodal: A_E's n_b columns (and the sparse linear stage's N + 1) are solved at once.
@@ -216,13 +260,18 @@ impl CondensedOperator {
         }
         factor.solve_in_place(&mut x);
         let n_a = if dense { n_b } else { 0 };
+        // A_E = B X with X = K̃⁻¹ Bᵀ: entry (r, c) sums the terms of r and c over free dofs
+        // (a conforming entry: the one term, times 1).
         let a = Mat::from_fn(n_a, n_a, |r, c| {
-            let (dr, dc) = (layout.dofs[r], layout.dofs[c]);
-            if free[dr] == usize::MAX || free[dc] == usize::MAX {
-                0.0
-            } else {
-                x[(free[dr], col_of_dof[dc])]
+            let mut v = 0.0;
+            for (dr, cr) in layout.terms(r) {
+                for (dc, cc) in layout.terms(c) {
+                    if free[dr] != usize::MAX && free[dc] != usize::MAX {
+                        v += cr * cc * x[(free[dr], col_of_dof[dc])];
+                    }
+                }
             }
+            v
         });
 
         // Load responses: K̃_ff u_f = f_f − K_fd u_d.
@@ -238,6 +287,24 @@ impl CondensedOperator {
                     rhs[(free[d], 0)] = case.force[d] - ku[d];
                 }
             }
+            // A non-matching entry mixing free and prescribed dofs couples them through
+            // Bᵀ k⁻ M B as K does: its prescribed part moves to the right-hand side too (a
+            // conforming entry is one dof, free or prescribed, and adds nothing here).
+            for b in 0..n_b {
+                let prescribed: f64 = layout
+                    .terms(b)
+                    .filter(|&(d, _)| free[d] == usize::MAX)
+                    .map(|(d, c)| c * case.displacement[d])
+                    .sum();
+                if prescribed != 0.0 {
+                    let km = layout.k[b] * layout.mass[b];
+                    for (d, c) in layout.terms(b) {
+                        if free[d] != usize::MAX {
+                            rhs[(free[d], 0)] -= c * km * prescribed;
+                        }
+                    }
+                }
+            }
             factor.solve_in_place(&mut rhs);
             for d in 0..n_dofs {
                 load_full[(d, j)] = if free[d] == usize::MAX {
@@ -246,8 +313,8 @@ impl CondensedOperator {
                     rhs[(free[d], 0)]
                 };
             }
-            for (b, &d) in layout.dofs.iter().enumerate() {
-                load_boundary[(b, j)] = load_full[(d, j)];
+            for b in 0..n_b {
+                load_boundary[(b, j)] = layout.trace_of(|d| load_full[(d, j)], b);
             }
         }
         Ok(Self {
@@ -275,6 +342,7 @@ impl CondensedOperator {
     /// forward and backward substitution ([`SparseSpd::solve_flops`]).
     pub fn sparse_response_flops(&self) -> u64 {
         let free_boundary = self.layout.dofs.iter().filter(|&&d| self.free[d] != usize::MAX).count();
+        // Each free term is a multiply and an add (M q then its share), counted once as before.
         2 * free_boundary as u64 + self.factor.solve_flops()
     }
 
@@ -298,23 +366,36 @@ impl CondensedOperator {
         let m = q.ncols();
         let mut rhs = rhs.subcols_mut(0, m);
         rhs.fill(0.0);
+        let layout = &self.layout;
+        let free = &self.free;
         for j in 0..m {
-            for (b, &d) in self.layout.dofs.iter().enumerate() {
-                if self.free[d] != usize::MAX {
-                    rhs[(self.free[d], j)] += self.layout.mass[b] * q[(b, j)];
+            for b in 0..layout.len() {
+                let mq = layout.mass[b] * q[(b, j)];
+                for (d, c) in layout.terms(b) {
+                    if free[d] != usize::MAX {
+                        rhs[(free[d], j)] += c * mq;
+                    }
                 }
             }
         }
         self.factor.solve_view_in_place_with(rhs.rb_mut(), scratch);
         for j in 0..m {
-            for (b, &d) in self.layout.dofs.iter().enumerate() {
-                w[(b, j)] = if self.free[d] == usize::MAX {
-                    0.0
-                } else {
-                    rhs[(self.free[d], j)]
-                };
+            for b in 0..layout.len() {
+                w[(b, j)] = self.free_trace(|f| rhs[(f, j)], b);
             }
         }
+    }
+
+    /// Entry b of the trace of a free-dof vector (`at(free index)`): constrained terms count 0.
+    fn free_trace(&self, at: impl Fn(usize) -> f64, b: usize) -> f64 {
+        let mut v: Option<f64> = None;
+        for (d, c) in self.layout.terms(b) {
+            if self.free[d] != usize::MAX {
+                let t = c * at(self.free[d]);
+                v = Some(v.map_or(t, |v| v + t));
+            }
+        }
+        v.unwrap_or(0.0)
     }
 
     /// Full displacement field u = Σ_j φ_j u_j + (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q for a boundary
@@ -322,9 +403,12 @@ impl CondensedOperator {
     /// factors φ_j.
     pub fn recover(&self, q: &[f64], load_factors: &[f64]) -> Vec<f64> {
         let mut rhs = Mat::<f64>::zeros(self.factor.n(), 1);
-        for (b, &d) in self.layout.dofs.iter().enumerate() {
-            if self.free[d] != usize::MAX {
-                rhs[(self.free[d], 0)] += self.layout.mass[b] * q[b];
+        for (b, &qb) in q.iter().enumerate() {
+            let mq = self.layout.mass[b] * qb;
+            for (d, c) in self.layout.terms(b) {
+                if self.free[d] != usize::MAX {
+                    rhs[(self.free[d], 0)] += c * mq;
+                }
             }
         }
         self.factor.solve_in_place(&mut rhs);
@@ -366,7 +450,9 @@ mod tests {
             })
             .collect();
         BoundaryLayout {
+            start: (0..=offset).collect(),
             dofs: (0..offset).collect(),
+            coefs: vec![1.0; offset],
             mass: vec![1.0; offset],
             k: vec![1.0; offset],
             slots,

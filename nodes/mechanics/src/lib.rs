@@ -18,6 +18,7 @@ pub mod local;
 pub mod mesh;
 pub mod model;
 pub mod modes;
+pub mod mortar;
 pub mod pgd;
 pub mod points;
 pub mod post;

@@ -4,6 +4,7 @@
 
 use crate::expr::Expr;
 use crate::mesh::Mesh;
+use crate::mortar::Projection;
 
 /// Plane strain or plane stress (unit thickness), or axisymmetric: x is the radius r ≥ 0, y the
 /// axis z, and every integral carries 2πr (forces are totals over the circumference).
@@ -170,7 +171,8 @@ pub enum InterfaceKind {
     Contact { friction: f64, gap: Vec<f64> },
 }
 
-/// A conforming interface Γ between subdomains `a` and `b`: node pairs coincide. Each pair has
+/// An interface Γ between subdomains `a` and `b`, conforming (node pairs coincide) or
+/// non-matching (`projection`: side b's trace is projected onto side a's nodes). Each pair has
 /// its own frame (DESIGN §2): the normal `normals[p]` points out of `a` towards `b`, the tangent
 /// is (−n_y, n_x); on a straight interface every pair has the same normal.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -178,7 +180,9 @@ pub struct Interface {
     pub kind: InterfaceKind,
     pub a: usize,
     pub b: usize,
-    /// (node of a, node of b) per pair, ordered along the interface.
+    /// (node of a, node of b) per pair, ordered along the interface. On a non-matching interface
+    /// the node of b is the one with the largest coefficient in the pair's projection (the
+    /// nearest, for display); its trace is [`Interface::trace`].
     pub pairs: Vec<(usize, usize)>,
     /// Coordinates of each pair (mm).
     pub coords: Vec<[f64; 2]>,
@@ -191,6 +195,9 @@ pub struct Interface {
     pub length: f64,
     /// Centroid of the pairs weighted by `weights` (mm).
     pub centroid: [f64; 2],
+    /// Non-matching: side b's trace at each pair ([`crate::mortar`]); None when conforming.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub projection: Option<Projection>,
 }
 
 impl Interface {
@@ -256,11 +263,27 @@ impl Interface {
         }
     }
 
-    /// Node of side `side` at pair `p`.
+    /// Node of side `side` at pair `p` (on a non-matching interface's side b, the node with the
+    /// largest coefficient: use [`Interface::trace`] for the trace).
     pub fn node(&self, side: Side, p: usize) -> usize {
         match side {
             Side::A => self.pairs[p].0,
             Side::B => self.pairs[p].1,
+        }
+    }
+
+    /// Whether side b reaches the pairs through a projection.
+    pub fn is_non_matching(&self) -> bool {
+        self.projection.is_some()
+    }
+
+    /// Side `side`'s trace at pair `p`: (node, coefficient) terms whose weighted sum of nodal
+    /// displacements is the side's displacement there; one term (node, 1) on a conforming
+    /// interface and on side a.
+    pub fn trace(&self, side: Side, p: usize) -> Vec<(usize, f64)> {
+        match (side, &self.projection) {
+            (Side::B, Some(pr)) => pr.terms(p).collect(),
+            _ => vec![(self.node(side, p), 1.0)],
         }
     }
 }

@@ -65,7 +65,7 @@ impl Merged {
             }
             r
         }
-        for itf in interfaces.iter().filter(|i| !i.is_contact()) {
+        for itf in interfaces.iter().filter(|i| !i.is_contact() && !i.is_non_matching()) {
             for &(na, nb) in &itf.pairs {
                 let (a, b) = ((itf.a, na), (itf.b, nb));
                 id.entry(a).or_insert(a);
@@ -326,6 +326,7 @@ mod tests {
             normals: vec![normal; n],
             length: (n - 1) as f64,
             centroid: [x0 + 0.5 * (n - 1) as f64, 0.0],
+            projection: None,
         }
     }
 
@@ -356,6 +357,7 @@ mod tests {
             normals: vec![[1.0, 0.0]],
             length: 1.0,
             centroid: [2.0, 0.0],
+            projection: None,
         };
         vec![
             itf(

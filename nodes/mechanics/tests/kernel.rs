@@ -518,7 +518,18 @@ fn condensed_fixture(rng: &mut XorShift) -> (Subdomain, BoundaryLayout) {
         constrained,
         loads,
     };
-    (sub, BoundaryLayout { dofs, mass, k, slots })
+    let n_b = dofs.len();
+    (
+        sub,
+        BoundaryLayout {
+            start: (0..=n_b).collect(),
+            dofs,
+            coefs: vec![1.0; n_b],
+            mass,
+            k,
+            slots,
+        },
+    )
 }
 
 /// Dense (K + Bᵀ k M B) assembled from `element::stiffness` (independently of `assembly`),

@@ -41,6 +41,7 @@ pub struct GluedSolution {
 /// Solves K u = f(t) with prescribed displacements imposed strongly, all interfaces glued, for
 /// every time point (by superposition of the load cases).
 pub fn solve_glued(model: &Model) -> Result<GluedSolution, AssemblyError> {
+    glissade_mechanics::assembly::refuse_non_matching(model)?;
     let num = GluedNumbering::new(model);
     let n = 2 * num.n_merged;
     let mut constrained = vec![false; n];

@@ -60,6 +60,7 @@ pub(crate) struct Problem<'m> {
 
 impl<'m> Problem<'m> {
     pub(crate) fn new(model: &'m Model, linear_solver: LinearSolver) -> Result<Self, ReferenceError> {
+        glissade_mechanics::assembly::refuse_non_matching(model)?;
         let num = Numbering::new(model);
         let n_dofs = 2 * num.n_merged;
         let mut constrained = vec![false; n_dofs];

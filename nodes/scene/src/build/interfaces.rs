@@ -77,21 +77,49 @@ impl Ctx<'_> {
             if na.is_empty() || nb.is_empty() {
                 return Err(mismatch(lo, "no node of one side lies on the shared segment"));
             }
-            for (k, (&(_, ca, corner_a), &(_, cb, corner_b))) in na.iter().zip(&nb).enumerate() {
-                if (ca - cb).abs() > tol {
-                    return Err(mismatch(ca.min(cb), "nodes do not coincide"));
-                }
-                if corner_a != corner_b {
-                    return Err(mismatch(ca, "a corner node faces a mid-side node"));
-                }
+            let conforming = na.len() == nb.len()
+                && na
+                    .iter()
+                    .zip(&nb)
+                    .all(|(&(_, ca, corner_a), &(_, cb, corner_b))| (ca - cb).abs() <= tol && corner_a == corner_b);
+            if !conforming {
+                // Non-matching: the interface's pairs are the nodes of a side whose edges end at
+                // both ends of the shared segment (a, or b with the roles swapped).
+                let normal = if horizontal { [0.0, 1.0] } else { [1.0, 0.0] };
+                let ends_whole = |n: &[(usize, f64, bool)]| {
+                    let (first, last) = (n[0], n[n.len() - 1]);
+                    first.2 && last.2 && (first.1 - lo).abs() <= tol && (last.1 - hi).abs() <= tol
+                };
+                // Of two such sides the coarser (fewer nodes on the segment): a finer Γ_h would
+                // carry traction modes the other side cannot see, which no iteration settles.
+                let (whole_a, whole_b) = (ends_whole(&na), ends_whole(&nb));
+                let (pa, pb, ea, eb, sign) = if whole_a && (!whole_b || na.len() <= nb.len()) {
+                    (a, b, side_a, side_b, 1.0)
+                } else if whole_b {
+                    (b, a, side_b, side_a, -1.0)
+                } else {
+                    return Err(mismatch(
+                        lo,
+                        "the meshes do not conform and an element edge of each side crosses an end of the shared \
+                         segment (a non-matching interface needs one side whose edges end at both ends)",
+                    ));
+                };
+                let g = self
+                    .block_non_matching(
+                        (&subs[pa], ea),
+                        (&subs[pb], eb),
+                        axis,
+                        [lo, hi],
+                        tol,
+                        [sign * normal[0], sign * normal[1]],
+                    )
+                    .map_err(|why| mismatch(lo, &why))?;
+                return Ok(Some(GeoInterface { a: pa, b: pb, ..g }));
+            }
+            for (k, &(_, ca, corner_a)) in na.iter().enumerate() {
                 if (k == 0 || k + 1 == na.len()) && !corner_a {
                     return Err(mismatch(ca, "an element edge crosses the end of the shared segment"));
                 }
-            }
-            if na.len() != nb.len() {
-                let k = na.len().min(nb.len());
-                let c = if na.len() > k { na[k].1 } else { nb[k].1 };
-                return Err(mismatch(c, "a node has no partner"));
             }
             let mut pair_of = vec![usize::MAX; sa.mesh.n_nodes()];
             for (p, &(n, _, _)) in na.iter().enumerate() {
@@ -119,9 +147,90 @@ impl Ctx<'_> {
                 weights,
                 length,
                 curves: Vec::new(),
+                projection: None,
             }));
         }
         Ok(None)
+    }
+
+    /// A non-matching interface between block sides: pairs are the nodes of `a`'s side on the
+    /// shared segment `range` (whose edges end at both of its ends), side b reaches them through
+    /// its projection ([`glissade_mechanics::mortar`]). `a`, `b` in the result are placeholders
+    /// for the caller.
+    fn block_non_matching(
+        &self,
+        (sa, side_a): (&Sub, BlockSide),
+        (sb, side_b): (&Sub, BlockSide),
+        axis: usize,
+        [lo, hi]: [f64; 2],
+        tol: f64,
+        normal: [f64; 2],
+    ) -> Result<GeoInterface, String> {
+        let within = |c: f64| c >= lo - tol && c <= hi + tol;
+        let edges_of = |s: &Sub, side: BlockSide, whole: bool| -> Vec<[usize; 3]> {
+            s.mesh.sides[side as usize]
+                .iter()
+                .filter(|e| {
+                    let (c0, c2) = (s.mesh.coords[e[0]][axis], s.mesh.coords[e[2]][axis]);
+                    if whole {
+                        within(c0) && within(c2)
+                    } else {
+                        c0.max(c2).min(hi) - c0.min(c2).max(lo) > tol
+                    }
+                })
+                .copied()
+                .collect()
+        };
+        let a_edges = edges_of(sa, side_a, true);
+        let b_edges = edges_of(sb, side_b, false);
+        let nodes = sa
+            .mesh
+            .side_nodes(side_a)
+            .into_iter()
+            .filter(|&n| within(sa.mesh.coords[n][axis]))
+            .collect::<Vec<_>>();
+        let mut pair_of = std::collections::HashMap::new();
+        for (p, &n) in nodes.iter().enumerate() {
+            pair_of.insert(n, p);
+        }
+        let mut weights = vec![0.0; nodes.len()];
+        let mut length = 0.0;
+        let mut a_side = Vec::with_capacity(a_edges.len());
+        for e in &a_edges {
+            let x = e.map(|n| sa.mesh.coords[n]);
+            for (k, m) in edge_lumped_mass(&x, self.plane).into_iter().enumerate() {
+                weights[pair_of[&e[k]]] += m;
+            }
+            length += ((x[2][0] - x[0][0]).powi(2) + (x[2][1] - x[0][1]).powi(2)).sqrt();
+            a_side.push(SideEdge {
+                nodes: e.map(|n| pair_of[&n]),
+                x,
+            });
+        }
+        let b_side: Vec<SideEdge> = b_edges
+            .iter()
+            .map(|e| SideEdge {
+                nodes: *e,
+                x: e.map(|n| sb.mesh.coords[n]),
+            })
+            .collect();
+        let coords: Vec<[f64; 2]> = nodes.iter().map(|&n| sa.mesh.coords[n]).collect();
+        let projection = project(&a_side, &weights, &b_side, self.plane, &coords).map_err(|e| e.to_string())?;
+        Ok(GeoInterface {
+            a: 0,
+            b: 0,
+            normals: vec![normal; nodes.len()],
+            pairs: nodes
+                .iter()
+                .enumerate()
+                .map(|(p, &n)| (n, nearest_term(&projection, p)))
+                .collect(),
+            coords,
+            weights,
+            length,
+            curves: Vec::new(),
+            projection: Some(projection),
+        })
     }
 
     /// Kind of each geometric interface after applying the `[[interface]]` rules in order.
@@ -267,14 +376,21 @@ impl Ctx<'_> {
         let mut out = Vec::new();
         for (g, kind) in geo.into_iter().zip(kinds) {
             let heaviest = g.weights.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+            // Side b's nodes at pair p: the one facing it, or every node of its projection.
+            let b_nodes = |p: usize| -> Vec<usize> {
+                match &g.projection {
+                    Some(pr) => pr.terms(p).map(|(n, _)| n).collect(),
+                    None => vec![g.pairs[p].1],
+                }
+            };
             let on_axis = |p: usize| {
                 self.plane == Plane::Axisymmetric
                     && g.weights[p].abs() <= glissade_mechanics::element::AXIS_TOLERANCE * heaviest
                     && radial_held(g.a, g.pairs[p].0)
-                    && radial_held(g.b, g.pairs[p].1)
+                    && b_nodes(p).iter().all(|&n| radial_held(g.b, n))
             };
             let keep: Vec<usize> = (0..g.pairs.len())
-                .filter(|&p| !(on_axis(p) || clamped(g.a, g.pairs[p].0) && clamped(g.b, g.pairs[p].1)))
+                .filter(|&p| !(on_axis(p) || clamped(g.a, g.pairs[p].0) && b_nodes(p).iter().all(|&n| clamped(g.b, n))))
                 .collect();
             if keep.is_empty() {
                 continue;
@@ -314,8 +430,21 @@ impl Ctx<'_> {
                 normals,
                 length: g.length,
                 centroid,
+                projection: g.projection.as_ref().map(|pr| pr.select(&keep)),
             });
         }
         Ok(out)
     }
+}
+
+/// The node of side b with the largest coefficient at pair p of a projection: the node facing
+/// the pair, for display.
+pub(crate) fn nearest_term(projection: &Projection, p: usize) -> usize {
+    projection
+        .terms(p)
+        .fold(None::<(usize, f64)>, |best, (n, c)| match best {
+            Some(b) if b.1 >= c => Some(b),
+            _ => Some((n, c)),
+        })
+        .map_or(usize::MAX, |b| b.0)
 }

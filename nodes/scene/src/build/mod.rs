@@ -24,6 +24,7 @@ use glissade_mechanics::model::{
     interpolate, Acceleration, Interface, InterfaceKind, LoadCase, Material, Model, Plane, SolverParams, Subdomain,
     TimeFunction, TimeGrid, TimeStart, DEFAULT_TIME_START_TOLERANCE,
 };
+use glissade_mechanics::mortar::{project, Projection, SideEdge};
 use glissade_mechanics::pgd::{PgdCriterion, PgdParams};
 use std::collections::BTreeMap;
 
@@ -71,6 +72,8 @@ pub(crate) struct GeoInterface {
     pub(crate) length: f64,
     /// Named curves of the mesh (indices) its edges lie on; empty for blocks.
     pub(crate) curves: Vec<usize>,
+    /// Non-matching: side b's trace at each pair (pairs are side a's nodes).
+    pub(crate) projection: Option<Projection>,
 }
 
 /// Initial gap g0(x, y) of a contact rule.

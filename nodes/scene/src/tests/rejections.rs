@@ -117,19 +117,21 @@ fn rejects_rule_matching_no_interface() {
 }
 
 #[test]
-fn rejects_non_conforming_interface() {
-    let e = expect_err(
-        &TWO_BLOCKS
-            .replacen("nx = 16", "nx = 10", 2)
-            .replacen("nx = 10", "nx = 16", 1),
-        "block[1]",
-        "do not conform",
-    );
-    assert!(e.problem.contains("`lower`") && e.problem.contains("`upper`"), "{e}");
-    assert!(e.problem.contains("y = 20") && e.problem.contains("x = 1.25"), "{e}");
-    // Shifted by half an element: nodes coincide but corners face mid-side nodes.
+fn non_matching_sides_need_one_that_ends_whole() {
+    // 16 elements against 10 along y = 20: accepted, as a non-matching interface whose pairs are
+    // the coarser side's nodes (21 of them), each seeing the finer side through its projection.
+    let text = TWO_BLOCKS
+        .replacen("nx = 16", "nx = 10", 2)
+        .replacen("nx = 10", "nx = 16", 1);
+    let model = crate::load_str(&text, "test.toml").unwrap().model;
+    assert_eq!(model.interfaces.len(), 1);
+    let itf = &model.interfaces[0];
+    assert!(itf.is_non_matching());
+    assert_eq!(itf.n_pairs(), 21);
+    // Shifted by half an element: each side's edges cross an end of the shared segment.
     let shifted = replaced("x = [0.0, 40.0]\ny = [20.0", "x = [1.25, 41.25]\ny = [20.0");
-    expect_err(&shifted, "block[1]", "corner node faces a mid-side node");
+    let e = expect_err(&shifted, "block[1]", "crosses an end of the shared segment");
+    assert!(e.problem.contains("`lower`") && e.problem.contains("`upper`"), "{e}");
 }
 
 #[test]

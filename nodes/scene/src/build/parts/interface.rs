@@ -154,6 +154,7 @@ pub(super) fn part_interface(
         weights,
         length,
         curves,
+        projection: None,
     })
 }
 
