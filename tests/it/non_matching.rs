@@ -216,3 +216,108 @@ fn non_matching_meshes_take_the_iterations_of_the_conforming_one() {
         }
     }
 }
+
+/// The shrink fit's scene with its mesh `mesh` (a file of launch/scenes/meshes), loaded from
+/// launch/scenes so that the mesh is found.
+fn shrink_fit(scene: &str, mesh: Option<&str>) -> glissade_scene::LoadedScene {
+    let path = format!("{}/launch/scenes/{scene}.toml", env!("CARGO_MANIFEST_DIR"));
+    let mut text = std::fs::read_to_string(&path).unwrap();
+    if let Some(mesh) = mesh {
+        let old = text.lines().find(|l| l.starts_with("file = ")).unwrap().to_string();
+        text = text.replace(&old, &format!("file = \"meshes/{mesh}\""));
+    }
+    glissade_scene::load_str(&text, &path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The contact pressure −F_a·n at every pair of the fit at time point `i`, and its mean weighted
+/// by the pairs' weights.
+fn fit_pressure(sc: &glissade_scene::LoadedScene, out: &glissade::runner::RunResult, i: usize) -> (Vec<f64>, f64) {
+    assert_eq!(sc.model.interfaces.len(), 1);
+    let itf = &sc.model.interfaces[0];
+    let sol = &out.interfaces[0];
+    let p: Vec<f64> = (0..itf.n_pairs())
+        .map(|q| {
+            let n = itf.normal(q);
+            -(sol.f_a.get(2 * q, i) * n[0] + sol.f_a.get(2 * q + 1, i) * n[1])
+        })
+        .collect();
+    let total: f64 = itf.weights.iter().sum();
+    let mean = p.iter().zip(&itf.weights).map(|(p, w)| p * w).sum::<f64>() / total;
+    (p, mean)
+}
+
+/// The ring press fit meshed on its own (shrink-fit-nonmatching.toml: the inner ring 6 elements
+/// per 45° sector along the fit, the outer ring 5 and its sectors turned by 22.5°, no node in
+/// common): at t = 0 (no shear yet) the mean contact pressure is Lamé's 27.25 MPa within 0.5 %
+/// and uniform along the fit within 1 % (the issue's bounds; the discretisation error of the
+/// conforming mesh is 0.01 %), the iterations are within ±10 % of the conforming scene's
+/// (shrink-fit.toml, 48 elements around both rings), and refining the outer ring alone (10 per
+/// sector) changes the mean pressure by less than 0.5 %.
+#[test]
+fn the_ring_press_fit_meshed_on_its_own_gives_lames_pressure() {
+    const LAME: f64 = 27.25;
+    let run = |sc: &glissade_scene::LoadedScene| {
+        let out = Run::new(sc, &RunOptions::new("ring")).in_process().expect("run").result;
+        assert_eq!(out.verdict, Verdict::Converged);
+        out
+    };
+    let conforming = shrink_fit("shrink-fit", None);
+    let base = run(&conforming);
+    let (_, p_conforming) = fit_pressure(&conforming, &base, 0);
+    let sc = shrink_fit("shrink-fit-nonmatching", None);
+    assert!(sc.model.interfaces[0].is_non_matching());
+    let out = run(&sc);
+    let (p, mean) = fit_pressure(&sc, &out, 0);
+    let oscillation = p.iter().fold(0.0f64, |m, v| m.max((v - mean).abs())) / mean;
+    let fine = shrink_fit("shrink-fit-nonmatching", Some("shrink-fit-nonmatching-fine.msh"));
+    let fine_out = run(&fine);
+    let (_, p_fine) = fit_pressure(&fine, &fine_out, 0);
+    println!(
+        "ring: conforming {p_conforming:.4} MPa in {} iterations; non-matching {mean:.4} MPa (oscillation {:.2e}) in {} \
+         iterations; outer refined {p_fine:.4} MPa in {} iterations",
+        base.iterations.len(),
+        oscillation,
+        out.iterations.len(),
+        fine_out.iterations.len()
+    );
+    assert!((mean - LAME).abs() <= 5e-3 * LAME, "{mean} MPa against Lamé's {LAME}");
+    assert!(oscillation <= 1e-2, "pressure oscillation {oscillation:e}");
+    assert!(
+        (p_fine - mean).abs() <= 5e-3 * mean,
+        "refined outer ring: {p_fine} against {mean}"
+    );
+    let (its, base_its) = (out.iterations.len() as f64, base.iterations.len() as f64);
+    assert!(
+        (its - base_its).abs() <= 0.1 * base_its,
+        "{its} iterations against {base_its} conforming"
+    );
+}
+
+/// `glissade onset` on the ring meshed on its own: the whole fit slips at the closed form
+/// f·p·b²/c² = 1.962 MPa, a factor 1.962/1.5 on the shear rule, within 1 % (the issue's bound),
+/// as on the conforming mesh (tests/it/studies.rs).
+#[test]
+fn the_ring_meshed_on_its_own_slips_at_the_closed_form() {
+    let dir = crate::common::scratch("onset-nonmatching");
+    let scene = format!(
+        "{}/launch/scenes/shrink-fit-nonmatching.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = crate::common::glissade_ok(&[&"onset", &scene, &"--rule", &"1", &"--out", &dir.0]);
+    assert!(out.contains("slip over a whole interface"), "{out}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.0.join("shrink-fit-nonmatching-onset.json")).unwrap())
+            .unwrap();
+    let closed = 1.962 / 1.5;
+    let (lo, hi) = (
+        r["full_slip"]["below"].as_f64().unwrap(),
+        r["full_slip"]["above"].as_f64().unwrap(),
+    );
+    let middle = 0.5 * (lo + hi);
+    println!("full slip between {lo} and {hi} (closed form {closed})");
+    assert!(lo < hi && hi - lo <= 1e-2 * hi, "[{lo}, {hi}]");
+    assert!(
+        (middle - closed).abs() <= 1e-2 * closed,
+        "full slip at {middle}, closed form {closed}"
+    );
+}

@@ -93,6 +93,9 @@ pub(crate) struct RawMesh {
     /// `sheath.1`, `sheath.2`, …) → material.
     #[serde(default)]
     pub(crate) materials: BTreeMap<String, String>,
+    /// Distance (mm) within which boundary edges of two parts that share no nodes face each
+    /// other: a non-matching interface.
+    pub(crate) match_tolerance: Option<f64>,
 }
 
 #[derive(Deserialize, Clone, Copy, PartialEq, Eq)]

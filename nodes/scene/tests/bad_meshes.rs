@@ -120,27 +120,32 @@ fn other_element_types_are_refused_with_their_count_and_the_gmsh_options() {
     assert!(m.elements.iter().filter(|e| e.dim == 2).all(|e| e.physicals == [1]));
 }
 
+/// nonconforming.msh (parts `a` and `b` meshed with 4 and 6 elements along their common side,
+/// end points shared) is no longer refused: the parts meet on a non-matching interface whose
+/// pairs are the coarser side's 9 nodes, each seeing the other side through its projection.
 #[test]
-fn nonconforming_parts_are_refused_with_both_names_and_the_node() {
-    let m = mesh("nonconforming");
-    let e = refusal("nonconforming", true);
-    let p = &e.problem;
-    assert!(
-        p.contains("parts `a` and `b`") || p.contains("parts `b` and `a`"),
-        "{e}"
-    );
-    assert!(p.contains("do not conform"), "{e}");
-    // The node named lies on x = 1 and is a node of one part only.
-    let node = numbers_after(p, "node ")[0];
-    let i = m.node_tags.iter().position(|&t| t == node).expect("the node");
-    assert!((m.nodes[i][0] - 1.0).abs() < 1e-12, "{e}");
-    let parts: BTreeSet<i32> = m
-        .elements
-        .iter()
-        .filter(|el| el.dim == 2 && el.nodes.contains(&i))
-        .flat_map(|el| el.physicals.clone())
-        .collect();
-    assert_eq!(parts.len(), 1, "{e}");
+fn parts_meshed_on_their_own_meet_on_a_non_matching_interface() {
+    let text = scene_text("nonconforming", r#"{ a = "m", b = "m" }"#, "");
+    let scene = dir().join("scene.toml");
+    let model = glissade_scene::load_str(&text, scene.to_str().expect("a UTF-8 path"))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .model;
+    assert_eq!(model.interfaces.len(), 1);
+    let itf = &model.interfaces[0];
+    assert!(itf.is_non_matching());
+    assert_eq!(itf.n_pairs(), 9);
+    assert!((itf.length - 1.0).abs() < 1e-12, "{}", itf.length);
+    // Every pair sits on x = 1, and side b's projection reproduces the coordinate y there.
+    let xb = &model.subdomains[itf.b].mesh.coords;
+    for p in 0..itf.n_pairs() {
+        assert!((itf.coords[p][0] - 1.0).abs() < 1e-12);
+        let y: f64 = itf
+            .trace(glissade_mechanics::model::Side::B, p)
+            .iter()
+            .map(|&(n, c)| c * xb[n][1])
+            .sum();
+        assert!((y - itf.coords[p][1]).abs() < 1e-12, "pair {p}: {y}");
+    }
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! nodes, no hinge) and the matching of the boundary edges two parts share, with the refusal of
 //! meshes that do not conform along a shared curve.
 
-use super::interface::part_interface;
+use super::interface::{part_interface, part_interface_non_matching, NonMatchingError};
 use super::*;
 use glissade_mechanics::element::{edge_frame, jacobian, GAUSS3};
 
@@ -23,6 +23,19 @@ fn jacobians(x: &[[f64; 2]; 8]) -> [(f64, f64, f64); 9] {
 }
 
 /// The point of the quadratic edge `x` nearest to `p` and its distance (sampled, then Newton).
+/// Bounding box of an edge's three nodes.
+fn edge_box(x: &[[f64; 2]; 3]) -> ([f64; 2], [f64; 2]) {
+    let lo = [
+        x.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min),
+        x.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min),
+    ];
+    let hi = [
+        x.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max),
+        x.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max),
+    ];
+    (lo, hi)
+}
+
 fn distance_to_edge(x: &[[f64; 2]; 3], p: [f64; 2]) -> f64 {
     let mut best = (f64::INFINITY, 0.0);
     for k in 0..=20 {
@@ -43,7 +56,10 @@ fn distance_to_edge(x: &[[f64; 2]; 3], p: [f64; 2]) -> f64 {
 
 impl Ctx<'_> {
     /// Checks every part and builds the subdomains' meshes, boundaries and interfaces.
-    pub(crate) fn part_geometry(&self, m: &PartMesh) -> Result<PartGeometry, SceneError> {
+    /// `match_tolerance`: the scene's `mesh.match_tolerance` (mm), the distance within which two
+    /// parts' boundary edges without common nodes face each other (a non-matching interface);
+    /// 1e-4 × the mesh's size by default.
+    pub(crate) fn part_geometry(&self, m: &PartMesh, match_tolerance: Option<f64>) -> Result<PartGeometry, SceneError> {
         let key = "mesh.file";
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
         for x in &m.nodes {
@@ -303,6 +319,103 @@ impl Ctx<'_> {
                 matched.entry((a, b)).or_default().push((ea, eb));
             }
         }
+        // Parts meshed on their own: an unmatched boundary edge whose three nodes lie within
+        // `match_tol` of another part's unmatched boundary edges faces that part.
+        let match_tol = match_tolerance.unwrap_or(1e-4 * size);
+        let mut facing_groups: Vec<((usize, Vec<usize>), (usize, Vec<usize>))> = Vec::new();
+        {
+            let mut loose: Vec<(usize, usize, [f64; 2], [f64; 2])> = Vec::new();
+            for (s, edges) in boundary.iter().enumerate() {
+                for (k, e) in edges.iter().enumerate() {
+                    if !is_matched[s][k] {
+                        let (lo, hi) = edge_box(&edge_x(s, e));
+                        loose.push((s, k, lo, hi));
+                    }
+                }
+            }
+            let cell = loose
+                .iter()
+                .fold(tol, |c, l| c.max(l.3[0] - l.2[0]).max(l.3[1] - l.2[1]));
+            let mut grid = Grid::new(cell);
+            for (i, l) in loose.iter().enumerate() {
+                grid.insert([0.5 * (l.2[0] + l.3[0]), 0.5 * (l.2[1] + l.3[1])], i);
+            }
+            // (a < b) → (edges of a facing b, edges of b facing a).
+            let mut facing: BTreeMap<(usize, usize), (Vec<usize>, Vec<usize>)> = BTreeMap::new();
+            for &(s, k, _, _) in &loose {
+                let x = edge_x(s, &boundary[s][k]);
+                // The parts whose loose edges hold each node, within match_tol.
+                let holders = |p: [f64; 2]| -> Vec<usize> {
+                    let mut parts: Vec<usize> = grid
+                        .near(p)
+                        .filter_map(|o| {
+                            let (t, j, lo, hi) = loose[o];
+                            let inside = p[0] >= lo[0] - match_tol
+                                && p[0] <= hi[0] + match_tol
+                                && p[1] >= lo[1] - match_tol
+                                && p[1] <= hi[1] + match_tol;
+                            (t != s && inside && distance_to_edge(&edge_x(t, &boundary[t][j]), p) <= match_tol)
+                                .then_some(t)
+                        })
+                        .collect();
+                    parts.sort_unstable();
+                    parts.dedup();
+                    parts
+                };
+                let (h0, h1, h2) = (holders(x[0]), holders(x[1]), holders(x[2]));
+                if !h0.is_empty()
+                    && !h1.is_empty()
+                    && !h2.is_empty()
+                    && !h0.iter().any(|t| h1.contains(t) && h2.contains(t))
+                {
+                    let mut others: Vec<&str> = h0
+                        .iter()
+                        .chain(&h1)
+                        .chain(&h2)
+                        .map(|&t| m.parts[t].name.as_str())
+                        .collect();
+                    others.sort_unstable();
+                    others.dedup();
+                    return Err(self.err(
+                        key,
+                        format!(
+                            "{}: an element edge of part `{}` near {} faces the parts {} at once: a non-matching \
+                             interface joins two parts, so the parts on either side of a curve they share must \
+                             end at the same points (or share their nodes there)",
+                            m.origin,
+                            m.parts[s].name,
+                            at(x[1]),
+                            others
+                                .iter()
+                                .map(|n| format!("`{n}`"))
+                                .collect::<Vec<_>>()
+                                .join(" and ")
+                        ),
+                    ));
+                }
+                for t in h0 {
+                    if h1.contains(&t) && h2.contains(&t) {
+                        let entry = facing.entry((s.min(t), s.max(t))).or_default();
+                        if s < t {
+                            entry.0.push(k);
+                        } else {
+                            entry.1.push(k);
+                        }
+                    }
+                }
+            }
+            for ((p, q), (ep, eq)) in facing {
+                if ep.is_empty() || eq.is_empty() {
+                    continue;
+                }
+                for (s, edges) in [(p, &ep), (q, &eq)] {
+                    for &k in edges {
+                        is_matched[s][k] = true;
+                    }
+                }
+                facing_groups.push(((p, ep), (q, eq)));
+            }
+        }
         // Non-conforming contact: a node of an unmatched boundary edge on another part's unmatched
         // boundary edge.
         let mut loose: Vec<(usize, usize, [f64; 2], [f64; 2])> = Vec::new(); // (part, edge, box lo, hi)
@@ -412,6 +525,52 @@ impl Ctx<'_> {
             curve_inside.push(inside);
         }
 
+        // The non-matching interfaces of the parts that face each other.
+        let mut non_matching: Vec<GeoInterface> = Vec::new();
+        for ((p, ep), (q, eq)) in facing_groups {
+            // The coarser side carries the interface (DESIGN §2): the other, if it is not
+            // covered.
+            let sides = if ep.len() <= eq.len() {
+                [((p, &ep), (q, &eq)), ((q, &eq), (p, &ep))]
+            } else {
+                [((q, &eq), (p, &ep)), ((p, &ep), (q, &eq))]
+            };
+            let mut built = None;
+            let mut why = String::new();
+            for ((a, ea), (b, eb)) in sides {
+                match part_interface_non_matching(&meshes, &boundary, &edge_curves, (a, ea), (b, eb), self.plane) {
+                    Ok(g) => {
+                        built = Some(g);
+                        break;
+                    }
+                    Err(NonMatchingError::Normal(n)) => {
+                        why = format!(
+                            "no normal at node {} {}",
+                            node_tag(globals[a][n]),
+                            at(meshes[a].coords[n])
+                        );
+                    }
+                    Err(NonMatchingError::Projection(e)) => {
+                        if why.is_empty() {
+                            why = e.to_string();
+                        }
+                    }
+                }
+            }
+            let Some(g) = built else {
+                return Err(self.err(
+                    key,
+                    format!(
+                        "{}: parts `{}` and `{}` face each other along a curve but their meshes match neither \
+                         node by node nor as a non-matching interface: {why} (a non-matching interface needs \
+                         one side whose edges the other's cover from end to end)",
+                        m.origin, m.parts[p].name, m.parts[q].name
+                    ),
+                ));
+            };
+            non_matching.push(g);
+        }
+
         let mut interfaces = Vec::with_capacity(matched.len());
         for ((a, b), edges) in matched {
             let itf = part_interface(&meshes, &boundary, &edge_curves, a, b, &edges, self.plane).map_err(|n| {
@@ -431,6 +590,7 @@ impl Ctx<'_> {
             })?;
             interfaces.push(itf);
         }
+        interfaces.extend(non_matching);
         Ok(PartGeometry {
             meshes,
             boundary,

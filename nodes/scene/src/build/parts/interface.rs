@@ -15,7 +15,6 @@ pub(super) fn part_interface(
     edges: &[(usize, usize)],
     plane: Plane,
 ) -> Result<GeoInterface, usize> {
-    let ea: Vec<Edge> = edges.iter().map(|&(k, _)| boundary[a][k]).collect();
     // Node of b facing each node of a's matched edges.
     let mut partner: HashMap<usize, usize> = HashMap::new();
     for &(k, j) in edges {
@@ -24,6 +23,80 @@ pub(super) fn part_interface(
         partner.insert(x[1], y[1]);
         partner.insert(x[2], y[0]);
     }
+    let a_edges: Vec<usize> = edges.iter().map(|&(k, _)| k).collect();
+    let mut g = chain_interface(meshes, boundary, a, b, &a_edges, plane)?;
+    for pair in g.pairs.iter_mut() {
+        pair.1 = partner[&pair.0];
+    }
+    for &(k, _) in edges {
+        for &c in &edge_curves[a][k] {
+            if !g.curves.contains(&c) {
+                g.curves.push(c);
+            }
+        }
+    }
+    Ok(g)
+}
+
+/// The non-matching interface of part a's edges `a_edges` with part b's edges `b_edges` that face
+/// them (DESIGN §2, "Non-matching"): the pairs are a's nodes, b reaches them through its
+/// projection; the named curves are those of both sides' edges. Err: a node of a without a
+/// normal (as [`part_interface`]) or a's edges not covered by b's.
+pub(super) fn part_interface_non_matching(
+    meshes: &[Mesh],
+    boundary: &[Vec<Edge>],
+    edge_curves: &[Vec<Vec<usize>>],
+    (a, a_edges): (usize, &[usize]),
+    (b, b_edges): (usize, &[usize]),
+    plane: Plane,
+) -> Result<GeoInterface, NonMatchingError> {
+    let mut g = chain_interface(meshes, boundary, a, b, a_edges, plane).map_err(NonMatchingError::Normal)?;
+    let pair_of: HashMap<usize, usize> = g.pairs.iter().enumerate().map(|(p, &(n, _))| (n, p)).collect();
+    let side = |s: usize, e: usize, nodes: [usize; 3]| glissade_mechanics::mortar::SideEdge {
+        nodes,
+        x: boundary[s][e].nodes.map(|n| meshes[s].coords[n]),
+    };
+    let a_side: Vec<_> = a_edges
+        .iter()
+        .map(|&k| side(a, k, boundary[a][k].nodes.map(|n| pair_of[&n])))
+        .collect();
+    let b_side: Vec<_> = b_edges.iter().map(|&j| side(b, j, boundary[b][j].nodes)).collect();
+    let projection = glissade_mechanics::mortar::project(&a_side, &g.weights, &b_side, plane, &g.coords)
+        .map_err(NonMatchingError::Projection)?;
+    for (p, pair) in g.pairs.iter_mut().enumerate() {
+        pair.1 = crate::build::interfaces::nearest_term(&projection, p);
+    }
+    g.projection = Some(projection);
+    for (s, edges) in [(a, a_edges), (b, b_edges)] {
+        for &k in edges {
+            for &c in &edge_curves[s][k] {
+                if !g.curves.contains(&c) {
+                    g.curves.push(c);
+                }
+            }
+        }
+    }
+    Ok(g)
+}
+
+/// Why a non-matching interface could not be built.
+pub(super) enum NonMatchingError {
+    /// Node of a without a normal.
+    Normal(usize),
+    Projection(glissade_mechanics::mortar::ProjectionError),
+}
+
+/// Pairs (a's nodes, b's left at usize::MAX), weights, normals, length of a's edges `a_edges`
+/// ordered in chains.
+fn chain_interface(
+    meshes: &[Mesh],
+    boundary: &[Vec<Edge>],
+    a: usize,
+    b: usize,
+    a_edges: &[usize],
+    plane: Plane,
+) -> Result<GeoInterface, usize> {
+    let ea: Vec<Edge> = a_edges.iter().map(|&k| boundary[a][k]).collect();
     // Chains: a's edges run with a on their left, end to start.
     let mut by_start: HashMap<usize, usize> = HashMap::new();
     let mut ends = std::collections::HashSet::new();
@@ -87,13 +160,12 @@ pub(super) fn part_interface(
     let mut weights = vec![0.0; np];
     let mut normal_sum = vec![[0.0; 2]; np];
     let mut length = 0.0;
-    let mut curves: Vec<usize> = Vec::new();
     // Edges in the pairs' order, each along it (the block scenes sum their weights and length so,
     // and the same sums give the same bits).
     // (middle pair, nodes along the pairs' order, reversed from a's own way round).
-    let mut ordered: Vec<(usize, [usize; 3], bool)> = edges
+    let mut ordered: Vec<(usize, [usize; 3], bool)> = a_edges
         .iter()
-        .map(|&(k, _)| {
+        .map(|&k| {
             let n = boundary[a][k].nodes;
             let (p0, p2) = (pair_of[&n[0]], pair_of[&n[2]]);
             // The edge closing a loop runs from the last pair to the first: keep its way.
@@ -103,13 +175,6 @@ pub(super) fn part_interface(
         })
         .collect();
     ordered.sort_by_key(|e| e.0);
-    for &(k, _) in edges {
-        for &c in &edge_curves[a][k] {
-            if !curves.contains(&c) {
-                curves.push(c);
-            }
-        }
-    }
     for &(_, e, reversed) in &ordered {
         let x = e.map(|n| meshes[a].coords[n]);
         let m = edge_lumped_mass(&x, plane);
@@ -149,11 +214,11 @@ pub(super) fn part_interface(
         a,
         b,
         normals,
-        pairs: nodes.iter().map(|&n| (n, partner[&n])).collect(),
+        pairs: nodes.iter().map(|&n| (n, usize::MAX)).collect(),
         coords: nodes.iter().map(|&n| meshes[a].coords[n]).collect(),
         weights,
         length,
-        curves,
+        curves: Vec::new(),
         projection: None,
     })
 }

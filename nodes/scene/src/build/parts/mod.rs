@@ -144,7 +144,7 @@ impl Ctx<'_> {
         ),
         SceneError,
     > {
-        let geometry = self.part_geometry(&pm)?;
+        let geometry = self.part_geometry(&pm, raw.mesh.as_ref().and_then(|m| m.match_tolerance))?;
         let sizes: Vec<(usize, usize)> = geometry
             .meshes
             .iter()
