@@ -322,7 +322,8 @@ impl Ctx<'_> {
         // Parts meshed on their own: an unmatched boundary edge whose three nodes lie within
         // `match_tol` of another part's unmatched boundary edges faces that part.
         let match_tol = match_tolerance.unwrap_or(1e-4 * size);
-        let mut facing_groups: Vec<((usize, Vec<usize>), (usize, Vec<usize>))> = Vec::new();
+        // ((part, its edges), (other part, its edges)) per pair of parts facing each other.
+        let mut facing_groups: Vec<[(usize, Vec<usize>); 2]> = Vec::new();
         {
             let mut loose: Vec<(usize, usize, [f64; 2], [f64; 2])> = Vec::new();
             for (s, edges) in boundary.iter().enumerate() {
@@ -413,7 +414,7 @@ impl Ctx<'_> {
                         is_matched[s][k] = true;
                     }
                 }
-                facing_groups.push(((p, ep), (q, eq)));
+                facing_groups.push([(p, ep), (q, eq)]);
             }
         }
         // Non-conforming contact: a node of an unmatched boundary edge on another part's unmatched
@@ -527,7 +528,7 @@ impl Ctx<'_> {
 
         // The non-matching interfaces of the parts that face each other.
         let mut non_matching: Vec<GeoInterface> = Vec::new();
-        for ((p, ep), (q, eq)) in facing_groups {
+        for [(p, ep), (q, eq)] in facing_groups {
             // The coarser side carries the interface (DESIGN §2): the other, if it is not
             // covered.
             let sides = if ep.len() <= eq.len() {
