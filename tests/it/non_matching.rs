@@ -120,7 +120,12 @@ fn run_patch(
     .in_process()
     .expect("run")
     .result;
-    assert_eq!(out.verdict, Verdict::Converged, "{lower:?} / {upper:?}");
+    assert_eq!(
+        out.verdict,
+        Verdict::Converged,
+        "{lower:?} / {upper:?} {sides:?} contact {contact}: {:?}",
+        out.iterations.last().map(|r| &r.decision)
+    );
     let iterations = out.iterations.len();
     let exact = exact_stress();
     let scale = exact.iter().fold(0.0f64, |m, v| m.max(v.abs()));

@@ -1,16 +1,25 @@
 //! Non-matching interfaces (DESIGN §2, "Non-matching"): the interface's own discretisation Γ_h
 //! is side a's trace (its pairs are side a's nodes, its weights side a's lumped edge masses), and
 //! side b's trace reaches it through the projection Π_b = M_Γ⁻¹ D_b, with
-//! D_b[p, j] = ∫_Γ N_p N_j^b dΓ integrated exactly segment by segment: side b's edges are
+//! D_b[p, j] = ∫_Γ ψ_p N_j^b dΓ integrated exactly segment by segment: side b's edges are
 //! intersected with side a's in side a's edge parameter, and each segment is integrated by Gauss
 //! on side a's isoparametric edge, the point of side b facing each Gauss point found by its
 //! closest point on b's edge. M_Γ is the row sums of D_b (equal to side a's lumped weights where
 //! side b covers side a), so that Π_b maps a rigid translation of b to itself exactly.
 //!
-//! On straight edges with centred middle nodes, the quadratic corner shape function N_c has
-//! ∫ N_c s ds = 0 over its edge, so M_Γ⁻¹ D_b reproduces every affine field exactly: a uniform
-//! stress state crosses any mesh ratio without error (the patch test). Side b's nodal forces are
-//! Π_bᵀ M_Γ F = D_bᵀ F, the consistent forces of the traction interpolated on Γ_h.
+//! The test functions ψ_p are the dual basis of a's edge (Wohlmuth's biorthogonal multipliers):
+//! on each edge ψ = A N with A = D_e M_e⁻¹ (M_e the edge's consistent mass, D_e its row sums), so
+//! that ∫ ψ_p N_q = δ_pq ∫ N_p edge by edge. On the end edges of an open interface (where it
+//! meets a support or another interface) ψ = N, the lumped projection. Both give, edge by edge,
+//! ∫ ψ_p u = u_p ∫ N_p for every affine u and Σ_p ψ_p = 1, so M_Γ⁻¹ D_b reproduces affine fields
+//! exactly and a uniform stress crosses any mesh ratio without error (the patch test); side b's
+//! nodal forces are Π_bᵀ M_Γ F = D_bᵀ F, the consistent forces of the traction Σ ψ_p F_p.
+//!
+//! Why the dual basis inside and not the lumped one everywhere: on the ring press fit meshed on
+//! its own (48 against 40 elements around) the lumped projection leaves an oscillation of 0.7 % in
+//! the contact pressure and takes 123 iterations against the conforming mesh's 48; the dual one
+//! 0.09 % and 49. Why not at the ends: there the dual basis stagnated (the patch test with
+//! clamped sides and an offset mesh, η stuck at 2.8e-6), the lumped one converges.
 
 use crate::element::edge_shape;
 use crate::model::Plane;
@@ -150,7 +159,32 @@ pub fn project(
     let n_pairs = weights.len();
     // Sparse rows: (node of b, value), merged per pair.
     let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n_pairs];
+    // The pairs that end an open interface belong to one edge only: the edges there keep N.
+    let mut edges_at = vec![0usize; n_pairs];
     for ea in a_edges {
+        edges_at[ea.nodes[0]] += 1;
+        edges_at[ea.nodes[2]] += 1;
+    }
+    for ea in a_edges {
+        let dual = edges_at[ea.nodes[0]] > 1 && edges_at[ea.nodes[2]] > 1;
+        // The edge's test functions: ψ = A N with A = D_e M_e⁻¹ (M_e the edge's consistent mass,
+        // D_e its row sums), or N itself.
+        let mut a_dual = nalgebra::Matrix3::<f64>::identity();
+        if dual {
+            let mut me = nalgebra::Matrix3::<f64>::zeros();
+            for &(g, w) in &GAUSS5 {
+                let (p, d) = point(&ea.x, g);
+                let jac = (d[0] * d[0] + d[1] * d[1]).sqrt();
+                let (na, _) = edge_shape(g);
+                for i in 0..3 {
+                    for j in 0..3 {
+                        me[(i, j)] += na[i] * na[j] * w * jac * plane.measure(p);
+                    }
+                }
+            }
+            let de = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::from_fn(|i, _| me.row(i).sum()));
+            a_dual = de * me.try_inverse().expect("edge mass");
+        }
         let span = {
             let c = [ea.x[2][0] - ea.x[0][0], ea.x[2][1] - ea.x[0][1]];
             (c[0] * c[0] + c[1] * c[1]).sqrt()
@@ -177,12 +211,17 @@ pub fn project(
                 let (p, d) = point(&ea.x, s);
                 let jac = (d[0] * d[0] + d[1] * d[1]).sqrt();
                 let sb = closest_parameter(&eb.x, p).clamp(-1.0, 1.0);
-                let (na, _) = edge_shape(s);
+                let (na0, _) = edge_shape(s);
+                let psi: [f64; 3] = if dual {
+                    std::array::from_fn(|i| (0..3).map(|j| a_dual[(i, j)] * na0[j]).sum())
+                } else {
+                    na0
+                };
                 let (nb, _) = edge_shape(sb);
                 let dw = w * half * jac * plane.measure(p);
                 for i in 0..3 {
                     for (&node_b, nbj) in eb.nodes.iter().zip(nb) {
-                        let v = na[i] * nbj * dw;
+                        let v = psi[i] * nbj * dw;
                         let row = &mut rows[ea.nodes[i]];
                         match row.iter_mut().find(|(n, _)| *n == node_b) {
                             Some(e) => e.1 += v,

@@ -297,21 +297,12 @@ impl Ctx<'_> {
                 if dist(x[1], y[1]) > tol {
                     continue;
                 }
-                // The neighbour runs the other way along the shared edge.
+                // The neighbour runs the other way along the shared edge. Edges that share only
+                // their middle node (meshes of different sizes whose middles happen to meet) are
+                // not matched here: they face each other as a non-matching interface, or are
+                // refused below.
                 if dist(x[0], y[2]) > tol || dist(x[2], y[0]) > tol {
-                    let p = if dist(x[0], y[2]) > tol { x[0] } else { x[2] };
-                    return Err(self.err(
-                        key,
-                        format!(
-                            "{}: parts `{}` and `{}` do not conform along their shared curve near {}: their element \
-                             edges share a middle node but not their ends (mesh both parts with the same nodes on \
-                             the shared curve)",
-                            m.origin,
-                            m.parts[s].name,
-                            m.parts[t].name,
-                            at(p)
-                        ),
-                    ));
+                    continue;
                 }
                 is_matched[s][k] = true;
                 is_matched[t][j] = true;
