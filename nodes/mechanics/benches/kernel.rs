@@ -57,8 +57,11 @@ fn four_side_layout(mesh: &Mesh, k: f64) -> BoundaryLayout {
             }
         }
     }
+    let n_b = dofs.len();
     BoundaryLayout {
+        start: (0..=n_b).collect(),
         dofs,
+        coefs: vec![1.0; n_b],
         mass,
         k: ks,
         slots,

@@ -21,7 +21,7 @@
 //! 0.09 % and 49. Why not at the ends: there the dual basis stagnated (the patch test with
 //! clamped sides and an offset mesh, η stuck at 2.8e-6), the lumped one converges.
 
-use crate::element::edge_shape;
+use crate::element::{edge_frame, edge_shape};
 use crate::model::Plane;
 
 /// Side b's trace at each pair of a non-matching interface: pair p sees
@@ -105,17 +105,10 @@ const GAUSS5: [(f64, f64); 5] = [
     (0.906_179_845_938_664, 0.236_926_885_056_189_1),
 ];
 
+/// Position and derivative dx/ds of edge `x` at s ([`edge_frame`]'s tangent times |dx/ds|).
 fn point(x: &[[f64; 2]; 3], s: f64) -> ([f64; 2], [f64; 2]) {
-    let (n, dn) = edge_shape(s);
-    let mut p = [0.0; 2];
-    let mut d = [0.0; 2];
-    for k in 0..3 {
-        for c in 0..2 {
-            p[c] += n[k] * x[k][c];
-            d[c] += dn[k] * x[k][c];
-        }
-    }
-    (p, d)
+    let (p, t, jac) = edge_frame(x, s);
+    (p, [t[0] * jac, t[1] * jac])
 }
 
 /// The parameter s of the point of edge `x` (extended beyond [−1, 1] as the same quadratic

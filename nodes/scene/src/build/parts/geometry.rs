@@ -23,6 +23,36 @@ fn jacobians(x: &[[f64; 2]; 8]) -> [(f64, f64, f64); 9] {
 }
 
 /// The point of the quadratic edge `x` nearest to `p` and its distance (sampled, then Newton).
+/// A part's boundary edge not matched node by node: (part, edge, box lo, box hi).
+type Loose = (usize, usize, [f64; 2], [f64; 2]);
+
+/// The boundary edges not matched yet, and a grid of their centres whose cells are as large as
+/// the largest of them: an edge's centre is then in a cell next to the cell of any point on it.
+fn loose_edges(
+    boundary: &[Vec<Edge>],
+    is_matched: &[Vec<bool>],
+    edge_x: &dyn Fn(usize, &Edge) -> [[f64; 2]; 3],
+    tol: f64,
+) -> (Vec<Loose>, Grid) {
+    let mut loose = Vec::new();
+    for (s, edges) in boundary.iter().enumerate() {
+        for (k, e) in edges.iter().enumerate() {
+            if !is_matched[s][k] {
+                let (lo, hi) = edge_box(&edge_x(s, e));
+                loose.push((s, k, lo, hi));
+            }
+        }
+    }
+    let cell = loose
+        .iter()
+        .fold(tol, |c, l| c.max(l.3[0] - l.2[0]).max(l.3[1] - l.2[1]));
+    let mut grid = Grid::new(cell);
+    for (i, l) in loose.iter().enumerate() {
+        grid.insert([0.5 * (l.2[0] + l.3[0]), 0.5 * (l.2[1] + l.3[1])], i);
+    }
+    (loose, grid)
+}
+
 /// Bounding box of an edge's three nodes.
 fn edge_box(x: &[[f64; 2]; 3]) -> ([f64; 2], [f64; 2]) {
     let lo = [
@@ -316,22 +346,7 @@ impl Ctx<'_> {
         // ((part, its edges), (other part, its edges)) per pair of parts facing each other.
         let mut facing_groups: Vec<[(usize, Vec<usize>); 2]> = Vec::new();
         {
-            let mut loose: Vec<(usize, usize, [f64; 2], [f64; 2])> = Vec::new();
-            for (s, edges) in boundary.iter().enumerate() {
-                for (k, e) in edges.iter().enumerate() {
-                    if !is_matched[s][k] {
-                        let (lo, hi) = edge_box(&edge_x(s, e));
-                        loose.push((s, k, lo, hi));
-                    }
-                }
-            }
-            let cell = loose
-                .iter()
-                .fold(tol, |c, l| c.max(l.3[0] - l.2[0]).max(l.3[1] - l.2[1]));
-            let mut grid = Grid::new(cell);
-            for (i, l) in loose.iter().enumerate() {
-                grid.insert([0.5 * (l.2[0] + l.3[0]), 0.5 * (l.2[1] + l.3[1])], i);
-            }
+            let (loose, grid) = loose_edges(&boundary, &is_matched, &edge_x, tol);
             // (a < b) → (edges of a facing b, edges of b facing a).
             let mut facing: BTreeMap<(usize, usize), (Vec<usize>, Vec<usize>)> = BTreeMap::new();
             for &(s, k, _, _) in &loose {
@@ -410,33 +425,7 @@ impl Ctx<'_> {
         }
         // Non-conforming contact: a node of an unmatched boundary edge on another part's unmatched
         // boundary edge.
-        let mut loose: Vec<(usize, usize, [f64; 2], [f64; 2])> = Vec::new(); // (part, edge, box lo, hi)
-        for (s, edges) in boundary.iter().enumerate() {
-            for (k, e) in edges.iter().enumerate() {
-                if is_matched[s][k] {
-                    continue;
-                }
-                let x = edge_x(s, e);
-                let lo = [
-                    x.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min),
-                    x.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min),
-                ];
-                let hi = [
-                    x.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max),
-                    x.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max),
-                ];
-                loose.push((s, k, lo, hi));
-            }
-        }
-        // Cells as large as the largest loose edge: an edge's centre is then in a cell next to
-        // the cell of any point on it.
-        let cell = loose
-            .iter()
-            .fold(tol, |c, l| c.max(l.3[0] - l.2[0]).max(l.3[1] - l.2[1]));
-        let mut loose_grid = Grid::new(cell);
-        for (i, l) in loose.iter().enumerate() {
-            loose_grid.insert([0.5 * (l.2[0] + l.3[0]), 0.5 * (l.2[1] + l.3[1])], i);
-        }
+        let (loose, loose_grid) = loose_edges(&boundary, &is_matched, &edge_x, tol);
         let near_tol = 1e-7 * size;
         for &(s, k, _, _) in &loose {
             for (own, &n) in boundary[s][k].nodes.iter().enumerate() {
