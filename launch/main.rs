@@ -87,6 +87,20 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                 }
             };
             println!("plane: {plane}; forces in {})", m.plane.force_unit());
+            for (i, itf) in m.interfaces.iter().enumerate() {
+                if let Some(projection) = &itf.projection {
+                    println!(
+                        "interface {i} (`{}` – `{}`): non-matching, {} pairs on the nodes of `{}`, `{}` projected onto \
+                         them ({} terms)",
+                        m.subdomains[itf.a].name,
+                        m.subdomains[itf.b].name,
+                        itf.n_pairs(),
+                        m.subdomains[itf.a].name,
+                        m.subdomains[itf.b].name,
+                        projection.nodes.len()
+                    );
+                }
+            }
             // How a run as processes deploys it: which subdomains each process hosts, which
             // interfaces each interface node owns.
             let plan = glissade_deploy::Plan::new(m).with_scene(&sc);

@@ -35,6 +35,12 @@ fn press_fit_holds_f_times_its_normal_force(name: &str) {
     let scene_path = format!("{}/launch/scenes/{name}.toml", env!("CARGO_MANIFEST_DIR"));
     let checked = glissade_ok(&[&"check", &scene_path]);
     assert!(checked.contains("plane: axisymmetric (x = r, y = z;"), "{checked}");
+    // The hub (11 elements along the fit) carries the pairs of the one meshed on its own.
+    assert_eq!(
+        checked.contains("interface 0 (`hub` – `shaft`): non-matching, 23 pairs on the nodes of `hub`"),
+        name.ends_with("nonmatching"),
+        "{checked}"
+    );
     let out = glissade_ok(&[&"run", &scene_path, &"--in-process", &"--no-record", &"--out", &dir.0]);
     assert!(out.contains("Converged"), "{out}");
     assert!(out.contains("support boundary[1] at t = 1: R = (—, "), "{out}");
