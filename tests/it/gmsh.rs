@@ -470,7 +470,6 @@ fn every_bad_mesh_is_exit_2_naming_the_file_and_writes_nothing() {
         ("mixed", "6-node triangle"),
         ("quad9", "9-node quadrangle"),
         ("linear", "4-node quadrangle"),
-        ("nonconforming", "do not conform"),
         ("pieces", "several pieces"),
         ("duplicates", "are duplicates"),
         ("two-physicals", "several physical surfaces"),
@@ -478,7 +477,7 @@ fn every_bad_mesh_is_exit_2_naming_the_file_and_writes_nothing() {
         ("offset", "do not conform"),
     ];
     for (name, expect) in cases {
-        let materials = if matches!(name, "nonconforming" | "two-physicals" | "offset") {
+        let materials = if matches!(name, "two-physicals" | "offset") {
             r#"{ a = "m", b = "m" }"#
         } else {
             r#"{ a = "m" }"#

@@ -14,7 +14,8 @@ tests/fixtures/msh-bad/README.md says what each one is.
 - linear.msh: 4-node quadrangles (Mesh.ElementOrder = 1).
 - nonconforming.msh: rectangles `a` and `b` side by side, each with its own curve at x = 1
   (duplicate curves between the same points, not fragmented), meshed with 4 and 6 elements along
-  it; QUA8.
+  it; QUA8. No longer refused: the parts meet on a non-matching interface (the scene crate's
+  test of that reads it).
 - pieces.msh: one physical surface `a` of two disjoint rectangles; QUA8.
 - duplicates.msh: one physical surface `a` of two rectangles touching along x = 1, each with its
   own points and curve there (3 elements along both): the nodes of x = 1 are there twice; QUA8.
