@@ -9,7 +9,9 @@
 //! - Interfaces (`interfaces-NNNN.vtu`): each interface's node pairs at their coordinates, its
 //!   3-node edges (those of side a whose middle node is a pair) as quadratic edges (VTK type 21:
 //!   end, end, middle), point data `traction_n`, `traction_t` (F on side a in the interface's
-//!   frame, MPa), `jump_n`, `jump_t` (W_b − W_a, mm; both of s, the state the verdict judged), `status` (0 separated, 1 stick, 2 slip,
+//!   frame, MPa), `jump_n`, `jump_t` (W_b − W_a, mm; both of s, the state the verdict judged),
+//!   `displacement_a`, `displacement_b` (W_a, W_b: side b's projected on a non-matching
+//!   interface; NaN at clamped ends), `status` (0 separated, 1 stick, 2 slip,
 //!   −1 on perfect interfaces, −2 at an edge end clamped on both sides, which is no pair), `normal`
 //!   and `tangent`; cell data `interface` and `contact` (1 on contact interfaces).
 
@@ -414,6 +416,7 @@ impl InterfaceGrid {
             Vec::with_capacity(8 * n),
             Vec::with_capacity(4 * n),
         );
+        let (mut u_a, mut u_b) = (Vec::with_capacity(24 * n), Vec::with_capacity(24 * n));
         for (k, itf) in model.interfaces.iter().enumerate() {
             let sol = solutions[k].expect("checked by write_series");
             let np = itf.n_pairs();
@@ -423,6 +426,10 @@ impl InterfaceGrid {
                 put_f64(&mut f_t, &[t]);
                 put_f64(&mut j_n, &[jn]);
                 put_f64(&mut j_t, &[jt]);
+                // Each side's displacement at the pair: side b's through its projection on a
+                // non-matching interface.
+                put_f64(&mut u_a, &[sol.w_a.get(2 * p, i), sol.w_a.get(2 * p + 1, i), 0.0]);
+                put_f64(&mut u_b, &[sol.w_b.get(2 * p, i), sol.w_b.get(2 * p + 1, i), 0.0]);
                 let st = if itf.is_contact() {
                     sol.status[i * np + p] as i32
                 } else {
@@ -435,6 +442,8 @@ impl InterfaceGrid {
                 put_f64(&mut f_t, &[f64::NAN]);
                 put_f64(&mut j_n, &[0.0]);
                 put_f64(&mut j_t, &[0.0]);
+                put_f64(&mut u_a, &[f64::NAN; 3]);
+                put_f64(&mut u_b, &[f64::NAN; 3]);
                 status.extend_from_slice(&CLAMPED.to_le_bytes());
             }
         }
@@ -444,6 +453,8 @@ impl InterfaceGrid {
         w.array("traction_t", "Float64", 1, &f_t);
         w.array("jump_n", "Float64", 1, &j_n);
         w.array("jump_t", "Float64", 1, &j_t);
+        w.array("displacement_a", "Float64", 3, &u_a);
+        w.array("displacement_b", "Float64", 3, &u_b);
         w.array("status", "Int32", 1, &status);
         w.array("normal", "Float64", 3, &self.normal);
         w.array("tangent", "Float64", 3, &self.tangent);
