@@ -24,6 +24,9 @@ tests/fixtures/msh-bad/README.md says what each one is.
 - offset.msh: squares `a` and `b` side by side along x = 1, b shifted up by half an element, so
   that every node of the shared line falls on a node of the other part, corners on middle nodes;
   QUA8.
+- crossing.msh: rectangles `a` (height 1) and `b` (height 1.5) side by side along x = 1, each
+  with its own curve there, 2 elements along each: b's edge from y = 0.75 to 1.5 crosses the end
+  of the curve they share; QUA8.
 """
 
 import os
@@ -168,9 +171,19 @@ def main():
     gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
     gmsh.option.setNumber("Mesh.Binary", 0)
     gmsh.option.setNumber("Mesh.SaveAll", 0)
-    for make in (triangles, mixed, quad9, linear, nonconforming, pieces, duplicates, two_physicals, hinge, offset):
+    for make in (triangles, mixed, quad9, linear, nonconforming, pieces, duplicates, two_physicals, hinge, offset,
+                 crossing):
         make()
     gmsh.finalize()
+
+
+def crossing():
+    start("crossing")
+    sa, ca, _ = rectangle(0, 1, 0, 1, 2, 2)
+    # b is taller than a and meshed on its own: its edge from y = 0.75 to 1.5 crosses a's corner.
+    sb, cb, _ = rectangle(1, 2, 0, 1.5, 2, 2)
+    recombined([sa, sb])
+    finish("crossing.msh", {"a": [sa], "b": [sb]}, [ca[3]], [cb[1]])
 
 
 if __name__ == "__main__":

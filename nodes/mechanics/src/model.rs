@@ -181,8 +181,9 @@ pub struct Interface {
     pub a: usize,
     pub b: usize,
     /// (node of a, node of b) per pair, ordered along the interface. On a non-matching interface
-    /// the node of b is the one with the largest coefficient in the pair's projection (the
-    /// nearest, for display); its trace is [`Interface::trace`].
+    /// the node of b is the one with the largest coefficient in the pair's projection (a node
+    /// under the pair's edges, not necessarily the nearest): side b's trace is
+    /// [`Interface::trace`].
     pub pairs: Vec<(usize, usize)>,
     /// Coordinates of each pair (mm).
     pub coords: Vec<[f64; 2]>,

@@ -4,8 +4,9 @@
 //! D_b[p, j] = ∫_Γ ψ_p N_j^b dΓ integrated exactly segment by segment: side b's edges are
 //! intersected with side a's in side a's edge parameter, and each segment is integrated by Gauss
 //! on side a's isoparametric edge, the point of side b facing each Gauss point found by its
-//! closest point on b's edge. M_Γ is the row sums of D_b (equal to side a's lumped weights where
-//! side b covers side a), so that Π_b maps a rigid translation of b to itself exactly.
+//! closest point on b's edge. Each row of Π_b is divided by its own sum (∫ ψ_p where side b
+//! covers side a, within 1e-6 of side a's lumped weight M_Γ), so that Π_b maps a rigid
+//! translation of b to itself exactly.
 //!
 //! The test functions ψ_p are the dual basis of a's edge (Wohlmuth's biorthogonal multipliers):
 //! on each edge ψ = A N with A = D_e M_e⁻¹ (M_e the edge's consistent mass, D_e its row sums), so
@@ -111,6 +112,36 @@ fn point(x: &[[f64; 2]; 3], s: f64) -> ([f64; 2], [f64; 2]) {
     (p, [t[0] * jac, t[1] * jac])
 }
 
+/// Lower and upper corners of the box of an edge's nodes.
+fn bounding_box(x: &[[f64; 2]; 3]) -> ([f64; 2], [f64; 2]) {
+    let lo = [0, 1].map(|c| x.iter().map(|p| p[c]).fold(f64::INFINITY, f64::min));
+    let hi = [0, 1].map(|c| x.iter().map(|p| p[c]).fold(f64::NEG_INFINITY, f64::max));
+    (lo, hi)
+}
+
+/// Side b's interpolation at point `q`: the shape functions of the b edge closest to q at its
+/// closest point (nonzero terms only).
+fn interpolation(b_edges: &[SideEdge], q: [f64; 2]) -> Vec<(usize, f64)> {
+    let mut best: Option<(f64, usize, f64)> = None;
+    for (k, eb) in b_edges.iter().enumerate() {
+        let s = closest_parameter(&eb.x, q).clamp(-1.0, 1.0);
+        let (p, _) = point(&eb.x, s);
+        let d = ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt();
+        if best.is_none_or(|b| d < b.0) {
+            best = Some((d, k, s));
+        }
+    }
+    let Some((_, k, s)) = best else { return Vec::new() };
+    let (n, _) = edge_shape(s);
+    b_edges[k]
+        .nodes
+        .iter()
+        .zip(n)
+        .filter(|(_, c)| *c != 0.0)
+        .map(|(&node, c)| (node, c))
+        .collect()
+}
+
 /// The parameter s of the point of edge `x` (extended beyond [−1, 1] as the same quadratic
 /// curve) closest to `q`: Newton on |x(s) − q|², from the projection on the chord. Exact in one
 /// step on a straight edge with a centred middle node.
@@ -139,9 +170,10 @@ pub fn closest_parameter(x: &[[f64; 2]; 3], q: [f64; 2]) -> f64 {
 }
 
 /// Π_b of an interface whose pairs are side a's nodes: `a_edges` carry pair indices, `b_edges`
-/// mesh nodes of b; `weights` are side a's lumped weights per pair (to check that side b covers
-/// side a: a pair whose row sum falls short of its weight by more than 1e-6 relative is an
-/// error). Distances along the interface are measured on side a; `plane` gives the measure.
+/// mesh nodes of b; `weights` are side a's lumped weights per pair (one per pair). A pair whose row
+/// sum differs from ∫ ψ_p by more than 1e-6 relative (side b does not cover side a there) is an
+/// error; a pair of zero weight (on the axis) gets b's interpolation at its point. Distances
+/// along the interface are measured on side a; `plane` gives the measure.
 pub fn project(
     a_edges: &[SideEdge],
     weights: &[f64],
@@ -152,6 +184,10 @@ pub fn project(
     let n_pairs = weights.len();
     // Sparse rows: (node of b, value), merged per pair.
     let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n_pairs];
+    // ∫ ψ_p over a's edges with the rule of the rows (= ∫ N_p: ψ's row sums are N's): what a row
+    // sums to where b covers a. (The scene's weights come from 3-point Gauss, which differs by up
+    // to 1e-4 on a curved edge of 45°.)
+    let mut full = vec![0.0; n_pairs];
     // The pairs that end an open interface belong to one edge only: the edges there keep N.
     let mut edges_at = vec![0usize; n_pairs];
     for ea in a_edges {
@@ -178,17 +214,22 @@ pub fn project(
             let de = nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::from_fn(|i, _| me.row(i).sum()));
             a_dual = de * me.try_inverse().expect("edge mass");
         }
-        let span = {
-            let c = [ea.x[2][0] - ea.x[0][0], ea.x[2][1] - ea.x[0][1]];
-            (c[0] * c[0] + c[1] * c[1]).sqrt()
-        };
+        for &(g, w) in &GAUSS5 {
+            let (p, d) = point(&ea.x, g);
+            let (na, _) = edge_shape(g);
+            for i in 0..3 {
+                full[ea.nodes[i]] += na[i] * w * (d[0] * d[0] + d[1] * d[1]).sqrt() * plane.measure(p);
+            }
+        }
+        let (a_lo, a_hi) = bounding_box(&ea.x);
         for eb in b_edges {
-            // Quick rejection: b's edge far from a's.
-            let near = eb.x.iter().any(|q| {
-                ea.x.iter()
-                    .any(|p| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt() <= 2.0 * span)
-            });
-            if !near {
+            // Quick rejection: boxes apart by more than the larger of the two edges.
+            let (b_lo, b_hi) = bounding_box(&eb.x);
+            let margin = (a_hi[0] - a_lo[0])
+                .max(a_hi[1] - a_lo[1])
+                .max(b_hi[0] - b_lo[0])
+                .max(b_hi[1] - b_lo[1]);
+            if (0..2).any(|c| b_lo[c] > a_hi[c] + margin || a_lo[c] > b_hi[c] + margin) {
                 continue;
             }
             let s0 = closest_parameter(&ea.x, eb.x[0]);
@@ -225,7 +266,7 @@ pub fn project(
             }
         }
     }
-    let heaviest = weights.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    let heaviest = full.iter().fold(0.0f64, |m, w| m.max(w.abs()));
     let mut out = Projection {
         start: vec![0],
         nodes: Vec::new(),
@@ -235,24 +276,21 @@ pub fn project(
         row.sort_by_key(|e| e.0);
         let sum: f64 = row.iter().map(|e| e.1).sum();
         // A pair of (numerically) zero weight (on the axis of an axisymmetric part) has no row to
-        // normalise; its nearest b node alone stands for it.
-        if weights[p].abs() <= 1e-12 * heaviest {
-            let best = row.iter().fold(None::<(usize, f64)>, |b, e| match b {
-                Some(b) if b.1.abs() >= e.1.abs() => Some(b),
-                _ => Some(*e),
-            });
-            if let Some((n, _)) = best {
+        // normalise: side b there is its interpolation at the pair's point (its node on the axis,
+        // with coefficient 1, where b has one there).
+        if full[p].abs() <= crate::element::AXIS_TOLERANCE * heaviest {
+            for (n, c) in interpolation(b_edges, pair_coords[p]) {
                 out.nodes.push(n);
-                out.coefs.push(1.0);
+                out.coefs.push(c);
             }
             out.start.push(out.nodes.len());
             continue;
         }
-        if (sum - weights[p]).abs() > 1e-6 * weights[p].abs() {
+        if (sum - full[p]).abs() > 1e-6 * full[p].abs() {
             return Err(ProjectionError::Uncovered {
                 pair: p,
                 at: pair_coords[p],
-                covered: sum / weights[p],
+                covered: sum / full[p],
             });
         }
         for &(n, v) in row.iter() {

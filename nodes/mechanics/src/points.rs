@@ -108,7 +108,14 @@ pub fn contact_points(interfaces: &[Interface]) -> Vec<PhysicalPoint> {
             continue;
         }
         for (p, &(na, nb)) in itf.pairs.iter().enumerate() {
-            let (ga, gb) = (merged.of((itf.a, na)), merged.of((itf.b, nb)));
+            // Side b of a non-matching interface is a combination of b's nodes, its own at each
+            // pair: never one point with another interface's pair.
+            let gb = if itf.is_non_matching() {
+                (usize::MAX - k, p)
+            } else {
+                merged.of((itf.b, nb))
+            };
+            let ga = merged.of((itf.a, na));
             let n = itf.normals[p];
             let swapped = gb < ga;
             let key = if swapped {

@@ -95,6 +95,8 @@ pub(crate) fn law_violations(
 /// the scene's size and 1e6 times the displacement scale, or internal, support or interface nodal forces beyond 1e6 times the force scale)
 /// is an error naming the first such time point, whatever its residuals.
 pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, ReferenceError> {
+    // Its balances read one node of each side per pair.
+    glissade_mechanics::assembly::refuse_non_matching(model)?;
     let nt = model.time.n_points();
     let scales = Scales::of(model);
     let mut ch = Checks {

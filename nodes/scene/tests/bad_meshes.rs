@@ -228,3 +228,28 @@ fn a_boundary_curve_inside_a_part_is_refused_with_its_element() {
         );
     }
 }
+
+/// crossing.msh: `b` is taller than `a` and meshed on its own, so one of its edges along their
+/// common side crosses a's corner: a non-matching interface would stop short of that edge, and
+/// the scene is refused at the first edge found with a node inside the other part's edge (a's
+/// top edge, whose corner (1, 1) lies inside b's edge). A `match_tolerance`
+/// that is not a finite number > 0 is refused too.
+#[test]
+fn an_edge_crossing_the_end_of_a_shared_curve_is_refused() {
+    let e = refusal("crossing", true);
+    assert!(e.problem.contains("crosses the end of a curve"), "{e}");
+    assert!(
+        e.problem.contains("node at (1, 1) lies on the other part's edge"),
+        "{e}"
+    );
+    let scene = dir().join("scene.toml");
+    let scene = scene.to_str().expect("a UTF-8 path");
+    for bad in ["0.0", "-1e-3", "nan"] {
+        let text = scene_text("nonconforming", r#"{ a = "m", b = "m" }"#, "")
+            .replace("[mesh]\n", &format!("[mesh]\nmatch_tolerance = {bad}\n"));
+        match glissade_scene::load_str(&text, scene) {
+            Ok(_) => panic!("match_tolerance = {bad} accepted"),
+            Err(e) => assert_eq!(e.key, "mesh.match_tolerance", "{e}"),
+        }
+    }
+}

@@ -27,12 +27,13 @@ fn jacobians(x: &[[f64; 2]; 8]) -> [(f64, f64, f64); 9] {
 type Loose = (usize, usize, [f64; 2], [f64; 2]);
 
 /// The boundary edges not matched yet, and a grid of their centres whose cells are as large as
-/// the largest of them: an edge's centre is then in a cell next to the cell of any point on it.
+/// the largest of them plus `reach`: an edge's centre is then in a cell next to the cell of any
+/// point within `reach` of it.
 fn loose_edges(
     boundary: &[Vec<Edge>],
     is_matched: &[Vec<bool>],
     edge_x: &dyn Fn(usize, &Edge) -> [[f64; 2]; 3],
-    tol: f64,
+    reach: f64,
 ) -> (Vec<Loose>, Grid) {
     let mut loose = Vec::new();
     for (s, edges) in boundary.iter().enumerate() {
@@ -43,9 +44,10 @@ fn loose_edges(
             }
         }
     }
-    let cell = loose
-        .iter()
-        .fold(tol, |c, l| c.max(l.3[0] - l.2[0]).max(l.3[1] - l.2[1]));
+    let cell = reach
+        + loose
+            .iter()
+            .fold(reach, |c, l| c.max(l.3[0] - l.2[0]).max(l.3[1] - l.2[1]));
     let mut grid = Grid::new(cell);
     for (i, l) in loose.iter().enumerate() {
         grid.insert([0.5 * (l.2[0] + l.3[0]), 0.5 * (l.2[1] + l.3[1])], i);
@@ -343,10 +345,16 @@ impl Ctx<'_> {
         // Parts meshed on their own: an unmatched boundary edge whose three nodes lie within
         // `match_tol` of another part's unmatched boundary edges faces that part.
         let match_tol = match_tolerance.unwrap_or(1e-4 * size);
+        if !(match_tol.is_finite() && match_tol > 0.0) {
+            return Err(self.err(
+                "mesh.match_tolerance",
+                format!("{match_tol} mm: the distance within which parts face each other must be a finite number > 0"),
+            ));
+        }
         // ((part, its edges), (other part, its edges)) per pair of parts facing each other.
         let mut facing_groups: Vec<[(usize, Vec<usize>); 2]> = Vec::new();
         {
-            let (loose, grid) = loose_edges(&boundary, &is_matched, &edge_x, tol);
+            let (loose, grid) = loose_edges(&boundary, &is_matched, &edge_x, tol.max(match_tol));
             // (a < b) → (edges of a facing b, edges of b facing a).
             let mut facing: BTreeMap<(usize, usize), (Vec<usize>, Vec<usize>)> = BTreeMap::new();
             for &(s, k, _, _) in &loose {
@@ -370,6 +378,35 @@ impl Ctx<'_> {
                     parts
                 };
                 let (h0, h1, h2) = (holders(x[0]), holders(x[1]), holders(x[2]));
+                // An edge that does not face one part along its length but has a node inside
+                // another part's edge (away from that edge's ends) crosses the end of the curve
+                // they share: the interface would stop short of it.
+                let facing_one = h0.iter().any(|t| h1.contains(t) && h2.contains(t));
+                if !facing_one {
+                    let inside_edge = x.iter().find(|&&p| {
+                        grid.near(p).any(|o| {
+                            let (t, j, _, _) = loose[o];
+                            let y = edge_x(t, &boundary[t][j]);
+                            t != s
+                                && distance_to_edge(&y, p) <= match_tol
+                                && dist(y[0], p) > match_tol
+                                && dist(y[2], p) > match_tol
+                        })
+                    });
+                    if let (Some(&p), false) = (inside_edge, !h0.is_empty() && !h1.is_empty() && !h2.is_empty()) {
+                        return Err(self.err(
+                            key,
+                            format!(
+                                "{}: an element edge of part `{}` crosses the end of a curve it shares with another \
+                                 part: its node at {} lies on the other part's edge, the rest of it off that part (mesh \
+                                 both parts so that their edges end at the same points there, or share their nodes)",
+                                m.origin,
+                                m.parts[s].name,
+                                at(p)
+                            ),
+                        ));
+                    }
+                }
                 if !h0.is_empty()
                     && !h1.is_empty()
                     && !h2.is_empty()
@@ -425,8 +462,8 @@ impl Ctx<'_> {
         }
         // Non-conforming contact: a node of an unmatched boundary edge on another part's unmatched
         // boundary edge.
-        let (loose, loose_grid) = loose_edges(&boundary, &is_matched, &edge_x, tol);
         let near_tol = 1e-7 * size;
+        let (loose, loose_grid) = loose_edges(&boundary, &is_matched, &edge_x, tol.max(near_tol));
         for &(s, k, _, _) in &loose {
             for (own, &n) in boundary[s][k].nodes.iter().enumerate() {
                 let p = x_of(s, n);
