@@ -99,6 +99,20 @@ fn dispatch(cli: Cli) -> anyhow::Result<ExitCode> {
                         m.subdomains[itf.b].name,
                         projection.nodes.len()
                     );
+                    let mut b_nodes = projection.nodes.clone();
+                    b_nodes.sort_unstable();
+                    b_nodes.dedup();
+                    if itf.n_pairs() > b_nodes.len() {
+                        glissade::console::warn(&format!(
+                            "interface {i}: its pairs are the finer side's nodes ({} against {} of `{}`: the coarser \
+                             side's edges do not cover the interface from end to end); traction modes the coarser \
+                             side cannot see may keep the iteration from settling (docs/method.md, \
+                             \"Non-matching interfaces\")",
+                            itf.n_pairs(),
+                            b_nodes.len(),
+                            m.subdomains[itf.b].name
+                        ));
+                    }
                 }
             }
             // How a run as processes deploys it: which subdomains each process hosts, which
