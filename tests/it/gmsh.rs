@@ -475,7 +475,7 @@ fn every_bad_mesh_is_exit_2_naming_the_file_and_writes_nothing() {
         ("two-physicals", "several physical surfaces"),
         ("hinge", "several pieces"),
         ("offset", "do not conform"),
-        ("crossing", "crosses the end of a curve"),
+        ("crossing", "crosses the end of the curve"),
     ];
     for (name, expect) in cases {
         let materials = if matches!(name, "two-physicals" | "offset" | "crossing") {

@@ -346,7 +346,6 @@ mod tests {
                 let sa = |k: usize| 2.0 + 3.0 * k as f64 / (2 * na) as f64;
                 let xa: Vec<[f64; 2]> = (0..2 * na + 1).map(|k| at(sa(k))).collect();
                 let pr = project(&a, &w, &b, plane, &xa).unwrap();
-                let mut worst = 0.0f64;
                 let f = |x: f64| 0.7 - 1.3 * x;
                 for p in 0..xa.len() {
                     let v: f64 = pr
@@ -411,11 +410,11 @@ mod tests {
             };
             let pr = project(&a, &w, &b, plane, &xa).unwrap();
             let mut worst = 0.0f64;
-            for p in 0..48 {
+            for (p, x_a) in xa.iter().enumerate() {
                 let one: f64 = pr.terms(p).map(|(_, c)| c).sum();
                 assert!((one - 1.0).abs() <= 1e-13, "{plane:?} pair {p}: {one}");
                 let x: f64 = pr.terms(p).map(|(n, c)| c * xb[n][0]).sum();
-                worst = worst.max((x - xa[p][0]).abs());
+                worst = worst.max((x - x_a[0]).abs());
             }
             assert!(worst <= 1e-3, "{plane:?}: largest |Π x_b − x_a| {worst:e} mm");
         }

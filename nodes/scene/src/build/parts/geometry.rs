@@ -383,26 +383,33 @@ impl Ctx<'_> {
                 // they share: the interface would stop short of it.
                 let facing_one = h0.iter().any(|t| h1.contains(t) && h2.contains(t));
                 if !facing_one {
-                    let inside_edge = x.iter().find(|&&p| {
-                        grid.near(p).any(|o| {
+                    // (node, the part whose edge holds it inside).
+                    let inside_edge = x.iter().find_map(|&p| {
+                        grid.near(p).find_map(|o| {
                             let (t, j, _, _) = loose[o];
                             let y = edge_x(t, &boundary[t][j]);
-                            t != s
+                            (t != s
                                 && distance_to_edge(&y, p) <= match_tol
                                 && dist(y[0], p) > match_tol
-                                && dist(y[2], p) > match_tol
+                                && dist(y[2], p) > match_tol)
+                                .then_some((p, t))
                         })
                     });
-                    if let (Some(&p), false) = (inside_edge, !h0.is_empty() && !h1.is_empty() && !h2.is_empty()) {
+                    if let (Some((p, t)), false) = (inside_edge, !h0.is_empty() && !h1.is_empty() && !h2.is_empty()) {
                         return Err(self.err(
                             key,
                             format!(
-                                "{}: an element edge of part `{}` crosses the end of a curve it shares with another \
-                                 part: its node at {} lies on the other part's edge, the rest of it off that part (mesh \
-                                 both parts so that their edges end at the same points there, or share their nodes)",
+                                "{}: parts `{}` and `{}` do not conform near {}: an element edge of `{}` crosses the \
+                                 end of the curve they share (its node there lies inside an edge of `{}`, the rest of \
+                                 it off `{}`; mesh both parts so that their edges end at the same points there, or \
+                                 share their nodes)",
                                 m.origin,
                                 m.parts[s].name,
-                                at(p)
+                                m.parts[t].name,
+                                at(p),
+                                m.parts[s].name,
+                                m.parts[t].name,
+                                m.parts[t].name
                             ),
                         ));
                     }
