@@ -15,12 +15,13 @@ use glissade_mechanics::model::{InterfaceKind, Model};
 use glissade_mechanics::scales::{Scales, ROUND_OFF};
 use std::collections::BTreeMap;
 
-/// Variable Jacobian entries of one pair's two rows (u entries at (A x, A y, B x, B y)).
-#[derive(Debug, Clone, Copy, Default)]
+/// Variable Jacobian entries of one pair's two rows (u entries at the pair's
+/// [`MergedPair::free`] entries).
+#[derive(Debug, Clone, Default)]
 pub(crate) struct PairJacobian {
-    pub(crate) du_n: [f64; 4],
+    pub(crate) du_n: Vec<f64>,
     pub(crate) dln_n: f64,
-    pub(crate) du_t: [f64; 4],
+    pub(crate) du_t: Vec<f64>,
     pub(crate) dln_t: f64,
     pub(crate) dlt_t: f64,
 }
@@ -60,7 +61,6 @@ pub(crate) struct Problem<'m> {
 
 impl<'m> Problem<'m> {
     pub(crate) fn new(model: &'m Model, linear_solver: LinearSolver) -> Result<Self, ReferenceError> {
-        glissade_mechanics::assembly::refuse_non_matching(model)?;
         let num = Numbering::new(model);
         let n_dofs = 2 * num.n_merged;
         let mut constrained = vec![false; n_dofs];
@@ -89,14 +89,17 @@ impl<'m> Problem<'m> {
         }
         let k = Csr::from_triplets(n_dofs, k_all);
 
-        // Merged contact pairs.
+        // Merged contact pairs, and the ties of non-matching perfect interfaces.
         let mut pairs: Vec<MergedPair> = Vec::new();
         let mut index: BTreeMap<(usize, usize), usize> = BTreeMap::new();
         let mut copies = vec![Vec::new(); model.interfaces.len()];
         for (ki, itf) in model.interfaces.iter().enumerate() {
-            let InterfaceKind::Contact { friction, gap } = &itf.kind else {
-                continue;
+            let (friction, gap, tie) = match &itf.kind {
+                InterfaceKind::Contact { friction, gap } => (*friction, Some(gap), false),
+                InterfaceKind::Perfect if itf.is_non_matching() => (0.0, None, true),
+                InterfaceKind::Perfect => continue,
             };
+            let g0 = |p: usize| gap.map_or(0.0, |g| g[p]);
             // The largest edge length about a pair (its weight, per unit of the plane's measure:
             // in axisymmetry a weight is ∫ N 2πr ds).
             let h = 1.5
@@ -108,15 +111,32 @@ impl<'m> Problem<'m> {
                     .fold(0.0, f64::max);
             let e_mean = 0.5 * (model.subdomains[itf.a].material.e + model.subdomains[itf.b].material.e);
             for (p, &(na, nb)) in itf.pairs.iter().enumerate() {
-                let (ga, gb) = (num.node(itf.a, na), num.node(itf.b, nb));
-                if ga == gb {
-                    return Err(ReferenceError::ContactPairGlued { interface: ki, pair: p });
-                }
+                let ga = num.node(itf.a, na);
                 let w = itf.weights[p];
-                let found = index
-                    .get(&(ga, gb))
-                    .map(|&m| (m, 1.0))
-                    .or_else(|| index.get(&(gb, ga)).map(|&m| (m, -1.0)));
+                let terms: Vec<(usize, f64)> = std::iter::once((ga, -1.0))
+                    .chain(
+                        itf.trace(glissade_mechanics::model::Side::B, p)
+                            .into_iter()
+                            .map(|(n, c)| (num.node(itf.b, n), c)),
+                    )
+                    .collect();
+                // A conforming pair is one point, merged with its copies on other interfaces.
+                let found = if itf.is_non_matching() {
+                    None
+                } else {
+                    let gb = num.node(itf.b, nb);
+                    if ga == gb {
+                        return Err(ReferenceError::ContactPairGlued { interface: ki, pair: p });
+                    }
+                    let found = index
+                        .get(&(ga, gb))
+                        .map(|&m| (m, 1.0))
+                        .or_else(|| index.get(&(gb, ga)).map(|&m| (m, -1.0)));
+                    if found.is_none() {
+                        index.insert((ga, gb), pairs.len());
+                    }
+                    found
+                };
                 match found {
                     Some((m, sign)) => {
                         let mp = &mut pairs[m];
@@ -131,10 +151,10 @@ impl<'m> Problem<'m> {
                         {
                             return Err(bad("the normal"));
                         }
-                        if mp.friction != *friction {
+                        if mp.friction != friction {
                             return Err(bad("the friction coefficient"));
                         }
-                        if (mp.gap - gap[p]).abs() > 1e-12 * (1.0 + mp.gap.abs()) {
+                        if (mp.gap - g0(p)).abs() > 1e-12 * (1.0 + mp.gap.abs()) {
                             return Err(bad("the initial gap"));
                         }
                         mp.weight += w;
@@ -142,23 +162,24 @@ impl<'m> Problem<'m> {
                         copies[ki].push((m, sign));
                     }
                     None => {
-                        index.insert((ga, gb), pairs.len());
                         copies[ki].push((pairs.len(), 1.0));
-                        let fr = |node: usize, c: usize| free[2 * node + c];
-                        let fdofs = [fr(ga, 0), fr(ga, 1), fr(gb, 0), fr(gb, 1)];
+                        let fdofs: Vec<usize> = terms
+                            .iter()
+                            .flat_map(|&(node, _)| [free[2 * node], free[2 * node + 1]])
+                            .collect();
                         if fdofs.iter().all(|&d| d == NONE) {
                             return Err(ReferenceError::ConstrainedPair { interface: ki, pair: p });
                         }
                         pairs.push(MergedPair {
-                            node_a: ga,
-                            node_b: gb,
+                            terms,
                             normal: itf.normal(p),
                             tangent: itf.tangent(p),
-                            friction: *friction,
-                            gap: gap[p],
+                            friction,
+                            gap: g0(p),
                             weight: w,
                             r_base: e_mean * w / h,
                             free: fdofs,
+                            tie,
                         });
                     }
                 }
@@ -259,9 +280,15 @@ impl<'m> Problem<'m> {
             .collect()
     }
 
+    /// Σ coef·u over the pair's terms: u_b − u_a on a conforming pair (the same bits).
     pub(crate) fn jump(&self, m: usize, u: &[f64]) -> [f64; 2] {
-        let (a, b) = (self.pairs[m].node_a, self.pairs[m].node_b);
-        [u[2 * b] - u[2 * a], u[2 * b + 1] - u[2 * a + 1]]
+        let terms = &self.pairs[m].terms;
+        [0, 1].map(|c| {
+            let (n0, c0) = terms[0];
+            terms[1..]
+                .iter()
+                .fold(c0 * u[2 * n0 + c], |acc, &(n, k)| acc + k * u[2 * n + c])
+        })
     }
 
     /// Equilibrium residual on free dofs and the largest relative violation of the step's
@@ -283,10 +310,10 @@ impl<'m> Problem<'m> {
                 ln * mp.normal[1] + lt * mp.tangent[1],
             ];
             for c in 0..2 {
-                r_dof[2 * mp.node_a + c] -= lam[c];
-                r_dof[2 * mp.node_b + c] += lam[c];
-                mag[2 * mp.node_a + c] += lam[c].abs();
-                mag[2 * mp.node_b + c] += lam[c].abs();
+                for &(node, k) in &mp.terms {
+                    r_dof[2 * node + c] += k * lam[c];
+                    mag[2 * node + c] += (k * lam[c]).abs();
+                }
             }
         }
         let (fs, us) = (self.scales.force, self.scales.displacement);
@@ -306,12 +333,16 @@ impl<'m> Problem<'m> {
             let (ln, lt) = (x[self.n_free + 2 * m], x[self.n_free + 2 * m + 1]);
             let gap = dot(jump, mp.normal) + mp.gap;
             let dslip = dot(jump, mp.tangent) - slip_prev[m];
-            let (ua, ub) = (2 * mp.node_a, 2 * mp.node_b);
-            let round = ROUND_OFF
-                * (u[ua].abs().max(u[ua + 1].abs())
-                    + u[ub].abs().max(u[ub + 1].abs())
-                    + mp.gap.abs()
-                    + slip_prev[m].abs());
+            let sizes = mp.terms.iter().fold(0.0, |acc, &(node, k)| {
+                acc + k.abs() * u[2 * node].abs().max(u[2 * node + 1].abs())
+            });
+            let round = ROUND_OFF * (sizes + mp.gap.abs() + slip_prev[m].abs());
+            if mp.tie {
+                // A tie: both components of the jump zero, any force.
+                let beyond = |v: f64| (v.abs() - round).max(0.0) / us;
+                worst = worst.max(beyond(gap)).max(beyond(dot(jump, mp.tangent)));
+                continue;
+            }
             let v = law_violations(ln, lt, gap, dslip, mp.friction, fs, us, round);
             worst = v.into_iter().fold(worst, f64::max);
         }
@@ -348,16 +379,38 @@ impl<'m> Problem<'m> {
             let nu = ln + rr * gap;
             let tau = mp.friction * (-nu).max(0.0);
             let mu = lt + rr * dslip;
-            // ∂(jump·v)/∂u at (A x, A y, B x, B y).
-            let grad = |v: [f64; 2]| [-v[0], -v[1], v[0], v[1]];
+            // ∂(jump·v)/∂u at the pair's entries.
+            let grad = |v: [f64; 2]| -> Vec<f64> {
+                (0..mp.free.len())
+                    .map(|q| {
+                        let (c, k) = mp.entry(q);
+                        k * v[c]
+                    })
+                    .collect()
+            };
             let (gn, gt) = (grad(mp.normal), grad(mp.tangent));
-            let mut pj = PairJacobian::default();
+            let zeros = vec![0.0; mp.free.len()];
+            let mut pj = PairJacobian {
+                du_n: zeros.clone(),
+                du_t: zeros,
+                ..PairJacobian::default()
+            };
+            if mp.tie {
+                // C_n = −r (jump·n), C_t = −r (jump·t): the jump held at zero.
+                pj.du_n = gn.iter().map(|g| -rr * g).collect();
+                pj.du_t = gt.iter().map(|g| -rr * g).collect();
+                r[self.n_free + 2 * m] = -rr * dot(jump, mp.normal);
+                r[self.n_free + 2 * m + 1] = -rr * dot(jump, mp.tangent);
+                jac.push(pj);
+                status.push(Status::Stick);
+                continue;
+            }
             // Row λ_n: C_n = λ_n − min(0, ν).
             let c_n = if nu > 0.0 {
                 pj.dln_n = 1.0;
                 ln
             } else {
-                pj.du_n = gn.map(|g| -rr * g);
+                pj.du_n = gn.iter().map(|g| -rr * g).collect();
                 -rr * gap
             };
             // Row λ_t: C_t = λ_t − proj_[−τ, τ](λ_t + rΔs).
@@ -365,11 +418,11 @@ impl<'m> Problem<'m> {
                 pj.dlt_t = 1.0;
                 (lt, Status::Separated)
             } else if mu.abs() <= tau {
-                pj.du_t = gt.map(|g| -rr * g);
+                pj.du_t = gt.iter().map(|g| -rr * g).collect();
                 (-rr * dslip, Status::Stick)
             } else {
                 let sf = mu.signum() * mp.friction;
-                pj.du_t = gn.map(|g| sf * rr * g);
+                pj.du_t = gn.iter().map(|g| sf * rr * g).collect();
                 pj.dln_t = sf;
                 pj.dlt_t = 1.0;
                 (lt + sf * nu, Status::Slip)
@@ -425,13 +478,13 @@ impl<'m> Problem<'m> {
                 let values = &mut work.values;
                 for (m, (mp, pj)) in self.pairs.iter().zip(jac).enumerate() {
                     let mut o = pat.offset[m];
-                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
+                    for q in (0..mp.free.len()).filter(|&q| mp.free[q] != NONE) {
                         values[o] = pj.du_n[q];
                         o += 1;
                     }
                     values[o] = pj.dln_n + shift;
                     o += 1;
-                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
+                    for q in (0..mp.free.len()).filter(|&q| mp.free[q] != NONE) {
                         values[o] = pj.du_t[q];
                         o += 1;
                     }
@@ -472,7 +525,7 @@ impl<'m> Problem<'m> {
                     s_t[(rn, rn)] += pj.dln_n + shift;
                     s_t[(rn, rt)] += pj.dln_t;
                     s_t[(rt, rt)] += pj.dlt_t + shift;
-                    for q in (0..4).filter(|&q| mp.free[q] != NONE) {
+                    for q in (0..mp.free.len()).filter(|&q| mp.free[q] != NONE) {
                         let (fd, cn, ct) = (mp.free[q], pj.du_n[q], pj.du_t[q]);
                         let z = cs.z_t.col(cs.position[fd]);
                         for (row, c) in [(rn, cn), (rt, ct)] {
@@ -493,8 +546,8 @@ impl<'m> Problem<'m> {
                     let (dn, dt) = (rhs[(2 * m, 0)], rhs[(2 * m + 1, 0)]);
                     for (q, &fd) in mp.free.iter().enumerate() {
                         if fd != NONE {
-                            let (c, sign) = (q % 2, if q < 2 { -1.0 } else { 1.0 });
-                            b[fd] -= sign * (mp.normal[c] * dn + mp.tangent[c] * dt);
+                            let (c, k) = mp.entry(q);
+                            b[fd] -= k * (mp.normal[c] * dn + mp.tangent[c] * dt);
                         }
                     }
                 }

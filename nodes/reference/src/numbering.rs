@@ -13,9 +13,10 @@ pub(crate) struct Numbering {
 }
 
 impl Numbering {
-    /// Perfect-interface node pairs merged (contact pairs keep their two nodes).
+    /// Perfect-interface node pairs merged (contact pairs keep their two nodes; a non-matching
+    /// perfect interface is a constraint of its own, [`MergedPair::tie`]).
     pub(crate) fn new(model: &Model) -> Self {
-        Self::merging(model, |i| !i.is_contact())
+        Self::merging(model, |i| !i.is_contact() && !i.is_non_matching())
     }
 
     /// The node pairs of every interface `merge` accepts merged (union–find, the smallest id as
@@ -71,10 +72,11 @@ impl Numbering {
     }
 }
 
-/// One merged contact pair.
+/// One merged contact pair, or the constraint of a pair of a non-matching perfect interface.
 pub(crate) struct MergedPair {
-    pub(crate) node_a: usize,
-    pub(crate) node_b: usize,
+    /// The jump is Σ coef·u(node) over these (merged node, coefficient) terms: (a, −1), (b, +1)
+    /// on a conforming pair; (a, −1) and side b's projection on a non-matching one.
+    pub(crate) terms: Vec<(usize, f64)>,
     pub(crate) normal: [f64; 2],
     pub(crate) tangent: [f64; 2],
     pub(crate) friction: f64,
@@ -82,8 +84,17 @@ pub(crate) struct MergedPair {
     pub(crate) weight: f64,
     /// E_m · W_m / h_Γ (N/mm); r = r_factor × this.
     pub(crate) r_base: f64,
-    /// Free index of (A x, A y, B x, B y), or NONE.
-    pub(crate) free: [usize; 4],
+    /// Free index of each term's x and y (entry 2k + c), or NONE.
+    pub(crate) free: Vec<usize>,
+    /// A pair of a non-matching perfect interface: its jump is held at zero (both components).
+    pub(crate) tie: bool,
+}
+
+impl MergedPair {
+    /// (component, coefficient) of entry q of [`MergedPair::free`].
+    pub(crate) fn entry(&self, q: usize) -> (usize, f64) {
+        (q % 2, self.terms[q / 2].1)
+    }
 }
 
 /// One perfect copy joining two vertices of a group.
@@ -114,7 +125,7 @@ pub(crate) fn perfect_groups(model: &Model, num: &Numbering) -> Vec<PerfectGroup
     let mut vertices: Vec<Vec<(usize, usize, usize)>> = Vec::new();
     let mut edges: Vec<Vec<PerfectEdge>> = Vec::new();
     for (ki, itf) in model.interfaces.iter().enumerate() {
-        if itf.is_contact() {
+        if itf.is_contact() || itf.is_non_matching() {
             continue;
         }
         for (p, &(na, nb)) in itf.pairs.iter().enumerate() {

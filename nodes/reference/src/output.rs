@@ -65,9 +65,13 @@ pub(crate) fn postprocess(
                 *nf = [r[2 * node], r[2 * node + 1]];
             }
         }
-        // Contact copies: equal traction λ_m / W_m on every copy.
+        // Contact copies: equal traction λ_m / W_m on every copy; the pairs of a non-matching
+        // perfect interface likewise (each its own constraint), side b's force spread over its
+        // projection's nodes.
         for (ki, itf) in model.interfaces.iter().enumerate() {
-            let Some(cs) = contact[ki].as_mut() else { continue };
+            if pb.copies[ki].is_empty() {
+                continue;
+            }
             let np = itf.n_pairs();
             for (p, &(m, sign)) in pb.copies[ki].iter().enumerate() {
                 let mp = &pb.pairs[m];
@@ -77,21 +81,37 @@ pub(crate) fn postprocess(
                     sign * (ln * mp.normal[1] + lt * mp.tangent[1]) / mp.weight,
                 ];
                 let w = itf.weights[p];
-                let (na, nb) = itf.pairs[p];
-                let (ia, ib) = (pb.num.node_offset[itf.a] + na, pb.num.node_offset[itf.b] + nb);
+                let ia = pb.num.node_offset[itf.a] + itf.pairs[p].0;
+                let b_terms: Vec<(usize, f64)> = itf
+                    .trace(glissade_mechanics::model::Side::B, p)
+                    .into_iter()
+                    .map(|(n, k)| (pb.num.node_offset[itf.b] + n, k))
+                    .collect();
                 let fl = &mut fields[ki];
                 for c in 0..2 {
-                    let (wa, wb) = (u[2 * pb.num.merged[ia] + c], u[2 * pb.num.merged[ib] + c]);
+                    let wa = u[2 * pb.num.merged[ia] + c];
+                    let (n0, k0) = b_terms[0];
+                    let wb = b_terms[1..]
+                        .iter()
+                        .fold(k0 * u[2 * pb.num.merged[n0] + c], |acc, &(n, k)| {
+                            acc + k * u[2 * pb.num.merged[n] + c]
+                        });
                     fl.w_a[(2 * p + c, i)] = wa;
                     fl.w_b[(2 * p + c, i)] = wb;
                     fl.f_a[(2 * p + c, i)] = traction[c];
                     fl.f_b[(2 * p + c, i)] = -traction[c];
-                    cs.lambda[(2 * p + c, i)] = w * traction[c];
-                    cs.jump[(2 * p + c, i)] = wb - wa;
+                    if let Some(cs) = contact[ki].as_mut() {
+                        cs.lambda[(2 * p + c, i)] = w * traction[c];
+                        cs.jump[(2 * p + c, i)] = wb - wa;
+                    }
                     node_force[ia][c] -= w * traction[c];
-                    node_force[ib][c] += w * traction[c];
+                    for &(n, k) in &b_terms {
+                        node_force[n][c] += k * (w * traction[c]);
+                    }
                 }
-                cs.status[p + np * i] = status[m];
+                if let Some(cs) = contact[ki].as_mut() {
+                    cs.status[p + np * i] = status[m];
+                }
             }
         }
         // Perfect copies: minimum-M-norm distribution of what is left at each group's nodes.

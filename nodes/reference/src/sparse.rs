@@ -143,11 +143,11 @@ pub(crate) fn lu_pattern(
             if fd == NONE {
                 continue;
             }
-            let (c, sign) = (q % 2, if q < 2 { -1.0 } else { 1.0 });
+            let (c, k) = mp.entry(q);
             idx.push(Pair { row: fd, col: ln });
-            fixed.push(sign * mp.normal[c]);
+            fixed.push(k * mp.normal[c]);
             idx.push(Pair { row: fd, col: lt });
-            fixed.push(sign * mp.tangent[c]);
+            fixed.push(k * mp.tangent[c]);
         }
     }
     let mut offset = Vec::with_capacity(pairs.len());
@@ -224,7 +224,8 @@ pub(crate) fn condensed_solver(k_ff: SparseSpd, n_free: usize, pairs: &[MergedPa
             let v = if comp == 0 { mp.normal } else { mp.tangent };
             for (q, &fd) in mp.free.iter().enumerate() {
                 if fd != NONE {
-                    rhs[(fd, j)] += if q < 2 { -v[q % 2] } else { v[q % 2] };
+                    let (c, k) = mp.entry(q);
+                    rhs[(fd, j)] += k * v[c];
                 }
             }
         }
