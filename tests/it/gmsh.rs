@@ -149,7 +149,7 @@ fn curved_latin_equals_the_monolithic_reference() {
     // contact tractions and jumps (traction errors measured: shrink fit 6.5e-9, and 2.2e-8 with
     // the macro problem under plain relaxation after 1821 iterations; sheath 8.8e-11, sheath with
     // contact on the cuts 1.8e-9, wedge 3.1e-9; the shrink fit meshed on its own, a non-matching
-    // interface, the same discrete problem through its projection). The sheath (glued cuts) runs with the macro
+    // interface, the same discrete problem through its projection: 1.4e-9). The sheath (glued cuts) runs with the macro
     // problem (on by default there); the shrink fit (its outer ring is held only by the fit), the
     // sheath with contact on the cuts (each sector held only by contact, where contact pairs close
     // cycles at the cross-points) and the wedge (held only by its flanks) without it (off by
