@@ -192,11 +192,10 @@ fn a_uniform_stress_crosses_any_mesh_ratio() {
     }
 }
 
-/// At the default stop (accuracy 1e-3), LATIN's iterations on the non-matching meshes stay
-/// within ±10 % of the conforming case's (1:1; for the offset, the same blocks on a lower part
-/// whose nodes face the upper's), the lateral sides loaded by tractions. (Where a
-/// non-matching interface ends on clamped sides, its end pairs are clamped on one side only
-/// and the iterations double: not asserted, said in docs/method.md.)
+/// At the default stop (accuracy 1e-3), LATIN's iterations on the non-matching meshes are at
+/// most 10 % above the conforming case's (1:1; for the offset, the same blocks on a lower part
+/// whose nodes face the upper's), the lateral sides loaded by tractions (measured: 21 against 21
+/// at every ratio; offset 37 against 37, and 21 against 27 in contact). Fewer is no defect.
 #[test]
 fn non_matching_meshes_take_the_iterations_of_the_conforming_one() {
     for contact in [false, true] {
@@ -210,15 +209,56 @@ fn non_matching_meshes_take_the_iterations_of_the_conforming_one() {
                 *base.get_or_insert_with(|| run_patch(&[(10.0, 4)], &[(10.0, 4)], contact, Sides::Traction, false).1)
             };
             let (_, its, _) = run_patch(&lower, &upper, contact, Sides::Traction, false);
-            // The offset is not within ±10 % (measured 52 against 37 perfect, 43 against 27 in
-            // contact): bounded at 2× so that a worse projection fails here; the issue's ±10 %
-            // holds for the ratios (21–23 against 21).
-            let tolerance = if name == "offset" { 1.0 } else { 0.1 };
             assert!(
-                (its as f64 - base as f64).abs() <= tolerance * base as f64,
+                its as f64 <= 1.1 * base as f64,
                 "{name}, contact {contact}: {its} iterations against {base} conforming"
             );
         }
+    }
+}
+
+/// T-junctions: one part in one subdomain facing two subdomains of the other, the cut between
+/// them ending on the non-matching interfaces (the end pairs there are left out, DESIGN §2 and
+/// docs/method.md), against the same blocks meshed to match. Measured 38 against 27 and 38
+/// against 30 (perfect and stuck contact alike; 149 and 91 before the end pairs were left
+/// out): bounded at 1.5× so that losing the end treatment fails here; the issue's ±10 % is not
+/// reached.
+#[test]
+fn t_junctions_stay_within_one_and_a_half_times_the_conforming_iterations() {
+    let cases: [(Part, Part, Part, Part); 2] = [
+        (
+            vec![(10.0, 8)],
+            vec![(5.0, 3), (10.0, 3)],
+            vec![(10.0, 6)],
+            vec![(5.0, 3), (10.0, 3)],
+        ),
+        (
+            vec![(5.0, 4), (10.0, 4)],
+            vec![(10.0, 6)],
+            vec![(5.0, 3), (10.0, 3)],
+            vec![(10.0, 6)],
+        ),
+    ];
+    for contact in [false, true] {
+        for (lower, upper, twin_lower, twin_upper) in &cases {
+            let (_, base, twin_non_matching) = run_patch(twin_lower, twin_upper, contact, Sides::Traction, false);
+            assert_eq!(twin_non_matching, 0);
+            let (err, its, non_matching) = run_patch(lower, upper, contact, Sides::Traction, false);
+            assert_eq!(non_matching, 2);
+            assert!(
+                err <= 1e-3,
+                "{lower:?} / {upper:?}: stress error {err:e} at the default stop"
+            );
+            assert!(
+                its as f64 <= 1.5 * base as f64,
+                "{lower:?} / {upper:?}, contact {contact}: {its} iterations against {base} conforming"
+            );
+        }
+    }
+    // And exact at tight tolerance (the end treatment keeps the patch test).
+    for (lower, upper, _, _) in &cases {
+        let (err, _, _) = run_patch(lower, upper, true, Sides::Displacement, true);
+        assert!(err <= 1e-10, "{lower:?} / {upper:?}: {err:e}");
     }
 }
 

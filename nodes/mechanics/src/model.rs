@@ -199,6 +199,10 @@ pub struct Interface {
     /// Non-matching: side b's trace at each pair ([`crate::mortar`]); None when conforming.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub projection: Option<Projection>,
+    /// Non-matching with an end left out ([`crate::mortar::project_with_ends`]): side a's trace
+    /// at each pair (mesh nodes of a); None when it is the pair's node alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub projection_a: Option<Projection>,
 }
 
 impl Interface {
@@ -280,10 +284,11 @@ impl Interface {
 
     /// Side `side`'s trace at pair `p`: (node, coefficient) terms whose weighted sum of nodal
     /// displacements is the side's displacement there; one term (node, 1) on a conforming
-    /// interface and on side a.
+    /// interface and on side a (but at the middle pair of a non-matching interface's end edge
+    /// whose end was left out: the edge's mean).
     pub fn trace(&self, side: Side, p: usize) -> Vec<(usize, f64)> {
-        match (side, &self.projection) {
-            (Side::B, Some(pr)) => pr.terms(p).collect(),
+        match (side, &self.projection, &self.projection_a) {
+            (Side::B, Some(pr), _) | (Side::A, _, Some(pr)) => pr.terms(p).collect(),
             _ => vec![(self.node(side, p), 1.0)],
         }
     }

@@ -115,7 +115,12 @@ pub fn contact_points(interfaces: &[Interface]) -> Vec<PhysicalPoint> {
             } else {
                 merged.of((itf.b, nb))
             };
-            let ga = merged.of((itf.a, na));
+            // Side a is its node, or at the middle of an end edge left out the edge's mean: its
+            // own then.
+            let ga = match &itf.projection_a {
+                Some(pa) if pa.terms(p).count() > 1 => (usize::MAX - k, p + (1 << 40)),
+                _ => merged.of((itf.a, na)),
+            };
             let n = itf.normals[p];
             let swapped = gb < ga;
             let key = if swapped {
@@ -334,6 +339,7 @@ mod tests {
             length: (n - 1) as f64,
             centroid: [x0 + 0.5 * (n - 1) as f64, 0.0],
             projection: None,
+            projection_a: None,
         }
     }
 
@@ -365,6 +371,7 @@ mod tests {
             length: 1.0,
             centroid: [2.0, 0.0],
             projection: None,
+            projection_a: None,
         };
         vec![
             itf(

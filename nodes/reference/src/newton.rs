@@ -113,7 +113,10 @@ impl<'m> Problem<'m> {
             for (p, &(na, nb)) in itf.pairs.iter().enumerate() {
                 let ga = num.node(itf.a, na);
                 let w = itf.weights[p];
-                let terms: Vec<(usize, f64)> = std::iter::once((ga, -1.0))
+                let terms: Vec<(usize, f64)> = itf
+                    .trace(glissade_mechanics::model::Side::A, p)
+                    .into_iter()
+                    .map(|(n, c)| (num.node(itf.a, n), -c))
                     .chain(
                         itf.trace(glissade_mechanics::model::Side::B, p)
                             .into_iter()

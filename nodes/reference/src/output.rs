@@ -81,7 +81,11 @@ pub(crate) fn postprocess(
                     sign * (ln * mp.normal[1] + lt * mp.tangent[1]) / mp.weight,
                 ];
                 let w = itf.weights[p];
-                let ia = pb.num.node_offset[itf.a] + itf.pairs[p].0;
+                let a_terms: Vec<(usize, f64)> = itf
+                    .trace(glissade_mechanics::model::Side::A, p)
+                    .into_iter()
+                    .map(|(n, k)| (pb.num.node_offset[itf.a] + n, k))
+                    .collect();
                 let b_terms: Vec<(usize, f64)> = itf
                     .trace(glissade_mechanics::model::Side::B, p)
                     .into_iter()
@@ -89,13 +93,15 @@ pub(crate) fn postprocess(
                     .collect();
                 let fl = &mut fields[ki];
                 for c in 0..2 {
-                    let wa = u[2 * pb.num.merged[ia] + c];
-                    let (n0, k0) = b_terms[0];
-                    let wb = b_terms[1..]
-                        .iter()
-                        .fold(k0 * u[2 * pb.num.merged[n0] + c], |acc, &(n, k)| {
-                            acc + k * u[2 * pb.num.merged[n] + c]
-                        });
+                    let trace = |terms: &[(usize, f64)]| {
+                        let (n0, k0) = terms[0];
+                        terms[1..]
+                            .iter()
+                            .fold(k0 * u[2 * pb.num.merged[n0] + c], |acc, &(n, k)| {
+                                acc + k * u[2 * pb.num.merged[n] + c]
+                            })
+                    };
+                    let (wa, wb) = (trace(&a_terms), trace(&b_terms));
                     fl.w_a[(2 * p + c, i)] = wa;
                     fl.w_b[(2 * p + c, i)] = wb;
                     fl.f_a[(2 * p + c, i)] = traction[c];
@@ -104,7 +110,9 @@ pub(crate) fn postprocess(
                         cs.lambda[(2 * p + c, i)] = w * traction[c];
                         cs.jump[(2 * p + c, i)] = wb - wa;
                     }
-                    node_force[ia][c] -= w * traction[c];
+                    for &(n, k) in &a_terms {
+                        node_force[n][c] -= k * (w * traction[c]);
+                    }
                     for &(n, k) in &b_terms {
                         node_force[n][c] += k * (w * traction[c]);
                     }

@@ -200,7 +200,7 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
             InterfaceKind::Perfect => None,
         };
         for p in 0..itf.n_pairs() {
-            let na = itf.pairs[p].0;
+            let a_terms = itf.trace(glissade_mechanics::model::Side::A, p);
             let b_terms = itf.trace(glissade_mechanics::model::Side::B, p);
             let w = itf.weights[p];
             let mut slip_prev = 0.0f64;
@@ -208,13 +208,14 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
                 let g = |m: &Mat<f64>| [m[(2 * p, i)], m[(2 * p + 1, i)]];
                 let (wa, wb, fa, fb) = (g(&fl.w_a), g(&fl.w_b), g(&fl.f_a), g(&fl.f_b));
                 for c in 0..2 {
-                    let (n0, k0) = b_terms[0];
-                    let ub = b_terms[1..]
-                        .iter()
-                        .fold(k0 * sol.u[itf.b][(2 * n0 + c, i)], |acc, &(n, k)| {
-                            acc + k * sol.u[itf.b][(2 * n + c, i)]
-                        });
-                    let mut e = (wa[c] - sol.u[itf.a][(2 * na + c, i)]).abs().max((wb[c] - ub).abs());
+                    let trace = |s: usize, terms: &[(usize, f64)]| {
+                        let (n0, k0) = terms[0];
+                        terms[1..].iter().fold(k0 * sol.u[s][(2 * n0 + c, i)], |acc, &(n, k)| {
+                            acc + k * sol.u[s][(2 * n + c, i)]
+                        })
+                    };
+                    let (ua, ub) = (trace(itf.a, &a_terms), trace(itf.b, &b_terms));
+                    let mut e = (wa[c] - ua).abs().max((wb[c] - ub).abs());
                     if contact.is_none() {
                         e = e.max((wa[c] - wb[c]).abs());
                     }

@@ -148,6 +148,7 @@ impl Ctx<'_> {
                 length,
                 curves: Vec::new(),
                 projection: None,
+                sides: None,
             }));
         }
         Ok(None)
@@ -230,6 +231,7 @@ impl Ctx<'_> {
             length,
             curves: Vec::new(),
             projection: Some(projection),
+            sides: Some((a_side, b_side)),
         })
     }
 
@@ -374,7 +376,45 @@ impl Ctx<'_> {
         let clamped = |s: usize, n: usize| loads[s].constrained[2 * n] && loads[s].constrained[2 * n + 1];
         let radial_held = |s: usize, n: usize| loads[s].constrained[2 * n];
         let mut out = Vec::new();
-        for (g, kind) in geo.into_iter().zip(kinds) {
+        // How many interfaces hold each (subdomain, node): a pair's own node on side a, or a
+        // conforming side b's.
+        let mut members: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
+        for g in &geo {
+            for &(na, nb) in &g.pairs {
+                *members.entry((g.a, na)).or_default() += 1;
+                if g.projection.is_none() {
+                    *members.entry((g.b, nb)).or_default() += 1;
+                }
+            }
+        }
+        for (mut g, kind) in geo.into_iter().zip(kinds) {
+            // A non-matching interface that ends on a support of side a, or where another
+            // interface holds its end node, leaves that end pair out (the crosspoint
+            // modification, glissade_mechanics::mortar::project_with_ends).
+            let mut dropped = vec![false; g.pairs.len()];
+            let mut projection_a = None;
+            if let Some((a_edges, b_edges)) = &g.sides {
+                let mut edges_at = vec![0usize; g.pairs.len()];
+                for e in a_edges {
+                    edges_at[e.nodes[0]] += 1;
+                    edges_at[e.nodes[2]] += 1;
+                }
+                for (p, d) in dropped.iter_mut().enumerate() {
+                    let na = g.pairs[p].0;
+                    *d = edges_at[p] == 1 && (clamped(g.a, na) || members[&(g.a, na)] > 1);
+                }
+                if dropped.iter().any(|&d| d) {
+                    let pr = project_with_ends(a_edges, &g.weights, b_edges, self.plane, &g.coords, &dropped)
+                        .map_err(|e| self.err("interface", format!("a non-matching interface: {e}")))?;
+                    let mut a = pr.a;
+                    for n in a.nodes.iter_mut() {
+                        *n = g.pairs[*n].0;
+                    }
+                    projection_a = Some(a);
+                    g.weights = pr.weights;
+                    g.projection = Some(pr.b);
+                }
+            }
             let heaviest = g.weights.iter().fold(0.0f64, |m, w| m.max(w.abs()));
             // Side b's nodes at pair p: the one facing it, or every node of its projection.
             let b_nodes = |p: usize| -> Vec<usize> {
@@ -390,7 +430,11 @@ impl Ctx<'_> {
                     && b_nodes(p).iter().all(|&n| radial_held(g.b, n))
             };
             let keep: Vec<usize> = (0..g.pairs.len())
-                .filter(|&p| !(on_axis(p) || clamped(g.a, g.pairs[p].0) && b_nodes(p).iter().all(|&n| clamped(g.b, n))))
+                .filter(|&p| {
+                    !(dropped[p]
+                        || on_axis(p)
+                        || clamped(g.a, g.pairs[p].0) && b_nodes(p).iter().all(|&n| clamped(g.b, n)))
+                })
                 .collect();
             if keep.is_empty() {
                 continue;
@@ -431,6 +475,7 @@ impl Ctx<'_> {
                 length: g.length,
                 centroid,
                 projection: g.projection.as_ref().map(|pr| pr.select(&keep)),
+                projection_a: projection_a.as_ref().map(|pr| pr.select(&keep)),
             });
         }
         Ok(out)

@@ -24,7 +24,7 @@ use glissade_mechanics::model::{
     interpolate, Acceleration, Interface, InterfaceKind, LoadCase, Material, Model, Plane, SolverParams, Subdomain,
     TimeFunction, TimeGrid, TimeStart, DEFAULT_TIME_START_TOLERANCE,
 };
-use glissade_mechanics::mortar::{project, Projection, SideEdge};
+use glissade_mechanics::mortar::{project, project_with_ends, Projection, SideEdge};
 use glissade_mechanics::pgd::{PgdCriterion, PgdParams};
 use std::collections::BTreeMap;
 
@@ -74,6 +74,9 @@ pub(crate) struct GeoInterface {
     pub(crate) curves: Vec<usize>,
     /// Non-matching: side b's trace at each pair (pairs are side a's nodes).
     pub(crate) projection: Option<Projection>,
+    /// Non-matching: the edges it was projected from (a's carrying pair indices, b's mesh
+    /// nodes), to project again once the supports are known.
+    pub(crate) sides: Option<(Vec<SideEdge>, Vec<SideEdge>)>,
 }
 
 /// Initial gap g0(x, y) of a contact rule.

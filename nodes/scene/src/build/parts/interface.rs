@@ -67,6 +67,7 @@ pub(super) fn part_interface_non_matching(
         pair.1 = crate::build::interfaces::nearest_term(&projection, p);
     }
     g.projection = Some(projection);
+    g.sides = Some((a_side, b_side));
     for (s, edges) in [(a, a_edges), (b, b_edges)] {
         for &k in edges {
             for &c in &edge_curves[s][k] {
@@ -220,6 +221,7 @@ fn chain_interface(
         length,
         curves: Vec::new(),
         projection: None,
+        sides: None,
     })
 }
 
