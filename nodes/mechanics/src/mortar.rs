@@ -214,7 +214,8 @@ pub struct Projected {
 /// the whole edge and the other pairs' 0, so that the edge's traction is one constant carried by
 /// its middle pair. Side a's trace at that middle pair is then the edge's mean (a combination of
 /// its three nodes, exact for affine fields like side b's), its weight the edge's length. The
-/// dropped pairs keep rows (of their other edges, none) that the caller leaves out. Without it an
+/// caller leaves out the dropped pairs, and the pairs whose weight comes out 0 (an end pair whose
+/// only edge is modified). Without it an
 /// end pair held by a support on side a, or shared with another interface, ties two different
 /// averages of side b to one point and slows the iteration 3–6×.
 pub fn project_with_ends(
@@ -243,6 +244,10 @@ pub fn project_with_ends(
         edges_at[ea.nodes[0]] += 1;
         edges_at[ea.nodes[2]] += 1;
     }
+    debug_assert!(
+        dropped.iter().zip(&edges_at).all(|(&d, &n)| !d || n == 1),
+        "only the end pairs of an open interface can be left out"
+    );
     for ea in a_edges {
         let dual = edges_at[ea.nodes[0]] > 1 && edges_at[ea.nodes[2]] > 1;
         let modified = (0..3)

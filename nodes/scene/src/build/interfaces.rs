@@ -386,6 +386,15 @@ impl Ctx<'_> {
                     *members.entry((g.b, nb)).or_default() += 1;
                 }
             }
+            // A non-matching interface holds each node of its side b's projections once.
+            if let Some(pr) = &g.projection {
+                let mut nodes = pr.nodes.clone();
+                nodes.sort_unstable();
+                nodes.dedup();
+                for n in nodes {
+                    *members.entry((g.b, n)).or_default() += 1;
+                }
+            }
         }
         for (mut g, kind) in geo.into_iter().zip(kinds) {
             // A non-matching interface that ends on a support of side a, or where another
@@ -431,7 +440,10 @@ impl Ctx<'_> {
             };
             let keep: Vec<usize> = (0..g.pairs.len())
                 .filter(|&p| {
+                    // A pair whose test function is zero everywhere (its only edge is a modified
+                    // end edge) carries nothing: left out too.
                     !(dropped[p]
+                        || projection_a.is_some() && g.weights[p] == 0.0
                         || on_axis(p)
                         || clamped(g.a, g.pairs[p].0) && b_nodes(p).iter().all(|&n| clamped(g.b, n)))
                 })
