@@ -426,6 +426,19 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
             if itf.straight_normal().is_none() {
                 entry["normals"] = json!(itf.normals);
             }
+            if itf.is_non_matching() {
+                // Each side's displacement at the pairs (global x, y): side b's through its
+                // projection, side a's the node's own (or an end edge's mean).
+                for (key, w) in [("u_a", &sol.w_a), ("u_b", &sol.w_b)] {
+                    entry[key] = Value::Array(
+                        (0..nt)
+                            .map(|i| {
+                                Value::Array((0..np).map(|p| json!([w.get(2 * p, i), w.get(2 * p + 1, i)])).collect())
+                            })
+                            .collect(),
+                    );
+                }
+            }
             entry
         })
         .collect();
@@ -442,6 +455,8 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
             "jump_t": "mm: (W_b − W_a)·tangent",
             "normal": "unit vector out of side a towards side b; tangent = (−normal_y, normal_x)",
             "status": "separated, stick or slip per pair (contact interfaces only)",
+            "u_a": "mm: side a's displacement (x, y) at each pair (non-matching interfaces only)",
+            "u_b": "mm: side b's displacement (x, y) projected at each pair (non-matching interfaces only)",
         },
         "times": (0..n_times).map(|i| model.time.t(i)).collect::<Vec<_>>(),
         "interfaces": items,

@@ -52,6 +52,28 @@ fn press_fit_holds_f_times_its_normal_force(name: &str) {
         "{boundaries}"
     );
     assert!(resultants.contains(",normal_N,tangential_N,"), "{resultants}");
+    // Meshed on their own, fields.json gives both sides' displacements at the fit's pairs (side
+    // b's projected there): their difference is the jump, in each pair's frame (round-off of one
+    // subtraction and a dot product on displacements of ~1e-2 mm).
+    let fields: serde_json::Value = serde_json::from_str(&text(".fields.json")).unwrap();
+    let fit = &fields["interfaces"][0];
+    assert_eq!(fit["u_a"].is_array(), name.ends_with("nonmatching"), "{}", fit["a"]);
+    if let (Some(u_a), Some(u_b)) = (fit["u_a"].as_array(), fit["u_b"].as_array()) {
+        let normals = fit["normals"].as_array().map(|n| n.to_vec());
+        let normal = fit["normal"].clone();
+        for (i, (ua, ub)) in u_a.iter().zip(u_b).enumerate() {
+            for (p, (a, b)) in ua.as_array().unwrap().iter().zip(ub.as_array().unwrap()).enumerate() {
+                let n = normals.as_ref().map_or(normal.clone(), |n| n[p].clone());
+                let d = [0, 1].map(|c| b[c].as_f64().unwrap() - a[c].as_f64().unwrap());
+                let jump_n = d[0] * n[0].as_f64().unwrap() + d[1] * n[1].as_f64().unwrap();
+                let want = fit["jump_n"][i][p].as_f64().unwrap();
+                assert!(
+                    (jump_n - want).abs() <= 1e-15,
+                    "time point {i}, pair {p}: {jump_n} against {want}"
+                );
+            }
+        }
+    }
     let rows = |csv: &str, keep: &dyn Fn(&[&str]) -> bool| -> Vec<Vec<f64>> {
         csv.lines()
             .skip(1)
