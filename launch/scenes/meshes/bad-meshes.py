@@ -146,13 +146,19 @@ def hinge():
     finish("hinge.msh", {"a": [s1, s2]}, [c1[3]], [c2[1]])
 
 
-def offset():
-    start("offset")
+def beside_unit_square(name, b_y0, b_y1):
+    """The unit square `a` and the rectangle `b` = [1, 2] × [b_y0, b_y1], each meshed on its own
+    with 2 × 2 elements (its own curve on x = 1)."""
+    start(name)
     sa, ca, _ = rectangle(0, 1, 0, 1, 2, 2)
-    # b's side on x = 1 is shifted by half an element: its corners fall on a's middle nodes.
-    sb, cb, _ = rectangle(1, 2, 0.25, 1.25, 2, 2)
+    sb, cb, _ = rectangle(1, 2, b_y0, b_y1, 2, 2)
     recombined([sa, sb])
-    finish("offset.msh", {"a": [sa], "b": [sb]}, [ca[3]], [cb[1]])
+    finish(f"{name}.msh", {"a": [sa], "b": [sb]}, [ca[3]], [cb[1]])
+
+
+def offset():
+    # b's side on x = 1 is shifted by half an element: its corners fall on a's middle nodes.
+    beside_unit_square("offset", 0.25, 1.25)
 
 
 def two_physicals():
@@ -178,12 +184,8 @@ def main():
 
 
 def crossing():
-    start("crossing")
-    sa, ca, _ = rectangle(0, 1, 0, 1, 2, 2)
-    # b is taller than a and meshed on its own: its edge from y = 0.75 to 1.5 crosses a's corner.
-    sb, cb, _ = rectangle(1, 2, 0, 1.5, 2, 2)
-    recombined([sa, sb])
-    finish("crossing.msh", {"a": [sa], "b": [sb]}, [ca[3]], [cb[1]])
+    # b is taller than a: its edge from y = 0.75 to 1.5 crosses a's corner.
+    beside_unit_square("crossing", 0.0, 1.5)
 
 
 if __name__ == "__main__":

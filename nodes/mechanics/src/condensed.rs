@@ -94,18 +94,9 @@ impl BoundaryLayout {
         self.dofs[r.clone()].iter().copied().zip(self.coefs[r].iter().copied())
     }
 
-    /// The dof of entry b when it is one dof with coefficient 1 (every entry of a conforming
-    /// interface), else None.
-    pub fn single_dof(&self, b: usize) -> Option<usize> {
-        let r = self.start[b]..self.start[b + 1];
-        (r.len() == 1 && self.coefs[r.start] == 1.0).then(|| self.dofs[r.start])
-    }
-
     /// Entry b of the trace of a full displacement vector u: Σ coef·u[dof].
     pub fn trace_of(&self, u: impl Fn(usize) -> f64, b: usize) -> f64 {
-        let mut terms = self.terms(b);
-        let Some((d, c)) = terms.next() else { return 0.0 };
-        terms.fold(c * u(d), |acc, (d, c)| acc + c * u(d))
+        crate::mortar::combine(self.terms(b), u)
     }
 
     /// Per slot, the interface node that owns its interface: the one whose group (`groups`, by
@@ -380,22 +371,11 @@ impl CondensedOperator {
         }
         self.factor.solve_view_in_place_with(rhs.rb_mut(), scratch);
         for j in 0..m {
+            // Constrained terms count 0 (A_E's zero rows).
             for b in 0..layout.len() {
-                w[(b, j)] = self.free_trace(|f| rhs[(f, j)], b);
+                w[(b, j)] = layout.trace_of(|d| if free[d] == usize::MAX { 0.0 } else { rhs[(free[d], j)] }, b);
             }
         }
-    }
-
-    /// Entry b of the trace of a free-dof vector (`at(free index)`): constrained terms count 0.
-    fn free_trace(&self, at: impl Fn(usize) -> f64, b: usize) -> f64 {
-        let mut v: Option<f64> = None;
-        for (d, c) in self.layout.terms(b) {
-            if self.free[d] != usize::MAX {
-                let t = c * at(self.free[d]);
-                v = Some(v.map_or(t, |v| v + t));
-            }
-        }
-        v.unwrap_or(0.0)
     }
 
     /// Full displacement field u = Σ_j φ_j u_j + (K_E + Bᵀk⁻MB)⁻¹ Bᵀ M q for a boundary

@@ -38,6 +38,24 @@ pub struct Projection {
 }
 
 impl Projection {
+    /// A projection of no pairs yet ([`Projection::push`] adds them).
+    pub fn empty() -> Self {
+        Projection {
+            start: vec![0],
+            nodes: Vec::new(),
+            coefs: Vec::new(),
+        }
+    }
+
+    /// Appends the next pair's (node, coefficient) terms.
+    pub fn push(&mut self, terms: impl IntoIterator<Item = (usize, f64)>) {
+        for (n, c) in terms {
+            self.nodes.push(n);
+            self.coefs.push(c);
+        }
+        self.start.push(self.nodes.len());
+    }
+
     /// Number of pairs.
     pub fn n_pairs(&self) -> usize {
         self.start.len() - 1
@@ -51,19 +69,49 @@ impl Projection {
 
     /// The projection with only the pairs `keep` (in that order).
     pub fn select(&self, keep: &[usize]) -> Self {
-        let mut out = Projection {
-            start: vec![0],
-            nodes: Vec::new(),
-            coefs: Vec::new(),
-        };
+        let mut out = Projection::empty();
         for &p in keep {
-            for (n, c) in self.terms(p) {
-                out.nodes.push(n);
-                out.coefs.push(c);
-            }
-            out.start.push(out.nodes.len());
+            out.push(self.terms(p));
         }
         out
+    }
+
+    /// The node with the largest coefficient at pair p (a node under the pair's edges: the one a
+    /// display names), usize::MAX for a pair without terms.
+    pub fn largest_term(&self, p: usize) -> usize {
+        self.terms(p)
+            .fold(None::<(usize, f64)>, |best, (n, c)| match best {
+                Some(b) if b.1 >= c => Some(b),
+                _ => Some((n, c)),
+            })
+            .map_or(usize::MAX, |b| b.0)
+    }
+}
+
+/// Σ coef·u(node) over `terms`, summed from the first term (so that (a, −1), (b, 1) gives
+/// exactly u_b − u_a); 0 without terms.
+pub fn combine(terms: impl IntoIterator<Item = (usize, f64)>, u: impl Fn(usize) -> f64) -> f64 {
+    let mut terms = terms.into_iter();
+    let Some((n, c)) = terms.next() else { return 0.0 };
+    terms.fold(c * u(n), |acc, (n, c)| acc + c * u(n))
+}
+
+/// Per pair, whether it ends an open interface: it belongs to one of `a_edges` only (edges
+/// carrying pair indices).
+pub fn end_pairs(a_edges: &[SideEdge], n_pairs: usize) -> Vec<bool> {
+    let mut edges_at = vec![0usize; n_pairs];
+    for ea in a_edges {
+        edges_at[ea.nodes[0]] += 1;
+        edges_at[ea.nodes[2]] += 1;
+    }
+    edges_at.into_iter().map(|n| n == 1).collect()
+}
+
+/// Adds `v` to the term of `node` in a sparse row (appended if new).
+fn accumulate(row: &mut Vec<(usize, f64)>, node: usize, v: f64) {
+    match row.iter_mut().find(|(n, _)| *n == node) {
+        Some(e) => e.1 += v,
+        None => row.push((node, v)),
     }
 }
 
@@ -229,7 +277,6 @@ pub fn project_with_ends(
     let n_pairs = weights.len();
     // Side a's rows of the modified end edges: (pair index of a's node, value).
     let mut a_rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n_pairs];
-    let mut modified_pair = vec![false; n_pairs];
     // Pairs of a modified end edge: their weight is ∫ ψ_p, not the given one.
     let mut on_modified = vec![false; n_pairs];
     // Sparse rows: (node of b, value), merged per pair.
@@ -239,20 +286,14 @@ pub fn project_with_ends(
     // to 1e-4 on a curved edge of 45°.)
     let mut full = vec![0.0; n_pairs];
     // The pairs that end an open interface belong to one edge only: the edges there keep N.
-    let mut edges_at = vec![0usize; n_pairs];
-    for ea in a_edges {
-        edges_at[ea.nodes[0]] += 1;
-        edges_at[ea.nodes[2]] += 1;
-    }
+    let end = end_pairs(a_edges, n_pairs);
     debug_assert!(
-        dropped.iter().zip(&edges_at).all(|(&d, &n)| !d || n == 1),
+        dropped.iter().zip(&end).all(|(&d, &e)| !d || e),
         "only the end pairs of an open interface can be left out"
     );
     for ea in a_edges {
-        let dual = edges_at[ea.nodes[0]] > 1 && edges_at[ea.nodes[2]] > 1;
-        let modified = (0..3)
-            .step_by(2)
-            .any(|k| dropped[ea.nodes[k]] && edges_at[ea.nodes[k]] == 1);
+        let dual = !end[ea.nodes[0]] && !end[ea.nodes[2]];
+        let modified = (0..3).step_by(2).any(|k| dropped[ea.nodes[k]] && end[ea.nodes[k]]);
         if modified {
             for &q in &ea.nodes {
                 on_modified[q] = true;
@@ -298,13 +339,8 @@ pub fn project_with_ends(
             }
             if modified {
                 // Side a's row of the middle pair: ∫ 1·N_q over the edge.
-                modified_pair[ea.nodes[1]] = true;
-                for (q, nq) in ea.nodes.iter().zip(na) {
-                    let row = &mut a_rows[ea.nodes[1]];
-                    match row.iter_mut().find(|(n, _)| n == q) {
-                        Some(e) => e.1 += nq * dw,
-                        None => row.push((*q, nq * dw)),
-                    }
+                for (&q, nq) in ea.nodes.iter().zip(na) {
+                    accumulate(&mut a_rows[ea.nodes[1]], q, nq * dw);
                 }
             }
         }
@@ -337,23 +373,14 @@ pub fn project_with_ends(
                 let dw = w * half * jac * plane.measure(p);
                 for i in 0..3 {
                     for (&node_b, nbj) in eb.nodes.iter().zip(nb) {
-                        let v = psi[i] * nbj * dw;
-                        let row = &mut rows[ea.nodes[i]];
-                        match row.iter_mut().find(|(n, _)| *n == node_b) {
-                            Some(e) => e.1 += v,
-                            None => row.push((node_b, v)),
-                        }
+                        accumulate(&mut rows[ea.nodes[i]], node_b, psi[i] * nbj * dw);
                     }
                 }
             }
         }
     }
     let heaviest = full.iter().fold(0.0f64, |m, w| m.max(w.abs()));
-    let mut out = Projection {
-        start: vec![0],
-        nodes: Vec::new(),
-        coefs: Vec::new(),
-    };
+    let mut out = Projection::empty();
     for (p, row) in rows.iter_mut().enumerate() {
         row.sort_by_key(|e| e.0);
         let sum: f64 = row.iter().map(|e| e.1).sum();
@@ -361,11 +388,7 @@ pub fn project_with_ends(
         // normalise: side b there is its interpolation at the pair's point (its node on the axis,
         // with coefficient 1, where b has one there).
         if full[p].abs() <= crate::element::AXIS_TOLERANCE * heaviest {
-            for (n, c) in interpolation(b_edges, pair_coords[p]) {
-                out.nodes.push(n);
-                out.coefs.push(c);
-            }
-            out.start.push(out.nodes.len());
+            out.push(interpolation(b_edges, pair_coords[p]));
             continue;
         }
         if (sum - full[p]).abs() > 1e-6 * full[p].abs() {
@@ -375,34 +398,20 @@ pub fn project_with_ends(
                 covered: sum / full[p],
             });
         }
-        for &(n, v) in row.iter() {
-            // Exact zeros (a b node whose shape function vanishes on the segment) are left out.
-            if v != 0.0 {
-                out.nodes.push(n);
-                out.coefs.push(v / sum);
-            }
-        }
-        out.start.push(out.nodes.len());
+        // Exact zeros (a b node whose shape function vanishes on the segment) are left out.
+        out.push(row.iter().filter(|e| e.1 != 0.0).map(|&(n, v)| (n, v / sum)));
     }
-    let mut a = Projection {
-        start: vec![0],
-        nodes: Vec::new(),
-        coefs: Vec::new(),
-    };
+    let mut a = Projection::empty();
     let mut new_weights = weights.to_vec();
     for (p, row) in a_rows.iter_mut().enumerate() {
-        if modified_pair[p] {
+        // Only the middle pair of a modified end edge has a row of its own.
+        if row.is_empty() {
+            a.push([(p, 1.0)]);
+        } else {
             row.sort_by_key(|e| e.0);
             let sum: f64 = row.iter().map(|e| e.1).sum();
-            for &(q, v) in row.iter() {
-                a.nodes.push(q);
-                a.coefs.push(v / sum);
-            }
-        } else {
-            a.nodes.push(p);
-            a.coefs.push(1.0);
+            a.push(row.iter().map(|&(q, v)| (q, v / sum)));
         }
-        a.start.push(a.nodes.len());
         if on_modified[p] {
             new_weights[p] = full[p];
         }

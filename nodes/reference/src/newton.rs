@@ -12,6 +12,7 @@ use glissade_mechanics::assembly::stiffness_triplets;
 use glissade_mechanics::laws::dot;
 use glissade_mechanics::laws::Status;
 use glissade_mechanics::model::{InterfaceKind, Model};
+use glissade_mechanics::mortar::combine;
 use glissade_mechanics::scales::{Scales, ROUND_OFF};
 use std::collections::BTreeMap;
 
@@ -286,12 +287,7 @@ impl<'m> Problem<'m> {
     /// Σ coef·u over the pair's terms: u_b − u_a on a conforming pair (the same bits).
     pub(crate) fn jump(&self, m: usize, u: &[f64]) -> [f64; 2] {
         let terms = &self.pairs[m].terms;
-        [0, 1].map(|c| {
-            let (n0, c0) = terms[0];
-            terms[1..]
-                .iter()
-                .fold(c0 * u[2 * n0 + c], |acc, &(n, k)| acc + k * u[2 * n + c])
-        })
+        [0, 1].map(|c| combine(terms.iter().copied(), |n| u[2 * n + c]))
     }
 
     /// Equilibrium residual on free dofs and the largest relative violation of the step's

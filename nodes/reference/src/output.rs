@@ -8,6 +8,7 @@ use crate::{ContactSolution, LinearSolver, ReferenceSolution};
 use faer::Mat;
 use glissade_mechanics::laws::Status;
 use glissade_mechanics::local::InterfaceFields;
+use glissade_mechanics::mortar::combine;
 
 pub(crate) type StepOutput = (Vec<f64>, Vec<f64>, Vec<Status>, Vec<f64>);
 
@@ -93,14 +94,8 @@ pub(crate) fn postprocess(
                     .collect();
                 let fl = &mut fields[ki];
                 for c in 0..2 {
-                    let trace = |terms: &[(usize, f64)]| {
-                        let (n0, k0) = terms[0];
-                        terms[1..]
-                            .iter()
-                            .fold(k0 * u[2 * pb.num.merged[n0] + c], |acc, &(n, k)| {
-                                acc + k * u[2 * pb.num.merged[n] + c]
-                            })
-                    };
+                    let trace =
+                        |terms: &[(usize, f64)]| combine(terms.iter().copied(), |n| u[2 * pb.num.merged[n] + c]);
                     let (wa, wb) = (trace(&a_terms), trace(&b_terms));
                     fl.w_a[(2 * p + c, i)] = wa;
                     fl.w_b[(2 * p + c, i)] = wb;

@@ -209,10 +209,7 @@ pub fn verify(model: &Model, sol: &ReferenceSolution) -> Result<Checks, Referenc
                 let (wa, wb, fa, fb) = (g(&fl.w_a), g(&fl.w_b), g(&fl.f_a), g(&fl.f_b));
                 for c in 0..2 {
                     let trace = |s: usize, terms: &[(usize, f64)]| {
-                        let (n0, k0) = terms[0];
-                        terms[1..].iter().fold(k0 * sol.u[s][(2 * n0 + c, i)], |acc, &(n, k)| {
-                            acc + k * sol.u[s][(2 * n + c, i)]
-                        })
+                        glissade_mechanics::mortar::combine(terms.iter().copied(), |n| sol.u[s][(2 * n + c, i)])
                     };
                     let (ua, ub) = (trace(itf.a, &a_terms), trace(itf.b, &b_terms));
                     let mut e = (wa[c] - ua).abs().max((wb[c] - ub).abs());

@@ -224,7 +224,7 @@ impl Ctx<'_> {
             pairs: nodes
                 .iter()
                 .enumerate()
-                .map(|(p, &n)| (n, nearest_term(&projection, p)))
+                .map(|(p, &n)| (n, projection.largest_term(p)))
                 .collect(),
             coords,
             weights,
@@ -403,14 +403,10 @@ impl Ctx<'_> {
             let mut dropped = vec![false; g.pairs.len()];
             let mut projection_a = None;
             if let Some((a_edges, b_edges)) = &g.sides {
-                let mut edges_at = vec![0usize; g.pairs.len()];
-                for e in a_edges {
-                    edges_at[e.nodes[0]] += 1;
-                    edges_at[e.nodes[2]] += 1;
-                }
+                let end = end_pairs(a_edges, g.pairs.len());
                 for (p, d) in dropped.iter_mut().enumerate() {
                     let na = g.pairs[p].0;
-                    *d = edges_at[p] == 1 && (clamped(g.a, na) || members[&(g.a, na)] > 1);
+                    *d = end[p] && (clamped(g.a, na) || members[&(g.a, na)] > 1);
                 }
                 if dropped.iter().any(|&d| d) {
                     let pr = project_with_ends(a_edges, &g.weights, b_edges, self.plane, &g.coords, &dropped)
@@ -492,16 +488,4 @@ impl Ctx<'_> {
         }
         Ok(out)
     }
-}
-
-/// The node of side b with the largest coefficient at pair p of a projection: the node facing
-/// the pair, for display.
-pub(crate) fn nearest_term(projection: &Projection, p: usize) -> usize {
-    projection
-        .terms(p)
-        .fold(None::<(usize, f64)>, |best, (n, c)| match best {
-            Some(b) if b.1 >= c => Some(b),
-            _ => Some((n, c)),
-        })
-        .map_or(usize::MAX, |b| b.0)
 }

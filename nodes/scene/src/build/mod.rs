@@ -24,7 +24,7 @@ use glissade_mechanics::model::{
     interpolate, Acceleration, Interface, InterfaceKind, LoadCase, Material, Model, Plane, SolverParams, Subdomain,
     TimeFunction, TimeGrid, TimeStart, DEFAULT_TIME_START_TOLERANCE,
 };
-use glissade_mechanics::mortar::{project, project_with_ends, Projection, SideEdge};
+use glissade_mechanics::mortar::{end_pairs, project, project_with_ends, Projection, SideEdge};
 use glissade_mechanics::pgd::{PgdCriterion, PgdParams};
 use std::collections::BTreeMap;
 

@@ -64,7 +64,7 @@ pub(super) fn part_interface_non_matching(
     let projection = glissade_mechanics::mortar::project(&a_side, &g.weights, &b_side, plane, &g.coords)
         .map_err(NonMatchingError::Projection)?;
     for (p, pair) in g.pairs.iter_mut().enumerate() {
-        pair.1 = crate::build::interfaces::nearest_term(&projection, p);
+        pair.1 = projection.largest_term(p);
     }
     g.projection = Some(projection);
     g.sides = Some((a_side, b_side));
