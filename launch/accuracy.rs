@@ -119,26 +119,73 @@ pub fn check_report(name: &str, report: &Report, stagnation: (usize, f64)) -> Ac
 /// Solves the reference of `scene` and runs it past the smallest accuracy checked (accuracy
 /// 1e-5, the scene's other stop rules and iteration cap kept), then checks it.
 pub fn check_scene(name: &str, scene: &LoadedScene, reference: &ReferenceOptions) -> crate::Result<AccuracyCheck> {
-    let mut sc = scene.clone();
-    sc.model.solver.accuracy = Some(ACCURACIES[ACCURACIES.len() - 1] * 0.1);
     let t0 = Instant::now();
     // A reference that fails is an error here: the check needs every time point.
+    let solution = solve_reference(&scene.model, reference)?;
+    check_scene_against(name, scene, solution, t0.elapsed().as_secs_f64())
+}
+
+/// [`check_scene`] against a reference already solved (in `reference_s` seconds).
+pub fn check_scene_against(
+    name: &str,
+    scene: &LoadedScene,
+    solution: glissade_reference::ReferenceSolution,
+    reference_s: f64,
+) -> crate::Result<AccuracyCheck> {
+    let mut sc = scene.clone();
+    sc.model.solver.accuracy = Some(ACCURACIES[ACCURACIES.len() - 1] * 0.1);
     let solved = ReferenceRun {
-        solution: solve_reference(&sc.model, reference)?,
+        solution,
         failure: None,
     };
-    let (report, _) = report_against(
-        &sc,
-        &format!("accuracy-{name}"),
-        &solved,
-        t0.elapsed().as_secs_f64(),
-        None,
-    )?;
+    let (report, _) = report_against(&sc, &format!("accuracy-{name}"), &solved, reference_s, None)?;
     Ok(check_report(
         name,
         &report,
         (sc.model.solver.stagnation_window, sc.model.solver.stagnation_ratio),
     ))
+}
+
+/// The margin factors the status check compares (m_T = factor · accuracy · T_max,
+/// `glissade_mechanics::settled`): the calibration part chooses among them.
+pub const MARGIN_FACTORS: [f64; 5] = [0.0, 0.5, 1.0, 2.0, 4.0];
+
+/// A run's reported statuses against the reference's, judged with the same margins.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StatusCheck {
+    /// The accuracy the run stopped at.
+    pub accuracy: f64,
+    /// Whether it ended "Converged" (the margins assume it did).
+    pub converged: bool,
+    /// Per factor of [`MARGIN_FACTORS`], the comparison with the margins of that factor.
+    pub agreement: Vec<(f64, glissade_mechanics::settled::Agreement)>,
+}
+
+/// Runs `scene` in-process to `accuracy` and compares its reported statuses with those of the
+/// reference `solution` under each margin factor of [`MARGIN_FACTORS`].
+pub fn check_statuses(
+    scene: &LoadedScene,
+    solution: &glissade_reference::ReferenceSolution,
+    accuracy: f64,
+) -> crate::Result<StatusCheck> {
+    let mut sc = scene.clone();
+    sc.model.solver.accuracy = Some(accuracy);
+    let opts = crate::runner::RunOptions::new(crate::run::random_run_id()?);
+    let result = crate::run::Run::new(&sc, &opts).in_process()?.result;
+    let run = result.interface_hat_fields();
+    Ok(StatusCheck {
+        accuracy,
+        converged: result.verdict == glissade_messages::Verdict::Converged,
+        agreement: MARGIN_FACTORS
+            .iter()
+            .map(|&f| {
+                (
+                    f,
+                    glissade_mechanics::settled::agreement(&sc.model, &run, &solution.interfaces, f, accuracy),
+                )
+            })
+            .collect(),
+    })
 }
 
 /// The checks as a markdown table: one row per scene and accuracy.

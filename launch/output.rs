@@ -4,10 +4,11 @@ use crate::error::{Error, IoWhat, Result};
 pub use crate::files::{io_why, rename_new, write_through_partial};
 use crate::runner::RunResult;
 use glissade_deploy::Plan;
-use glissade_mechanics::laws::{dot, STATUS_NAMES};
+use glissade_mechanics::laws::dot;
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{Interface, InterfaceKind, Model};
+use glissade_mechanics::settled::SETTLED_NAMES;
 use glissade_messages::{InterfaceSolution, Verdict};
 use glissade_reference::ReferenceSolution;
 use glissade_scene::LoadedScene;
@@ -16,10 +17,11 @@ use serde::Serialize;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
-/// Status counts (separated, stick, slip) per time point over all contact interfaces.
-pub fn status_counts_per_time(model: &Model, result: &RunResult) -> Vec<[u64; 3]> {
+/// Reported status counts (separated, stick, slip, limit, grazing: [`SETTLED_NAMES`]) per time
+/// point over all contact interfaces.
+pub fn status_counts_per_time(model: &Model, result: &RunResult) -> Vec<[u64; 5]> {
     let nt = model.time.n_points();
-    let mut counts = vec![[0u64; 3]; nt];
+    let mut counts = vec![[0u64; 5]; nt];
     for sol in &result.interfaces {
         let itf = &model.interfaces[sol.interface as usize];
         if !itf.is_contact() {
@@ -27,7 +29,9 @@ pub fn status_counts_per_time(model: &Model, result: &RunResult) -> Vec<[u64; 3]
         }
         let np = itf.n_pairs();
         for (k, st) in sol.status.iter().enumerate() {
-            counts[k / np][*st as usize] += 1;
+            if let Some(c) = counts[k / np].get_mut(*st as usize) {
+                *c += 1;
+            }
         }
     }
     counts
@@ -262,7 +266,7 @@ pub fn summary(scene: &LoadedScene, result: &RunResult, run_id: &str) -> Value {
         "outcome": outcome(model, result),
         "setup_s": result.setup_s,
         "solve_s": result.solve_s,
-        "status_counts_per_time": per_time.iter().enumerate().map(|(i, c)| json!({"t": model.time.t(i), "separated": c[0], "stick": c[1], "slip": c[2]})).collect::<Vec<_>>(),
+        "status_counts_per_time": per_time.iter().enumerate().map(|(i, c)| json!({"t": model.time.t(i), "separated": c[0], "stick": c[1], "slip": c[2], "limit": c[3], "grazing": c[4]})).collect::<Vec<_>>(),
         "history": result.iterations.iter().map(|r| {
             let mut v = json!(r);
             let [separated, stick, slip] = r.decision.counts;
@@ -454,7 +458,7 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
             "jump_n": "mm: (W_b − W_a)·normal; jump_n + gap ≥ 0, = 0 where in contact (within the accuracy)",
             "jump_t": "mm: (W_b − W_a)·tangent",
             "normal": "unit vector out of side a towards side b; tangent = (−normal_y, normal_x)",
-            "status": "separated, stick or slip per pair (contact interfaces only)",
+            "status": "per pair (contact interfaces only): separated, stick or slip, decided with a margin tied to the accuracy; limit (on the friction cone within the margin, not moving beyond it) or grazing (gap and contact force both within the margin of zero) where the fields cannot tell (docs/accuracy.md)",
             "u_a": "mm: side a's displacement (x, y) at each pair (non-matching interfaces only)",
             "u_b": "mm: side b's displacement (x, y) projected at each pair (non-matching interfaces only)",
         },
@@ -579,9 +583,9 @@ pub fn pair_values(itf: &Interface, sol: &InterfaceSolution, i: usize, p: usize)
     ]
 }
 
-/// The name of status code `c`, or `invalid status code <c>` (which no node sends).
+/// The name of reported status code `c` ([`SETTLED_NAMES`]), or `invalid status code <c>`.
 pub fn status_name(c: u8) -> String {
-    STATUS_NAMES
+    SETTLED_NAMES
         .get(c as usize)
         .map_or_else(|| format!("invalid status code {c}"), |s| s.to_string())
 }
@@ -590,7 +594,7 @@ pub use glissade_studies::table::csv_field;
 
 /// The interface of a final solution `sol`, once its shape is checked against the scene: an
 /// interface of the scene, W and F of 2·n_pairs × (N+1), and on a contact interface a status
-/// code of [`STATUS_NAMES`] for every pair and time point (a solution read from a recording may
+/// code of [`SETTLED_NAMES`] for every pair and time point (a solution read from a recording may
 /// hold anything).
 pub fn checked_solution<'m>(model: &'m Model, sol: &InterfaceSolution) -> Result<&'m Interface> {
     let nt = model.time.n_points();
@@ -620,11 +624,11 @@ pub fn checked_solution<'m>(model: &'m Model, sol: &InterfaceSolution) -> Result
         }
         if let Some(&code) = sol.status[..np * nt]
             .iter()
-            .find(|&&c| c as usize >= STATUS_NAMES.len())
+            .find(|&&c| c as usize >= SETTLED_NAMES.len())
         {
             return Err(Error::ResultShape {
                 what: format!("interface {}: status code {code}", sol.interface),
-                scene: format!("codes 0 to {}", STATUS_NAMES.len() - 1),
+                scene: format!("codes 0 to {}", SETTLED_NAMES.len() - 1),
             });
         }
     }
@@ -633,7 +637,7 @@ pub fn checked_solution<'m>(model: &'m Model, sol: &InterfaceSolution) -> Result
 
 /// The interface fields of s ([`pair_values`]) as CSV: one row per time point and node pair, with the pair's
 /// position, the tractions on side a and the jumps in the interface's frame, and the status
-/// (`separated`, `stick`, `slip`, or `perfect` on a perfect interface); the parts' names quoted
+/// (`separated`, `stick`, `slip`, `limit`, `grazing`, or `perfect` on a perfect interface); the parts' names quoted
 /// where they must be ([`csv_field`]). docs/outputs.md.
 pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<String> {
     use rayon::prelude::*;
@@ -647,7 +651,7 @@ pub fn interface_csv(model: &Model, interfaces: &[InterfaceSolution]) -> Result<
         let statuses: Vec<&str> = if itf.is_contact() {
             sol.status[..itf.n_pairs() * nt]
                 .iter()
-                .map(|&code| STATUS_NAMES[code as usize])
+                .map(|&code| SETTLED_NAMES[code as usize])
                 .collect()
         } else {
             Vec::new()

@@ -1,11 +1,13 @@
 //! Interface resultants (docs/outputs.md, "Interface resultants"): per interface and time point,
 //! the force the interface carries, summed over its node pairs, and on contact interfaces the
-//! share of its length that is separated, stuck and slipping. What an engineer plots against
+//! share of its length in each reported status (separated, stuck, slipping, at the friction
+//! limit, grazing: `glissade_mechanics::settled`). What an engineer plots against
 //! the load: the tangential resultant reaching f times the normal one is the joint slipping.
 
 use crate::output::{checked_solution, csv_field, pair_values};
 use crate::Result;
 use glissade_mechanics::model::Model;
+use glissade_mechanics::settled::SETTLED_NAMES;
 use glissade_messages::InterfaceSolution;
 use serde::Serialize;
 
@@ -25,13 +27,14 @@ pub struct InterfaceResultants {
     pub normal: Vec<f64>,
     /// Σ w·f_t (N/mm), along each pair's tangent.
     pub tangential: Vec<f64>,
-    /// Contact interfaces: the shares of the interface's length (Σ w) separated, stuck and
-    /// slipping, per time point (0 to 1, summing to 1); empty on perfect interfaces.
-    pub shares: Vec<[f64; 3]>,
+    /// Contact interfaces: the shares of the interface's length (Σ w) in each reported status
+    /// (separated, stick, slip, limit, grazing), per time point (0 to 1, summing to 1); empty on
+    /// perfect interfaces.
+    pub shares: Vec<[f64; 5]>,
 }
 
 /// The resultants of every interface of a run's final solution `interfaces` (s, with the
-/// statuses of ŝ), in interface order.
+/// reported statuses), in interface order.
 pub fn resultants(model: &Model, interfaces: &[InterfaceSolution]) -> Result<Vec<InterfaceResultants>> {
     let nt = model.time.n_points();
     let mut out = Vec::with_capacity(interfaces.len());
@@ -51,7 +54,7 @@ pub fn resultants(model: &Model, interfaces: &[InterfaceSolution]) -> Result<Vec
             shares: Vec::new(),
         };
         for i in 0..nt {
-            let (mut f, mut n, mut t, mut share) = ([0.0; 2], 0.0, 0.0, [0.0; 3]);
+            let (mut f, mut n, mut t, mut share) = ([0.0; 2], 0.0, 0.0, [0.0; 5]);
             for (p, &w) in itf.weights.iter().enumerate() {
                 let [f_n, f_t, _, _] = pair_values(itf, sol, i, p);
                 f[0] += w * sol.f_a.get(2 * p, i);
@@ -79,16 +82,15 @@ pub fn resultants_csv(model: &Model, all: &[InterfaceResultants]) -> String {
     use std::fmt::Write as _;
     let u = model.plane.force_column_unit();
     let mut s = format!(
-        "time_s,interface,a,b,kind,force_a_x_{u},force_a_y_{u},normal_{u},tangential_{u},separated_share,stick_share,slip_share\n",
+        "time_s,interface,a,b,kind,force_a_x_{u},force_a_y_{u},normal_{u},tangential_{u},separated_share,stick_share,slip_share,limit_share,grazing_share\n",
     );
     for i in 0..model.time.n_points() {
         let t = model.time.t(i);
         for r in all {
             let kind = if r.contact { "contact" } else { "perfect" };
-            let shares = r
-                .shares
-                .get(i)
-                .map_or(",,".to_string(), |[o, st, sl]| format!("{o:?},{st:?},{sl:?}"));
+            let shares = r.shares.get(i).map_or(",,,,".to_string(), |[o, st, sl, li, gr]| {
+                format!("{o:?},{st:?},{sl:?},{li:?},{gr:?}")
+            });
             let _ = writeln!(
                 s,
                 "{t:?},{},{},{},{kind},{:?},{:?},{:?},{:?},{shares}",
@@ -117,21 +119,25 @@ pub fn console_lines(model: &Model, all: &[InterfaceResultants], max: usize) -> 
         .take(max)
         .map(|r| {
             let (n, tg) = (r.normal[last], r.tangential[last]);
-            let [o, st, sl] = r.shares[last];
             let ratio = if n != 0.0 {
                 format!("{:.3}", (tg / n).abs())
             } else {
                 "—".into()
             };
+            // The shares in words; the statuses within the margins only where there are some.
+            let shares: Vec<String> = r.shares[last]
+                .iter()
+                .zip(SETTLED_NAMES)
+                .enumerate()
+                .filter(|(k, (v, _))| *k < 3 || **v > 0.0)
+                .map(|(_, (v, name))| format!("{:.0} % {name}", 100.0 * v))
+                .collect();
             format!(
-                "interface {} ({} | {}) at t = {t}: N = {n:.4e} {unit}, T = {tg:.4e} {unit}, |T/N| = {ratio}; \
-                 {:.0} % separated, {:.0} % stick, {:.0} % slip",
+                "interface {} ({} | {}) at t = {t}: N = {n:.4e} {unit}, T = {tg:.4e} {unit}, |T/N| = {ratio}; {}",
                 r.interface,
                 r.a,
                 r.b,
-                100.0 * o,
-                100.0 * st,
-                100.0 * sl
+                shares.join(", ")
             )
         })
         .collect();
@@ -241,7 +247,7 @@ pub fn whole_slip_lines(model: &Model, all: &[InterfaceResultants], max: usize) 
         .filter_map(|r| {
             r.shares
                 .iter()
-                .position(|s| glissade_studies::quantities::closed_slip_share(s[2], s[0]) >= 1.0 - 1e-9)
+                .position(|s| glissade_studies::quantities::closed_slip_share(s[2] + s[3], s[0] + s[4]) >= 1.0 - 1e-9)
                 .map(|i| (r, i))
         })
         .collect();

@@ -93,6 +93,20 @@ impl RunResult {
             })
             .collect()
     }
+
+    /// The same of ŝ (the last local stage's fields, from which the statuses are decided).
+    pub fn interface_hat_fields(&self) -> Vec<InterfaceFields> {
+        let mut sols: Vec<&InterfaceSolution> = self.interfaces.iter().collect();
+        sols.sort_by_key(|s| s.interface);
+        sols.into_iter()
+            .map(|s| InterfaceFields {
+                w_a: mat_of(&s.w_a_hat),
+                w_b: mat_of(&s.w_b_hat),
+                f_a: mat_of(&s.f_a_hat),
+                f_b: mat_of(&s.f_b_hat),
+            })
+            .collect()
+    }
 }
 
 /// The Anderson steps of a run, told apart from its messages: each iteration's `anderson_gram`
@@ -288,7 +302,7 @@ pub(crate) fn run_logged(
     interfaces.sort_by_key(|s| s.interface);
     let state = opts.keep_state.then(|| interfaces.clone());
     let boundary = crate::boundary::boundary_resultants(&model, &interfaces, model.moment_about);
-    glissade_replay::one_value_per_point(&model, &mut interfaces);
+    glissade_replay::as_reported(&model, &mut interfaces);
     let verdict = iterations
         .last()
         .map(|r| r.decision.verdict.clone())

@@ -120,8 +120,9 @@ pub struct RunRow {
     pub jump_error: Option<f64>,
     /// LATIN wall time, operator setup included (s).
     pub latin_s: Option<f64>,
-    /// Contact points (separated, stuck, slipping) at the last time point, at the stop.
-    pub final_counts: Option<[u64; 3]>,
+    /// Contact points per reported status (separated, stick, slip, limit, grazing) at the last
+    /// time point, at the stop.
+    pub final_counts: Option<[u64; 5]>,
     /// Iteration of the first search-direction update, if any.
     pub first_direction_update: Option<u32>,
     /// The Anderson steps of an accelerated run (`None` for the plain run).
@@ -396,13 +397,15 @@ fn latin_run(case: &Case, scene: &str, accelerated: bool) -> (RunRow, Option<Sto
     };
     let model = &sc.model;
     let nt = model.time.n_points();
-    let mut counts = [0u64; 3];
+    let mut counts = [0u64; 5];
     for sol in &result.interfaces {
         let itf = &model.interfaces[sol.interface as usize];
         if itf.is_contact() {
             let np = itf.n_pairs();
             for st in &sol.status[np * (nt - 1)..] {
-                counts[*st as usize] += 1;
+                if let Some(c) = counts.get_mut(*st as usize) {
+                    *c += 1;
+                }
             }
         }
     }
@@ -533,8 +536,10 @@ pub fn markdown(rows: &[CaseResult]) -> String {
             opt(p.jump_error, 1),
             seconds(p),
             r.reference_s.map_or("—".into(), |t| format!("{t:.2}")),
-            p.final_counts
-                .map_or("—".into(), |c| format!("{}/{}/{}", c[0], c[1], c[2])),
+            p.final_counts.map_or("—".into(), |c| format!(
+                "{}/{}/{}/{}/{}",
+                c[0], c[1], c[2], c[3], c[4]
+            )),
             outcome.replace('|', "\\|"),
             iterations(a),
             opt(a.eta, 2),

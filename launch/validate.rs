@@ -7,7 +7,7 @@
 //! a shipped Gmsh geometry (the wedge in its V-groove, the shrink fit of two rings, the
 //! three-layer sheath) with its own friction, loads, plane and N.
 
-use crate::accuracy::{check_scene, AccuracyCheck};
+use crate::accuracy::{check_scene_against, check_statuses, AccuracyCheck, StatusCheck, MARGIN_FACTORS};
 use glissade_reference::ReferenceOptions;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -319,8 +319,13 @@ pub struct Validated {
     pub family: &'static str,
     pub drawn: String,
     pub check: Result<AccuracyCheck, String>,
+    /// The reported statuses of a run at accuracy [`STATUS_ACCURACY`] against the reference's.
+    pub statuses: Option<StatusCheck>,
     pub seconds: f64,
 }
+
+/// The accuracy at which the statuses are compared with the reference's.
+pub const STATUS_ACCURACY: f64 = 1e-3;
 
 /// Writes the scene of `seed` and its meshes into `dir` (created) and checks it: the reference,
 /// then one LATIN run past the smallest accuracy ([`check_scene`]).
@@ -338,8 +343,15 @@ pub fn validate_seed(seed: u64, dir: &Path, reference: &ReferenceOptions) -> cra
     let path = dir.join(format!("{}.toml", g.name));
     std::fs::write(&path, &g.toml).map_err(io(format!("cannot write {}", path.display())))?;
     let t0 = std::time::Instant::now();
+    let mut statuses = None;
     let check = crate::load_scene(&path)
-        .and_then(|sc| check_scene(&g.name, &sc, reference))
+        .and_then(|sc| {
+            // A reference that fails is an error here: the check needs every time point.
+            let solution = glissade_reference::solve_reference(&sc.model, reference)?;
+            let check = check_scene_against(&g.name, &sc, solution.clone(), t0.elapsed().as_secs_f64())?;
+            statuses = Some(check_statuses(&sc, &solution, STATUS_ACCURACY)?);
+            Ok(check)
+        })
         .map_err(|e| crate::error::chain(&e));
     Ok(Validated {
         seed,
@@ -347,6 +359,7 @@ pub fn validate_seed(seed: u64, dir: &Path, reference: &ReferenceOptions) -> cra
         family: g.family,
         drawn: g.drawn,
         check,
+        statuses,
         seconds: t0.elapsed().as_secs_f64(),
     })
 }
@@ -466,6 +479,45 @@ pub fn summary(results: &[Validated]) -> String {
         "- not checked (the reference or the run failed): {failed} of {}",
         results.len()
     );
+    s += &status_summary(results);
+    s
+}
+
+/// Per margin factor, over the runs at [`STATUS_ACCURACY`] that converged: the share of the
+/// pair-time points decided in both (outside the margins) whose statuses agree with the
+/// reference's, the scenes below 99 % of agreement, and the share of pair-time points within a
+/// margin (limit or grazing in either).
+pub fn status_summary(results: &[Validated]) -> String {
+    let mut s = String::new();
+    let checks: Vec<(u64, &StatusCheck)> = results
+        .iter()
+        .filter_map(|v| v.statuses.as_ref().filter(|c| c.converged).map(|c| (v.seed, c)))
+        .collect();
+    for (j, factor) in MARGIN_FACTORS.iter().enumerate() {
+        let (mut agree, mut decided, mut within, mut below) = (0usize, 0usize, 0usize, Vec::new());
+        for (seed, c) in &checks {
+            let Some((_, a)) = c.agreement.get(j) else {
+                continue;
+            };
+            agree += a.agree;
+            decided += a.agree + a.disagree;
+            within += a.within_margin;
+            if a.share() < 0.99 {
+                below.push(format!("{seed} ({:.1} %)", 100.0 * a.share()));
+            }
+        }
+        let pct = |n: usize, of: usize| if of == 0 { 100.0 } else { 100.0 * n as f64 / of as f64 };
+        let _ = writeln!(
+            s,
+            "- statuses at accuracy {STATUS_ACCURACY:.0e}, margin factor {factor}: over {} converged runs, {:.2} % of the \
+             {decided} pair-time points decided in both agree with the reference; {:.1} % of all are within a margin \
+             (limit or grazing); scenes below 99 %: {}",
+            checks.len(),
+            pct(agree, decided),
+            pct(within, decided + within),
+            if below.is_empty() { "none".to_string() } else { below.join(", ") },
+        );
+    }
     s
 }
 

@@ -11,7 +11,7 @@
 //!   end, end, middle), point data `traction_n`, `traction_t` (F on side a in the interface's
 //!   frame, MPa), `jump_n`, `jump_t` (W_b − W_a, mm; both of s, the state the verdict judged),
 //!   `displacement_a`, `displacement_b` (W_a, W_b: side b's projected on a non-matching
-//!   interface; NaN at clamped ends), `status` (0 separated, 1 stick, 2 slip,
+//!   interface; NaN at clamped ends), `status` (0 separated, 1 stick, 2 slip, 3 limit, 4 grazing,
 //!   −1 on perfect interfaces, −2 at an edge end clamped on both sides, which is no pair), `normal`
 //!   and `tangent`; cell data `interface` and `contact` (1 on contact interfaces).
 

@@ -876,7 +876,7 @@ impl Collected {
     ) -> RunResult {
         self.interfaces.sort_by_key(|s| s.interface);
         let boundary = crate::boundary::boundary_resultants(model, &self.interfaces, model.moment_about);
-        glissade_replay::one_value_per_point(model, &mut self.interfaces);
+        glissade_replay::as_reported(model, &mut self.interfaces);
         self.displacements.sort_by_key(|d| d.0);
         RunResult {
             setup_s: self.setup_s,

@@ -34,6 +34,7 @@ mod shared_router;
 mod slurm;
 mod stability;
 mod stall;
+mod statuses;
 mod studies;
 mod time_start;
 mod tls;

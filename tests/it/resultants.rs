@@ -27,12 +27,12 @@ fn the_contact_of_two_blocks_pushed_together_carries_the_whole_load() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("time_s,interface,a,b,kind,force_a_x_N_per_mm,force_a_y_N_per_mm,normal_N_per_mm,tangential_N_per_mm,separated_share,stick_share,slip_share")
+        Some("time_s,interface,a,b,kind,force_a_x_N_per_mm,force_a_y_N_per_mm,normal_N_per_mm,tangential_N_per_mm,separated_share,stick_share,slip_share,limit_share,grazing_share")
     );
     let mut contact_rows = 0;
     for row in lines {
         let c: Vec<&str> = row.split(',').collect();
-        assert_eq!(c.len(), 12, "{row}");
+        assert_eq!(c.len(), 14, "{row}");
         if c[4] != "contact" {
             continue;
         }
@@ -42,7 +42,7 @@ fn the_contact_of_two_blocks_pushed_together_carries_the_whole_load() {
         assert!((num(7) + 10.0 * t).abs() <= 1e-2, "normal {row}");
         assert!(num(8).abs() <= 0.3 * num(7).abs() + 1e-12, "tangential {row}");
         assert!(num(5).abs() == num(7).abs() && num(6).abs() == num(8).abs(), "{row}");
-        let shares = num(9) + num(10) + num(11);
+        let shares = num(9) + num(10) + num(11) + num(12) + num(13);
         assert!((shares - 1.0).abs() <= 1e-12, "shares {row}");
         if t > 0.0 {
             assert!(num(10) > 0.999, "stuck {row}");

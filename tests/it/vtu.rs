@@ -32,7 +32,7 @@ clamped = 0
 d_normal = 0.0
 d_sides = 0.0
 curved = False
-codes = {"separated": 0, "stick": 1, "slip": 2}
+codes = {"separated": 0, "stick": 1, "slip": 2, "limit": 3, "grazing": 4}
 for i, t in enumerate(times):
     parts = by_time[t]
     solid = meshio.read(parts["0"])

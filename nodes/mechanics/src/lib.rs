@@ -23,6 +23,7 @@ pub mod pgd;
 pub mod points;
 pub mod post;
 pub mod scales;
+pub mod settled;
 pub mod simd;
 
 /// Passes over full boundary fields (n_b × (N+1)) that one plain iteration makes per subdomain,

@@ -48,8 +48,17 @@ pub(crate) fn color(v: f64, lo: f64, hi: f64) -> rerun::Color {
     rerun::Color::from_rgb(c[0], c[1], c[2])
 }
 
-pub(crate) const STATUS_COLORS: [[u8; 3]; 3] = [[150, 150, 150], [40, 170, 60], [240, 130, 20]];
+/// Colours of the reported statuses (separated grey, stick green, slip orange, limit yellow,
+/// grazing light blue).
+pub(crate) const SETTLED_COLORS: [[u8; 3]; 5] = [
+    [150, 150, 150],
+    [40, 170, 60],
+    [240, 130, 20],
+    [230, 210, 40],
+    [120, 190, 230],
+];
 pub(crate) use glissade_mechanics::laws::STATUS_NAMES;
+pub(crate) use glissade_mechanics::settled::SETTLED_NAMES;
 
 fn entity_name(name: &str) -> String {
     name.chars()

@@ -31,7 +31,7 @@ mod view;
 mod walk;
 
 pub use legend::{ordinal, ColourRange, PERCENTILES};
-pub use states::{one_value_per_point, BoundaryStates};
+pub use states::{as_reported, one_value_per_point, BoundaryStates};
 use std::path::PathBuf;
 pub use view::View;
 pub use walk::{final_state, replay, run_messages, FinalState, Skipped};

@@ -242,6 +242,58 @@ pub fn one_value_per_point(model: &Model, solutions: &mut [glissade_messages::In
     glissade_mechanics::points::one_value_per_point(&model.interfaces, &mut fields);
 }
 
+/// The final solutions as every output reports them: one value per physical point
+/// ([`one_value_per_point`]), then on each contact interface the status decided from ŝ (the
+/// last local stage's fields, which obey the interface laws exactly, so that only the margins
+/// decide, not how far s is from them) with the margins of the run's accuracy
+/// ([`glissade_mechanics::settled`]: separated, stick, slip, or within a margin: limit,
+/// grazing) in place of the local stage's own. A solution whose shape does not fit the scene is
+/// left as it is (the outputs name it).
+pub fn as_reported(model: &Model, solutions: &mut [glissade_messages::InterfaceSolution]) {
+    use glissade_mechanics::laws::dot;
+    use glissade_mechanics::settled::{largest_traction, settle_interface, Margins, PairValues};
+    one_value_per_point(model, solutions);
+    let nt = model.time.n_points();
+    let fits = |s: &glissade_messages::InterfaceSolution| {
+        model.interfaces.get(s.interface as usize).is_some_and(|itf| {
+            let rows = 2 * itf.n_pairs();
+            [&s.w_a_hat, &s.w_b_hat, &s.f_a_hat]
+                .iter()
+                .all(|f| f.rows() == rows && f.cols() == nt)
+        })
+    };
+    let mut by_interface: Vec<Option<usize>> = vec![None; model.interfaces.len()];
+    for (j, s) in solutions.iter().enumerate() {
+        if fits(s) {
+            by_interface[s.interface as usize] = Some(j);
+        }
+    }
+    let values = |sol: &glissade_messages::InterfaceSolution,
+                  itf: &glissade_mechanics::model::Interface,
+                  i: usize,
+                  p: usize|
+     -> PairValues {
+        let f = [sol.f_a_hat.get(2 * p, i), sol.f_a_hat.get(2 * p + 1, i)];
+        let jump = [
+            sol.w_b_hat.get(2 * p, i) - sol.w_a_hat.get(2 * p, i),
+            sol.w_b_hat.get(2 * p + 1, i) - sol.w_a_hat.get(2 * p + 1, i),
+        ];
+        let (n, t) = (itf.normal(p), itf.tangent(p));
+        [dot(f, n), dot(f, t), dot(jump, n), dot(jump, t)]
+    };
+    let t_max = largest_traction(&model.interfaces, nt, |k, i, p| {
+        by_interface[k].map_or([0.0; 4], |j| values(&solutions[j], &model.interfaces[k], i, p))
+    });
+    let margins = Margins::new(model, Margins::accuracy_of(model), t_max);
+    for (k, itf) in model.interfaces.iter().enumerate() {
+        let Some(j) = by_interface[k].filter(|_| itf.is_contact()) else {
+            continue;
+        };
+        let codes = settle_interface(itf, &margins, k, nt, |i, p| values(&solutions[j], itf, i, p));
+        solutions[j].status = codes;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,7 +1,9 @@
 //! The Rerun view of one run: the scene, then every message (boundary states, decisions,
 //! displacements, interface solutions) logged on the `iteration` and `time` timelines.
 
-use crate::draw::{create_stream, largest_time_point, log_mesh, nodal_field, STATUS_COLORS, STATUS_NAMES};
+use crate::draw::{
+    create_stream, largest_time_point, log_mesh, nodal_field, SETTLED_COLORS, SETTLED_NAMES, STATUS_NAMES,
+};
 use crate::legend::{self, ColourRange, Frame};
 use crate::recovery::{final_displacements, Recovery};
 use crate::{rerr, BoundaryStates, ColorBy, ReplayError, ReplayOptions, ReplaySummary};
@@ -318,7 +320,7 @@ impl View {
         // The displacements and the boundary forces from each copy's own values, the interfaces
         // drawn with one value per point, as the run's outputs show them.
         let boundary = glissade_studies::boundary::boundary_resultants(model, &self.interfaces, model.moment_about);
-        crate::one_value_per_point(model, &mut self.interfaces);
+        crate::as_reported(model, &mut self.interfaces);
         // A solution whose shape does not fit is named by the loop below.
         let resultants = glissade_studies::quantities::quantities(model, &self.interfaces).unwrap_or_default();
         let mut final_fields: BTreeMap<u32, Vec<Vec<f64>>> = BTreeMap::new();
@@ -367,7 +369,7 @@ impl View {
                 )?;
                 self.summary.meshes += 1;
             }
-            let mut counts = [0u64; 3];
+            let mut counts = [0u64; 5];
             for sol in &self.interfaces {
                 let Some(itf) = model.interfaces.get(sol.interface as usize) else {
                     return Err(ReplayError::Content {
@@ -400,16 +402,19 @@ impl View {
                 if itf.is_contact() && sol.status.len() == np * nt {
                     let status = &sol.status[np * i..np * (i + 1)];
                     for st in status {
-                        counts[(*st as usize).min(2)] += 1;
+                        counts[(*st as usize).min(SETTLED_NAMES.len() - 1)] += 1;
                     }
                     let colors: Vec<rerun::Color> = status
                         .iter()
                         .map(|st| {
-                            let c = STATUS_COLORS[(*st as usize).min(2)];
+                            let c = SETTLED_COLORS[(*st as usize).min(SETTLED_NAMES.len() - 1)];
                             rerun::Color::from_rgb(c[0], c[1], c[2])
                         })
                         .collect();
-                    let labels: Vec<&str> = status.iter().map(|st| STATUS_NAMES[(*st as usize).min(2)]).collect();
+                    let labels: Vec<&str> = status
+                        .iter()
+                        .map(|st| SETTLED_NAMES[(*st as usize).min(SETTLED_NAMES.len() - 1)])
+                        .collect();
                     rec.log(
                         format!("interfaces/{}/status", sol.interface),
                         &rerun::Points3D::new(pos.clone())
@@ -444,7 +449,8 @@ impl View {
             }
             // The interface resultants and the boundary rules' forces, as the run's CSVs hold them.
             for q in &resultants {
-                for (name, k) in [("normal", 0), ("tangential", 1), ("slip_share", 4)] {
+                for name in ["normal", "tangential", "slip_share", "limit_share"] {
+                    let k = glissade_studies::quantities::index_of(name).expect("a quantity");
                     rec.log(
                         format!("resultants/interface_{}/{name}", q.interface),
                         &rerun::Scalars::single(q.values[k][i]),
@@ -468,7 +474,7 @@ impl View {
                 .iter()
                 .any(|s| model.interfaces[s.interface as usize].is_contact())
             {
-                for (k, name) in STATUS_NAMES.iter().enumerate() {
+                for (k, name) in SETTLED_NAMES.iter().enumerate() {
                     rec.log(
                         format!("contact_over_time/{name}"),
                         &rerun::Scalars::single(counts[k] as f64),

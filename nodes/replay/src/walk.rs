@@ -139,7 +139,7 @@ pub fn final_state(recording: &Recording) -> Result<FinalState, ReplayError> {
     // The displacements from each copy's own values (what each subdomain was sent), then the
     // outputs' one value per point.
     let u = final_displacements(&model, &mut recovery, &interfaces, &displacements, &last_states).map_err(content)?;
-    crate::one_value_per_point(&model, &mut interfaces);
+    crate::as_reported(&model, &mut interfaces);
     Ok(FinalState {
         model,
         u,

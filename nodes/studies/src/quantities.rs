@@ -1,5 +1,5 @@
 //! The quantities of interest of a solved variant, per contact interface and time point, from
-//! its final fields (s, with ŝ's statuses, one value per point): what an engineer reads off a
+//! its final fields (s, with the reported statuses, one value per point): what an engineer reads off a
 //! joint without summing anything by hand.
 
 use glissade_mechanics::laws::dot;
@@ -9,12 +9,14 @@ use serde::Serialize;
 
 /// Every quantity's name and unit, in the order of [`InterfaceQuantities::values`]. Forces are
 /// per unit thickness (plane problems); [`unit`] gives them for a scene's plane.
-pub const QUANTITIES: [(&str, &str); 9] = [
+pub const QUANTITIES: [(&str, &str); 11] = [
     ("normal", "N/mm"),
     ("tangential", "N/mm"),
     ("separated_share", "1"),
     ("stick_share", "1"),
     ("slip_share", "1"),
+    ("limit_share", "1"),
+    ("grazing_share", "1"),
     ("mean_pressure", "MPa"),
     ("max_pressure", "MPa"),
     ("max_slip", "mm"),
@@ -46,7 +48,8 @@ pub struct InterfaceQuantities {
     /// - normal, tangential: Σ w·f_n and Σ w·f_t over the pairs (f the traction on side a, w the
     ///   pair's lumped length): the resultant force side b exerts on side a along each pair's
     ///   normal and tangent; normal < 0 in compression;
-    /// - the shares of the interface's length separated, stuck and slipping (0 to 1);
+    /// - the shares of the interface's length in each reported status (0 to 1; separated,
+    ///   stick, slip, limit, grazing: `glissade_mechanics::settled`);
     /// - mean_pressure: −Σ w·f_n / Σ w over the pairs in contact (0 with none), max_pressure:
     ///   the largest −f_n;
     /// - max_slip: the largest |[u_t](t) − [u_t](0)| over the pairs in contact at t, [u_t] the
@@ -101,7 +104,7 @@ fn one(model: &Model, k: usize, itf: &Interface, sol: &InterfaceSolution) -> Int
     let mut values = vec![vec![0.0; nt]; QUANTITIES.len()];
     let mut dissipated = 0.0;
     for i in 0..nt {
-        let (mut n, mut t, mut shares) = (0.0, 0.0, [0.0; 3]);
+        let (mut n, mut t, mut shares) = (0.0, 0.0, [0.0; 5]);
         let (mut pressed, mut pressed_length, mut max_p, mut max_slip) = (0.0, 0.0, 0.0f64, 0.0f64);
         for (p, &w) in itf.weights.iter().enumerate() {
             let f = traction(p, i);
@@ -112,15 +115,18 @@ fn one(model: &Model, k: usize, itf: &Interface, sol: &InterfaceSolution) -> Int
             if let Some(s) = shares.get_mut(status) {
                 *s += w / length;
             }
-            if status != 0 {
+            // In contact: stick, slip or at the friction limit (not separated, not grazing).
+            let closed = matches!(status, 1..=3);
+            if closed {
                 pressed += -w * f_n;
                 pressed_length += w;
             }
             max_p = max_p.max(-f_n);
-            if status != 0 {
+            if closed {
                 max_slip = max_slip.max((jump_t(p, i) - jump_t(p, 0)).abs());
             }
-            if i > 0 && status == 2 {
+            // Slipping, or on the cone with a slip within the margin.
+            if i > 0 && matches!(status, 2 | 3) {
                 dissipated += w * (f_t * (jump_t(p, i) - jump_t(p, i - 1))).abs();
             }
         }
@@ -130,6 +136,8 @@ fn one(model: &Model, k: usize, itf: &Interface, sol: &InterfaceSolution) -> Int
             shares[0],
             shares[1],
             shares[2],
+            shares[3],
+            shares[4],
             if pressed_length > 0.0 {
                 pressed / pressed_length
             } else {
