@@ -267,20 +267,7 @@ pub(crate) fn join_bus(
     groups: &[Vec<u32>],
     hosted_interfaces: &[Vec<usize>],
 ) -> Result<Bus> {
-    for l in &net.listen {
-        if l.ends_with(":0") {
-            return Err(Error::Option {
-                option: format!("--listen {l}"),
-                why: "give an explicit port (nodes started elsewhere must know it)".into(),
-            });
-        }
-    }
-    if !net.connect.is_empty() && !net.listen.is_empty() {
-        return Err(Error::Option {
-            option: "--listen, --connect".into(),
-            why: "they exclude each other: the launcher either hosts the router or connects to one".into(),
-        });
-    }
+    check_bus_options(scene, net, all_nodes)?;
     // TLS and access control as the scene's [network] says.
     let tls = scene.network.tls.as_ref().map(|t| transport::Tls {
         root_ca: t.root_ca.clone(),
@@ -302,94 +289,8 @@ pub(crate) fn join_bus(
     } else {
         BTreeMap::new()
     };
-    let access = if hosting {
-        Some(transport::Access {
-            run_id: run_id.to_string(),
-            common_names: scene.network.allow.clone(),
-            members: Some(
-                members
-                    .iter()
-                    .map(|&id| {
-                        let mut m = transport::Member::node(run_id, id);
-                        if id.role == Role::Subdomain {
-                            // A subdomain process speaks for the subdomains it hosts, and for the
-                            // interface nodes it runs (`interfaces_with_subdomains`).
-                            let g = id.index as usize;
-                            m.keys = vec![glissade_messages::topic::alive(run_id, id.role.key(), id.index)];
-                            let subdomains = groups[g].iter().map(|&s| NodeId {
-                                role: Role::Subdomain,
-                                index: s,
-                            });
-                            let interfaces = hosted_interfaces[g].iter().map(|&k| NodeId {
-                                role: Role::Interface,
-                                index: k as u32,
-                            });
-                            m.keys.extend(
-                                subdomains
-                                    .chain(interfaces)
-                                    .map(|n| glissade_messages::topic::sent_by(run_id, n)),
-                            );
-                        }
-                        m
-                    })
-                    .collect(),
-            ),
-        })
-    } else {
-        None
-    };
-    if scene.network.allow.is_some() && !hosting {
-        return Err(Error::Option {
-            option: "network.allow".into(),
-            why: format!(
-                "access control is enforced by the router this launcher hosts; with --connect {}, configure it on \
-                 that router",
-                net.connect.join(", ")
-            ),
-        });
-    }
-    if let (Some(allow), Some(t)) = (&scene.network.allow, &scene.network.tls) {
-        // The nodes this launcher starts present its certificate.
-        let cn = cert_common_name(&t.cert)?;
-        if all_nodes.iter().any(|n| !net.remote.contains(n)) && !cn.as_ref().is_some_and(|cn| allow.contains(cn)) {
-            return Err(Error::Option {
-                option: "network.allow".into(),
-                why: format!(
-                    "the launcher's certificate {} has common name {}, which the list does not allow; the nodes it \
-                     starts present that certificate (list it, or start every node by hand)",
-                    t.cert.display(),
-                    cn.map_or("(none)".to_string(), |cn| format!("`{cn}`"))
-                ),
-            });
-        }
-    }
-    let shared_memory = match scene.network.shared_memory {
-        Some(on) => {
-            crate::console::note(&format!(
-                "fields {} (network.shared_memory = {on})",
-                if on { "through shared memory" } else { "over TCP" }
-            ));
-            on
-        }
-        None => {
-            let host = Host {
-                recorded,
-                // Nodes started by hand, or job steps of an allocation of several hosts, may run
-                // on other machines.
-                remote_nodes: !net.remote.is_empty() || net.starter.hosts() > 1,
-                room: transport::shared_memory_room(),
-                lockable: transport::shared_memory_lockable(),
-            };
-            let auto = auto_shared_memory(scene, &host);
-            match &auto {
-                Ok(why) => crate::console::note(&format!("fields through shared memory ({why})")),
-                Err(why) => crate::console::note(&format!(
-                    "fields over TCP (network.shared_memory unset; not through shared memory: {why})"
-                )),
-            }
-            auto.is_ok()
-        }
-    };
+    let access = hosting.then(|| access_of(scene, run_id, &members, groups, hosted_interfaces));
+    let shared_memory = choose_shared_memory(scene, net, recorded);
     let bus_config = |mode: &str, listen: &[String], connect: &[String], auth: Option<&transport::Auth>| {
         let access = if mode == "router" { access.as_ref() } else { None };
         let mut c =
@@ -415,51 +316,10 @@ pub(crate) fn join_bus(
     }
     // The bus: a router hosted here, or a client of the given router.
     let (session, node_connect, description) = if hosting {
-        // Node processes that may run on other hosts (Slurm job steps) reach the router by this
-        // host's name, on every interface unless --listen says where.
-        let advertised = net.starter.advertised_host()?;
-        if advertised.is_some() {
-            if let Some(l) = net
-                .listen
-                .iter()
-                .find(|l| l.contains("/127.") || l.contains("/[::1]") || l.contains("/localhost:"))
-            {
-                return Err(Error::Option {
-                    option: "--listen".into(),
-                    why: format!(
-                        "{l} is this host's loopback, which node processes on the allocation's other hosts cannot \
-                         reach; with --slurm listen on tcp/0.0.0.0:<port> or on an address the other hosts reach"
-                    ),
-                });
-            }
-        }
-        let scheme = if tls.is_some() { "tls" } else { "tcp" };
-        let listen = match (net.listen.is_empty(), &advertised) {
-            (true, None) => vec![format!("{scheme}/127.0.0.1:{}", free_port()?)],
-            (true, Some(_)) => vec![format!("{scheme}/0.0.0.0:{}", free_port()?)],
-            (false, _) => net.listen.clone(),
-        };
-        // The router reads its users when it opens; their file goes right after.
         let users: Vec<transport::Credentials> = credentials.values().cloned().collect();
-        let dictionary = transport::Dictionary::write(&std::env::temp_dir(), &users)?;
-        let auth = transport::Auth::Router {
-            dictionary: dictionary.path().to_path_buf(),
-        };
-        let session =
-            transport::open(bus_config("router", &listen, &[], Some(&auth))?).map_err(|source| Error::Bus {
-                what: format!("cannot host the Zenoh router on {}", listen.join(", ")),
-                source,
-            })?;
-        drop(dictionary);
-        let connect = vec![match &advertised {
-            Some(host) => host_endpoint(&listen[0], host),
-            None => local_endpoint(&listen[0]),
-        }];
-        (
-            session,
-            connect,
-            format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
-        )
+        host_router(net, tls.is_some(), &users, |listen, auth| {
+            bus_config("router", listen, &[], Some(auth))
+        })?
     } else {
         let session = transport::open(bus_config("client", &[], &net.connect, None)?).map_err(|source| Error::Bus {
             what: format!("cannot connect to the Zenoh router at {}", net.connect.join(", ")),
@@ -492,6 +352,185 @@ pub(crate) fn join_bus(
         node_args,
         credentials,
     })
+}
+
+/// The launcher's bus options against each other and the scene's `[network]`: explicit ports,
+/// `--listen` or `--connect`, access control only on a router hosted here and admitting the
+/// certificate of the nodes the launcher starts.
+fn check_bus_options(scene: &LoadedScene, net: &Network, all_nodes: &[NodeName]) -> Result<()> {
+    for l in &net.listen {
+        if l.ends_with(":0") {
+            return Err(Error::Option {
+                option: format!("--listen {l}"),
+                why: "give an explicit port (nodes started elsewhere must know it)".into(),
+            });
+        }
+    }
+    if !net.connect.is_empty() && !net.listen.is_empty() {
+        return Err(Error::Option {
+            option: "--listen, --connect".into(),
+            why: "they exclude each other: the launcher either hosts the router or connects to one".into(),
+        });
+    }
+    if scene.network.allow.is_some() && !net.connect.is_empty() {
+        return Err(Error::Option {
+            option: "network.allow".into(),
+            why: format!(
+                "access control is enforced by the router this launcher hosts; with --connect {}, configure it on \
+                 that router",
+                net.connect.join(", ")
+            ),
+        });
+    }
+    if let (Some(allow), Some(t)) = (&scene.network.allow, &scene.network.tls) {
+        // The nodes this launcher starts present its certificate.
+        let cn = cert_common_name(&t.cert)?;
+        if all_nodes.iter().any(|n| !net.remote.contains(n)) && !cn.as_ref().is_some_and(|cn| allow.contains(cn)) {
+            return Err(Error::Option {
+                option: "network.allow".into(),
+                why: format!(
+                    "the launcher's certificate {} has common name {}, which the list does not allow; the nodes it \
+                     starts present that certificate (list it, or start every node by hand)",
+                    t.cert.display(),
+                    cn.map_or("(none)".to_string(), |cn| format!("`{cn}`"))
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The access control of a router hosted here: the run's processes (`members`), each speaking
+/// only on its own keys; a subdomain process also for the subdomains it hosts and the interface
+/// nodes it runs (`interfaces_with_subdomains`).
+fn access_of(
+    scene: &LoadedScene,
+    run_id: &str,
+    members: &[NodeId],
+    groups: &[Vec<u32>],
+    hosted_interfaces: &[Vec<usize>],
+) -> transport::Access {
+    transport::Access {
+        run_id: run_id.to_string(),
+        common_names: scene.network.allow.clone(),
+        members: Some(
+            members
+                .iter()
+                .map(|&id| {
+                    let mut m = transport::Member::node(run_id, id);
+                    if id.role == Role::Subdomain {
+                        // A subdomain process speaks for the subdomains it hosts, and for the
+                        // interface nodes it runs (`interfaces_with_subdomains`).
+                        let g = id.index as usize;
+                        m.keys = vec![glissade_messages::topic::alive(run_id, id.role.key(), id.index)];
+                        let subdomains = groups[g].iter().map(|&s| NodeId {
+                            role: Role::Subdomain,
+                            index: s,
+                        });
+                        let interfaces = hosted_interfaces[g].iter().map(|&k| NodeId {
+                            role: Role::Interface,
+                            index: k as u32,
+                        });
+                        m.keys.extend(
+                            subdomains
+                                .chain(interfaces)
+                                .map(|n| glissade_messages::topic::sent_by(run_id, n)),
+                        );
+                    }
+                    m
+                })
+                .collect(),
+        ),
+    }
+}
+
+/// Whether fields go through shared memory: as the scene's `network.shared_memory` says, or when
+/// unset, where every process runs on this host and the machine has room for it (said as a note
+/// either way).
+fn choose_shared_memory(scene: &LoadedScene, net: &Network, recorded: bool) -> bool {
+    match scene.network.shared_memory {
+        Some(on) => {
+            crate::console::note(&format!(
+                "fields {} (network.shared_memory = {on})",
+                if on { "through shared memory" } else { "over TCP" }
+            ));
+            on
+        }
+        None => {
+            let host = Host {
+                recorded,
+                // Nodes started by hand, or job steps of an allocation of several hosts, may run
+                // on other machines.
+                remote_nodes: !net.remote.is_empty() || net.starter.hosts() > 1,
+                room: transport::shared_memory_room(),
+                lockable: transport::shared_memory_lockable(),
+            };
+            let auto = auto_shared_memory(scene, &host);
+            match &auto {
+                Ok(why) => crate::console::note(&format!("fields through shared memory ({why})")),
+                Err(why) => crate::console::note(&format!(
+                    "fields over TCP (network.shared_memory unset; not through shared memory: {why})"
+                )),
+            }
+            auto.is_ok()
+        }
+    }
+}
+
+/// Hosts the run's router: on `--listen`, or on a free port of the loopback (of every interface
+/// where node processes may run on other hosts, reached by this host's name); its users
+/// `users` read from a file that is gone once the router has opened. `config` makes the router's
+/// configuration from its listening endpoints and authentication. Returns the session, the
+/// endpoint node processes connect to and the bus's description.
+fn host_router(
+    net: &Network,
+    tls: bool,
+    users: &[transport::Credentials],
+    config: impl Fn(&[String], &transport::Auth) -> Result<zenoh::Config>,
+) -> Result<(zenoh::Session, Vec<String>, String)> {
+    // Node processes that may run on other hosts (Slurm job steps) reach the router by this
+    // host's name, on every interface unless --listen says where.
+    let advertised = net.starter.advertised_host()?;
+    if advertised.is_some() {
+        if let Some(l) = net
+            .listen
+            .iter()
+            .find(|l| l.contains("/127.") || l.contains("/[::1]") || l.contains("/localhost:"))
+        {
+            return Err(Error::Option {
+                option: "--listen".into(),
+                why: format!(
+                    "{l} is this host's loopback, which node processes on the allocation's other hosts cannot \
+                     reach; with --slurm listen on tcp/0.0.0.0:<port> or on an address the other hosts reach"
+                ),
+            });
+        }
+    }
+    let scheme = if tls { "tls" } else { "tcp" };
+    let listen = match (net.listen.is_empty(), &advertised) {
+        (true, None) => vec![format!("{scheme}/127.0.0.1:{}", free_port()?)],
+        (true, Some(_)) => vec![format!("{scheme}/0.0.0.0:{}", free_port()?)],
+        (false, _) => net.listen.clone(),
+    };
+    // The router reads its users when it opens; their file goes right after.
+    let dictionary = transport::Dictionary::write(&std::env::temp_dir(), users)?;
+    let auth = transport::Auth::Router {
+        dictionary: dictionary.path().to_path_buf(),
+    };
+    let session = transport::open(config(&listen, &auth)?).map_err(|source| Error::Bus {
+        what: format!("cannot host the Zenoh router on {}", listen.join(", ")),
+        source,
+    })?;
+    drop(dictionary);
+    let connect = vec![match &advertised {
+        Some(host) => host_endpoint(&listen[0], host),
+        None => local_endpoint(&listen[0]),
+    }];
+    Ok((
+        session,
+        connect,
+        format!("this launcher hosting the Zenoh router on {}", listen.join(", ")),
+    ))
 }
 
 /// How a node or recorder process joins a run's bus: the router's endpoints, TLS, and its

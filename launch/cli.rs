@@ -43,49 +43,7 @@ pub(crate) enum Command {
     },
     /// Run the reference and the LATIN solver, and write the error-against-run-time report
     /// (`<scene>-report.json` and `<scene>-report.svg`).
-    Report {
-        /// Scene file (TOML).
-        scene: PathBuf,
-        /// Folder for the outputs.
-        #[arg(long, default_value = "recordings")]
-        out: PathBuf,
-        /// LATIN stops once its estimated contact-traction error is at most this (overrides the
-        /// scene's `solver.accuracy`).
-        #[arg(long, allow_negative_numbers = true)]
-        accuracy: Option<f64>,
-        /// LATIN also waits for η ≤ this (overrides the scene's `solver.tolerance`).
-        #[arg(long, allow_negative_numbers = true)]
-        tolerance: Option<f64>,
-        /// LATIN iteration cap (overrides the scene's).
-        #[arg(long)]
-        max_iterations: Option<usize>,
-        /// Compare solver variants against one reference solve: linear stages, each optionally
-        /// with `+anderson` or `+plain` and with `+start<c>` (a time-coarse start on every c-th
-        /// time point) or `+zero` (from ŝ = 0), e.g.
-        /// `condensed+plain,condensed+anderson,condensed+anderson+start10,pgd+anderson` or
-        /// `condensed,sparse,pgd` (writes `<scene>-<variant>-report.json` / `.svg` each, and
-        /// prints a comparison table). The PGD stage also takes the `[solver.pgd]` settings
-        /// `+xi1=<ξ₀,₁>`, `+xi2=<ξ₀,₂>`, `+criterion=<increment|accumulated|increment-svd|forcing|forcing-svd>`
-        /// and `+max_new_modes=<m>`, e.g. `pgd+anderson+criterion=forcing+xi1=0.3`.
-        #[arg(long, alias = "linear-stages", value_delimiter = ',')]
-        variants: Vec<String>,
-        /// Subdomains (numbered from 1) whose PGD basis sizes `<scene>-iterations.svg` plots
-        /// against the iterations, under η and the traction error of every variant (the paper's
-        /// Figure 4).
-        #[arg(long, value_delimiter = ',', default_values_t = [7, 12], value_parser = clap::value_parser!(u32).range(1..))]
-        basis_subdomains: Vec<u32>,
-        /// Stop each run at the first iteration whose contact-traction error against the
-        /// reference is at most this (e.g. 1e-3), instead of at the tolerance or iteration cap.
-        #[arg(long, allow_negative_numbers = true)]
-        stop_at_error: Option<f64>,
-        /// Newton iterations of the reference per attempt of a time step (the non-monotone attempt
-        /// gets 20 times as many).
-        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..))]
-        newton_iterations: u32,
-        /// Plot the wall time on a logarithmic axis.
-        #[arg(long)]
-        log_time: bool,
-    },
+    Report(ReportArgs),
     /// Run a scene in-process and split an iteration's time by stage, against the machine's
     /// measured dense-product rate and memory bandwidth (`<scene>-bench.json`; use a release build).
     Bench {
@@ -305,6 +263,52 @@ pub(crate) enum RoleArg {
     Coarse,
     /// Records every message of the run to the MCAP file `--file`.
     Recorder,
+}
+
+/// `glissade report`'s arguments.
+#[derive(clap::Args)]
+pub(crate) struct ReportArgs {
+    /// Scene file (TOML).
+    pub(crate) scene: PathBuf,
+    /// Folder for the outputs.
+    #[arg(long, default_value = "recordings")]
+    pub(crate) out: PathBuf,
+    /// LATIN stops once its estimated contact-traction error is at most this (overrides the
+    /// scene's `solver.accuracy`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub(crate) accuracy: Option<f64>,
+    /// LATIN also waits for η ≤ this (overrides the scene's `solver.tolerance`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub(crate) tolerance: Option<f64>,
+    /// LATIN iteration cap (overrides the scene's).
+    #[arg(long)]
+    pub(crate) max_iterations: Option<usize>,
+    /// Compare solver variants against one reference solve: linear stages, each optionally
+    /// with `+anderson` or `+plain` and with `+start<c>` (a time-coarse start on every c-th
+    /// time point) or `+zero` (from ŝ = 0), e.g.
+    /// `condensed+plain,condensed+anderson,condensed+anderson+start10,pgd+anderson` or
+    /// `condensed,sparse,pgd` (writes `<scene>-<variant>-report.json` / `.svg` each, and
+    /// prints a comparison table). The PGD stage also takes the `[solver.pgd]` settings
+    /// `+xi1=<ξ₀,₁>`, `+xi2=<ξ₀,₂>`, `+criterion=<increment|accumulated|increment-svd|forcing|forcing-svd>`
+    /// and `+max_new_modes=<m>`, e.g. `pgd+anderson+criterion=forcing+xi1=0.3`.
+    #[arg(long, alias = "linear-stages", value_delimiter = ',')]
+    pub(crate) variants: Vec<String>,
+    /// Subdomains (numbered from 1) whose PGD basis sizes `<scene>-iterations.svg` plots
+    /// against the iterations, under η and the traction error of every variant (the paper's
+    /// Figure 4).
+    #[arg(long, value_delimiter = ',', default_values_t = [7, 12], value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) basis_subdomains: Vec<u32>,
+    /// Stop each run at the first iteration whose contact-traction error against the
+    /// reference is at most this (e.g. 1e-3), instead of at the tolerance or iteration cap.
+    #[arg(long, allow_negative_numbers = true)]
+    pub(crate) stop_at_error: Option<f64>,
+    /// Newton iterations of the reference per attempt of a time step (the non-monotone attempt
+    /// gets 20 times as many).
+    #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..))]
+    pub(crate) newton_iterations: u32,
+    /// Plot the wall time on a logarithmic axis.
+    #[arg(long)]
+    pub(crate) log_time: bool,
 }
 
 #[derive(clap::Args)]

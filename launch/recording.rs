@@ -292,6 +292,93 @@ fn log_of(path: &Path, patterns: &str) -> Result<Vec<u8>, String> {
     Ok(glissade_zenoh::encode_log(&messages))
 }
 
+/// What the recorder process declares on the bus: its subscription to the run's keys and its log
+/// queryable (both feeding the returned channel), and its liveliness token; dropping it undeclares
+/// them.
+type Attending = (
+    zenoh::pubsub::Subscriber<()>,
+    zenoh::query::Queryable<()>,
+    zenoh::liveliness::LivelinessToken,
+);
+
+/// Subscribes to the run's keys, answers the run's log queries and declares the recorder's
+/// liveliness token; what is heard comes through the returned channel.
+fn attend(session: &zenoh::Session, run_id: &str) -> Result<(mpsc::Receiver<Heard>, Attending)> {
+    let (tx, rx) = mpsc::channel::<Heard>();
+    let log_tx = tx.clone();
+    let sub = session
+        .declare_subscriber(run_topics(run_id))
+        .callback(move |s| {
+            let _ = tx.send(Heard::Put(
+                s.key_expr().as_str().to_string(),
+                s.payload().clone(),
+                log_time_now(),
+            ));
+        })
+        .wait()
+        .map_err(|e| zenoh("subscribe to the run", e))?;
+    // A replacement node process asks for the messages it needs to resume; the query goes
+    // through the same channel, so every message heard before it is in the file when it is
+    // answered.
+    let log = session
+        .declare_queryable(glissade_messages::topic::log(run_id))
+        .callback(move |q| {
+            let _ = log_tx.send(Heard::LogQuery(q));
+        })
+        .wait()
+        .map_err(|e| zenoh("declare the log queryable", e))?;
+    let token = session
+        .liveliness()
+        .declare_token(glissade_messages::topic::recorder_alive(run_id))
+        .wait()
+        .map_err(|e| zenoh("liveliness token", e))?;
+    Ok((rx, (sub, log, token)))
+}
+
+/// Answers a replacement node process's query for the messages it needs to resume, from the
+/// recording so far (flushed first), or says why this recording cannot.
+fn answer_log_query(q: &zenoh::query::Query, incomplete: Option<&str>, recorder: &mut RunRecorder, path: &Path) {
+    let answer = match incomplete {
+        Some(why) => Err(format!("this recording cannot resume a node: {why}")),
+        None => recorder.flush().map_err(|e| e.to_string()).and_then(|()| {
+            log_of(
+                path,
+                &String::from_utf8_lossy(&q.payload().map(|p| p.to_bytes()).unwrap_or_default()),
+            )
+        }),
+    };
+    let sent = match answer {
+        Ok(bytes) => q.reply(q.key_expr().clone(), bytes).wait(),
+        Err(why) => {
+            crate::console::say(&format!("log query refused: {why}"));
+            q.reply_err(why.into_bytes()).wait()
+        }
+    };
+    if let Err(e) = sent {
+        crate::console::say(&format!("cannot answer a log query: {e}"));
+    }
+}
+
+/// Finalises the recording and says what it holds (and what it refused).
+fn finish_recording(recorder: RunRecorder, path: &Path) -> Result<()> {
+    let finished = recorder.finish()?;
+    if let Some(first) = &finished.first_refused {
+        crate::console::warn(&format!(
+            "{} message(s) on the run's keys were not the run's and were not recorded (the first {first})",
+            finished.refused
+        ));
+    }
+    crate::console::say(&format!(
+        "{}recorded {} messages on {} channels, {} bytes: {}",
+        glissade_zenoh::NOTE,
+        finished.stats.messages,
+        finished.stats.channels,
+        finished.stats.file_bytes,
+        path.display()
+    ));
+    Ok(())
+}
+
 /// The `glissade node recorder` process: fetches the scene, creates the file, subscribes to the
 /// run, declares its liveliness token, and records until the launcher's stop (or SIGINT/SIGTERM,
 /// which finalise the file too).
@@ -311,35 +398,8 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
         path.display(),
         std::process::id()
     ));
-    let (tx, rx) = mpsc::channel::<Heard>();
-    let log_tx = tx.clone();
-    let _sub = session
-        .declare_subscriber(run_topics(run_id))
-        .callback(move |s| {
-            let _ = tx.send(Heard::Put(
-                s.key_expr().as_str().to_string(),
-                s.payload().clone(),
-                log_time_now(),
-            ));
-        })
-        .wait()
-        .map_err(|e| zenoh("subscribe to the run", e))?;
-    // A replacement node process asks for the messages it needs to resume; the query goes
-    // through the same channel, so every message heard before it is in the file when it is
-    // answered.
-    let _log = session
-        .declare_queryable(glissade_messages::topic::log(run_id))
-        .callback(move |q| {
-            let _ = log_tx.send(Heard::LogQuery(q));
-        })
-        .wait()
-        .map_err(|e| zenoh("declare the log queryable", e))?;
+    let (rx, _attending) = attend(&session, run_id)?;
     let incomplete = scene.recording.incomplete();
-    let _token = session
-        .liveliness()
-        .declare_token(glissade_messages::topic::recorder_alive(run_id))
-        .wait()
-        .map_err(|e| zenoh("liveliness token", e))?;
     let (end, stop) = (
         glissade_messages::topic::end(run_id),
         glissade_messages::topic::stop(run_id),
@@ -374,27 +434,7 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
             }
         }
         match rx.recv_timeout(Duration::from_millis(100)) {
-            Ok(Heard::LogQuery(q)) => {
-                let answer = match &incomplete {
-                    Some(why) => Err(format!("this recording cannot resume a node: {why}")),
-                    None => recorder.flush().map_err(|e| e.to_string()).and_then(|()| {
-                        log_of(
-                            path,
-                            &String::from_utf8_lossy(&q.payload().map(|p| p.to_bytes()).unwrap_or_default()),
-                        )
-                    }),
-                };
-                let sent = match answer {
-                    Ok(bytes) => q.reply(q.key_expr().clone(), bytes).wait(),
-                    Err(why) => {
-                        crate::console::say(&format!("log query refused: {why}"));
-                        q.reply_err(why.into_bytes()).wait()
-                    }
-                };
-                if let Err(e) = sent {
-                    crate::console::say(&format!("cannot answer a log query: {e}"));
-                }
-            }
+            Ok(Heard::LogQuery(q)) => answer_log_query(&q, incomplete.as_deref(), &mut recorder, path),
             Ok(Heard::Put(key, payload, t)) => {
                 last = Instant::now();
                 // Borrowed where the payload is one slice (shared memory, or a message that was
@@ -429,21 +469,7 @@ pub fn run_recorder_process(run_id: &str, bus: &crate::bus::Joining, shared_memo
             Err(mpsc::RecvTimeoutError::Disconnected) => return Err(Error::Failed("the subscriber closed".into())),
         }
     }
-    let finished = recorder.finish()?;
-    if let Some(first) = &finished.first_refused {
-        crate::console::warn(&format!(
-            "{} message(s) on the run's keys were not the run's and were not recorded (the first {first})",
-            finished.refused
-        ));
-    }
-    crate::console::say(&format!(
-        "{}recorded {} messages on {} channels, {} bytes: {}",
-        glissade_zenoh::NOTE,
-        finished.stats.messages,
-        finished.stats.channels,
-        finished.stats.file_bytes,
-        path.display()
-    ));
+    finish_recording(recorder, path)?;
     let _ = session.close().wait();
     Ok(())
 }

@@ -18,6 +18,7 @@ use glissade_messages::{encode, Stage, Verdict};
 use glissade_reference::{solve_reference_watched, ReferenceOptions, ReferenceRun};
 use glissade_replay::BoundaryStates;
 use glissade_scene::LoadedScene;
+use glissade_subdomain::LinearStageRecord;
 use serde::Serialize;
 use std::cell::Cell;
 use std::time::Instant;
@@ -436,16 +437,8 @@ pub fn report_against(
     stop_at: Option<f64>,
 ) -> crate::Result<(Report, RunResult)> {
     let model = &scene.model;
-    // Against every time point of a reference that solved them all, or against the ones a failed
-    // reference solved, where they are at least two (time point 0 alone has no load).
     let solved = reference.solution.newton_iterations.len();
-    let compared = if reference.failure.is_none() {
-        model.time.n_points()
-    } else if solved >= 2 {
-        solved
-    } else {
-        0
-    };
+    let compared = compared_time_points(model, reference);
     let complete = (compared > 0).then_some(&reference.solution);
     let mut tracker = ReferenceErrors::over(model, compared.max(1));
     let mut errors: Vec<(u32, ErrorsAgainstReference)> = Vec::new();
@@ -497,13 +490,82 @@ pub fn report_against(
             "the run's own boundary state could not be read: {e}"
         )));
     }
+    let points = report_points(&result, &records, complete.is_some().then_some(&errors[..]), &bytes);
+    let accuracy = accuracies(&points, result.setup_s, &records);
+    let time_to_accuracy = accuracy.iter().map(|a| (a.threshold, a.wall_s, a.iterations)).collect();
+    let report = Report {
+        scene: model.name.clone(),
+        scene_fingerprint: format!("{:016x}", scene.fingerprint),
+        software_version: env!("CARGO_PKG_VERSION").to_string(),
+        build_profile: if cfg!(debug_assertions) { "debug" } else { "release" }.to_string(),
+        cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+        reference_s,
+        reference_newton_iterations: reference.solution.newton_iterations.iter().sum(),
+        reference_max_newton_per_step: reference.solution.newton_iterations.iter().copied().max().unwrap_or(0),
+        reference_failure: reference.failure.as_ref().map(ToString::to_string),
+        reference_steps_solved: solved,
+        errors_over_time_points: compared,
+        latin_setup_s: result.setup_s,
+        latin_solve_s: result.solve_s,
+        latin_verdict: match (result.verdict.clone(), stop_at) {
+            (Verdict::Continue, Some(e)) => format!("stopped at a traction error ≤ {e:e}"),
+            (v, _) => format!("{v:?}"),
+        },
+        acceleration: acceleration_name(model.solver.acceleration),
+        // A plain step is a safeguarded one or one taken before any difference was stored.
+        anderson_steps: [
+            anderson.mixed,
+            anderson.safeguarded + anderson.unmixed,
+            anderson.restarted,
+        ],
+        linear_stage: linear_stage_name(scene),
+        start: start_name(model),
+        points,
+        time_to_accuracy,
+        accuracy,
+    };
+    Ok((report, result))
+}
+
+/// The time points a report compares: every one of a reference that solved them all, or the
+/// ones a failed reference solved where they are at least two (time point 0 alone has no load);
+/// else none.
+fn compared_time_points(model: &glissade_mechanics::model::Model, reference: &ReferenceRun) -> usize {
+    let solved = reference.solution.newton_iterations.len();
+    if reference.failure.is_none() {
+        model.time.n_points()
+    } else if solved >= 2 {
+        solved
+    } else {
+        0
+    }
+}
+
+/// The acceleration as a report names it.
+fn acceleration_name(a: Acceleration) -> String {
+    match a {
+        Acceleration::None => "none".into(),
+        Acceleration::Anderson { window } => format!("anderson({window})"),
+    }
+}
+
+/// One report point per iteration of `result` with the errors of that iteration against the
+/// reference (`errors`, by iteration; None: NaN errors, the reference solved too few time
+/// points), its linear stages' time, operations and PGD basis sizes (`records`) and its bus
+/// bytes.
+fn report_points(
+    result: &RunResult,
+    records: &[LinearStageRecord],
+    errors: Option<&[(u32, ErrorsAgainstReference)]>,
+    bytes: &[u64],
+) -> Vec<ReportPoint> {
     let pgd = records.iter().any(|r| r.modes > 0);
-    let points: Vec<ReportPoint> = result
+    result
         .iterations
         .iter()
         .filter_map(|r| {
-            let (e_f, e_w, e_max) = match complete {
-                Some(_) => errors
+            let (e_f, e_w, e_max) = match errors {
+                Some(errors) => errors
                     .iter()
                     .find(|e| e.0 == r.iteration)
                     .map(|(_, e)| (e.traction, e.jump, e.pointwise))?,
@@ -540,19 +602,24 @@ pub fn report_against(
                 },
             })
         })
-        .collect();
+        .collect()
+}
+
+/// Time, iterations, linear-stage time and operations and the largest PGD basis to each traction
+/// error of 1e-2, 1e-3, 1e-4 (None where never reached); `setup_s` is the operators' set-up.
+fn accuracies(points: &[ReportPoint], setup_s: f64, records: &[LinearStageRecord]) -> Vec<Accuracy> {
     // Linear stages before the first reported iteration (the initial one from ŝ = 0) count too.
     let first = points.first().map_or(0, |p| p.iteration);
     let linear_before: f64 = records.iter().filter(|x| x.iteration < first).map(|x| x.seconds).sum();
     let flops_before: u64 = records.iter().filter(|x| x.iteration < first).map(|x| x.flops).sum();
-    let accuracy: Vec<Accuracy> = [1e-2, 1e-3, 1e-4]
+    [1e-2, 1e-3, 1e-4]
         .iter()
         .map(|&th| {
             let hit = points.iter().position(|p| p.traction_error <= th);
             let upto = |k: usize| &points[..=k];
             Accuracy {
                 threshold: th,
-                wall_s: hit.map(|k| result.setup_s + points[k].elapsed_s),
+                wall_s: hit.map(|k| setup_s + points[k].elapsed_s),
                 iterations: hit.map(|k| points[k].iteration),
                 linear_s: hit.map(|k| linear_before + upto(k).iter().map(|p| p.linear_s).sum::<f64>()),
                 linear_flops: hit.map(|k| flops_before + upto(k).iter().map(|p| p.linear_flops).sum::<u64>()),
@@ -565,43 +632,7 @@ pub fn report_against(
                 }),
             }
         })
-        .collect();
-    let time_to_accuracy = accuracy.iter().map(|a| (a.threshold, a.wall_s, a.iterations)).collect();
-    let report = Report {
-        scene: model.name.clone(),
-        scene_fingerprint: format!("{:016x}", scene.fingerprint),
-        software_version: env!("CARGO_PKG_VERSION").to_string(),
-        build_profile: if cfg!(debug_assertions) { "debug" } else { "release" }.to_string(),
-        cores: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
-        reference_s,
-        reference_newton_iterations: reference.solution.newton_iterations.iter().sum(),
-        reference_max_newton_per_step: reference.solution.newton_iterations.iter().copied().max().unwrap_or(0),
-        reference_failure: reference.failure.as_ref().map(ToString::to_string),
-        reference_steps_solved: solved,
-        errors_over_time_points: compared,
-        latin_setup_s: result.setup_s,
-        latin_solve_s: result.solve_s,
-        latin_verdict: match (result.verdict.clone(), stop_at) {
-            (Verdict::Continue, Some(e)) => format!("stopped at a traction error ≤ {e:e}"),
-            (v, _) => format!("{v:?}"),
-        },
-        acceleration: match model.solver.acceleration {
-            Acceleration::None => "none".into(),
-            Acceleration::Anderson { window } => format!("anderson({window})"),
-        },
-        // A plain step is a safeguarded one or one taken before any difference was stored.
-        anderson_steps: [
-            anderson.mixed,
-            anderson.safeguarded + anderson.unmixed,
-            anderson.restarted,
-        ],
-        linear_stage: linear_stage_name(scene),
-        start: start_name(model),
-        points,
-        time_to_accuracy,
-        accuracy,
-    };
-    Ok((report, result))
+        .collect()
 }
 
 /// The scene's linear stage as the report names it.

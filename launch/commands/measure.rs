@@ -517,3 +517,36 @@ pub(crate) fn validate(
     );
     Ok(ExitCode::SUCCESS)
 }
+
+/// `glissade report`: its arguments checked, then one report or a comparison of variants.
+pub(crate) fn report_command(args: crate::cli::ReportArgs) -> anyhow::Result<ExitCode> {
+    let overrides = Overrides {
+        accuracy: args.accuracy,
+        tolerance: args.tolerance,
+        max_iterations: args.max_iterations,
+        record: None,
+    };
+    let ropts = reference_options(args.newton_iterations);
+    if let Some(e) = args.stop_at_error {
+        if !(e > 0.0 && e.is_finite()) {
+            anyhow::bail!("--stop-at-error {e}: must be a positive number");
+        }
+    }
+    let plots = Plots {
+        time_axis: if args.log_time { TimeAxis::Log } else { TimeAxis::Linear },
+        basis_subdomains: args.basis_subdomains.iter().map(|&s| s as usize).collect(),
+    };
+    if args.variants.is_empty() {
+        report(&args.scene, &args.out, &overrides, args.stop_at_error, &ropts, &plots)
+    } else {
+        report_variants(
+            &args.scene,
+            &args.out,
+            &overrides,
+            &args.variants,
+            args.stop_at_error,
+            &ropts,
+            &plots,
+        )
+    }
+}

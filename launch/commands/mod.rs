@@ -2,7 +2,10 @@
 //! measure (the reference, reports, benches, the stability matrix: [`measure`]); and what they
 //! share: exit codes, run ids, the output folder's check and scene loading with overrides.
 
+pub(crate) mod generate;
+pub(crate) mod inspect;
 pub(crate) mod measure;
+pub(crate) mod node;
 pub(crate) mod replay;
 pub(crate) mod run;
 pub(crate) mod soak;

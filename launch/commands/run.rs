@@ -103,15 +103,6 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         "building operators of {} subdomains",
         sc.model.subdomains.len()
     ));
-    let opts = RunOptions {
-        run_id: run_id.clone(),
-        interior: args.interior || args.vtu,
-        keep_state: false,
-    };
-    let progress = |r: &IterationRecord| {
-        bar.set_position(r.iteration as u64 + 1);
-        bar.set_message(glissade::output::progress_line(&sc.model, r));
-    };
     let recording = glissade::recording::recording_path(&sc, &run_id, &args.out);
     if let Some(p) = &recording {
         println!(
@@ -120,11 +111,62 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             glissade::recording::expected_size(&sc)
         );
     }
-    let mut live = LiveView::new(&args, &sc, &run_id)?;
+    let solved = match solve(&args, &sc, &run_id, &bar, recording.as_deref())? {
+        Ok(solved) => solved,
+        Err(code) => return Ok(code),
+    };
+    bar.finish_and_clear();
+    let outputs_started = std::time::Instant::now();
+    let result = &solved.result;
+    for l in &result.left_out {
+        println!("left out: {l}");
+    }
+    let resultants = glissade::resultants::resultants(&sc.model, &result.interfaces)?;
+    let written = write_outputs(&args, &sc, &run_id, &solved, &resultants, recording.as_deref())?;
+    println!(
+        "scene `{}`: {}; setup {:.2} s, iterations {:.2} s, outputs {:.2} s ({:.2} s since the command started)",
+        sc.model.name,
+        glissade::output::outcome(&sc.model, result),
+        result.setup_s,
+        result.solve_s,
+        outputs_started.elapsed().as_secs_f64(),
+        started.elapsed().as_secs_f64()
+    );
+    print_results(&sc, &solved, &resultants, recording.as_deref(), &written);
+    Ok(match result.verdict {
+        Verdict::Converged => ExitCode::SUCCESS,
+        _ => ExitCode::from(NOT_CONVERGED),
+    })
+}
+
+/// A solved run: its result, the totals of its linear stages and, as processes, its traffic.
+struct Solved {
+    result: glissade::runner::RunResult,
+    linear_stages: Vec<glissade::output::LinearStageTotals>,
+    bus: Option<glissade::distributed::Traffic>,
+}
+
+/// Solves the scene in-process or as processes, with the progress bar and the live view. Ok(Err)
+/// is the exit code of a run interrupted as processes (its summary written).
+fn solve(
+    args: &RunArgs,
+    sc: &LoadedScene,
+    run_id: &str,
+    bar: &ProgressBar,
+    recording: Option<&std::path::Path>,
+) -> anyhow::Result<Result<Solved, ExitCode>> {
+    let opts = RunOptions {
+        run_id: run_id.to_string(),
+        interior: args.interior || args.vtu,
+        keep_state: false,
+    };
+    let progress = |r: &IterationRecord| {
+        bar.set_position(r.iteration as u64 + 1);
+        bar.set_message(glissade::output::progress_line(&sc.model, r));
+    };
+    let mut live = LiveView::new(args, sc, run_id)?;
     let watched = live.view.is_some();
-    let mut run = Run::new(&sc, &opts)
-        .recorded(recording.as_deref())
-        .on_iteration(progress);
+    let mut run = Run::new(sc, &opts).recorded(recording).on_iteration(progress);
     if watched {
         run = run.observe(|m| {
             let t0 = std::time::Instant::now();
@@ -135,11 +177,9 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     // Linear-stage totals per linear stage: the counters of every run's `linear_stage_stats`
     // messages; their time in-process only (the in-process bus times the stages).
     let run = run.linear_stages();
-    let linear_stages;
-    let mut bus = None;
-    let result = if args.in_process {
+    if args.in_process {
         let outcome = run.in_process()?;
-        linear_stages = glissade::output::linear_stage_totals(&sc, &outcome.linear_stages, true);
+        let linear_stages = glissade::output::linear_stage_totals(sc, &outcome.linear_stages, true);
         live.finish()?;
         if let Some(st) = outcome.recording.and_then(|o| o.stats) {
             glissade::console::note(&format!(
@@ -147,92 +187,121 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 st.messages, st.channels
             ));
         }
-        outcome.result
-    } else {
-        let exe = std::env::current_exe().context("cannot locate the glissade executable to spawn nodes")?;
-        install_interrupt_handler()?;
-        let net = Network {
-            listen: args.listen.clone(),
-            connect: args.connect.clone(),
-            remote: args.remote.clone(),
-            remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
-            credentials: Some(args.out.clone()),
-            starter: if args.slurm {
-                Starter::Slurm(SlurmAllocation::from_env()?)
-            } else {
-                Starter::Local
-            },
-        };
-        match run.processes(&exe, &net) {
-            Ok(outcome) => {
-                bar.finish_and_clear();
-                live.finish()?;
-                let traffic = outcome.traffic.unwrap_or_default();
-                if traffic.counted == glissade::distributed::Counted::Kept {
-                    glissade::console::note(
-                        "bus: only the messages the launcher keeps are counted: an unrecorded run's fields do not reach \
-                         it (through a router outside its process, or with the interface nodes in the subdomain \
-                         processes)",
-                    );
-                }
-                let per = traffic.iterations.max(1) as f64;
-                for (kind, t) in &traffic.by_kind {
-                    let rate = if t.messages >= traffic.iterations {
-                        format!("{:.0} bytes per iteration", t.bytes as f64 / per)
-                    } else {
-                        "set-up or final, not per iteration".to_string()
-                    };
-                    glissade::console::note(&format!(
-                        "bus: {kind}: {} message(s), {} bytes ({rate})",
-                        t.messages, t.bytes
-                    ));
-                }
-                bus = Some(traffic);
-                linear_stages = glissade::output::linear_stage_totals(&sc, &outcome.linear_stages, false);
-                outcome.result
-            }
-            Err(e) => {
-                bar.finish_and_clear();
-                let glissade::Error::Interrupted(interrupted) = e else {
-                    return Err(e.into());
-                };
-                let Interrupted { partial } = &*interrupted;
-                let mut s = summary(&sc, partial, &run_id);
-                s["verdict"] = serde_json::json!("Interrupted");
-                s["interrupted"] = serde_json::json!(true);
-                let p = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &s)?;
-                println!(
-                    "scene `{}`: interrupted after {} iterations; every node was stopped\nsummary: {}",
-                    sc.model.name,
-                    partial.iterations.len(),
-                    p.display()
-                );
-                return Ok(ExitCode::from(INTERRUPTED));
-            }
-        }
-    };
-    bar.finish_and_clear();
-    let outputs_started = std::time::Instant::now();
-    for l in &result.left_out {
-        println!("left out: {l}");
+        return Ok(Ok(Solved {
+            result: outcome.result,
+            linear_stages,
+            bus: None,
+        }));
     }
-    let mut run_summary = summary(&sc, &result, &run_id);
-    let resultants = glissade::resultants::resultants(&sc.model, &result.interfaces)?;
+    let exe = std::env::current_exe().context("cannot locate the glissade executable to spawn nodes")?;
+    install_interrupt_handler()?;
+    let net = Network {
+        listen: args.listen.clone(),
+        connect: args.connect.clone(),
+        remote: args.remote.clone(),
+        remote_timeout: Some(std::time::Duration::from_secs(args.remote_timeout)),
+        credentials: Some(args.out.clone()),
+        starter: if args.slurm {
+            Starter::Slurm(SlurmAllocation::from_env()?)
+        } else {
+            Starter::Local
+        },
+    };
+    let done = run.processes(&exe, &net);
+    bar.finish_and_clear();
+    match done {
+        Ok(outcome) => {
+            live.finish()?;
+            let traffic = outcome.traffic.unwrap_or_default();
+            note_traffic(&traffic);
+            Ok(Ok(Solved {
+                result: outcome.result,
+                linear_stages: glissade::output::linear_stage_totals(sc, &outcome.linear_stages, false),
+                bus: Some(traffic),
+            }))
+        }
+        Err(glissade::Error::Interrupted(interrupted)) => {
+            let Interrupted { partial } = &*interrupted;
+            let mut s = summary(sc, partial, run_id);
+            s["verdict"] = serde_json::json!("Interrupted");
+            s["interrupted"] = serde_json::json!(true);
+            let p = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, run_id), &s)?;
+            println!(
+                "scene `{}`: interrupted after {} iterations; every node was stopped\nsummary: {}",
+                sc.model.name,
+                partial.iterations.len(),
+                p.display()
+            );
+            Ok(Err(ExitCode::from(INTERRUPTED)))
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The bus traffic of a run as processes, per kind of message, as notes (`--verbose`).
+fn note_traffic(traffic: &glissade::distributed::Traffic) {
+    if traffic.counted == glissade::distributed::Counted::Kept {
+        glissade::console::note(
+            "bus: only the messages the launcher keeps are counted: an unrecorded run's fields do not reach \
+             it (through a router outside its process, or with the interface nodes in the subdomain \
+             processes)",
+        );
+    }
+    let per = traffic.iterations.max(1) as f64;
+    for (kind, t) in &traffic.by_kind {
+        let rate = if t.messages >= traffic.iterations {
+            format!("{:.0} bytes per iteration", t.bytes as f64 / per)
+        } else {
+            "set-up or final, not per iteration".to_string()
+        };
+        glissade::console::note(&format!(
+            "bus: {kind}: {} message(s), {} bytes ({rate})",
+            t.messages, t.bytes
+        ));
+    }
+}
+
+/// The files a run wrote beside its recording.
+struct Written {
+    summary: std::path::PathBuf,
+    fields: std::path::PathBuf,
+    resultants: std::path::PathBuf,
+    boundaries: std::path::PathBuf,
+    csv: Option<std::path::PathBuf>,
+    series: Option<glissade::vtu::Series>,
+}
+
+/// Writes the run's outputs, each new: the summary, the interface fields, the displacements
+/// where asked, the ParaView series, the resultants and boundary forces (CSV and SVG) and the
+/// interface CSV. Where one cannot be written (a full disk), the error names the files already
+/// written: each is complete, and nothing is left of the one that failed.
+fn write_outputs(
+    args: &RunArgs,
+    sc: &LoadedScene,
+    run_id: &str,
+    solved: &Solved,
+    resultants: &[glissade::resultants::InterfaceResultants],
+    recording: Option<&std::path::Path>,
+) -> anyhow::Result<Written> {
+    let result = &solved.result;
+    let mut run_summary = summary(sc, result, run_id);
     run_summary["interface_resultants"] = serde_json::json!(resultants);
     run_summary["boundary_resultants"] = serde_json::json!(result.boundary);
-    run_summary["linear_stages"] = serde_json::json!(linear_stages.iter().map(|t| t.json()).collect::<Vec<_>>());
-    if let Some(traffic) = &bus {
+    run_summary["linear_stages"] = serde_json::json!(solved.linear_stages.iter().map(|t| t.json()).collect::<Vec<_>>());
+    if let Some(traffic) = &solved.bus {
         run_summary["bus"] = serde_json::json!(traffic);
     }
-    // The files this run wrote, named with the error when a later one cannot be written (a full
-    // disk): each is complete, and nothing is left of the one that failed.
-    let mut kept: Vec<std::path::PathBuf> = recording.iter().filter(|p| p.is_file()).cloned().collect();
-    let summary_path = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, &run_id), &run_summary)
+    let mut kept: Vec<std::path::PathBuf> = recording
+        .iter()
+        .filter(|p| p.is_file())
+        .map(|p| p.to_path_buf())
+        .collect();
+    let summary_path = write_json_new(&args.out, &RunFile::Summary.name(&sc.model.name, run_id), &run_summary)
         .map_err(|e| with_kept(e.into(), &kept))?;
     kept.push(summary_path.clone());
     let fields_path = write_bytes_new(
         &args.out,
-        &RunFile::Fields.name(&sc.model.name, &run_id),
+        &RunFile::Fields.name(&sc.model.name, run_id),
         &glissade::output::json_pieces(&interface_fields(&sc.model, &result.interfaces), "interfaces"),
     )
     .map_err(|e| with_kept(e.into(), &kept))?;
@@ -240,7 +309,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     if args.interior || (sc.model.interfaces.is_empty() && !args.vtu) {
         let p = write_bytes_new(
             &args.out,
-            &RunFile::Displacement.name(&sc.model.name, &run_id),
+            &RunFile::Displacement.name(&sc.model.name, run_id),
             &glissade::output::displacements(&sc.model, &result.displacements),
         )
         .map_err(|e| with_kept(e.into(), &kept))?;
@@ -271,7 +340,7 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         kept.push(path.clone());
         anyhow::Ok(path)
     };
-    let resultants_csv = glissade::resultants::resultants_csv(&sc.model, &resultants);
+    let resultants_csv = glissade::resultants::resultants_csv(&sc.model, resultants);
     let resultants_path = write_beside(&mut kept, "resultants.csv", resultants_csv.as_bytes())?;
     let boundaries_csv = glissade::resultants::boundary_csv(&sc.model, &result.boundary);
     let boundaries_path = write_beside(&mut kept, "boundaries.csv", boundaries_csv.as_bytes())?;
@@ -279,57 +348,63 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     write_beside(&mut kept, "boundaries.svg", boundaries_svg.as_bytes())?;
     let csv = if args.csv {
         let table = glissade::output::interface_csv(&sc.model, &result.interfaces)?;
-        let path = write_beside(&mut kept, "interfaces.csv", table.as_bytes())?;
-        Some(path)
+        Some(write_beside(&mut kept, "interfaces.csv", table.as_bytes())?)
     } else {
         None
     };
-    println!(
-        "scene `{}`: {}; setup {:.2} s, iterations {:.2} s, outputs {:.2} s ({:.2} s since the command started)",
-        sc.model.name,
-        glissade::output::outcome(&sc.model, &result),
-        result.setup_s,
-        result.solve_s,
-        outputs_started.elapsed().as_secs_f64(),
-        started.elapsed().as_secs_f64()
-    );
-    for line in glissade::resultants::console_lines(&sc.model, &resultants, 4) {
+    Ok(Written {
+        summary: summary_path,
+        fields: fields_path,
+        resultants: resultants_path,
+        boundaries: boundaries_path,
+        csv,
+        series,
+    })
+}
+
+/// The console's account of a finished run: the contact interfaces' resultants (and, not
+/// converged, those slipping over their whole length), the supports' forces, the linear stages,
+/// and where each output is.
+fn print_results(
+    sc: &LoadedScene,
+    solved: &Solved,
+    resultants: &[glissade::resultants::InterfaceResultants],
+    recording: Option<&std::path::Path>,
+    written: &Written,
+) {
+    let result = &solved.result;
+    for line in glissade::resultants::console_lines(&sc.model, resultants, 4) {
         println!("{line}");
     }
     if result.verdict != Verdict::Converged {
-        for line in glissade::resultants::whole_slip_lines(&sc.model, &resultants, 4) {
+        for line in glissade::resultants::whole_slip_lines(&sc.model, resultants, 4) {
             glissade::console::warn(&line);
         }
     }
     for line in glissade::resultants::boundary_console_lines(&sc.model, &result.boundary, 4) {
         println!("{line}");
     }
-    for t in &linear_stages {
+    for t in &solved.linear_stages {
         // Untimed (as processes), the counters alone are a note (`--verbose`).
         match t.seconds {
             Some(_) => println!("{}", t.line()),
             None => glissade::console::note(&t.line()),
         }
     }
-    if let Some(size) = recording
-        .as_deref()
-        .and_then(|p| std::fs::metadata(p).ok())
-        .map(|m| m.len())
-    {
-        let path = recording.as_deref().expect("a recording path").display();
-        println!("recording: {path} ({:.1} MB)", size as f64 * 1e-6);
+    if let Some((path, size)) = recording.and_then(|p| std::fs::metadata(p).ok().map(|m| (p, m.len()))) {
+        println!("recording: {} ({:.1} MB)", path.display(), size as f64 * 1e-6);
     }
     println!(
         "summary: {}\nfields: {}\nresultants: {}\nboundaries: {}",
-        summary_path.display(),
-        fields_path.display(),
-        resultants_path.display(),
-        boundaries_path.display()
+        written.summary.display(),
+        written.fields.display(),
+        written.resultants.display(),
+        written.boundaries.display()
     );
-    if let Some(path) = &csv {
+    if let Some(path) = &written.csv {
         println!("csv: {}", path.display());
     }
-    if let Some(v) = series {
+    if let Some(v) = &written.series {
         println!(
             "paraview: {} ({} files, {:.1} MB)",
             v.pvd.display(),
@@ -337,10 +412,6 @@ pub(crate) fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             v.bytes as f64 * 1e-6
         );
     }
-    Ok(match result.verdict {
-        Verdict::Converged => ExitCode::SUCCESS,
-        _ => ExitCode::from(NOT_CONVERGED),
-    })
 }
 
 /// The error of an output that could not be written, with the files the run did write.

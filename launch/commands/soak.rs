@@ -110,6 +110,111 @@ fn file_ending(dir: &Path, suffix: &str) -> Option<PathBuf> {
         .find(|p| p.to_string_lossy().ends_with(suffix))
 }
 
+/// Writes `soak.json` (the counts of each outcome, the run times, every run's record) and prints
+/// the counts.
+fn write_summary(args: &SoakArgs, records: &[RunRecord], wall_s: f64, soak_json: &Path) -> anyhow::Result<()> {
+    let count = |o: Outcome| records.iter().filter(|r| r.outcome == o).count();
+    let mut seconds: Vec<f64> = records.iter().map(|r| r.seconds).collect();
+    seconds.sort_by(f64::total_cmp);
+    let median = seconds.get(seconds.len() / 2).copied().unwrap_or(0.0);
+    let max = seconds.last().copied().unwrap_or(0.0);
+    let recovered: usize = records.iter().map(|r| r.recovered_stalls).sum();
+    let runs_recovered = records.iter().filter(|r| r.recovered_stalls > 0).count();
+    let summary = serde_json::json!({
+        "scene": args.scene.display().to_string(),
+        "runs": records.len(),
+        "parallel": args.parallel,
+        "busy_loops": args.busy,
+        "cores": std::thread::available_parallelism().map_or(0, |n| n.get()),
+        "recorded": !args.no_record,
+        "same_as_in_process": count(Outcome::Same),
+        "different": count(Outcome::Different),
+        "ended_by_a_stall": count(Outcome::Stalled),
+        "failed": count(Outcome::Failed),
+        "hung": count(Outcome::Hung),
+        "stalls_recovered": recovered,
+        "runs_with_a_stall_recovered": runs_recovered,
+        "median_s": median,
+        "max_s": max,
+        "wall_s": wall_s,
+        "runs_detail": records,
+    });
+    write_json_new(&args.out, "soak.json", &summary)?;
+    println!(
+        "soak: {} of {} runs converged to the in-process run's numbers; {} different, {} ended by a stall, {} failed, \
+         {} hung; {recovered} stall(s) recovered in {runs_recovered} run(s); median {median:.1} s, longest {max:.1} s \
+         ({})",
+        count(Outcome::Same),
+        records.len(),
+        count(Outcome::Different),
+        count(Outcome::Stalled),
+        count(Outcome::Failed),
+        count(Outcome::Hung),
+        soak_json.display()
+    );
+    Ok(())
+}
+
+/// Run `k` of the soak as processes, its outcome against the in-process run's fields
+/// `expected`; its outputs and log removed where it agrees (the log kept where it recovered from a
+/// stall).
+fn one_run(exe: &Path, args: &SoakArgs, k: u32, expected: &[u8], extra: &[&str]) -> anyhow::Result<RunRecord> {
+    let out = args.out.join(format!("run-{k}"));
+    let log = args.out.join(format!("run-{k}.log"));
+    let started = Instant::now();
+    let mut c = child(exe, &args.scene, &out, extra, &log)?;
+    let status = wait(&mut c, args.timeout)?;
+    let seconds = started.elapsed().as_secs_f64();
+    let said = std::fs::read_to_string(&log).unwrap_or_default();
+    let recovered_stalls = said.matches("stopped moving and was set going again").count();
+    let same = file_ending(&out, ".fields.json")
+        .and_then(|f| std::fs::read(f).ok())
+        .is_some_and(|f| f == expected);
+    let outcome = match status {
+        None => Outcome::Hung,
+        Some(s) if s.success() && same => Outcome::Same,
+        Some(s) if s.success() || s.code() == Some(NOT_CONVERGED.into()) => Outcome::Different,
+        Some(_) if said.contains("the run stopped moving") => Outcome::Stalled,
+        Some(_) => Outcome::Failed,
+    };
+    let keep = outcome != Outcome::Same;
+    if !keep {
+        // The outputs agree: only the log of a run that recovered from a stall
+        // is kept.
+        let _ = std::fs::remove_dir_all(&out);
+        if recovered_stalls == 0 {
+            let _ = std::fs::remove_file(&log);
+        }
+    }
+    let tail: Vec<&str> = said.lines().rev().take(8).collect();
+    let warnings = said
+        .lines()
+        .filter(|l| l.contains("stopped moving and was set going again"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let record = RunRecord {
+        run: k,
+        outcome,
+        seconds,
+        recovered_stalls,
+        said: if keep {
+            Some(tail.into_iter().rev().collect::<Vec<_>>().join("\n"))
+        } else {
+            (recovered_stalls > 0).then_some(warnings)
+        },
+    };
+    println!(
+        "run {k}: {:?} in {seconds:.1} s{}",
+        record.outcome,
+        if recovered_stalls > 0 {
+            format!(" ({recovered_stalls} stall(s) recovered)")
+        } else {
+            String::new()
+        }
+    );
+    Ok(record)
+}
+
 pub(crate) fn soak(args: SoakArgs) -> anyhow::Result<ExitCode> {
     let exe = std::env::current_exe().context("cannot find this program's path")?;
     ensure_not_a_file(&args.out)?;
@@ -163,59 +268,7 @@ pub(crate) fn soak(args: SoakArgs) -> anyhow::Result<ExitCode> {
                         if k >= args.runs || glissade::distributed::interrupted() {
                             return Ok(());
                         }
-                        let out = args.out.join(format!("run-{k}"));
-                        let log = args.out.join(format!("run-{k}.log"));
-                        let started = Instant::now();
-                        let mut c = child(&exe, &args.scene, &out, &extra, &log)?;
-                        let status = wait(&mut c, args.timeout)?;
-                        let seconds = started.elapsed().as_secs_f64();
-                        let said = std::fs::read_to_string(&log).unwrap_or_default();
-                        let recovered_stalls = said.matches("stopped moving and was set going again").count();
-                        let same = file_ending(&out, ".fields.json")
-                            .and_then(|f| std::fs::read(f).ok())
-                            .is_some_and(|f| f == expected);
-                        let outcome = match status {
-                            None => Outcome::Hung,
-                            Some(s) if s.success() && same => Outcome::Same,
-                            Some(s) if s.success() || s.code() == Some(NOT_CONVERGED.into()) => Outcome::Different,
-                            Some(_) if said.contains("the run stopped moving") => Outcome::Stalled,
-                            Some(_) => Outcome::Failed,
-                        };
-                        let keep = outcome != Outcome::Same;
-                        if !keep {
-                            // The outputs agree: only the log of a run that recovered from a stall
-                            // is kept.
-                            let _ = std::fs::remove_dir_all(&out);
-                            if recovered_stalls == 0 {
-                                let _ = std::fs::remove_file(&log);
-                            }
-                        }
-                        let tail: Vec<&str> = said.lines().rev().take(8).collect();
-                        let warnings = said
-                            .lines()
-                            .filter(|l| l.contains("stopped moving and was set going again"))
-                            .collect::<Vec<_>>()
-                            .join("\n");
-                        let record = RunRecord {
-                            run: k,
-                            outcome,
-                            seconds,
-                            recovered_stalls,
-                            said: if keep {
-                                Some(tail.into_iter().rev().collect::<Vec<_>>().join("\n"))
-                            } else {
-                                (recovered_stalls > 0).then_some(warnings)
-                            },
-                        };
-                        println!(
-                            "run {k}: {:?} in {seconds:.1} s{}",
-                            record.outcome,
-                            if recovered_stalls > 0 {
-                                format!(" ({recovered_stalls} stall(s) recovered)")
-                            } else {
-                                String::new()
-                            }
-                        );
+                        let record = one_run(&exe, &args, k, &expected, &extra)?;
                         records.lock().unwrap_or_else(|e| e.into_inner()).push(record);
                     }
                 })
@@ -233,45 +286,8 @@ pub(crate) fn soak(args: SoakArgs) -> anyhow::Result<ExitCode> {
     result?;
     let mut records = records.into_inner().unwrap_or_else(|e| e.into_inner());
     records.sort_by_key(|r| r.run);
+    write_summary(&args, &records, t0.elapsed().as_secs_f64(), &soak_json)?;
     let count = |o: Outcome| records.iter().filter(|r| r.outcome == o).count();
-    let mut seconds: Vec<f64> = records.iter().map(|r| r.seconds).collect();
-    seconds.sort_by(f64::total_cmp);
-    let median = seconds.get(seconds.len() / 2).copied().unwrap_or(0.0);
-    let max = seconds.last().copied().unwrap_or(0.0);
-    let recovered: usize = records.iter().map(|r| r.recovered_stalls).sum();
-    let runs_recovered = records.iter().filter(|r| r.recovered_stalls > 0).count();
-    let summary = serde_json::json!({
-        "scene": args.scene.display().to_string(),
-        "runs": records.len(),
-        "parallel": args.parallel,
-        "busy_loops": args.busy,
-        "cores": std::thread::available_parallelism().map_or(0, |n| n.get()),
-        "recorded": !args.no_record,
-        "same_as_in_process": count(Outcome::Same),
-        "different": count(Outcome::Different),
-        "ended_by_a_stall": count(Outcome::Stalled),
-        "failed": count(Outcome::Failed),
-        "hung": count(Outcome::Hung),
-        "stalls_recovered": recovered,
-        "runs_with_a_stall_recovered": runs_recovered,
-        "median_s": median,
-        "max_s": max,
-        "wall_s": t0.elapsed().as_secs_f64(),
-        "runs_detail": records,
-    });
-    write_json_new(&args.out, "soak.json", &summary)?;
-    println!(
-        "soak: {} of {} runs converged to the in-process run's numbers; {} different, {} ended by a stall, {} failed, \
-         {} hung; {recovered} stall(s) recovered in {runs_recovered} run(s); median {median:.1} s, longest {max:.1} s \
-         ({})",
-        count(Outcome::Same),
-        records.len(),
-        count(Outcome::Different),
-        count(Outcome::Stalled),
-        count(Outcome::Failed),
-        count(Outcome::Hung),
-        soak_json.display()
-    );
     Ok(
         if count(Outcome::Same) == records.len() && records.len() == args.runs as usize {
             ExitCode::SUCCESS

@@ -112,15 +112,22 @@ const COLOURS: [&str; 10] = [
 /// those the scene does not have are skipped) of every PGD report, one dash pattern per
 /// subdomain. Panel (b) is left out when no report is PGD.
 pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
-    let (w, ha, hb) = (1100.0, 520.0, 420.0);
-    let (left, right, top, bottom) = (80.0, 440.0, 40.0, 60.0);
+    let (ha, hb) = (520.0, 420.0);
     let it_max = reports
         .iter()
         .flat_map(|r| r.points.iter().map(|p| p.iteration))
         .max()
         .unwrap_or(1)
         .max(1) as f64;
-    let x = |i: f64| left + (w - left - right) * i / it_max;
+    let ax = IterationAxis {
+        w: 1100.0,
+        left: 80.0,
+        right: 440.0,
+        top: 40.0,
+        bottom: 60.0,
+        it_max,
+    };
+    let (w, left, right, top, bottom) = (ax.w, ax.left, ax.right, ax.top, ax.bottom);
     let title = reports.first().map_or("", |r| r.scene.as_str());
     // (a): log axis over every plotted value.
     let values: Vec<f64> = reports
@@ -145,39 +152,8 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
         w - left - right,
         ha - top - bottom
     );
-    let mut e = lo;
-    while e <= hi + 0.5 {
-        let yy = ya(10f64.powf(e));
-        svg += &format!(
-            "<line x1=\"{left}\" y1=\"{yy}\" x2=\"{}\" y2=\"{yy}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{}</text>\n",
-            w - right,
-            left - 6.0,
-            yy + 4.0,
-            e as i32
-        );
-        e += 1.0;
-    }
-    let iteration_ticks = |svg: &mut String, y0: f64| {
-        for (i, label) in linear_ticks(it_max) {
-            svg.push_str(&format!(
-                "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{label}</text>\n",
-                x(i),
-                y0 + 18.0
-            ));
-        }
-        svg.push_str(&format!(
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">LATIN iteration</text>\n",
-            (left + w - right) / 2.0,
-            y0 + 40.0
-        ));
-    };
-    iteration_ticks(&mut svg, ha - bottom);
-    let polyline = |pts: Vec<String>, colour: &str, dash: &str| {
-        format!(
-            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.6\" stroke-dasharray=\"{dash}\" points=\"{}\"/>\n",
-            pts.join(" ")
-        )
-    };
+    svg += &decade_lines((lo, hi), ya, left, w - right);
+    ax.ticks(&mut svg, ha - bottom);
     for (k, r) in reports.iter().enumerate() {
         let colour = COLOURS[k % COLOURS.len()];
         for (dash, f) in [
@@ -188,7 +164,7 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
                 .points
                 .iter()
                 .filter(|p| f(p) > 0.0 && f(p).is_finite())
-                .map(|p| format!("{:.2},{:.2}", x(p.iteration as f64), ya(f(p))))
+                .map(|p| format!("{:.2},{:.2}", ax.x(p.iteration as f64), ya(f(p))))
                 .collect();
             svg += &polyline(pts, colour, dash);
         }
@@ -202,10 +178,64 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
             escape(&short_name(r))
         );
     }
-    // (b): basis sizes.
-    if pgd.is_empty() {
-        return svg + "</svg>\n";
+    if !pgd.is_empty() {
+        basis_panel(&mut svg, &ax, &pgd, subdomains, (ha, hb));
     }
+    svg += "</svg>\n";
+    svg
+}
+
+/// The iteration axis both panels of [`plot_iterations_svg`] share, and their margins.
+struct IterationAxis {
+    w: f64,
+    left: f64,
+    right: f64,
+    top: f64,
+    bottom: f64,
+    it_max: f64,
+}
+
+impl IterationAxis {
+    fn x(&self, i: f64) -> f64 {
+        self.left + (self.w - self.left - self.right) * i / self.it_max
+    }
+
+    /// The iteration ticks and the axis' name under a panel whose bottom is at `y0`.
+    fn ticks(&self, svg: &mut String, y0: f64) {
+        for (i, label) in linear_ticks(self.it_max) {
+            svg.push_str(&format!(
+                "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{label}</text>\n",
+                self.x(i),
+                y0 + 18.0
+            ));
+        }
+        svg.push_str(&format!(
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">LATIN iteration</text>\n",
+            (self.left + self.w - self.right) / 2.0,
+            y0 + 40.0
+        ));
+    }
+}
+
+/// A curve through `pts` ("x,y" each).
+fn polyline(pts: Vec<String>, colour: &str, dash: &str) -> String {
+    format!(
+        "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.6\" stroke-dasharray=\"{dash}\" points=\"{}\"/>\n",
+        pts.join(" ")
+    )
+}
+
+/// Panel (b) of [`plot_iterations_svg`], from `y0` down `hb` (`(y0, hb)`): the PGD basis sizes of
+/// the chosen `subdomains` of every PGD report (`pgd`: its index among the reports, for its
+/// colour), one dash pattern per subdomain.
+fn basis_panel(
+    svg: &mut String,
+    ax: &IterationAxis,
+    pgd: &[(usize, &Report)],
+    subdomains: &[usize],
+    (y0, hb): (f64, f64),
+) {
+    let (w, left, right, top, bottom) = (ax.w, ax.left, ax.right, ax.top, ax.bottom);
     let chosen = |r: &Report| -> Vec<usize> {
         let n = r.points.iter().map(|p| p.basis_sizes.len()).max().unwrap_or(0);
         subdomains.iter().copied().filter(|s| (1..=n).contains(s)).collect()
@@ -223,10 +253,9 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
         .max()
         .unwrap_or(1)
         .max(1) as f64;
-    let y0 = ha;
     let yb = |m: f64| y0 + top + (hb - top - bottom) * (1.0 - m / m_max);
     let names: Vec<String> = subdomains.iter().map(|s| s.to_string()).collect();
-    svg += &format!(
+    *svg += &format!(
         "<text x=\"{}\" y=\"{}\" font-size=\"15\" text-anchor=\"middle\">(b) PGD basis size of subdomains {} (dash pattern per subdomain)</text>\n<rect x=\"{left}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"black\"/>\n",
         (left + w - right) / 2.0,
         y0 + 22.0,
@@ -236,7 +265,7 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
         hb - top - bottom
     );
     for (m, label) in linear_ticks(m_max) {
-        svg += &format!(
+        *svg += &format!(
             "<line x1=\"{left}\" y1=\"{0}\" x2=\"{1}\" y2=\"{0}\" stroke=\"#eee\"/><text x=\"{2}\" y=\"{3}\" text-anchor=\"end\">{label}</text>\n",
             yb(m),
             w - right,
@@ -244,10 +273,10 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
             yb(m) + 4.0
         );
     }
-    iteration_ticks(&mut svg, y0 + hb - bottom);
+    ax.ticks(svg, y0 + hb - bottom);
     const DASHES: [&str; 4] = ["", "6,3", "2,3", "10,3,2,3"];
     let mut row = 0;
-    for (k, r) in pgd {
+    for &(k, r) in pgd {
         let colour = COLOURS[k % COLOURS.len()];
         for (j, s) in chosen(r).into_iter().enumerate() {
             let dash = DASHES[j % DASHES.len()];
@@ -257,14 +286,14 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
                 .filter_map(|p| {
                     p.basis_sizes
                         .get(s - 1)
-                        .map(|&m| format!("{:.2},{:.2}", x(p.iteration as f64), yb(m as f64)))
+                        .map(|&m| format!("{:.2},{:.2}", ax.x(p.iteration as f64), yb(m as f64)))
                 })
                 .collect();
-            svg += &polyline(pts, colour, dash);
+            *svg += &polyline(pts, colour, dash);
             let ly = y0 + top + 10.0 + 16.0 * row as f64;
             row += 1;
             if ly < y0 + hb - bottom {
-                svg += &format!(
+                *svg += &format!(
                     "<line x1=\"{}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{colour}\" stroke-width=\"2\" stroke-dasharray=\"{dash}\"/><text x=\"{}\" y=\"{}\" font-size=\"10\">subdomain {s}: {}</text>\n",
                     w - right + 8.0,
                     w - right + 28.0,
@@ -275,8 +304,6 @@ pub fn plot_iterations_svg(reports: &[Report], subdomains: &[usize]) -> String {
             }
         }
     }
-    svg += "</svg>\n";
-    svg
 }
 
 /// [`variant_name`] without the defaults a legend need not repeat (frozen macro modes off).
@@ -345,11 +372,28 @@ pub fn log_ticks(lo: f64, hi: f64) -> Vec<(f64, String)> {
     (a..=b).map(|k| (10f64.powi(k), format!("1e{k}"))).collect()
 }
 
-fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
-    let (w, h) = (900.0, 560.0);
-    let (left, right, top, bottom) = (80.0, 230.0, 40.0, 60.0);
-    // Colour and dash pattern per curve, so that curves on top of each other stay apart.
-    let series: [Series; 7] = [
+/// The grid lines and labels of a logarithmic vertical axis at every decade 1e`lo` … 1e`hi`,
+/// from `left` to `x_end`, `y` placing a value.
+fn decade_lines((lo, hi): (f64, f64), y: impl Fn(f64) -> f64, left: f64, x_end: f64) -> String {
+    let mut svg = String::new();
+    let mut e = lo;
+    while e <= hi + 0.5 {
+        let yy = y(10f64.powf(e));
+        svg += &format!(
+            "<line x1=\"{left}\" y1=\"{yy}\" x2=\"{x_end}\" y2=\"{yy}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{}</text>\n",
+            left - 6.0,
+            yy + 4.0,
+            e as i32
+        );
+        e += 1.0;
+    }
+    svg
+}
+
+/// The curves of [`plot_errors_svg`]: name, colour and dash pattern (so that curves on top of
+/// each other stay apart), and the value of a report point.
+fn error_series() -> [Series; 7] {
+    [
         (
             "traction error vs reference",
             "#d62728",
@@ -382,7 +426,40 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
             "4,4",
             Box::new(|p| p.contact_indicator),
         ),
-    ];
+    ]
+}
+
+/// The reference's wall time as a vertical dashed line at `xr` (at the right edge, said
+/// "beyond this axis", where `beyond`) from `top` to `bottom_y`, named with how the reference
+/// ended.
+fn reference_line(report: &Report, xr: f64, beyond: bool, (top, bottom_y): (f64, f64)) -> String {
+    let reference_label = match report.reference_failure {
+        None => "monolithic Newton reference".to_string(),
+        Some(_) if report.errors_over_time_points > 0 => format!(
+            "monolithic Newton reference FAILED after {} time points (errors over those)",
+            report.reference_steps_solved
+        ),
+        Some(_) => format!(
+            "monolithic Newton reference FAILED after {} time points (no errors)",
+            report.reference_steps_solved
+        ),
+    };
+    format!(
+        "<line x1=\"{xr}\" y1=\"{top}\" x2=\"{xr}\" y2=\"{}\" stroke=\"black\" stroke-dasharray=\"6,4\"/><text x=\"{}\" y=\"{}\" transform=\"rotate(-90 {} {})\">{reference_label}: {:.2} s{}</text>\n",
+        bottom_y,
+        xr - 6.0,
+        top + 240.0,
+        xr - 6.0,
+        top + 240.0,
+        report.reference_s,
+        if beyond { " (beyond this axis)" } else { "" }
+    )
+}
+
+fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
+    let (w, h) = (900.0, 560.0);
+    let (left, right, top, bottom) = (80.0, 230.0, 40.0, 60.0);
+    let series = error_series();
     let t_of = |p: &ReportPoint| report.latin_setup_s + p.elapsed_s;
     // The axis spans LATIN's run (the reference's time is marked on it where it fits, else named
     // at the right edge): a reference ten times slower would squeeze LATIN's curves into a tenth.
@@ -420,18 +497,7 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
         w - left - right,
         h - top - bottom
     );
-    let mut e = lo;
-    while e <= hi + 0.5 {
-        let yy = y(10f64.powf(e));
-        svg += &format!(
-            "<line x1=\"{left}\" y1=\"{yy}\" x2=\"{}\" y2=\"{yy}\" stroke=\"#ddd\"/><text x=\"{}\" y=\"{}\" text-anchor=\"end\">1e{}</text>\n",
-            w - right,
-            left - 6.0,
-            yy + 4.0,
-            e as i32
-        );
-        e += 1.0;
-    }
+    svg += &decade_lines((lo, hi), y, left, w - right);
     let ticks = match time_axis {
         TimeAxis::Linear => linear_ticks(t_max),
         TimeAxis::Log => log_ticks(t_lo, t_hi),
@@ -456,27 +522,7 @@ fn plot_errors_svg(report: &Report, time_axis: TimeAxis) -> String {
     );
     let beyond = report.reference_s > t_max;
     let xr = if beyond { w - right } else { x(report.reference_s) };
-    let reference_label = match report.reference_failure {
-        None => "monolithic Newton reference".to_string(),
-        Some(_) if report.errors_over_time_points > 0 => format!(
-            "monolithic Newton reference FAILED after {} time points (errors over those)",
-            report.reference_steps_solved
-        ),
-        Some(_) => format!(
-            "monolithic Newton reference FAILED after {} time points (no errors)",
-            report.reference_steps_solved
-        ),
-    };
-    svg += &format!(
-        "<line x1=\"{xr}\" y1=\"{top}\" x2=\"{xr}\" y2=\"{}\" stroke=\"black\" stroke-dasharray=\"6,4\"/><text x=\"{}\" y=\"{}\" transform=\"rotate(-90 {} {})\">{reference_label}: {:.2} s{}</text>\n",
-        h - bottom,
-        xr - 6.0,
-        top + 240.0,
-        xr - 6.0,
-        top + 240.0,
-        report.reference_s,
-        if beyond { " (beyond this axis)" } else { "" }
-    );
+    svg += &reference_line(report, xr, beyond, (top, h - bottom));
     for (k, (name, color, dash, f)) in series.iter().enumerate() {
         let pts: Vec<String> = report
             .points

@@ -276,11 +276,26 @@ pub fn cases(quick: bool) -> Vec<Case> {
     let conv = Expect::Converge { error: ERROR_TOLERANCE };
     let base = Base::three_layers();
     let mut out = Vec::new();
+    out.extend(material_and_load_cases(&base, &conv));
+    out.extend(solver_cases(&base, &conv));
+    out.extend(geometry_cases(&conv));
+    for c in &mut out {
+        c.quick = !SLOW.contains(&c.name);
+    }
+    if quick {
+        out.retain(|c| c.quick);
+    }
+    out
+}
+
+/// Cases that vary the base scene's materials, friction and loads.
+fn material_and_load_cases(base: &Base, conv: &Expect) -> Vec<Case> {
+    let mut out = Vec::new();
     out.push(case(
         "base",
         "nothing: three 40 × 10 mm layers, 8 × 2 QUA8 and 2 subdomains each, E = 130 GPa, ν = 0.2, \
          f = 0.3, p = 100 MPa, end tension and shear, N = 10",
-        &base,
+        base,
         conv.clone(),
     ));
 
@@ -345,6 +360,12 @@ pub fn cases(quick: bool) -> Vec<Case> {
     b.set_loads(0.0, 0.0, 0.0, "t", "t");
     out.push(case("zero-load", "no load at all (clamp only)", &b, conv.clone()));
 
+    out
+}
+
+/// Cases that vary the solver's settings and the time grid.
+fn solver_cases(base: &Base, conv: &Expect) -> Vec<Case> {
+    let mut out = Vec::new();
     for (name, k, expect) in [
         (
             "k0-x1e-3",
@@ -436,6 +457,12 @@ pub fn cases(quick: bool) -> Vec<Case> {
         conv.clone(),
     ));
 
+    out
+}
+
+/// Cases of other geometries: gaps opening and closing between two blocks, thin layers.
+fn geometry_cases(conv: &Expect) -> Vec<Case> {
+    let mut out = Vec::new();
     let gap_open = two_blocks(
         "0.01",
         "[[boundary]]\ny = 0.0\nux = 0.0\nuy = 0.0\n\n[[boundary]]\ny = 20.0\nux = 0.0\nuy = 0.0\n\n\
@@ -510,11 +537,5 @@ pub fn cases(quick: bool) -> Vec<Case> {
         },
     ));
 
-    for c in &mut out {
-        c.quick = !SLOW.contains(&c.name);
-    }
-    if quick {
-        out.retain(|c| c.quick);
-    }
     out
 }
