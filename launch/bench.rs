@@ -183,20 +183,9 @@ pub fn machine_rates(m: usize, n: usize) -> MachineRates {
     }
 }
 
-/// Runs the benchmark of `scene`.
-pub fn bench(scene: &LoadedScene, run_id: &str) -> crate::Result<BenchReport> {
-    let model = &scene.model;
-    if model.interfaces.is_empty() {
-        return Err(crate::Error::NoInterface {
-            scene: model.name.clone(),
-            consequence: "there is no iteration to benchmark",
-        });
-    }
-    let plan = Plan::new(model).with_scene(scene);
-    let nt = model.time.n_points();
-    // Boundary sizes and macro sizes of the subdomains that iterate.
-    let sizes: Vec<(usize, usize, LinearStage)> = plan
-        .participants
+/// Boundary sizes, macro sizes and linear stages of the subdomains that iterate.
+fn subdomain_sizes(model: &glissade_mechanics::model::Model, plan: &Plan) -> Vec<(usize, usize, LinearStage)> {
+    plan.participants
         .iter()
         .map(|&s| {
             let s = s as usize;
@@ -210,7 +199,38 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> crate::Result<BenchReport> {
                 .sum();
             (n_b, n_m, plan.stage_of(model, s))
         })
-        .collect();
+        .collect()
+}
+
+/// The floating-point operations of one iteration's condensed linear stages (None where a
+/// subdomain has another stage), over `nt` time points, `coarse`: with the coarse problem.
+fn linear_flops(sizes: &[(usize, usize, LinearStage)], nt: usize, coarse: bool) -> Option<f64> {
+    let all_condensed = sizes.iter().all(|x| x.2 == LinearStage::Condensed);
+    all_condensed.then(|| {
+        sizes
+            .iter()
+            .map(|&(n_b, n_m, _)| {
+                let (b, m, t) = (n_b as f64, n_m as f64, nt as f64);
+                // micro 1: A_E (M q̂); with the coarse problem also 𝔼ᵀ M F₁ and, in micro 2,
+                // (A_E M k⁻ 𝔼) w̃ and 𝔼 w̃.
+                2.0 * b * b * t + if coarse { 3.0 * 2.0 * b * m * t } else { 0.0 }
+            })
+            .sum::<f64>()
+    })
+}
+
+/// Runs the benchmark of `scene`.
+pub fn bench(scene: &LoadedScene, run_id: &str) -> crate::Result<BenchReport> {
+    let model = &scene.model;
+    if model.interfaces.is_empty() {
+        return Err(crate::Error::NoInterface {
+            scene: model.name.clone(),
+            consequence: "there is no iteration to benchmark",
+        });
+    }
+    let plan = Plan::new(model).with_scene(scene);
+    let nt = model.time.n_points();
+    let sizes = subdomain_sizes(model, &plan);
     let largest = sizes.iter().map(|x| x.0).max().unwrap_or(0);
     // Anderson's passes beyond the plain iteration's, summed over the run: per subdomain for its
     // records, and for every subdomain for each step (all of them take it).
@@ -246,19 +266,7 @@ pub fn bench(scene: &LoadedScene, run_id: &str) -> crate::Result<BenchReport> {
             ms_per_iteration: per_it(t.seconds),
         })
         .collect();
-    let all_condensed = sizes.iter().all(|x| x.2 == LinearStage::Condensed);
-    let coarse = plan.coarse;
-    let linear_flops = all_condensed.then(|| {
-        sizes
-            .iter()
-            .map(|&(n_b, n_m, _)| {
-                let (b, m, t) = (n_b as f64, n_m as f64, nt as f64);
-                // micro 1: A_E (M q̂); with the coarse problem also 𝔼ᵀ M F₁ and, in micro 2,
-                // (A_E M k⁻ 𝔼) w̃ and 𝔼 w̃.
-                2.0 * b * b * t + if coarse { 3.0 * 2.0 * b * m * t } else { 0.0 }
-            })
-            .sum::<f64>()
-    });
+    let linear_flops = linear_flops(&sizes, nt, plan.coarse);
     let linear_cpu_s: f64 = times
         .iter()
         .filter(|t| t.role == Role::Subdomain && matches!(t.field.as_str(), "local_directions" | "macro_displacements"))

@@ -369,6 +369,75 @@ pub fn interface_fields(model: &Model, interfaces: &[InterfaceSolution]) -> Valu
     interface_fields_upto(model, interfaces, model.time.n_points())
 }
 
+/// One interface's entry of `fields.json` over the first `nt` time points: its sides, kind,
+/// frame, pairs and weights, the tractions, jumps and statuses per time point and pair, and on a
+/// non-matching interface each side's displacement at the pairs.
+fn interface_entry(model: &Model, sol: &InterfaceSolution, nt: usize) -> Value {
+    let itf = &model.interfaces[sol.interface as usize];
+    let np = itf.n_pairs();
+    // f_n, f_t, jump_n, jump_t: [quantity][time point][pair].
+    let mut values: [Vec<Value>; 4] = std::array::from_fn(|_| Vec::with_capacity(nt));
+    for i in 0..nt {
+        let mut rows: [Vec<Value>; 4] = std::array::from_fn(|_| Vec::with_capacity(np));
+        for p in 0..np {
+            for (row, v) in rows.iter_mut().zip(pair_values(itf, sol, i, p)) {
+                row.push(Value::from(v));
+            }
+        }
+        for (q, row) in values.iter_mut().zip(rows) {
+            q.push(Value::Array(row));
+        }
+    }
+    let kind = match &itf.kind {
+        InterfaceKind::Perfect => json!("perfect"),
+        InterfaceKind::Contact { friction, .. } => json!({"contact": {"friction": friction}}),
+    };
+    let (normal, tangent) = itf.mean_frame();
+    let mut entry = json!({
+        "interface": sol.interface,
+        "a": model.subdomains[itf.a].name,
+        "b": model.subdomains[itf.b].name,
+        "kind": kind,
+        "normal": normal,
+        "tangent": tangent,
+        "coords": itf.coords,
+        "weights": itf.weights,
+    });
+    let [f_n, f_t, jump_n, jump_t] = values;
+    for (key, q) in [("f_n", f_n), ("f_t", f_t), ("jump_n", jump_n), ("jump_t", jump_t)] {
+        entry[key] = Value::Array(q);
+    }
+    entry["status"] = Value::Array(if itf.is_contact() {
+        (0..nt)
+            .map(|i| {
+                Value::Array(
+                    sol.status[i * np..(i + 1) * np]
+                        .iter()
+                        .map(|&c| Value::String(status_name(c)))
+                        .collect(),
+                )
+            })
+            .collect()
+    } else {
+        Vec::new()
+    });
+    if itf.straight_normal().is_none() {
+        entry["normals"] = json!(itf.normals);
+    }
+    if itf.is_non_matching() {
+        // Each side's displacement at the pairs (global x, y): side b's through its
+        // projection, side a's the node's own (or an end edge's mean).
+        for (key, w) in [("u_a", &sol.w_a), ("u_b", &sol.w_b)] {
+            entry[key] = Value::Array(
+                (0..nt)
+                    .map(|i| Value::Array((0..np).map(|p| json!([w.get(2 * p, i), w.get(2 * p + 1, i)])).collect()))
+                    .collect(),
+            );
+        }
+    }
+    entry
+}
+
 /// [`interface_fields`] over the first `n_times` time points only (the steps a failed reference
 /// solved; its fields have that many columns).
 pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_times: usize) -> Value {
@@ -377,74 +446,7 @@ pub fn interface_fields_upto(model: &Model, interfaces: &[InterfaceSolution], n_
     // `json!` macro would serialize a vector into a new one, value by value).
     let items: Vec<Value> = interfaces
         .par_iter()
-        .map(|sol| {
-            let itf = &model.interfaces[sol.interface as usize];
-            let np = itf.n_pairs();
-            let nt = n_times;
-            // f_n, f_t, jump_n, jump_t: [quantity][time point][pair].
-            let mut values: [Vec<Value>; 4] = std::array::from_fn(|_| Vec::with_capacity(nt));
-            for i in 0..nt {
-                let mut rows: [Vec<Value>; 4] = std::array::from_fn(|_| Vec::with_capacity(np));
-                for p in 0..np {
-                    for (row, v) in rows.iter_mut().zip(pair_values(itf, sol, i, p)) {
-                        row.push(Value::from(v));
-                    }
-                }
-                for (q, row) in values.iter_mut().zip(rows) {
-                    q.push(Value::Array(row));
-                }
-            }
-            let kind = match &itf.kind {
-                InterfaceKind::Perfect => json!("perfect"),
-                InterfaceKind::Contact { friction, .. } => json!({"contact": {"friction": friction}}),
-            };
-            let (normal, tangent) = itf.mean_frame();
-            let mut entry = json!({
-                "interface": sol.interface,
-                "a": model.subdomains[itf.a].name,
-                "b": model.subdomains[itf.b].name,
-                "kind": kind,
-                "normal": normal,
-                "tangent": tangent,
-                "coords": itf.coords,
-                "weights": itf.weights,
-            });
-            let [f_n, f_t, jump_n, jump_t] = values;
-            for (key, q) in [("f_n", f_n), ("f_t", f_t), ("jump_n", jump_n), ("jump_t", jump_t)] {
-                entry[key] = Value::Array(q);
-            }
-            entry["status"] = Value::Array(if itf.is_contact() {
-                (0..nt)
-                    .map(|i| {
-                        Value::Array(
-                            sol.status[i * np..(i + 1) * np]
-                                .iter()
-                                .map(|&c| Value::String(status_name(c)))
-                                .collect(),
-                        )
-                    })
-                    .collect()
-            } else {
-                Vec::new()
-            });
-            if itf.straight_normal().is_none() {
-                entry["normals"] = json!(itf.normals);
-            }
-            if itf.is_non_matching() {
-                // Each side's displacement at the pairs (global x, y): side b's through its
-                // projection, side a's the node's own (or an end edge's mean).
-                for (key, w) in [("u_a", &sol.w_a), ("u_b", &sol.w_b)] {
-                    entry[key] = Value::Array(
-                        (0..nt)
-                            .map(|i| {
-                                Value::Array((0..np).map(|p| json!([w.get(2 * p, i), w.get(2 * p + 1, i)])).collect())
-                            })
-                            .collect(),
-                    );
-                }
-            }
-            entry
-        })
+        .map(|sol| interface_entry(model, sol, n_times))
         .collect();
     let curved = model.interfaces.iter().any(|itf| itf.straight_normal().is_none());
     let mut doc = json!({

@@ -206,58 +206,14 @@ pub(crate) fn run_logged(
     let t0 = Instant::now();
     if model.interfaces.is_empty() {
         // One part, nothing to iterate: a direct solve.
-        let sol = solve_glued(&model).map_err(RunError::Glued)?;
-        let displacements = sol
-            .u
-            .iter()
-            .enumerate()
-            .map(|(s, u)| (s as u32, glissade_bus::convert::field_of(u.as_ref())))
-            .collect();
-        return Ok(RunResult {
-            setup_s: t0.elapsed().as_secs_f64(),
-            solve_s: 0.0,
-            iterations: Vec::new(),
-            verdict: Verdict::Converged,
-            interfaces: Vec::new(),
-            state: None,
-            boundary: crate::boundary::boundary_resultants(&model, &[], model.moment_about),
-            displacements,
-            k0: Vec::new(),
-            nodes: vec!["none: direct solve".into()],
-            left_out: vec![
-                "interface, coarse and subdomain nodes: the scene has no interface (one part), solved directly".into(),
-            ],
-        });
+        return direct_solve(&model, t0);
     }
     let ctx = RunContext {
         run_id: opts.run_id.clone(),
         scene_fingerprint: scene.fingerprint,
     };
     let plan = Plan::new(&model).with_scene(scene);
-    let selection = Selection::everything(&plan);
-    let solvers = match prepared.solvers {
-        Some(s) => {
-            check_prepared(&model, &plan, &s)?;
-            s
-        }
-        None => build_solvers(&model, &plan, &selection.subdomains)?,
-    };
-    let start = match &prepared.start {
-        Some(given) => Some((
-            "launcher: given start (ŝ of a solved variant)".to_string(),
-            given_start(&model, &ctx, &plan, given)?,
-        )),
-        None => time_start(scene, &ctx, &plan, Some(&solvers))?.map(|t| (t.describe(), t.messages)),
-    };
-    let mut nodes = build_nodes_with(&model, &ctx, opts.interior, &plan, &selection, solvers)?;
-    let (mut names, left_out) = plan.describe(&model, 1);
-    if let Some((describe, messages)) = start {
-        names.push(describe);
-        nodes.push(Box::new(LauncherNode {
-            id: launcher_id(),
-            out: messages,
-        }));
-    }
+    let (nodes, names, left_out) = nodes_of(scene, &model, &ctx, &plan, opts.interior, prepared)?;
     let k0 = plan.k0.clone();
     let setup_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
@@ -320,6 +276,71 @@ pub(crate) fn run_logged(
         nodes: names,
         left_out,
     })
+}
+
+/// A scene of one part, nothing to iterate: the glued solve, as a run's result.
+fn direct_solve(model: &Model, t0: Instant) -> Result<RunResult, RunError> {
+    let sol = solve_glued(model).map_err(RunError::Glued)?;
+    let displacements = sol
+        .u
+        .iter()
+        .enumerate()
+        .map(|(s, u)| (s as u32, glissade_bus::convert::field_of(u.as_ref())))
+        .collect();
+    Ok(RunResult {
+        setup_s: t0.elapsed().as_secs_f64(),
+        solve_s: 0.0,
+        iterations: Vec::new(),
+        verdict: Verdict::Converged,
+        interfaces: Vec::new(),
+        state: None,
+        boundary: crate::boundary::boundary_resultants(model, &[], model.moment_about),
+        displacements,
+        k0: Vec::new(),
+        nodes: vec!["none: direct solve".into()],
+        left_out: vec![
+            "interface, coarse and subdomain nodes: the scene has no interface (one part), solved directly".into(),
+        ],
+    })
+}
+
+/// The nodes of an in-process run (with the launcher's start, a time-coarse or a given one, as a
+/// node of its own), what they are and what the run leaves out; `prepared`'s operators where
+/// given.
+#[allow(clippy::type_complexity)]
+fn nodes_of(
+    scene: &LoadedScene,
+    model: &Arc<Model>,
+    ctx: &RunContext,
+    plan: &Plan,
+    interior: bool,
+    prepared: Prepared,
+) -> Result<(Vec<Box<dyn Node>>, Vec<String>, Vec<String>), RunError> {
+    let selection = Selection::everything(plan);
+    let solvers = match prepared.solvers {
+        Some(s) => {
+            check_prepared(model, plan, &s)?;
+            s
+        }
+        None => build_solvers(model, plan, &selection.subdomains)?,
+    };
+    let start = match &prepared.start {
+        Some(given) => Some((
+            "launcher: given start (ŝ of a solved variant)".to_string(),
+            given_start(model, ctx, plan, given)?,
+        )),
+        None => time_start(scene, ctx, plan, Some(&solvers))?.map(|t| (t.describe(), t.messages)),
+    };
+    let mut nodes = build_nodes_with(model, ctx, interior, plan, &selection, solvers)?;
+    let (mut names, left_out) = plan.describe(model, 1);
+    if let Some((describe, messages)) = start {
+        names.push(describe);
+        nodes.push(Box::new(LauncherNode {
+            id: launcher_id(),
+            out: messages,
+        }));
+    }
+    Ok((nodes, names, left_out))
 }
 
 fn launcher_id() -> NodeId {

@@ -94,7 +94,7 @@ impl Draw {
 }
 
 /// A load's history over t in [0, 1], scaled by an amplitude: (name, times, values).
-const HISTORIES: [(&str, &[f64], &[f64]); 4] = [
+const HISTORIES: [History; 4] = [
     ("ramp", &[0.0, 1.0], &[0.0, 1.0]),
     ("ramp-hold", &[0.0, 0.5, 1.0], &[0.0, 1.0, 1.0]),
     ("ramp-reverse", &[0.0, 0.4, 1.0], &[0.0, 1.0, -1.0]),
@@ -219,86 +219,11 @@ fn geometry(seed: u64, d: &mut Draw) -> Generated {
     );
     let _ = writeln!(s, "name = \"{name}\"\nplane = \"{plane}\"\n");
     let _ = writeln!(s, "[time]\nT = 1.0\nN = {n}\n");
+    let h = (hname, ht, hv);
     let (family, mesh, drawn) = match which {
-        0 => {
-            let p = d.log_uniform(5.0, 100.0);
-            let lean = d.uniform(0.0, 2.0);
-            let _ = writeln!(s, "[materials.steel]\nE = 210000.0\nnu = 0.3\n");
-            let _ = writeln!(
-                s,
-                "[mesh]\nfile = \"wedge.msh\"\nmaterials = {{ base = \"steel\", wedge = \"steel\" }}\n"
-            );
-            let _ = writeln!(
-                s,
-                "[[interface]]\nbetween = [\"base\", \"wedge\"]\nkind = \"contact\"\nfriction = {friction:.6}\n"
-            );
-            let _ = writeln!(s, "[[boundary]]\ncurve = \"base-bottom\"\nux = 0.0\nuy = 0.0\n");
-            // The pressure rises with t (it must hold the wedge in the groove at every time
-            // point); the lean follows the drawn history.
-            let _ = writeln!(s, "[[boundary]]\ncurve = \"wedge-top\"\np = \"{p:.6}*(0.2 + 0.8*t)\"\n");
-            let _ = writeln!(
-                s,
-                "[[boundary]]\ncurve = \"wedge-top\"\ntx = {}\n",
-                history(ht, hv, lean * 0.1 * p)
-            );
-            (
-                "wedge",
-                "wedge.msh",
-                format!("wedge: pressure {p:.1} MPa rising, lean {lean:.2} {hname}"),
-            )
-        }
-        1 => {
-            let interference = d.log_uniform(2e-3, 2e-2);
-            let shear = d.log_uniform(0.2, 5.0);
-            let _ = writeln!(s, "[materials.steel]\nE = 210000.0\nnu = 0.3\n");
-            let _ = writeln!(
-                s,
-                "[mesh]\nfile = \"shrink-fit-1.msh\"\nmaterials = {{ inner = \"steel\", outer = \"steel\" }}\n"
-            );
-            let _ = writeln!(
-                s,
-                "[[interface]]\ncurve = \"fit\"\nkind = \"contact\"\nfriction = {friction:.6}\ngap = {:.6e}\n",
-                -interference
-            );
-            let _ = writeln!(s, "[[boundary]]\ncurve = \"bore\"\nux = 0.0\nuy = 0.0\n");
-            let _ = writeln!(
-                s,
-                "[[boundary]]\ncurve = \"outside\"\nshear = {}\n",
-                history(ht, hv, shear)
-            );
-            (
-                "shrink-fit",
-                "shrink-fit-1.msh",
-                format!("shrink fit: interference {interference:.1e} mm, shear {shear:.2} MPa {hname}"),
-            )
-        }
-        _ => {
-            let p = d.log_uniform(2.0, 50.0);
-            let shear = d.log_uniform(0.1, 3.0);
-            let contrast = d.log_uniform(1.0, 100.0);
-            let _ = writeln!(s, "[materials.aluminium]\nE = 70000.0\nnu = 0.33\n");
-            let _ = writeln!(s, "[materials.steel]\nE = 210000.0\nnu = 0.3\n");
-            let _ = writeln!(s, "[materials.polymer]\nE = {:.6}\nnu = 0.4\n", 70000.0 / contrast);
-            let _ = writeln!(s, "[mesh]\nfile = \"sheath.msh\"\nmaterials = {{ inner = \"aluminium\", middle = \"steel\", outer = \"polymer\" }}\n");
-            for curve in ["inner-middle", "middle-outer"] {
-                let _ = writeln!(
-                    s,
-                    "[[interface]]\ncurve = \"{curve}\"\nkind = \"contact\"\nfriction = {friction:.6}\n"
-                );
-            }
-            let _ = writeln!(s, "[[boundary]]\ncurve = \"bore\"\nux = 0.0\nuy = 0.0\n");
-            let _ = writeln!(s, "[[boundary]]\ncurve = \"outside\"\np = \"{p:.6}*(0.2 + 0.8*t)\"\n");
-            let _ = writeln!(
-                s,
-                "[[boundary]]\ncurve = \"outside\"\nshear = {}\n",
-                history(ht, hv, shear)
-            );
-            (
-                "sheath",
-                "sheath.msh",
-                format!("sheath: outer modulus 70000/{contrast:.0}, pressure {p:.1} MPa rising, shear {shear:.2} MPa {hname}"),
-            )
-        }
+        0 => wedge(&mut s, d, friction, h),
+        1 => shrink_fit(&mut s, d, friction, h),
+        _ => sheath(&mut s, d, friction, h),
     };
     Generated {
         seed,
@@ -308,6 +233,97 @@ fn geometry(seed: u64, d: &mut Draw) -> Generated {
         meshes: vec![mesh],
         drawn: format!("{drawn}, f {friction:.2}, plane {plane}, N {n}"),
     }
+}
+
+/// A load history of [`HISTORIES`]: its name, times and values.
+type History = (&'static str, &'static [f64], &'static [f64]);
+
+/// The wedge in its V-groove: a pressure rising with t, a lean following the history. Writes its part of the scene into `s`; returns (family, mesh, what was drawn).
+fn wedge(s: &mut String, d: &mut Draw, friction: f64, h: History) -> (&'static str, &'static str, String) {
+    let (hname, ht, hv) = h;
+    let p = d.log_uniform(5.0, 100.0);
+    let lean = d.uniform(0.0, 2.0);
+    let _ = writeln!(s, "[materials.steel]\nE = 210000.0\nnu = 0.3\n");
+    let _ = writeln!(
+        s,
+        "[mesh]\nfile = \"wedge.msh\"\nmaterials = {{ base = \"steel\", wedge = \"steel\" }}\n"
+    );
+    let _ = writeln!(
+        s,
+        "[[interface]]\nbetween = [\"base\", \"wedge\"]\nkind = \"contact\"\nfriction = {friction:.6}\n"
+    );
+    let _ = writeln!(s, "[[boundary]]\ncurve = \"base-bottom\"\nux = 0.0\nuy = 0.0\n");
+    // The pressure rises with t (it must hold the wedge in the groove at every time
+    // point); the lean follows the drawn history.
+    let _ = writeln!(s, "[[boundary]]\ncurve = \"wedge-top\"\np = \"{p:.6}*(0.2 + 0.8*t)\"\n");
+    let _ = writeln!(
+        s,
+        "[[boundary]]\ncurve = \"wedge-top\"\ntx = {}\n",
+        history(ht, hv, lean * 0.1 * p)
+    );
+    (
+        "wedge",
+        "wedge.msh",
+        format!("wedge: pressure {p:.1} MPa rising, lean {lean:.2} {hname}"),
+    )
+}
+
+/// The shrink fit of two rings: an interference and a shear on the outside following the history. Writes its part of the scene into `s`; returns (family, mesh, what was drawn).
+fn shrink_fit(s: &mut String, d: &mut Draw, friction: f64, h: History) -> (&'static str, &'static str, String) {
+    let (hname, ht, hv) = h;
+    let interference = d.log_uniform(2e-3, 2e-2);
+    let shear = d.log_uniform(0.2, 5.0);
+    let _ = writeln!(s, "[materials.steel]\nE = 210000.0\nnu = 0.3\n");
+    let _ = writeln!(
+        s,
+        "[mesh]\nfile = \"shrink-fit-1.msh\"\nmaterials = {{ inner = \"steel\", outer = \"steel\" }}\n"
+    );
+    let _ = writeln!(
+        s,
+        "[[interface]]\ncurve = \"fit\"\nkind = \"contact\"\nfriction = {friction:.6}\ngap = {:.6e}\n",
+        -interference
+    );
+    let _ = writeln!(s, "[[boundary]]\ncurve = \"bore\"\nux = 0.0\nuy = 0.0\n");
+    let _ = writeln!(
+        s,
+        "[[boundary]]\ncurve = \"outside\"\nshear = {}\n",
+        history(ht, hv, shear)
+    );
+    (
+        "shrink-fit",
+        "shrink-fit-1.msh",
+        format!("shrink fit: interference {interference:.1e} mm, shear {shear:.2} MPa {hname}"),
+    )
+}
+
+/// The three-layer sheath: an outer layer softer by a drawn contrast, a pressure rising with t and a shear following the history. Writes its part of the scene into `s`; returns (family, mesh, what was drawn).
+fn sheath(s: &mut String, d: &mut Draw, friction: f64, h: History) -> (&'static str, &'static str, String) {
+    let (hname, ht, hv) = h;
+    let p = d.log_uniform(2.0, 50.0);
+    let shear = d.log_uniform(0.1, 3.0);
+    let contrast = d.log_uniform(1.0, 100.0);
+    let _ = writeln!(s, "[materials.aluminium]\nE = 70000.0\nnu = 0.33\n");
+    let _ = writeln!(s, "[materials.steel]\nE = 210000.0\nnu = 0.3\n");
+    let _ = writeln!(s, "[materials.polymer]\nE = {:.6}\nnu = 0.4\n", 70000.0 / contrast);
+    let _ = writeln!(s, "[mesh]\nfile = \"sheath.msh\"\nmaterials = {{ inner = \"aluminium\", middle = \"steel\", outer = \"polymer\" }}\n");
+    for curve in ["inner-middle", "middle-outer"] {
+        let _ = writeln!(
+            s,
+            "[[interface]]\ncurve = \"{curve}\"\nkind = \"contact\"\nfriction = {friction:.6}\n"
+        );
+    }
+    let _ = writeln!(s, "[[boundary]]\ncurve = \"bore\"\nux = 0.0\nuy = 0.0\n");
+    let _ = writeln!(s, "[[boundary]]\ncurve = \"outside\"\np = \"{p:.6}*(0.2 + 0.8*t)\"\n");
+    let _ = writeln!(
+        s,
+        "[[boundary]]\ncurve = \"outside\"\nshear = {}\n",
+        history(ht, hv, shear)
+    );
+    (
+        "sheath",
+        "sheath.msh",
+        format!("sheath: outer modulus 70000/{contrast:.0}, pressure {p:.1} MPa rising, shear {shear:.2} MPa {hname}"),
+    )
 }
 
 /// One scene's validation: its check (where each accuracy stops and the true error there), or

@@ -55,18 +55,14 @@ pub fn series_times(n_points: usize, every: usize) -> Vec<usize> {
     times
 }
 
-/// Writes the time series of `model` to `out/<stem>.pvd` and `out/<stem>-vtu/`, every `every`
-/// time points and the last ([`series_times`]): `u[s][i]` is subdomain s's displacement at time
-/// point i (2 values per node), `interfaces` the interface solutions (ŝ) of the run. Refuses to
-/// write over an existing series; the folder appears under its name only once complete.
-pub fn write_series(
+/// The displacements `u` and the interface solutions checked against the scene (every
+/// subdomain at every time point, every interface with W, F and statuses of its shape), the
+/// solutions by interface.
+fn checked_inputs<'a>(
     model: &Model,
     u: &[Vec<&[f64]>],
-    interfaces: &[InterfaceSolution],
-    out: &Path,
-    stem: &str,
-    every: usize,
-) -> Result<Series> {
+    interfaces: &'a [InterfaceSolution],
+) -> Result<Vec<Option<&'a InterfaceSolution>>> {
     let nt = model.time.n_points();
     if u.len() != model.subdomains.len() {
         return Err(Error::ResultShape {
@@ -123,6 +119,23 @@ pub fn write_series(
             });
         }
     }
+    Ok(by_interface)
+}
+
+/// Writes the time series of `model` to `out/<stem>.pvd` and `out/<stem>-vtu/`, every `every`
+/// time points and the last ([`series_times`]): `u[s][i]` is subdomain s's displacement at time
+/// point i (2 values per node), `interfaces` the interface solutions (ŝ) of the run. Refuses to
+/// write over an existing series; the folder appears under its name only once complete.
+pub fn write_series(
+    model: &Model,
+    u: &[Vec<&[f64]>],
+    interfaces: &[InterfaceSolution],
+    out: &Path,
+    stem: &str,
+    every: usize,
+) -> Result<Series> {
+    let nt = model.time.n_points();
+    let by_interface = checked_inputs(model, u, interfaces)?;
     let (pvd, dir) = series_paths(out, stem);
     for p in [&pvd, &dir] {
         if std::fs::symlink_metadata(p).is_ok() {

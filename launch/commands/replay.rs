@@ -10,37 +10,7 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
         warn_unfinished(&args.recording, &recording);
     }
     if !args.node.is_empty() {
-        use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
-        let mut nodes = Vec::new();
-        for n in &args.node {
-            if n == "all" {
-                nodes.extend(recorded_nodes(&recording)?);
-            } else {
-                nodes.push(parse_node(n)?);
-            }
-        }
-        let mut differing = 0;
-        for (k, id) in nodes.into_iter().enumerate() {
-            let r = reexecute(&recording, id)?;
-            if let (0, Some(why)) = (k, r.skipped.describe()) {
-                eprintln!("warning: {}: {why}", args.recording.display());
-            }
-            match &r.mismatch {
-                None => println!(
-                    "node {id}: {} outputs bit-identical to the recording ({} bytes; {} recorded inputs)",
-                    r.outputs, r.bytes, r.inputs
-                ),
-                Some(m) => {
-                    differing += 1;
-                    println!("node {id}: differs from the recording: {m}");
-                }
-            }
-        }
-        return Ok(if differing == 0 {
-            ExitCode::SUCCESS
-        } else {
-            ExitCode::from(NOT_CONVERGED)
-        });
+        return reexecute_nodes(&args, &recording);
     }
     let sink = if args.spawn {
         glissade_replay::Sink::Spawn
@@ -114,6 +84,42 @@ pub(crate) fn replay(args: ReplayArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// `glissade replay --node`: re-executes each node named (`all`: every recorded node) from its
+/// recorded inputs and compares its outputs with the recorded ones, bit for bit.
+fn reexecute_nodes(args: &ReplayArgs, recording: &glissade_recorder::Recording) -> anyhow::Result<ExitCode> {
+    use glissade_replay::reexecute::{parse_node, recorded_nodes, reexecute};
+    let mut nodes = Vec::new();
+    for n in &args.node {
+        if n == "all" {
+            nodes.extend(recorded_nodes(recording)?);
+        } else {
+            nodes.push(parse_node(n)?);
+        }
+    }
+    let mut differing = 0;
+    for (k, id) in nodes.into_iter().enumerate() {
+        let r = reexecute(recording, id)?;
+        if let (0, Some(why)) = (k, r.skipped.describe()) {
+            eprintln!("warning: {}: {why}", args.recording.display());
+        }
+        match &r.mismatch {
+            None => println!(
+                "node {id}: {} outputs bit-identical to the recording ({} bytes; {} recorded inputs)",
+                r.outputs, r.bytes, r.inputs
+            ),
+            Some(m) => {
+                differing += 1;
+                println!("node {id}: differs from the recording: {m}");
+            }
+        }
+    }
+    Ok(if differing == 0 {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(NOT_CONVERGED)
+    })
+}
+
 /// `glissade export`: `vtu` is the folder of the ParaView series and its time-point stride.
 pub(crate) fn export(
     recording: &std::path::Path,
@@ -133,46 +139,7 @@ pub(crate) fn export(
     }
     warn_unfinished(recording, &rec);
     let fields = if vtu.is_some() || csv.is_some() {
-        let unfinished = if rec.is_finished() {
-            ""
-        } else {
-            " (the recording is not finished: its run's last fields may not be in it)"
-        };
-        let state = glissade_replay::final_state(&rec)
-            .map_err(|e| anyhow::anyhow!("{}: {e}{unfinished}", recording.display()))?;
-        let model = &state.model;
-        if let Some(i) =
-            (0..model.interfaces.len()).find(|&i| !state.interfaces.iter().any(|s| s.interface as usize == i))
-        {
-            let itf = &model.interfaces[i];
-            anyhow::bail!(
-                "{}: no final solution of interface {i} ({} | {}) is recorded{unfinished}; nothing was exported",
-                recording.display(),
-                model.subdomains[itf.a].name,
-                model.subdomains[itf.b].name
-            );
-        }
-        if vtu.is_some() {
-            if let Some(sub) = (0..model.subdomains.len()).find(|&s| !state.u.contains_key(&(s as u32))) {
-                anyhow::bail!(
-                    "{}: no displacement of subdomain `{}` can be recovered (no boundary state recorded); nothing \
-                     was exported",
-                    recording.display(),
-                    model.subdomains[sub].name
-                );
-            }
-        }
-        if let Some(why) = state.skipped.describe() {
-            eprintln!("warning: {}: {why}", recording.display());
-        }
-        let stem = format!("{}-{}", state.model.name, rec.run_id());
-        if let Some((dir, _)) = vtu {
-            ensure_absent(dir, &[format!("{stem}.pvd"), format!("{stem}-vtu")])?;
-        }
-        if let Some(dir) = csv {
-            ensure_absent(dir, &[format!("{stem}.interfaces.csv")])?;
-        }
-        Some((state, stem))
+        Some(final_state_to_export(&rec, recording, vtu.map(|v| v.0), csv)?)
     } else {
         None
     };
@@ -186,23 +153,7 @@ pub(crate) fn export(
         ensure_writable(dir)?;
     }
     if let Some(dir) = foreign {
-        let e = glissade_recorder::foreign::export(recording, dir, &glissade::recording::software())?;
-        if let Some(why) = &e.source_truncated {
-            eprintln!(
-                "warning: {}: {why}; the export holds the messages before it",
-                recording.display()
-            );
-        }
-        if let Some(why) = &e.source_damaged {
-            eprintln!("warning: {}: {why}; the export holds the others", recording.display());
-        }
-        println!(
-            "foreign-readable (protobuf): {} ({} messages on {} channels, {:.1} MB)",
-            e.path.display(),
-            e.messages,
-            e.channels,
-            e.bytes as f64 * 1e-6
-        );
+        export_foreign(recording, dir)?;
     }
     let Some((state, stem)) = fields else {
         return Ok(ExitCode::SUCCESS);
@@ -239,6 +190,78 @@ pub(crate) fn export(
         println!("csv: {}", path.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The final state of `recording` (`rec`) that `export` writes as ParaView files (into `vtu`) or
+/// CSV (into `csv`), checked before anything is written: every interface's final solution, every
+/// subdomain's displacement for ParaView, no target file already there. Also its file stem.
+fn final_state_to_export(
+    rec: &glissade_recorder::Recording,
+    recording: &std::path::Path,
+    vtu: Option<&std::path::Path>,
+    csv: Option<&std::path::Path>,
+) -> anyhow::Result<(glissade_replay::FinalState, String)> {
+    let unfinished = if rec.is_finished() {
+        ""
+    } else {
+        " (the recording is not finished: its run's last fields may not be in it)"
+    };
+    let state =
+        glissade_replay::final_state(rec).map_err(|e| anyhow::anyhow!("{}: {e}{unfinished}", recording.display()))?;
+    let model = &state.model;
+    if let Some(i) = (0..model.interfaces.len()).find(|&i| !state.interfaces.iter().any(|s| s.interface as usize == i))
+    {
+        let itf = &model.interfaces[i];
+        anyhow::bail!(
+            "{}: no final solution of interface {i} ({} | {}) is recorded{unfinished}; nothing was exported",
+            recording.display(),
+            model.subdomains[itf.a].name,
+            model.subdomains[itf.b].name
+        );
+    }
+    if vtu.is_some() {
+        if let Some(sub) = (0..model.subdomains.len()).find(|&s| !state.u.contains_key(&(s as u32))) {
+            anyhow::bail!(
+                "{}: no displacement of subdomain `{}` can be recovered (no boundary state recorded); nothing \
+                 was exported",
+                recording.display(),
+                model.subdomains[sub].name
+            );
+        }
+    }
+    if let Some(why) = state.skipped.describe() {
+        eprintln!("warning: {}: {why}", recording.display());
+    }
+    let stem = format!("{}-{}", state.model.name, rec.run_id());
+    if let Some(dir) = vtu {
+        ensure_absent(dir, &[format!("{stem}.pvd"), format!("{stem}-vtu")])?;
+    }
+    if let Some(dir) = csv {
+        ensure_absent(dir, &[format!("{stem}.interfaces.csv")])?;
+    }
+    Ok((state, stem))
+}
+
+/// `export --foreign`: the recording copied in protobuf into `dir`, said with what it holds.
+fn export_foreign(recording: &std::path::Path, dir: &std::path::Path) -> anyhow::Result<()> {
+    let e = glissade_recorder::foreign::export(recording, dir, &glissade::recording::software())?;
+    if let Some(why) = &e.source_truncated {
+        eprintln!(
+            "warning: {}: {why}; the export holds the messages before it",
+            recording.display()
+        );
+    }
+    if let Some(why) = &e.source_damaged {
+        eprintln!("warning: {}: {why}; the export holds the others", recording.display());
+    }
+    println!(
+        "foreign-readable (protobuf): {} ({} messages on {} channels, {:.1} MB)",
+        e.path.display(),
+        e.messages,
+        e.channels,
+        e.bytes as f64 * 1e-6
+    );
+    Ok(())
 }
 
 /// Says so when `rec` was cut short or has damaged chunks (`doing`: what is done with the rest).

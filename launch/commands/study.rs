@@ -8,14 +8,9 @@ use glissade_studies::study::Study;
 use glissade_studies::{plot, table};
 use std::path::Path;
 
-pub(crate) fn sweep(
-    path: &Path,
-    vary: &[String],
-    cold: bool,
-    accuracy: Option<f64>,
-    record: bool,
-    out: &Path,
-) -> anyhow::Result<ExitCode> {
+/// The study of `path` (a study file, or a scene with `--vary`), with `--accuracy`, its name made
+/// fit for file names and run ids (`-cold` added for a cold study).
+fn study_of(path: &Path, vary: &[String], cold: bool, accuracy: Option<f64>) -> anyhow::Result<Study> {
     let mut study = if vary.is_empty() {
         Study::read(path)?
     } else {
@@ -43,6 +38,18 @@ pub(crate) fn sweep(
     if cold {
         study.name.push_str("-cold");
     }
+    Ok(study)
+}
+
+pub(crate) fn sweep(
+    path: &Path,
+    vary: &[String],
+    cold: bool,
+    accuracy: Option<f64>,
+    record: bool,
+    out: &Path,
+) -> anyhow::Result<ExitCode> {
+    let study = study_of(path, vary, cold, accuracy)?;
     // The scene as a file: its text is what each variant rewrites; a scene that does not load
     // as it is stops the study before any variant.
     let base =

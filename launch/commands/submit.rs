@@ -9,6 +9,79 @@ fn quoted(p: &Path) -> String {
     format!("'{}'", p.display().to_string().replace('\'', r"'\''"))
 }
 
+/// The lines of the batch script that runs `scene` (absolute) with its outputs in `out`
+/// (absolute) as run `run_id`: the `#SBATCH` lines (job name, nodes, one task per node, the
+/// console file, time and partition where given) and the `glissade run --slurm` line.
+fn batch_script(args: &SubmitArgs, exe: &Path, (scene, out): (&Path, &Path), run_id: &str, name: &str) -> Vec<String> {
+    let stem = format!("{name}-{run_id}");
+    let mut lines = vec![
+        "#!/bin/bash".to_string(),
+        format!("#SBATCH --job-name=glissade-{}", name),
+        format!("#SBATCH --nodes={}", args.nodes),
+        "#SBATCH --ntasks-per-node=1".to_string(),
+        format!(
+            "#SBATCH --output={}",
+            out.join(format!("{stem}.slurm-%j.out")).display()
+        ),
+    ];
+    if let Some(t) = &args.time {
+        lines.push(format!("#SBATCH --time={t}"));
+    }
+    if let Some(p) = &args.partition {
+        lines.push(format!("#SBATCH --partition={p}"));
+    }
+    lines.push(
+        "# The launcher runs here; its node processes are job steps of this job (`srun`), spread over its hosts."
+            .to_string(),
+    );
+    lines.push("# scancel sends SIGTERM: the run ends Interrupted with its recording and summary written.".to_string());
+    let mut run = format!(
+        "exec {} run {} --slurm --quiet --out {} --run-id {run_id}",
+        quoted(exe),
+        quoted(scene),
+        quoted(out)
+    );
+    if let Some(a) = args.solver.accuracy {
+        run += &format!(" --accuracy {a:e}");
+    }
+    if let Some(n) = args.solver.max_iterations {
+        run += &format!(" --max-iterations {n}");
+    }
+    if args.no_record {
+        run += " --no-record";
+    }
+    lines.push(run);
+    lines
+}
+
+/// Submits `script` with `sbatch --parsable`; its job id.
+fn sbatch(script_path: &Path) -> anyhow::Result<String> {
+    let sbatch = std::process::Command::new("sbatch")
+        .arg("--parsable")
+        .arg(script_path)
+        .output()
+        .with_context(|| {
+            format!(
+                "cannot run sbatch (is this a Slurm cluster's login node?); the batch script is {}",
+                script_path.display()
+            )
+        })?;
+    anyhow::ensure!(
+        sbatch.status.success(),
+        "sbatch refused {}: {}",
+        script_path.display(),
+        String::from_utf8_lossy(&sbatch.stderr).trim()
+    );
+    let said = String::from_utf8_lossy(&sbatch.stdout);
+    let job = said.trim().split(';').next().unwrap_or("").to_string();
+    anyhow::ensure!(
+        !job.is_empty() && job.chars().all(|c| c.is_ascii_digit()),
+        "sbatch said `{}` instead of a job id",
+        said.trim()
+    );
+    Ok(job)
+}
+
 /// Writes the batch script of a `glissade run <scene> --slurm` beside the run's outputs, submits
 /// it with `sbatch` and says the job id and where its outputs will be. Nothing is written if the
 /// scene is refused or the run id already has outputs there.
@@ -49,43 +122,7 @@ pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
     let exe = std::env::current_exe().context("cannot locate the glissade executable for the batch script")?;
     let stem = format!("{}-{run_id}", sc.model.name);
     let script_path = out.join(format!("{stem}.sbatch"));
-    let mut lines = vec![
-        "#!/bin/bash".to_string(),
-        format!("#SBATCH --job-name=glissade-{}", sc.model.name),
-        format!("#SBATCH --nodes={}", args.nodes),
-        "#SBATCH --ntasks-per-node=1".to_string(),
-        format!(
-            "#SBATCH --output={}",
-            out.join(format!("{stem}.slurm-%j.out")).display()
-        ),
-    ];
-    if let Some(t) = &args.time {
-        lines.push(format!("#SBATCH --time={t}"));
-    }
-    if let Some(p) = &args.partition {
-        lines.push(format!("#SBATCH --partition={p}"));
-    }
-    lines.push(
-        "# The launcher runs here; its node processes are job steps of this job (`srun`), spread over its hosts."
-            .to_string(),
-    );
-    lines.push("# scancel sends SIGTERM: the run ends Interrupted with its recording and summary written.".to_string());
-    let mut run = format!(
-        "exec {} run {} --slurm --quiet --out {} --run-id {run_id}",
-        quoted(&exe),
-        quoted(&scene),
-        quoted(&out)
-    );
-    if let Some(a) = args.solver.accuracy {
-        run += &format!(" --accuracy {a:e}");
-    }
-    if let Some(n) = args.solver.max_iterations {
-        run += &format!(" --max-iterations {n}");
-    }
-    if args.no_record {
-        run += " --no-record";
-    }
-    lines.push(run);
+    let lines = batch_script(args, &exe, (&scene, &out), &run_id, &sc.model.name);
     let mut file = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
@@ -94,29 +131,7 @@ pub(crate) fn submit(args: &SubmitArgs) -> anyhow::Result<ExitCode> {
     file.write_all((lines.join("\n") + "\n").as_bytes())
         .with_context(|| format!("cannot write the batch script {}", script_path.display()))?;
     drop(file);
-    let sbatch = std::process::Command::new("sbatch")
-        .arg("--parsable")
-        .arg(&script_path)
-        .output()
-        .with_context(|| {
-            format!(
-                "cannot run sbatch (is this a Slurm cluster's login node?); the batch script is {}",
-                script_path.display()
-            )
-        })?;
-    anyhow::ensure!(
-        sbatch.status.success(),
-        "sbatch refused {}: {}",
-        script_path.display(),
-        String::from_utf8_lossy(&sbatch.stderr).trim()
-    );
-    let said = String::from_utf8_lossy(&sbatch.stdout);
-    let job = said.trim().split(';').next().unwrap_or("").to_string();
-    anyhow::ensure!(
-        !job.is_empty() && job.chars().all(|c| c.is_ascii_digit()),
-        "sbatch said `{}` instead of a job id",
-        said.trim()
-    );
+    let job = sbatch(&script_path)?;
     println!("submitted Slurm job {job}: run {run_id} of scene `{}`", sc.model.name);
     println!("batch script: {}", script_path.display());
     println!("outputs: {}/{stem}.*", out.display());

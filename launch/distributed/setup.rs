@@ -160,17 +160,7 @@ pub(super) fn set_up(
     let time_start = TimeStartSolve::start(scene, &ctx, &plan)?;
     let groups = plan.groups(scene.deployment.subdomain_nodes);
     let all_nodes = run_nodes_of(&plan, groups.len());
-    for r in &net.remote {
-        if !all_nodes.contains(r) {
-            return Err(Error::Option {
-                option: format!("--remote {r}"),
-                why: format!(
-                    "this run has no such node (its nodes: {})",
-                    all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
-                ),
-            });
-        }
-    }
+    check_remote(net, &all_nodes)?;
     let hosted_interfaces: Vec<Vec<usize>> = (0..groups.len()).map(|g| plan.interface_nodes_in(g)).collect();
     let bus = join_bus(
         scene,
@@ -196,57 +186,8 @@ pub(super) fn set_up(
         },
     };
     let queryable = transport::serve_scene(session, run_id, encode(&scene_msg))?;
-    // The launcher hears every message of the run where that costs no socket (the router is in
-    // its process and every field crosses it anyway), where an observer wants them, or where
-    // the recorder's end needs their count. Through a router outside its process, an unrecorded
-    // run's fields would cross one more socket each only to be counted, and with interface nodes
-    // in the subdomain processes the fields between the nodes of one process would leave it only
-    // to be counted: the launcher then subscribes to what it keeps.
-    let own_fields_stay = plan.interface_hosts.iter().any(Option::is_some);
-    let counted = if (bus.hosting && !own_fields_stay) || keep_all || recording.is_some() {
-        Counted::Every
-    } else {
-        Counted::Kept
-    };
-    let patterns: Vec<String> = match counted {
-        Counted::Every => vec![glissade_messages::run_topics(run_id)],
-        Counted::Kept => KEPT
-            .iter()
-            .map(|(role, kind)| glissade_messages::role_field_topic(run_id, *role, kind, None))
-            .collect(),
-    };
-    let (tx, arrivals) = mpsc::channel::<Arrival>();
-    let mut watch = Vec::with_capacity(patterns.len());
-    for pattern in patterns {
-        let (tx, watched_run) = (tx.clone(), run_id.clone());
-        let subscriber = session
-            .declare_subscriber(pattern)
-            .callback(move |s| {
-                let _ = tx.send(Arrival::of(s.key_expr().as_str(), s.payload(), &watched_run, keep_all));
-            })
-            .wait()
-            .map_err(|e| zenoh("subscribe to the run", e))?;
-        watch.push(subscriber);
-    }
-
-    // Node processes that die mid-run are restarted (they resume from the recorder's log) when
-    // the scene allows restarts, the run is recorded completely and its fields do not go through
-    // shared memory; otherwise a death stops the run, and the launcher says why up front.
-    //
-    // Shared memory: a message lies in its sender's pool, and Zenoh (1.10.2) drops, with no more
-    // than a debug log ("Error receiving SHM buffer: Buffer is invalidated"), a message whose
-    // shared buffer a receiver no longer takes as valid, which happens to the last messages of a
-    // process killed mid-run. The recorder may hold such a message and a node not: the resumed
-    // node then takes it for already delivered and never sends it again, and the node that
-    // missed it waits.
-    let restarts = scene.deployment.restarts;
-    let no_resume = unresumable(scene, recording.is_some()).or_else(|| {
-        bus.shared_memory.then(|| {
-            "network.shared_memory = true: a killed node's last messages may reach some nodes and not others"
-                .to_string()
-        })
-    });
-    let supervised = restarts > 0 && no_resume.is_none();
+    let (counted, arrivals, watch) = watch_run(session, run_id, &plan, bus.hosting, keep_all, recording.is_some())?;
+    let supervised = restart_policy(scene, recording.is_some(), bus.shared_memory);
     // The interface nodes run in this process, beside the router, where nothing calls for a
     // process of their own: fields between them and the subdomain processes then cross one
     // socket instead of two.
@@ -259,18 +200,6 @@ pub(super) fn set_up(
     } else {
         Vec::new()
     };
-    match (restarts > 0, &no_resume) {
-        (true, Some(why)) => crate::console::note(&format!(
-            "node restarts off ({why}): a node process that dies stops the run"
-        )),
-        (true, None) => crate::console::note(&format!(
-            "node restarts on: a node process the launcher started that dies is restarted, up to {restarts} \
-             times (deployment.restarts), and resumes from the recording"
-        )),
-        (false, _) => {
-            crate::console::note("node restarts off (deployment.restarts = 0): a node process that dies stops the run")
-        }
-    }
     // With --verbose: which subdomains each process hosts (as `glissade check` prints it).
     for line in plan.deployment_lines(&groups) {
         crate::console::note(&line);
@@ -290,6 +219,104 @@ pub(super) fn set_up(
         _watch: watch,
     };
     Ok((set_up, Handover { presence, time_start }))
+}
+
+/// Refuses a `--remote` node that is not one of the run's.
+fn check_remote(net: &super::Network, all_nodes: &[NodeName]) -> Result<()> {
+    for r in &net.remote {
+        if !all_nodes.contains(r) {
+            return Err(Error::Option {
+                option: format!("--remote {r}"),
+                why: format!(
+                    "this run has no such node (its nodes: {})",
+                    all_nodes.iter().map(|n| n.to_string()).collect::<Vec<_>>().join(", ")
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The launcher's subscriptions to the run (`hosting`: it hosts the router; `keep_all`: an
+/// observer wants every message; `recorded`: the recorder's end needs their count): which
+/// messages it counts, the channel they arrive on, and the subscribers.
+fn watch_run(
+    session: &zenoh::Session,
+    run_id: &str,
+    plan: &Plan,
+    hosting: bool,
+    keep_all: bool,
+    recorded: bool,
+) -> Result<(Counted, mpsc::Receiver<Arrival>, Vec<zenoh::pubsub::Subscriber<()>>)> {
+    // The launcher hears every message of the run where that costs no socket (the router is in
+    // its process and every field crosses it anyway), where an observer wants them, or where
+    // the recorder's end needs their count. Through a router outside its process, an unrecorded
+    // run's fields would cross one more socket each only to be counted, and with interface nodes
+    // in the subdomain processes the fields between the nodes of one process would leave it only
+    // to be counted: the launcher then subscribes to what it keeps.
+    let own_fields_stay = plan.interface_hosts.iter().any(Option::is_some);
+    let counted = if (hosting && !own_fields_stay) || keep_all || recorded {
+        Counted::Every
+    } else {
+        Counted::Kept
+    };
+    let patterns: Vec<String> = match counted {
+        Counted::Every => vec![glissade_messages::run_topics(run_id)],
+        Counted::Kept => KEPT
+            .iter()
+            .map(|(role, kind)| glissade_messages::role_field_topic(run_id, *role, kind, None))
+            .collect(),
+    };
+    let (tx, arrivals) = mpsc::channel::<Arrival>();
+    let mut watch = Vec::with_capacity(patterns.len());
+    for pattern in patterns {
+        let (tx, watched_run) = (tx.clone(), run_id.to_string());
+        let subscriber = session
+            .declare_subscriber(pattern)
+            .callback(move |s| {
+                let _ = tx.send(Arrival::of(s.key_expr().as_str(), s.payload(), &watched_run, keep_all));
+            })
+            .wait()
+            .map_err(|e| zenoh("subscribe to the run", e))?;
+        watch.push(subscriber);
+    }
+
+    Ok((counted, arrivals, watch))
+}
+
+/// Whether node processes that die are restarted (said as a note either way).
+fn restart_policy(scene: &LoadedScene, recorded: bool, shared_memory: bool) -> bool {
+    // Node processes that die mid-run are restarted (they resume from the recorder's log) when
+    // the scene allows restarts, the run is recorded completely and its fields do not go through
+    // shared memory; otherwise a death stops the run, and the launcher says why up front.
+    //
+    // Shared memory: a message lies in its sender's pool, and Zenoh (1.10.2) drops, with no more
+    // than a debug log ("Error receiving SHM buffer: Buffer is invalidated"), a message whose
+    // shared buffer a receiver no longer takes as valid, which happens to the last messages of a
+    // process killed mid-run. The recorder may hold such a message and a node not: the resumed
+    // node then takes it for already delivered and never sends it again, and the node that
+    // missed it waits.
+    let restarts = scene.deployment.restarts;
+    let no_resume = unresumable(scene, recorded).or_else(|| {
+        shared_memory.then(|| {
+            "network.shared_memory = true: a killed node's last messages may reach some nodes and not others"
+                .to_string()
+        })
+    });
+    let supervised = restarts > 0 && no_resume.is_none();
+    match (restarts > 0, &no_resume) {
+        (true, Some(why)) => crate::console::note(&format!(
+            "node restarts off ({why}): a node process that dies stops the run"
+        )),
+        (true, None) => crate::console::note(&format!(
+            "node restarts on: a node process the launcher started that dies is restarted, up to {restarts} \
+             times (deployment.restarts), and resumes from the recording"
+        )),
+        (false, _) => {
+            crate::console::note("node restarts off (deployment.restarts = 0): a node process that dies stops the run")
+        }
+    }
+    supervised
 }
 
 /// The `glissade node` arguments of node `name` (after the executable); `tls`: its `--tls-*`

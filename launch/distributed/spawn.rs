@@ -34,6 +34,89 @@ pub(super) fn with_supervision(supervised: bool, mut args: Vec<String>) -> Vec<S
     args
 }
 
+/// Writes the credentials of the nodes `net.remote` names and prints how to start them by hand
+/// (every file is written before a word is printed: whoever reads the instructions finds the
+/// files they name). Returns the files, removed when the run ends.
+fn instruct_remote(
+    set_up: &SetUp,
+    scene: &LoadedScene,
+    opts: &RunOptions,
+    net: &super::Network,
+    remote_timeout: std::time::Duration,
+) -> Result<CredentialFiles> {
+    let (run_id, bus) = (&opts.run_id, &set_up.bus);
+    let mut hand_credentials = CredentialFiles(Vec::new());
+    if net.remote.is_empty() {
+        return Ok(hand_credentials);
+    }
+    let connect: Vec<String> = if net.connect.is_empty() {
+        net.listen
+            .iter()
+            .map(|l| l.replace("/0.0.0.0:", "/<this machine's address>:"))
+            .collect()
+    } else {
+        net.connect.clone()
+    };
+    // Every credentials file is written before a word is printed: whoever reads the
+    // instructions finds the files they name.
+    let mut lines = vec![format!(
+        "waiting up to {} s for {} node(s) started by hand; on the other machine(s) run:",
+        remote_timeout.as_secs(),
+        net.remote.len()
+    )];
+    let mut remote_tls = match &scene.network.tls {
+        Some(t) => {
+            lines.push(format!(
+                "(TLS: copy {} to the other machine(s){})",
+                t.root_ca.display(),
+                if t.mutual {
+                    "; each node presents its own certificate signed by it"
+                } else {
+                    ""
+                }
+            ));
+            let ca = Path::new(t.root_ca.file_name().unwrap_or(t.root_ca.as_os_str()));
+            let identity = (Path::new("<node-cert.pem>"), Path::new("<node-key.pem>"));
+            tls_args(ca, t.mutual.then_some(identity))
+        }
+        None => Vec::new(),
+    };
+    remote_tls.extend(bus.shared_memory.then(|| "--shared-memory".to_string()));
+    let dir = match (&net.credentials, bus.hosting) {
+        (Some(d), true) => Some(d),
+        (None, true) => {
+            return Err(Error::Option {
+                option: "--remote".into(),
+                why: "nodes started by hand need their credentials written to a folder (none given)".into(),
+            })
+        }
+        (_, false) => None,
+    };
+    for &r in &net.remote {
+        let mut args = remote_tls.clone();
+        if let Some(dir) = dir {
+            let cr = &bus.credentials[&r.id()];
+            let file = write_credentials(dir, run_id, r, cr)?;
+            lines.push(format!(
+                "(node {r}: copy {} to its machine, readable by its user only; it lets a process speak as {r} in \
+                 this run and nothing else)",
+                file.display()
+            ));
+            hand_credentials.0.push(file.clone());
+            let name = file.file_name().map(PathBuf::from).unwrap_or(file);
+            args.extend(["--credentials".to_string(), name.display().to_string()]);
+        }
+        lines.push(format!(
+            "  glissade {}",
+            with_supervision(set_up.supervised, node_args(r, run_id, &connect, opts.interior, &args)).join(" ")
+        ));
+    }
+    for line in lines {
+        crate::console::say(&line);
+    }
+    Ok(hand_credentials)
+}
+
 /// Starts the node processes of `set_up` that this machine runs (all but `net.remote`) and the
 /// recorder process (writing `recording`, when given), and prints how to start the others.
 pub(super) fn spawn(
@@ -91,74 +174,7 @@ pub(super) fn spawn(
         None => None,
     };
     let remote_timeout = net.remote_timeout.unwrap_or(READY_TIMEOUT);
-    let mut hand_credentials = CredentialFiles(Vec::new());
-    if !net.remote.is_empty() {
-        let connect: Vec<String> = if net.connect.is_empty() {
-            net.listen
-                .iter()
-                .map(|l| l.replace("/0.0.0.0:", "/<this machine's address>:"))
-                .collect()
-        } else {
-            net.connect.clone()
-        };
-        // Every credentials file is written before a word is printed: whoever reads the
-        // instructions finds the files they name.
-        let mut lines = vec![format!(
-            "waiting up to {} s for {} node(s) started by hand; on the other machine(s) run:",
-            remote_timeout.as_secs(),
-            net.remote.len()
-        )];
-        let mut remote_tls = match &scene.network.tls {
-            Some(t) => {
-                lines.push(format!(
-                    "(TLS: copy {} to the other machine(s){})",
-                    t.root_ca.display(),
-                    if t.mutual {
-                        "; each node presents its own certificate signed by it"
-                    } else {
-                        ""
-                    }
-                ));
-                let ca = Path::new(t.root_ca.file_name().unwrap_or(t.root_ca.as_os_str()));
-                let identity = (Path::new("<node-cert.pem>"), Path::new("<node-key.pem>"));
-                tls_args(ca, t.mutual.then_some(identity))
-            }
-            None => Vec::new(),
-        };
-        remote_tls.extend(bus.shared_memory.then(|| "--shared-memory".to_string()));
-        let dir = match (&net.credentials, bus.hosting) {
-            (Some(d), true) => Some(d),
-            (None, true) => {
-                return Err(Error::Option {
-                    option: "--remote".into(),
-                    why: "nodes started by hand need their credentials written to a folder (none given)".into(),
-                })
-            }
-            (_, false) => None,
-        };
-        for &r in &net.remote {
-            let mut args = remote_tls.clone();
-            if let Some(dir) = dir {
-                let cr = &bus.credentials[&r.id()];
-                let file = write_credentials(dir, run_id, r, cr)?;
-                lines.push(format!(
-                    "(node {r}: copy {} to its machine, readable by its user only; it lets a process speak as {r} in \
-                     this run and nothing else)",
-                    file.display()
-                ));
-                hand_credentials.0.push(file.clone());
-                let name = file.file_name().map(PathBuf::from).unwrap_or(file);
-                args.extend(["--credentials".to_string(), name.display().to_string()]);
-            }
-            lines.push(format!(
-                "  glissade {}",
-                with_supervision(set_up.supervised, node_args(r, run_id, &connect, opts.interior, &args)).join(" ")
-            ));
-        }
-        for line in lines {
-            crate::console::say(&line);
-        }
-    }
+    let hand_credentials = instruct_remote(set_up, scene, opts, net, remote_timeout)?;
     Ok(Spawned {
         children,
         hosted,
