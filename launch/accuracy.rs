@@ -1,4 +1,4 @@
-//! Whether the stop on accuracy keeps its promise (DESIGN §3, "Stopping on an error estimate"):
+//! Whether the stop on accuracy keeps its promise (docs/accuracy.md, "Stopping on accuracy"):
 //! for a run followed past its stop against the monolithic reference, the iteration at which the
 //! run's own estimate first reached each accuracy (where a run asking for it stops) and the true
 //! contact-traction error there.
@@ -147,7 +147,7 @@ pub fn check_scene_against(
 }
 
 /// The margin factors the status check compares (m_T = factor · accuracy · T_max,
-/// `glissade_mechanics::settled`): the calibration part chooses among them.
+/// `glissade_mechanics::settled`; 0: no margin at all).
 pub const MARGIN_FACTORS: [f64; 5] = [0.0, 0.5, 1.0, 2.0, 4.0];
 
 /// A run's reported statuses against the reference's, judged with the same margins.

@@ -1,4 +1,4 @@
-//! The run's bus (DESIGN §4): how the launcher opens it (hosting the Zenoh router, or as a client
+//! The run's bus (docs/architecture.md): how the launcher opens it (hosting the Zenoh router, or as a client
 //! of the router of `--connect`), who may connect to it (TLS and certificate names as the scene's
 //! `[network]` says; each process of the run under its own user with a random password, speaking
 //! only on its own keys), whether fields go through shared memory, and how a node or recorder
@@ -256,7 +256,7 @@ pub(crate) struct Bus {
 }
 
 /// Opens the run's bus: a router hosted here (TLS and access control as the scene's `[network]`
-/// says, only the run's processes admitted, DESIGN §4) or a client of the router of
+/// says, only the run's processes admitted, docs/architecture.md) or a client of the router of
 /// `--connect`, refusing a run id already in use there.
 pub(crate) fn join_bus(
     scene: &LoadedScene,
@@ -274,7 +274,7 @@ pub(crate) fn join_bus(
         identity: Some((t.cert.clone(), t.key.clone())),
         mutual: t.mutual,
     });
-    // Who may connect (DESIGN §4): to a router hosted here, only the run's own processes, each
+    // Who may connect (docs/architecture.md): to a router hosted here, only the run's own processes, each
     // under its own user with a random password, speaking only on its own keys.
     let hosting = net.connect.is_empty();
     let mut members: Vec<NodeId> = all_nodes.iter().map(|n| n.id()).collect();

@@ -1,4 +1,4 @@
-//! The launcher library's errors (DESIGN §1: thiserror enums carrying data in the libraries,
+//! The launcher library's errors (thiserror enums carrying data in the libraries,
 //! anyhow only in the binary). Each says what failed and where, in the words the console prints;
 //! the cause, when there is one, is its `source`, and the binary prints the chain
 //! ("what: cause").

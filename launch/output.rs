@@ -800,9 +800,11 @@ fn write_json_as(dir: &Path, name: &str, value: &Value, replace: bool) -> Result
 }
 
 /// The reference solution's interface fields as [`InterfaceSolution`]s (s = ŝ), so that they are
-/// written like a LATIN run's.
+/// written like a LATIN run's: the statuses decided by the same rule and margins as a run's
+/// (`glissade_replay::settle_statuses`, the scene's accuracy, the reference's largest traction),
+/// over the time points it solved.
 pub fn reference_interfaces(model: &Model, reference: &ReferenceSolution) -> Vec<InterfaceSolution> {
-    model
+    let mut sols: Vec<InterfaceSolution> = model
         .interfaces
         .iter()
         .enumerate()
@@ -813,7 +815,10 @@ pub fn reference_interfaces(model: &Model, reference: &ReferenceSolution) -> Vec
                 .unwrap_or_default();
             solution_of_fields(i, &reference.interfaces[i], status)
         })
-        .collect()
+        .collect();
+    let nt = reference.interfaces.first().map_or(0, |f| f.f_a.ncols());
+    glissade_replay::settle_statuses(model, &mut sols, nt);
+    sols
 }
 
 /// Interface `i`'s fields `f` as an [`InterfaceSolution`] whose s and ŝ are both `f`.

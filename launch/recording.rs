@@ -1,4 +1,4 @@
-//! Recording runs to MCAP (DESIGN §4, "recorder"). Both run modes feed one front-end,
+//! Recording runs to MCAP (docs/recording.md). Both run modes feed one front-end,
 //! [`glissade_recorder::RunRecorder`], which decides what is the run's and keeps the first failed
 //! write; what differs is only how messages reach it:
 //!

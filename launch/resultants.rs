@@ -247,7 +247,7 @@ pub fn whole_slip_lines(model: &Model, all: &[InterfaceResultants], max: usize) 
         .filter_map(|r| {
             r.shares
                 .iter()
-                .position(|s| glissade_studies::quantities::closed_slip_share(s[2] + s[3], s[0] + s[4]) >= 1.0 - 1e-9)
+                .position(|s| glissade_studies::quantities::closed_slip_share(s[2], s[0] + s[4]) >= 1.0 - 1e-9)
                 .map(|i| (r, i))
         })
         .collect();

@@ -1,7 +1,7 @@
 //! The one way to run a scene: [`Run`] says what the run is (scene, options, recording, what the
 //! caller watches and measures) and runs it in this process ([`Run::in_process`]) or as node
 //! processes on a Zenoh bus ([`Run::processes`]); [`Outcome`] is what it gives. Both modes give the
-//! same iterations and bit-identical fields (DESIGN §1).
+//! same iterations and bit-identical fields.
 //!
 //! The steps of a run, in order (deal.II's setup/assemble/solve/output): the plan and the
 //! operators are set up (`glissade_deploy`), the nodes are built and iterated on a bus

@@ -1,4 +1,4 @@
-//! Runs a scene's LATIN iteration with every node in this process (DESIGN §4): one subdomain
+//! Runs a scene's LATIN iteration with every node in this process (docs/architecture.md): one subdomain
 //! node per subdomain, the deployment's interface nodes, one coarse node when the scene needs one, on the
 //! in-process bus; subdomain work within a round runs in parallel on all cores.
 

@@ -470,7 +470,7 @@ fn opt(v: Option<f64>, prec: usize) -> String {
 pub fn markdown(rows: &[CaseResult]) -> String {
     let mut s = String::from(
         "| case | varies | expected | iterations | final η | traction error | jump error | LATIN (s) | \
-         reference (s) | sep/stick/slip at t = T | outcome | Anderson: iterations | Anderson: final η | \
+         reference (s) | sep/stick/slip/limit/grazing at t = T | outcome | Anderson: iterations | Anderson: final η | \
          Anderson: traction error | Anderson: LATIN (s) | mixed/safeguarded/restarted | acceleration |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );

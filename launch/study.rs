@@ -1,7 +1,7 @@
 //! The run pipeline as a study's [`Solver`] (`glissade sweep`, docs/studies.md): each variant is
 //! run in-process as `glissade run --in-process` runs a scene, from the state of the solved
 //! variant the study gives (a given start, [`Prepared::start`]), with every subdomain operator
-//! the variant leaves valid reused (DESIGN §6): a friction, gap or load change keeps them all
+//! the variant leaves valid reused (docs/studies.md, "How variants are solved"): a friction, gap or load change keeps them all
 //! (only the loads' boundary responses W_d are computed again, [`SubdomainSolver::retimed`]); a
 //! material change rebuilds the subdomains of that material and those whose search directions
 //! it changes.

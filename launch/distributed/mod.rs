@@ -1,4 +1,4 @@
-//! Multi-process runs (DESIGN §4): the launcher spawns one OS process per node group as the
+//! Multi-process runs (docs/architecture.md): the launcher spawns one OS process per node group as the
 //! scene's deployment section says (subdomain groups, interface nodes, the coarse node), hosts the Zenoh router they connect to (or connects to a
 //! `zenohd` router), serves them the scene over the bus, forwards their logs with a prefix,
 //! watches the run's messages for progress and results, and stops every node when one fails or

@@ -1,6 +1,6 @@
 //! Encoding and decoding of messages: [`encode`] (and its variants into a given buffer or in
 //! [`Piece`]s), [`decode`] (from bytes, a reader or slices in memory), with the checks of
-//! DESIGN §4: schema version, run, scene ([`Expected`]), trailing bytes and field sizes, each
+//! docs/architecture.md: schema version, run, scene ([`Expected`]), trailing bytes and field sizes, each
 //! refusal a [`DecodeError`] that says why.
 
 use crate::{DecodeBuffers, Envelope, Message, Payload, SCHEMA_VERSION};

@@ -1,4 +1,4 @@
-//! Wire types of glissade (DESIGN §4): every message is an [`Envelope`] plus a [`Payload`],
+//! Wire types of glissade (docs/architecture.md): every message is an [`Envelope`] plus a [`Payload`],
 //! encoded with bincode 2 (its own Encode/Decode; the wire form is that of serde's derive
 //! through bincode, which the decoder fuzz test checks). Key expressions come only from the
 //! functions of this crate ([`topic`](mod@topic)).

@@ -1,4 +1,4 @@
-//! What a message carries: the [`Payload`]s of DESIGN §4 and their structs ([`Decision`],
+//! What a message carries: the [`Payload`]s of docs/architecture.md and their structs ([`Decision`],
 //! [`Verdict`], [`InterfaceIndicators`], [`ParticularModes`], [`InterfaceSolution`],
 //! [`LinearStageStats`], and a stall's [`NodeStatus`] and [`StallReport`]), the checks of their sizes after decoding, and the [`Message`]
 //! (envelope + payload).
@@ -61,7 +61,7 @@ pub struct Decision {
 }
 
 /// One interface's indicator sums after a local stage (the terms of η, e_F, e_W and the contact
-/// counts, DESIGN §3) and whether its search direction was updated.
+/// counts, docs/method.md, "Indicators") and whether its search direction was updated.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 pub struct InterfaceIndicators {
     pub interface: u32,
@@ -194,7 +194,7 @@ pub struct StallReport {
     pub diagnosis: String,
 }
 
-/// The payloads of DESIGN §4.
+/// The payloads of docs/architecture.md.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, bincode::Encode, bincode::Decode)]
 #[bincode(decode_context = "DecodeBuffers")]
 pub enum Payload {
@@ -232,7 +232,7 @@ pub enum Payload {
         w: Field,
         f: Field,
     },
-    /// s = (W, F) of a subdomain's boundary after a linear stage, in PGD mode form (DESIGN §3–4):
+    /// s = (W, F) of a subdomain's boundary after a linear stage, in PGD mode form (docs/pgd.md, "Messages in mode form"):
     /// W = P_W φ + Σ_k Z_k λ_k, F = P_F φ + Σ_k G_k λ_k. The receiver keeps the particular part
     /// (in the subdomain's first message only) and the basis: it keeps its first `first_mode`
     /// modes and replaces the rest by the columns of `z` and `g` (n_b × new: new modes, or the
@@ -255,8 +255,8 @@ pub enum Payload {
         interfaces: Vec<u32>,
         q_hat: Field,
     },
-    /// A subdomain's share of the Anderson least-squares problem after its linear stage (DESIGN §3
-    /// "Acceleration"), over its k stored residual differences Δr_i (oldest first), forces only:
+    /// A subdomain's share of the Anderson least-squares problem after its linear stage (docs/method.md,
+    /// "Relaxation and Anderson mixing"), over its k stored residual differences Δr_i (oldest first), forces only:
     /// `gram` Δr_iᵀΔr_j (k × k), `projection` Δr_iᵀ r (k × 1), `residual2` ‖r‖².
     AndersonGram {
         subdomain: u32,

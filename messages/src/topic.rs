@@ -1,4 +1,4 @@
-//! Every key expression of a run (DESIGN §4), built here and nowhere else. All of a run's keys
+//! Every key expression of a run (docs/architecture.md), built here and nowhere else. All of a run's keys
 //! are under `glissade/<run>/` ([`run_topics`]):
 //!
 //! - messages: `<role>/<id>/<field>[/<destination subdomain>]` ([`topic`], [`role_field_topic`]);

@@ -1,4 +1,4 @@
-//! Anderson acceleration of the LATIN fixed point (DESIGN §3 "Acceleration"): the same limit as
+//! Anderson acceleration of the LATIN fixed point (docs/method.md, "Relaxation and Anderson mixing"): the same limit as
 //! plain relaxation, the reduction's messages only when it is on, and the multi-process run
 //! bit-identical to the in-process one with it on.
 

@@ -5,7 +5,7 @@
 //! - two blocks pressed together: a never-slipping contact equals the glued solution, and a fully
 //!   sliding one satisfies |F_t| = f|F_n| with the friction opposing the slip increment.
 //!
-//! Conventions (DESIGN §2, scene.rs): side a of the interface is the lower block, n = (0, 1),
+//! Conventions (docs/method.md, "The discrete problem"; scene.rs): side a of the interface is the lower block, n = (0, 1),
 //! t = (−1, 0); `f_a_hat` is the traction (N/mm) on the lower block at each pair (nodal force =
 //! weight × traction), so the contact pressure is p = −F̂_a·n and the tangential traction on the
 //! lower block is F̂_a·t. Every run goes to a tight η with the stagnation stop off.
@@ -298,7 +298,7 @@ fn hertz_2d_matches_johnson() {
 /// f p − |q| = f p0 (c/a) √(1 − x²/c²) (linear in x² when squared) over the stick pairs
 /// (measured −0.4…+0.5 % on this mesh, ≤ 4 % on the 0.5 mm one); it is held to the same 5 %.
 ///
-/// k₀ = 10 E/L_Γ: the converged solution does not depend on k₀ (DESIGN §3), and with the
+/// k₀ = 10 E/L_Γ: the converged solution does not depend on k₀ (docs/method.md, "Search direction"), and with the
 /// default E/L_Γ the iteration needs ~3000 iterations per decade of η here (9× more, ~20 s).
 #[test]
 fn cattaneo_mindlin_stick_zone() {

@@ -1,4 +1,4 @@
-//! Who may speak on a run's bus (DESIGN §4), at the transport: a router with the run's users
+//! Who may speak on a run's bus (docs/architecture.md), at the transport: a router with the run's users
 //! (user/password authentication) and access control by user lets in only the sessions that
 //! present a member's password, and lets each member publish and declare tokens only on its own
 //! keys, while every member hears the whole run.

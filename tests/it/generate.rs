@@ -84,7 +84,7 @@ fn a_generated_laminate_matches_the_reference_and_runs_alike_as_processes() {
     );
     let check = glissade::accuracy::check_scene("laminate-8x15", &sc, &Default::default()).unwrap();
     for stop in &check.stops {
-        // DESIGN §3's promise: at the stop the true contact-traction error is at most 3× the
+        // The stop's promise (docs/accuracy.md): at the stop the true contact-traction error is at most 3× the
         // accuracy asked for.
         let err = stop.true_error.expect("a stop with a true error");
         assert!(

@@ -118,7 +118,7 @@ fn shrink_fit_pressure_is_lame_and_sticks_below_the_slip_traction() {
 }
 
 /// (traction error, jump error) of converged LATIN's ŝ against the monolithic reference of the
-/// same scene (with `edit` applied to its text), copies of one physical pair summed (DESIGN §2),
+/// same scene (with `edit` applied to its text), copies of one physical pair summed (docs/method.md, "Cross-points"),
 /// whether the macro problem was on, and the iterations.
 fn latin_vs_reference(name: &str, edit: impl Fn(String) -> String) -> (f64, f64, bool, usize) {
     let mut sc = mesh_scene(&edit(shipped(name)));

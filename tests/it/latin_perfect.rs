@@ -122,7 +122,7 @@ coarse = {coarse}
     )
 }
 
-/// Numerical scalability (DESIGN §3, paper §2.3): with the macro problem, the iteration count to
+/// Numerical scalability (docs/method.md, "Macro problem"; paper §2.3): with the macro problem, the iteration count to
 /// η ≤ 1e-4 barely depends on the number of subdomains; without it, it grows with the number of
 /// interfaces information must cross.
 #[test]

@@ -1,4 +1,4 @@
-//! The house rules of DESIGN §1 that the source itself shows: the launcher's modules depend on one
+//! The layout's rules (README, "Crates") that the source itself shows: the launcher's modules depend on one
 //! another without a cycle, the numerics open no file, and every key expression of a run is built
 //! in `messages`.
 

@@ -59,7 +59,7 @@ fn latin_vs_reference(name: &str, tolerance: f64, k0_factor: f64) -> (f64, f64) 
 /// η ≤ 1e-8 the measured traction errors are 5.7e-7 (two-blocks, k₀ × 3), 1.4e-6 (hertz-slip,
 /// k₀ × 10) and ~5e-7 (three layers), so the test runs to η ≤ 1e-9, where the errors are
 /// ~1e-7 and the 1e-6 bound has a margin. The three-layer scene's cross-points are compared
-/// through the summed forces of their copies (DESIGN §2).
+/// through the summed forces of their copies (docs/method.md, "Cross-points").
 #[test]
 fn latin_converges_to_the_monolithic_reference() {
     for (name, k0) in [("two-blocks", 3.0), ("hertz-slip", 10.0), ("small-three-layer", 1.0)] {
@@ -68,7 +68,7 @@ fn latin_converges_to_the_monolithic_reference() {
     }
 }
 
-/// The default stop (`solver.accuracy`, DESIGN §3 "Stopping on an error estimate"): a run asked
+/// The default stop (`solver.accuracy`, docs/accuracy.md, "Stopping on accuracy"): a run asked
 /// for accuracy a stops converged with a true contact-traction error against the reference of at
 /// most a. The estimate is conservative on these two scenes (true error / a at the stop is at
 /// most 0.25 for a = 1e-2, 1e-3, 1e-4 in docs/accuracy.md's table), so the bound a itself is

@@ -1,4 +1,4 @@
-//! Non-matching interfaces (DESIGN §2, "Non-matching"): the patch tests. Two parts meshed on
+//! Non-matching interfaces (docs/method.md, "Non-matching interfaces"): the patch tests. Two parts meshed on
 //! their own (ratios 1:1 … 1:7 along the interface, and an offset where the upper part is cut
 //! in two blocks whose nodes fall between the lower part's), loaded by one uniform stress state:
 //! the exact solution is an affine displacement field, which the QUA8 elements and the
@@ -218,8 +218,8 @@ fn non_matching_meshes_take_the_iterations_of_the_conforming_one() {
 }
 
 /// T-junctions: one part in one subdomain facing two subdomains of the other, the cut between
-/// them ending on the non-matching interfaces (the end pairs there are left out, DESIGN §2 and
-/// docs/method.md), against the same blocks meshed to match. Measured 38 against 27 and 38
+/// them ending on the non-matching interfaces (the end pairs there are left out, docs/method.md,
+/// "Non-matching interfaces"), against the same blocks meshed to match. Measured 38 against 27 and 38
 /// against 30 (perfect and stuck contact alike; 149 and 91 before the end pairs were left
 /// out): bounded at 1.5× so that losing the end treatment fails here; the issue's ±10 % is not
 /// reached.

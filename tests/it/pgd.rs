@@ -413,7 +413,7 @@ fn reports_count_linear_stage_flops() {
     assert!(t.json()["flops"].as_u64() == Some(t.flops));
 }
 
-/// A PGD subdomain's messages in mode form (DESIGN §3–4): the particular part in its first message
+/// A PGD subdomain's messages in mode form (docs/pgd.md, "Messages in mode form"): the particular part in its first message
 /// only, each basis column once (the `increment` criterion only adds modes, so every message
 /// starts where the subdomain's previous one stopped and carries only the modes added since), and
 /// the time functions every iteration. The state they describe is the one the interface node

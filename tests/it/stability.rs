@@ -200,8 +200,8 @@ fn full_matrix_scenes_load() {
     }
 }
 
-/// The stop on accuracy on every converging quick case (DESIGN §3, "Stopping on an error
-/// estimate"): where the default solver's estimate first reaches 1e-2, 1e-3 and 1e-4, the true
+/// The stop on accuracy on every converging quick case (docs/accuracy.md,
+/// "Stopping on accuracy"): where the default solver's estimate first reaches 1e-2, 1e-3 and 1e-4, the true
 /// contact-traction error against the reference is at most the accuracy in at least 95 % of the
 /// stops and never above 3× it (the issue's bar). A case whose reference or run fails is a
 /// failure here, not a skipped row; the two gap-open cases, whose reference has no contact force

@@ -21,7 +21,11 @@ fn the_first_ten_held_out_seeds_keep_the_promise() {
     for seed in (1..20).step_by(2) {
         assert_eq!(Part::of(seed), Part::HeldOut);
         let v = validate_seed(seed, &dir.join("scenes"), &Default::default()).expect("scene written");
-        if let Some(st) = v.statuses.as_ref().filter(|s| s.converged) {
+        let statuses = v
+            .statuses
+            .clone()
+            .map(|r| r.unwrap_or_else(|e| panic!("seed {seed}: statuses: {e}")));
+        if let Some(st) = statuses.as_ref().filter(|s| s.converged) {
             let (_, a) = st
                 .agreement
                 .iter()

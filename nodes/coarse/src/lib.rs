@@ -1,5 +1,5 @@
 //! The coarse node: assembles Σ_E L_E once from the subdomains' homogenized operators and, each
-//! iteration, solves the macro problem (Σ L_E) w̃ = −Σ F̂ᴹ_{E,d} (DESIGN §3, Problem 3) and sends
+//! iteration, solves the macro problem (Σ L_E) w̃ = −Σ F̂ᴹ_{E,d} (docs/method.md, "Macro problem") and sends
 //! each subdomain its columns of w̃.
 
 use faer::Mat;

@@ -1,5 +1,5 @@
 //! The interface node: receives s = (W, F) from every subdomain, runs the local stage on every
-//! interface (DESIGN §3), computes the indicators, updates search directions when asked, decides
+//! interface (docs/method.md, "Local stage"), computes the indicators, updates search directions when asked, decides
 //! whether to continue, and sends each subdomain q̂ = F̂ + k⁻Ŵ for its next linear stage. At the
 //! stop it publishes every interface's s and ŝ.
 //!
@@ -15,7 +15,7 @@
 //! keeps that subdomain's particular part and basis ([`ModeForm`]) and expands W and F from the
 //! time functions of each message.
 //!
-//! With Anderson acceleration node 0 also hosts the mixing's global step (DESIGN §3 "Acceleration"):
+//! With Anderson acceleration node 0 also hosts the mixing's global step (docs/method.md, "Relaxation and Anderson mixing"):
 //! it sums the subdomains' `AndersonGram` partials in subdomain order (so the sum does not depend
 //! on arrival order), solves the small least-squares problem and sends one `AndersonStep` to
 //! every subdomain. A search-direction update changes the fixed-point map: the next step restarts

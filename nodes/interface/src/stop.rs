@@ -1,11 +1,11 @@
-//! The stop decision's rule (DESIGN §3): accuracy on the error estimate, tolerances, max
+//! The stop decision's rule (docs/method.md, "Indicators and stopping"): accuracy on the error estimate, tolerances, max
 //! iterations, stagnation, divergence.
 
 use glissade_mechanics::estimate::{ErrorEstimate, Estimated, STAGNATION_AGREEMENT};
 use glissade_mechanics::local::IndicatorSums;
 use glissade_messages::Verdict;
 
-/// The stop rules of DESIGN §3: converged when the estimated contact-traction error (relative
+/// The stop rules of docs/method.md, "Indicators and stopping": converged when the estimated contact-traction error (relative
 /// space-time L2, and the largest at one point relative to the largest traction) and the
 /// disagreement between s and ŝ ([`IndicatorSums::disagreement`]) are at most the accuracy and
 /// η, e_c at most their tolerances (each where set); else max iterations, stagnation, divergence.

@@ -1,4 +1,4 @@
-//! The macro (coarse) problem of the LATIN linear stage (DESIGN §3, Problem 3):
+//! The macro (coarse) problem of the LATIN linear stage (docs/method.md, "Macro problem"):
 //! (Σ_E L_E) w̃ = −Σ_E F̂ᴹ_{E,d}, one unknown block per interface (its macro modes), shared by
 //! both sides; assembled from the subdomains' homogenized operators, factorised once, one column
 //! per time point.

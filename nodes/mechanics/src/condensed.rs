@@ -1,4 +1,4 @@
-//! The condensed boundary operator of a subdomain (DESIGN §3):
+//! The condensed boundary operator of a subdomain (docs/method.md, "Linear stage"):
 //! A_E = B (K_E + Bᵀ k⁻ M B)⁻¹ Bᵀ, a dense SPD n_b × n_b matrix built once from a sparse Cholesky
 //! factorisation, and the boundary responses to the subdomain's own loads (W_d patterns).
 //!
@@ -12,7 +12,7 @@ use faer::{Mat, MatMut, MatRef};
 
 /// Where each boundary entry of a subdomain lives. The boundary vector stacks, interface by
 /// interface (in the model's interface order), the x and y traces of that interface's node copies
-/// (DESIGN §2: one copy of a node per interface). An entry is a combination of subdomain dofs:
+/// (docs/method.md, "Cross-points": one copy of a node per interface). An entry is a combination of subdomain dofs:
 /// one dof with coefficient 1 on a conforming interface, side b's projection on a non-matching
 /// one ([`crate::mortar`]).
 #[derive(Debug, Clone, PartialEq)]

@@ -305,7 +305,7 @@ pub fn edge_load_along(
 
 /// Lumped edge mass of a 3-node edge: L/6, 4L/6, L/6 with L the edge length (mm); for a curved
 /// edge the row sums of the consistent mass; in axisymmetry the row sums of ∫ N_i N_j 2πr ds
-/// (mm²). DESIGN §2.
+/// (mm²). docs/method.md, "The interface mass".
 pub fn edge_lumped_mass(x: &[[f64; 2]; 3], plane: Plane) -> [f64; 3] {
     let mut m = [0.0; 3];
     for &(s, w) in &GAUSS3 {

@@ -1,4 +1,4 @@
-//! The estimate of the contact-traction error that the run computes as it goes (DESIGN §3,
+//! The estimate of the contact-traction error that the run computes as it goes (docs/method.md, "Linear stage",
 //! "Stopping on an error estimate").
 //!
 //! The LATIN iteration is a fixed point sₙ₊₁ = G(sₙ). If it contracts with factor ρ < 1, the

@@ -1,4 +1,4 @@
-//! The local stage of the LATIN method (DESIGN §3): interface laws solved point-wise, per node
+//! The local stage of the LATIN method (docs/method.md, "Local stage"): interface laws solved point-wise, per node
 //! pair and time point, along the search direction E⁺:
 //! F̂_E − F_E = k⁺ (Ŵ_E − W_E) on each side, k⁺ = k_N P_N + k_T P_T (2 × 2, symmetric, positive).
 //!
@@ -82,7 +82,7 @@ pub struct ContactResult {
     pub slip: f64,
 }
 
-/// Unilateral contact with Coulomb friction, backward Euler on the slip increment (DESIGN §3):
+/// Unilateral contact with Coulomb friction, backward Euler on the slip increment (docs/method.md, "Local stage"):
 /// C_N = ½k_N([W]·n + g0) + ½(F_A − F_B)·n, C_T = ½k_T([W]·t − ĝ_T(t_{i−1})) + ½(F_A − F_B)·t;
 /// C_N > 0 → separation, F̂ = 0; else F̂_A·n = C_N and stick (|C_T| < f|C_N|: F̂_A·t = C_T) or
 /// slip (F̂_A·t = f|C_N| sign C_T); then Ŵ from E⁺ on each side.

@@ -1,5 +1,5 @@
 //! The local stage on whole interfaces, the search-direction update and the convergence
-//! indicators (DESIGN §3).
+//! indicators (docs/method.md, "Indicators").
 //!
 //! Interface fields are stored per side as (2·n_pairs) × (N+1) column-major matrices: entry
 //! 2p + c is pair p, component c (global x, y); column i is time point t_i.
@@ -247,7 +247,7 @@ pub fn pointwise_traction_error_over(
 }
 
 /// Error of interface fields `s` against a reference solution of the same discrete problem, on
-/// contact interfaces (DESIGN §3, "error against a reference"): relative space-time norms
+/// contact interfaces (docs/accuracy.md): relative space-time norms
 /// (trapezoid weights w_i):
 /// - e_F over the contact forces: per junction g (see [`junctions`]; a single pair away from
 ///   cross-points) the nodal forces M·F of both sides are summed, since only their sum is
@@ -736,7 +736,7 @@ impl InterfaceLocal {
         (sums, updated)
     }
 
-    /// Search-direction update (paper eq. 6, DESIGN §3), done once per contact interface: when the
+    /// Search-direction update (paper eq. 6, docs/method.md, "Search-direction update"), done once per contact interface: when the
     /// stagnation ratios I_N = ‖C_N − C_N,prev‖/‖C_N,prev‖ and I_T (same on 𝒯) are both below
     /// `i0`, set k_N = k_T = k₀(1 − α) at separated points and k_T = k₀(1 − α) at slipping ones.
     /// Returns true when the update happened at this call.

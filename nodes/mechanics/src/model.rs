@@ -173,7 +173,7 @@ pub enum InterfaceKind {
 
 /// An interface Γ between subdomains `a` and `b`, conforming (node pairs coincide) or
 /// non-matching (`projection`: side b's trace is projected onto side a's nodes). Each pair has
-/// its own frame (DESIGN §2): the normal `normals[p]` points out of `a` towards `b`, the tangent
+/// its own frame (docs/method.md, "Pair frames and weights"): the normal `normals[p]` points out of `a` towards `b`, the tangent
 /// is (−n_y, n_x); on a straight interface every pair has the same normal.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Interface {
@@ -301,7 +301,7 @@ pub enum Side {
     B,
 }
 
-/// Solver parameters of a scene (DESIGN §3), already validated.
+/// Solver parameters of a scene (docs/scenes.md, "[solver]"), already validated.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SolverParams {
     /// k₀ = k0_factor · E/L_Γ, E the interface modulus √(2G·M) of the two sides ([`crate::linear::default_k0`]).
@@ -321,15 +321,15 @@ pub struct SolverParams {
     pub stagnation_ratio: f64,
     /// Solve the macro (coarse) problem.
     pub coarse: bool,
-    /// Search-direction update (DESIGN §3): off by default.
+    /// Search-direction update (docs/method.md, "Search-direction update"): off by default.
     pub search_direction_update: bool,
     /// Updated directions are k₀(1 − α) (separated: both components; slipping: tangential).
     /// With relaxation μ the relaxed iteration keeps every mode inside the unit disc only for
-    /// α ≤ [`SolverParams::alpha_limit`] = 2(1 − μ)/(2 − μ) (1/3 at μ = 0.8, where DESIGN's
+    /// α ≤ [`SolverParams::alpha_limit`] = 2(1 − μ)/(2 − μ) (1/3 at μ = 0.8, where
     /// α = 1/3 sits exactly on the limit): the default is 0.2.
     pub alpha: f64,
     pub i0: f64,
-    /// Acceleration of the fixed point (DESIGN §3 "Acceleration").
+    /// Acceleration of the fixed point (docs/method.md, "Relaxation and Anderson mixing").
     pub acceleration: Acceleration,
     /// Polynomial degree of the macro basis on every interface ([`crate::linear::macro_basis`]);
     /// `None` (the default) chooses per interface ([`crate::linear::macro_degree`]).

@@ -1,4 +1,4 @@
-//! A subdomain's boundary state in PGD mode form (DESIGN §3 "PGD linear stage", §4), as the
+//! A subdomain's boundary state in PGD mode form (docs/pgd.md, "Messages in mode form"), as the
 //! subdomain and every receiver of its messages hold it:
 //!
 //!   W = P_W φ + Σ_k Z_k λ_k,  F = P_F φ + Σ_k G_k λ_k,

@@ -1,4 +1,4 @@
-//! Non-matching interfaces (DESIGN §2, "Non-matching"): the interface's own discretisation Γ_h
+//! Non-matching interfaces (docs/method.md, "Non-matching interfaces"): the interface's own discretisation Γ_h
 //! is side a's trace (its pairs are side a's nodes, its weights side a's lumped edge masses), and
 //! side b's trace reaches it through the projection Π_b = M_Γ⁻¹ D_b, with
 //! D_b[p, j] = ∫_Γ ψ_p N_j^b dΓ integrated exactly segment by segment: side b's edges are

@@ -1,5 +1,5 @@
 //! Physical contact points: the copies of one node pair that sit on several contact interfaces
-//! (a cross-point where perfect interfaces meet a contact, DESIGN §2), grouped as the reference
+//! (a cross-point where perfect interfaces meet a contact, docs/method.md, "Cross-points"), grouped as the reference
 //! merges them, and the outputs' one value per point.
 
 use crate::laws::{self, Status};
@@ -217,7 +217,7 @@ pub struct FinalColumns<'a> {
 const OTHER_SIDE: [usize; 8] = [1, 0, 3, 2, 5, 4, 7, 6];
 
 /// One value per physical point: where copies of one node pair sit on several contact interfaces
-/// ([`contact_points`]), only the sum of their nodal forces is determined (DESIGN §2), and each
+/// ([`contact_points`]), only the sum of their nodal forces is determined (docs/method.md, "Cross-points"), and each
 /// copy's own traction carries a share of it that depends on the run. Every copy is given the
 /// point's values instead: the weighted means Σ m·v / Σ m of W and F of both sides, of s and of
 /// ŝ (a swapped copy's sides exchanged); and, where the copies' statuses differ, the status of the

@@ -1,4 +1,4 @@
-//! Recordings of glissade runs (DESIGN §4, "recorder"): every message of a run written to an MCAP
+//! Recordings of glissade runs (docs/recording.md): every message of a run written to an MCAP
 //! file, and read back.
 //!
 //! Layout of a recording `<scene>-<run id>.mcap`:

@@ -308,7 +308,7 @@ mod timing {
         assert!(checks.max() <= 1e-10);
     }
 
-    /// The stratified scene of DESIGN §5 (N = 100) with the default condensed solver: about 85 s
+    /// The stratified scene of docs/scenes.md (the stratified scene, here at N = 100) with the default condensed solver: about 85 s
     /// in the release profile. Ignored by default; run with `--release --ignored`.
     #[test]
     #[ignore]

@@ -5,7 +5,7 @@
 //!   colour scale `legend/**`; not the traction arrows `tractions/**`) in a 3D view whose eye looks
 //!   straight down on the plane z = 0, framed on the model and its legend;
 //! - right, top: log10 η, log10 e_c and (with `--reference`) log10 of the traction error;
-//! - right, bottom: the stick / slip / separated counts (per iteration, and per time point of
+//! - right, bottom: the contact status counts (per iteration, and per time point of
 //!   the final state);
 //! - the time panel on the `iteration` timeline, following the data;
 //!   switching it to `time` steps through the final state's time points.
@@ -37,7 +37,7 @@ pub const CONVERGENCE: [&str; 4] = [
 /// Display names of the views, as the viewer shows them (and the tests look them up).
 pub const STRUCTURE_VIEW: &str = "structure";
 pub const CONVERGENCE_VIEW: &str = "log10 η, e_c, traction error (with --reference) per iteration";
-pub const COUNTS_VIEW: &str = "stick / slip / separated";
+pub const COUNTS_VIEW: &str = "contact statuses";
 pub const FORCES_VIEW: &str = "interface resultants and boundary forces (N/mm; N in axisymmetry) over time";
 
 /// A view of the layout: its class, name and entity-path filter.

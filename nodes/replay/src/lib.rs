@@ -9,12 +9,13 @@
 //!   s = (W, F) by one sparse solve per time point: u = (K + Bᵀk M B)⁻¹ (f_d + Bᵀ M (F + k W)),
 //!   which holds for any s the linear stage produced and any k. The final state's s is taken from
 //!   the interface solutions, so a recording thinned by `full_fields_every` shows it too.
-//! - `interfaces/<i>/status`: the contact node pairs coloured separated (grey) / stick (green) /
-//!   slip (orange), and `tractions/<i>`: the traction F̂ on side a as arrows, at every time point
+//! - `interfaces/<i>/status`: the contact node pairs coloured by their reported status,
+//!   separated (grey) / stick (green) / slip (orange) / limit (yellow) / grazing (light blue), and `tractions/<i>`: the traction F̂ on side a as arrows, at every time point
 //!   of the final state; `legend/…`: the colour scale (the final state's 2nd–98th percentiles).
 //! - The layout: a blueprint sent before any data (`blueprint`).
 //! - `indicators/eta`, `indicators/contact_indicator` (and their log10), `contact/{separated,
-//!   stick,slip}` counts per iteration; `contact_over_time/…` status counts per time point.
+//!   stick,slip}` counts per iteration (the local stage's); `contact_over_time/…` the reported
+//!   status counts per time point.
 //!
 //! [`replay`] reads a recording in two passes (the colour range and amplification of the final
 //! state, then every message); [`View`] takes messages one at a time, as [`replay`] and a live run
@@ -31,7 +32,7 @@ mod view;
 mod walk;
 
 pub use legend::{ordinal, ColourRange, PERCENTILES};
-pub use states::{as_reported, one_value_per_point, BoundaryStates};
+pub use states::{as_reported, one_value_per_point, settle_statuses, BoundaryStates};
 use std::path::PathBuf;
 pub use view::View;
 pub use walk::{final_state, replay, run_messages, FinalState, Skipped};

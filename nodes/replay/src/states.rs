@@ -243,17 +243,24 @@ pub fn one_value_per_point(model: &Model, solutions: &mut [glissade_messages::In
 }
 
 /// The final solutions as every output reports them: one value per physical point
-/// ([`one_value_per_point`]), then on each contact interface the status decided from ŝ (the
-/// last local stage's fields, which obey the interface laws exactly, so that only the margins
-/// decide, not how far s is from them) with the margins of the run's accuracy
-/// ([`glissade_mechanics::settled`]: separated, stick, slip, or within a margin: limit,
-/// grazing) in place of the local stage's own. A solution whose shape does not fit the scene is
-/// left as it is (the outputs name it).
+/// ([`one_value_per_point`]), then the statuses the run reports ([`settle_statuses`]) in place
+/// of the local stage's own.
 pub fn as_reported(model: &Model, solutions: &mut [glissade_messages::InterfaceSolution]) {
+    one_value_per_point(model, solutions);
+    settle_statuses(model, solutions, model.time.n_points());
+}
+
+/// On each contact interface of solutions over `nt` time points, the status decided from ŝ (the
+/// last local stage's fields, which obey the interface laws exactly, so that only the margins
+/// decide, not how far s is from them) with the margins of the scene's accuracy
+/// ([`glissade_mechanics::settled`]: separated, stick, slip, or within a margin: limit, grazing);
+/// copies of one physical point (`glissade_mechanics::points::contact_points`) all get the status
+/// of its first copy (their values are the point's already; the status does not depend on which
+/// side a copy calls a). A solution whose shape does not fit the scene is left as it is (the
+/// outputs name it).
+pub fn settle_statuses(model: &Model, solutions: &mut [glissade_messages::InterfaceSolution], nt: usize) {
     use glissade_mechanics::laws::dot;
     use glissade_mechanics::settled::{largest_traction, settle_interface, Margins, PairValues};
-    one_value_per_point(model, solutions);
-    let nt = model.time.n_points();
     let fits = |s: &glissade_messages::InterfaceSolution| {
         model.interfaces.get(s.interface as usize).is_some_and(|itf| {
             let rows = 2 * itf.n_pairs();
@@ -291,6 +298,27 @@ pub fn as_reported(model: &Model, solutions: &mut [glissade_messages::InterfaceS
         };
         let codes = settle_interface(itf, &margins, k, nt, |i, p| values(&solutions[j], itf, i, p));
         solutions[j].status = codes;
+    }
+    // One status per physical point: its first copy's.
+    for point in glissade_mechanics::points::contact_points(&model.interfaces) {
+        let Some((first, rest)) = point.copies.split_first() else {
+            continue;
+        };
+        let Some(j0) = by_interface[first.interface] else {
+            continue;
+        };
+        for c in rest {
+            let Some(j) = by_interface[c.interface] else {
+                continue;
+            };
+            let (np0, np) = (
+                model.interfaces[first.interface].n_pairs(),
+                model.interfaces[c.interface].n_pairs(),
+            );
+            for i in 0..nt {
+                solutions[j].status[c.pair + np * i] = solutions[j0].status[first.pair + np0 * i];
+            }
+        }
     }
 }
 
@@ -365,5 +393,62 @@ mod tests {
         // A part naming an interface off the boundary is refused, naming it.
         let e = states.fields(&part(s, 3, 0, vec![999], 2, 0.0)).unwrap().unwrap_err();
         assert!(e.contains("interface 999 is not on its boundary"), "{e}");
+    }
+
+    /// Copies of one physical point report one status: the first copy's, whatever their own
+    /// fields would decide. Small three-layer scene, a point shared by two contact interfaces;
+    /// every pair pressed (f_n = −100 MPa, f_t = 0) and still, except the second copy, moved
+    /// tangentially by 1 mm at the last time point (its own decision: slip).
+    #[test]
+    fn copies_of_one_point_report_the_first_copys_status() {
+        use glissade_mechanics::settled::Settled;
+        let text = include_str!("../../../launch/scenes/small-three-layer.toml");
+        let model = glissade_scene::load_str(text, "small.toml").unwrap().model;
+        let nt = model.time.n_points();
+        let point = glissade_mechanics::points::contact_points(&model.interfaces)
+            .into_iter()
+            .find(|p| p.copies.len() >= 2)
+            .expect("a point on two contact interfaces");
+        let moved = point.copies[1];
+        let mut solutions: Vec<glissade_messages::InterfaceSolution> = model
+            .interfaces
+            .iter()
+            .enumerate()
+            .map(|(k, itf)| {
+                let rows = 2 * itf.n_pairs();
+                let zero = Field::from_fn(rows, nt, |_, _| 0.0);
+                // Pressed along each pair's normal: F on side a is −100 n.
+                let pressed = Field::from_fn(rows, nt, |r, _| -100.0 * itf.normal(r / 2)[r % 2]);
+                let w_b = Field::from_fn(rows, nt, |r, i| {
+                    let p = r / 2;
+                    if k == moved.interface && p == moved.pair && i == nt - 1 {
+                        itf.tangent(p)[r % 2]
+                    } else {
+                        0.0
+                    }
+                });
+                glissade_messages::InterfaceSolution {
+                    interface: k as u32,
+                    w_a: zero.clone(),
+                    w_b: w_b.clone(),
+                    f_a: pressed.clone(),
+                    f_b: zero.clone(),
+                    w_a_hat: zero.clone(),
+                    w_b_hat: w_b,
+                    f_a_hat: pressed,
+                    f_b_hat: zero,
+                    status: Vec::new(),
+                }
+            })
+            .collect();
+        settle_statuses(&model, &mut solutions, nt);
+        let status = |k: usize, p: usize, i: usize| solutions[k].status[p + model.interfaces[k].n_pairs() * i];
+        let first = point.copies[0];
+        assert_eq!(status(first.interface, first.pair, nt - 1), Settled::Stick as u8);
+        assert_eq!(status(moved.interface, moved.pair, nt - 1), Settled::Stick as u8);
+        // Every other pair is pressed and still: stick, at every time point.
+        assert!(solutions
+            .iter()
+            .all(|s| s.status.iter().all(|&c| c == Settled::Stick as u8)));
     }
 }

@@ -1,4 +1,4 @@
-//! Design studies (DESIGN §6, docs/studies.md): many variants of one scene, where the friction or
+//! Design studies (docs/studies.md): many variants of one scene, where the friction or
 //! gap of an interface rule, a scale factor on a boundary rule's values, or E or ν of a material
 //! vary over a list, a range, a grid of several or a seeded sample.
 //!

@@ -4,8 +4,10 @@
 //! bracketed by solves to a relative width the user asks. Each trial starts from the last trial
 //! that held (converged without slipping everywhere), with the operators reused.
 //!
-//! A trial is classified by its reported statuses on the interfaces watched (slip or at the
-//! friction limit counts as slipping, grazing as open): it slips at a
+//! A trial is classified by its reported statuses on the interfaces watched (`slip` only counts
+//! as slipping: a pair at the friction `limit` does not move beyond the margin, and a pair with a
+//! normal force within the margin is `limit` whatever it carries; `grazing` counts as open): it
+//! slips at a
 //! point if some pair slips at some time point; it slips everywhere if at some time point one
 //! interface's whole length slips, or if it did not converge: a part that would slide or spin
 //! away has no equilibrium, and LATIN's iteration then stalls with every pair slipping (its
@@ -175,7 +177,7 @@ pub fn onset(
     }
     let file = scene.display().to_string();
     let share = |q: &str| index_of(q).expect("a share is a quantity");
-    let [slip, limit, open, grazing] = ["slip_share", "limit_share", "separated_share", "grazing_share"].map(share);
+    let [slip, open, grazing] = ["slip_share", "separated_share", "grazing_share"].map(share);
     let mut out = Onset {
         rule: format!("boundary[{}]", req.rule),
         interfaces: req.interfaces.clone(),
@@ -234,8 +236,8 @@ pub fn onset(
                     .filter(|iq| watched.contains(&iq.interface))
                     .map(|iq| {
                         let v = |q: usize| iq.values[q][i];
-                        // On the cone: slipping or at the limit; closed: neither open nor grazing.
-                        crate::quantities::closed_slip_share(v(slip) + v(limit), v(open) + v(grazing))
+                        // Slipping (beyond the margins); closed: neither open nor grazing.
+                        crate::quantities::closed_slip_share(v(slip), v(open) + v(grazing))
                     })
                     .fold(0.0, f64::max)
             })

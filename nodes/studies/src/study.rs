@@ -108,7 +108,7 @@ impl Target {
         }
     }
 
-    /// Whether changing this parameter leaves every subdomain operator valid (DESIGN §6): a
+    /// Whether changing this parameter leaves every subdomain operator valid (docs/studies.md, "How variants are solved"): a
     /// friction, gap or load change does; a material change does not.
     pub fn keeps_operators(&self) -> bool {
         !matches!(self, Target::Young { .. } | Target::Poisson { .. })

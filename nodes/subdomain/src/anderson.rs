@@ -1,4 +1,4 @@
-//! Anderson acceleration in a subdomain node (DESIGN §3 "Acceleration"): the Gram partials of
+//! Anderson acceleration in a subdomain node (docs/method.md, "Relaxation and Anderson mixing"): the Gram partials of
 //! the iteration's record sent to the interface node (`AndersonGram`), and the step it returns
 //! (`AndersonStep`: mixed, plain or restart) taken on the fields, or with PGD on the coordinates,
 //! before the state is sent.

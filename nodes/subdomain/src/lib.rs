@@ -1,4 +1,4 @@
-//! The subdomain node: hosts one subdomain's linear stage (DESIGN §3–4).
+//! The subdomain node: hosts one subdomain's linear stage (docs/method.md, "Linear stage").
 //!
 //! Setup: builds A_E and sends L_E (when the coarse problem is on), then runs the first linear
 //! stage from ŝ = 0. Each iteration: `LocalDirections` (q̂, from every interface node owning one
@@ -9,13 +9,13 @@
 //! the coarse problem micro 2 is skipped (w̃ = 0). A stop `Decision` ends the node, after sending
 //! the full displacement field when asked.
 //!
-//! With Anderson acceleration (DESIGN §3 "Acceleration"), from iteration 2 on the end of the
+//! With Anderson acceleration (docs/method.md, "Relaxation and Anderson mixing"), from iteration 2 on the end of the
 //! linear stage is a reduction: the node records s and G(s) = s₁ + s₂, sends its `AndersonGram`
 //! partials, and takes the `AndersonStep` the interface node returns (mixed, plain or restart)
 //! before it sends `BoundaryState`. Without acceleration no such message exists.
 //!
-//! With the PGD linear stage the node holds its state in mode form (DESIGN §3 "PGD linear
-//! stage"): the coordinates λˢ of s − s₀ on its basis, relaxed (or mixed, with the same Anderson
+//! With the PGD linear stage the node holds its state in mode form (docs/pgd.md,
+//! the PGD linear stage): the coordinates λˢ of s − s₀ on its basis, relaxed (or mixed, with the same Anderson
 //! coefficients as the fields would be) in coordinates, and sends `BoundaryModes` instead of
 //! `BoundaryState`: the particular part once, each new basis column once, λˢ every iteration. Its
 //! own fields (W, F) are expanded from the same [`ModeForm`] a receiver builds from the messages,
@@ -100,7 +100,7 @@ pub struct SubdomainNode {
     /// nodes each send the rows of their interfaces).
     directions_in: Vec<bool>,
     finished: bool,
-    /// PGD linear stage (DESIGN §3), when the scene asks for it, the mode form of the state as
+    /// PGD linear stage (docs/method.md, "Linear stage"), when the scene asks for it, the mode form of the state as
     /// receivers hold it, and the particular part until the first message carries it.
     pgd: Option<PgdStage>,
     modes: Option<ModeForm>,

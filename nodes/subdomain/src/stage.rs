@@ -1,4 +1,4 @@
-//! The linear stage of a subdomain node, full or PGD (DESIGN §3): micro problems 1 and 2 (into
+//! The linear stage of a subdomain node, full or PGD (docs/method.md, "Linear stage"): micro problems 1 and 2 (into
 //! full fields, or through the PGD basis), the relaxation (in coordinates with PGD), the state
 //! sent (`BoundaryState`, or `BoundaryModes` in mode form) followed by the stage's counters
 //! (`LinearStageStats`), and the displacement field recovered from the state at the end. The

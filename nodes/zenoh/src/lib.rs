@@ -1,4 +1,4 @@
-//! The Zenoh transport of glissade (DESIGN §4): runs sans-IO [`Node`](glissade_bus::Node)s over a Zenoh session.
+//! The Zenoh transport of glissade (docs/architecture.md): runs sans-IO [`Node`](glissade_bus::Node)s over a Zenoh session.
 //!
 //! Topology (STACK.md, "topology trap"): the launcher opens a session in `router` mode listening
 //! on an explicit endpoint (or connects as a client to a `zenohd` router); every node process

@@ -1,4 +1,4 @@
-//! Anderson acceleration of the LATIN fixed point (DESIGN §3, "Acceleration").
+//! Anderson acceleration of the LATIN fixed point (docs/method.md, "Relaxation and Anderson mixing").
 //!
 //! The LATIN iteration is a fixed point s ← G(s): s = (W, F) is the boundary state after a
 //! linear stage, G the local stage followed by the next linear stage. Plain relaxation takes
@@ -9,8 +9,8 @@
 //!
 //! with Δs_i, Δr_i the differences of consecutive iterates and residuals. A fixed point of the
 //! mixed iteration is one of G, so the limit is the plain run's. The least-squares norm is the
-//! plain Euclidean norm of the force part F only (DESIGN measured that weighting W like η gains
-//! nothing).
+//! plain Euclidean norm of the force part F only (weighting W as η does was
+//! measured to gain nothing).
 //!
 //! The state is spread over subdomains, so the work is split in two:
 //! - [`AndersonHistory`] (one per subdomain, buffers allocated once) keeps the last m + 1

@@ -1,8 +1,8 @@
-//! The macro basis of an interface (DESIGN §2, §3) and the degree each interface gets.
+//! The macro basis of an interface (docs/method.md, "The macro space") and the degree each interface gets.
 
 use crate::model::{Interface, Model};
 
-/// Macro basis of an interface (DESIGN §2, §3): the affine fields u(x) = a + B(x − c) restricted
+/// Macro basis of an interface (docs/method.md, "The macro space"): the affine fields u(x) = a + B(x − c) restricted
 /// to its pairs (c the weighted centroid), in the order translation along t, translation along n,
 /// rotation about the centroid, extension along t (s·t, s = (x − c)·t), then — on a curved
 /// interface only — extension along n and the symmetric shear, with (t, n) the interface's

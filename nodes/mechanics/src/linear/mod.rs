@@ -1,4 +1,4 @@
-//! The linear stage of the LATIN method on one subdomain (DESIGN §3), on the condensed operator:
+//! The linear stage of the LATIN method on one subdomain (docs/method.md, "Linear stage"), on the condensed operator:
 //! micro problem 1, W₁ = A_E M q̂ + W_d, F₁ = q̂ − k⁻W₁ with q̂ = F̂ + k⁻Ŵ;
 //! macro forces F̂ᴹ_{E,d} = 𝔼ᵀ M F₁; micro problem 2, W₂ = A_E M k⁻ 𝔼 w̃, F₂ = k⁻(𝔼 w̃ − W₂);
 //! and the homogenized operator L_E = 𝔼ᵀ M k⁻ 𝔼 − (M k⁻ 𝔼)ᵀ A_E (M k⁻ 𝔼).
@@ -26,7 +26,7 @@ pub use state::{relaxation_at, LinearEnd, SubdomainFields};
 
 use crate::model::Model;
 
-/// The linear stage of the subdomains (DESIGN §3).
+/// The linear stage of the subdomains (docs/method.md, "Linear stage").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LinearStage {
     /// One dense product with the condensed A_E per micro problem.

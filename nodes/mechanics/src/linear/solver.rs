@@ -1,4 +1,4 @@
-//! One subdomain's linear stage (DESIGN §3): [`SubdomainSolver`] builds A_E, W_d, 𝔼 and L_E
+//! One subdomain's linear stage (docs/method.md, "Linear stage"): [`SubdomainSolver`] builds A_E, W_d, 𝔼 and L_E
 //! once, then solves micro problem 1, the macro forces and micro problem 2 at every iteration.
 
 use super::fields::{col, col_mut, scale_into};

@@ -1,4 +1,4 @@
-//! The PGD linear stage of one subdomain (DESIGN §3, "PGD linear stage").
+//! The PGD linear stage of one subdomain (docs/pgd.md).
 //!
 //! Every boundary state of the iteration is admissible: W = A_E M q + W_d, F = q − k⁻W for a
 //! right-hand side q = F + k⁻W (N/mm²); the initial state s₀ = (W_d, −k⁻W_d) has q₀ = 0. PGD
@@ -53,7 +53,7 @@ mod basis;
 #[cfg(test)]
 mod tests;
 
-/// How the PGD enrichment criterion ξ is measured (DESIGN §3, "Where PGD pays").
+/// How the PGD enrichment criterion ξ is measured (docs/pgd.md, "When PGD pays").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PgdCriterion {
     /// ξ relative to the increment δ.

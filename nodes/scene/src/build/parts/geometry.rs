@@ -553,7 +553,7 @@ impl Ctx<'_> {
         // The non-matching interfaces of the parts that face each other.
         let mut non_matching: Vec<GeoInterface> = Vec::new();
         for [(p, ep), (q, eq)] in facing_groups {
-            // The coarser side carries the interface (DESIGN §2): the other, if it is not
+            // The coarser side carries the interface (docs/method.md, "Non-matching interfaces"): the other, if it is not
             // covered.
             let sides = if ep.len() <= eq.len() {
                 [((p, &ep), (q, &eq)), ((q, &eq), (p, &ep))]

@@ -39,7 +39,7 @@ pub(super) fn part_interface(
 }
 
 /// The non-matching interface of part a's edges `a_edges` with part b's edges `b_edges` that face
-/// them (DESIGN §2, "Non-matching"): the pairs are a's nodes, b reaches them through its
+/// them (docs/method.md, "Non-matching interfaces"): the pairs are a's nodes, b reaches them through its
 /// projection; the named curves are those of both sides' edges. Err: a node of a without a
 /// normal (as [`part_interface`]) or a's edges not covered by b's.
 pub(super) fn part_interface_non_matching(
