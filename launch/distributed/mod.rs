@@ -17,6 +17,7 @@
 //! processes started ([`spawn`]), supervised until they exit ([`supervise`]), and its result put
 //! together here.
 
+mod arrival;
 mod hosted;
 mod setup;
 mod spawn;

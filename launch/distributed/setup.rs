@@ -2,7 +2,7 @@
 //! solve, the bus the launcher joins (or hosts), the scene served to the nodes and the launcher's
 //! subscription to the run, and whether dead node processes are restarted.
 
-use super::supervise::{Arrival, KEPT};
+use super::arrival::{Arrival, KEPT};
 use super::unresumable;
 use super::Counted;
 use crate::bus::{join_bus, Bus, RECORDER};

@@ -125,6 +125,61 @@ fn the_launcher_modules_have_no_cycle() {
     assert!(cycle(&with_cycle, &mut vec!["run".into()]).is_some());
 }
 
+/// The modules of `launch/distributed` (its files but `mod.rs`) and the sibling modules each one
+/// names as `super::<module>` (also inside `super::{…}`).
+fn distributed_modules() -> BTreeMap<String, BTreeSet<String>> {
+    let dir = root().join("launch/distributed");
+    let files: Vec<PathBuf> = sources(&dir)
+        .into_iter()
+        .filter(|f| f.file_name().is_some_and(|n| n != "mod.rs"))
+        .collect();
+    let names: BTreeSet<String> = files
+        .iter()
+        .map(|f| f.file_stem().expect("a name").to_string_lossy().into_owned())
+        .collect();
+    let mut edges = BTreeMap::new();
+    for f in &files {
+        let module = f.file_stem().expect("a name").to_string_lossy().into_owned();
+        let text = code(f);
+        let mut uses = BTreeSet::new();
+        for (i, _) in text.match_indices("super::") {
+            let rest = &text[i + "super::".len()..];
+            let group = match rest.strip_prefix('{') {
+                Some(g) => g.split('}').next().unwrap_or(""),
+                None => rest,
+            };
+            for n in group.split(',') {
+                let name: String = n
+                    .trim_start()
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                if names.contains(&name) && name != module {
+                    uses.insert(name);
+                }
+            }
+        }
+        edges.insert(module, uses);
+    }
+    edges
+}
+
+/// The run as processes has no cycle between its own modules (the set-up does not need the
+/// supervision that needs it: what both use of the run's messages is `arrival`).
+#[test]
+fn the_distributed_modules_have_no_cycle() {
+    let edges = distributed_modules();
+    for m in ["setup", "spawn", "supervise", "arrival"] {
+        assert!(edges.contains_key(m), "module {m} not found: {:?}", edges.keys());
+    }
+    assert!(edges["supervise"].contains("setup") && edges["setup"].contains("arrival"));
+    for start in edges.keys() {
+        if let Some(c) = cycle(&edges, &mut vec![start.clone()]) {
+            panic!("a cycle of launch/distributed modules: {}", c.join(" → "));
+        }
+    }
+}
+
 #[test]
 fn the_numerics_open_no_file() {
     let mechanics = root().join("nodes/mechanics/src");
