@@ -138,7 +138,10 @@ fn solve_contact(text: &str, solver: Solver) -> (LoadedScene, Interface, Interfa
             (sc, itf, sol, line)
         }
         Solver::Reference => {
-            let sc = scene(text);
+            // The reported statuses' margins follow the scene's accuracy: the reference's are
+            // judged at the LATIN run's (η ≤ 1e-9, no accuracy), so that both are the solution's.
+            let mut sc = scene(text);
+            (sc.model.solver.accuracy, sc.model.solver.tolerance) = (None, Some(1e-9));
             let clock = Instant::now();
             let reference = glissade_reference::solve_reference(&sc.model, &Default::default()).expect("reference");
             let secs = clock.elapsed().as_secs_f64();
