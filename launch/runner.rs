@@ -2,13 +2,12 @@
 //! node per subdomain, the deployment's interface nodes, one coarse node when the scene needs one, on the
 //! in-process bus; subdomain work within a round runs in parallel on all cores.
 
-use faer::{Mat, MatRef};
 use glissade_bus::convert::{field_of, mat_of, view};
 use glissade_bus::{BusError, HandleTime, InProcessBus, Node, RunContext};
 use glissade_deploy::{build_nodes_with, build_solvers, BuildError, Plan, Selection};
 use glissade_mechanics::assembly::AssemblyError;
 use glissade_mechanics::condensed::BoundaryLayout;
-use glissade_mechanics::linear::SubdomainSolver;
+use glissade_mechanics::linear::{interpolated_directions, SubdomainSolver};
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{Model, Side, TimeGrid};
 use glissade_messages::{Decision, Field, InterfaceSolution, Message, NodeId, Payload, Role, Stage, Verdict};
@@ -82,28 +81,23 @@ impl RunResult {
     /// The stopped state of every interface as matrices, in interface order (the form the
     /// reference comparisons of `glissade_mechanics::local` take).
     pub fn interface_fields(&self) -> Vec<InterfaceFields> {
-        let mut sols: Vec<&InterfaceSolution> = self.interfaces.iter().collect();
-        sols.sort_by_key(|s| s.interface);
-        sols.into_iter()
-            .map(|s| InterfaceFields {
-                w_a: mat_of(&s.w_a),
-                w_b: mat_of(&s.w_b),
-                f_a: mat_of(&s.f_a),
-                f_b: mat_of(&s.f_b),
-            })
-            .collect()
+        self.fields_of(|s| [&s.w_a, &s.w_b, &s.f_a, &s.f_b])
     }
 
     /// The same of ŝ (the last local stage's fields, from which the statuses are decided).
     pub fn interface_hat_fields(&self) -> Vec<InterfaceFields> {
+        self.fields_of(|s| [&s.w_a_hat, &s.w_b_hat, &s.f_a_hat, &s.f_b_hat])
+    }
+
+    /// W_a, W_b, F_a, F_b of every interface as `pick` takes them from its solution, in
+    /// interface order.
+    fn fields_of(&self, pick: impl Fn(&InterfaceSolution) -> [&Field; 4]) -> Vec<InterfaceFields> {
         let mut sols: Vec<&InterfaceSolution> = self.interfaces.iter().collect();
         sols.sort_by_key(|s| s.interface);
         sols.into_iter()
-            .map(|s| InterfaceFields {
-                w_a: mat_of(&s.w_a_hat),
-                w_b: mat_of(&s.w_b_hat),
-                f_a: mat_of(&s.f_a_hat),
-                f_b: mat_of(&s.f_b_hat),
+            .map(|s| {
+                let [w_a, w_b, f_a, f_b] = pick(s).map(mat_of);
+                InterfaceFields { w_a, w_b, f_a, f_b }
             })
             .collect()
     }
@@ -440,7 +434,14 @@ fn initial_directions(
         .iter()
         .map(|&s| {
             let layout = BoundaryLayout::new(model, s as usize, &plan.k0);
-            let q = coarse_directions(model, grid, &layout, solutions);
+            let q = interpolated_directions(&model.time, grid, &layout, |k, side| {
+                let sol = &solutions[k];
+                debug_assert_eq!(sol.interface as usize, k);
+                match side {
+                    Side::A => (view(&sol.w_a_hat), view(&sol.f_a_hat)),
+                    Side::B => (view(&sol.w_b_hat), view(&sol.f_b_hat)),
+                }
+            });
             Message {
                 envelope: ctx.envelope(launcher_id(), 0, Stage::Local),
                 payload: Payload::LocalDirections {
@@ -509,39 +510,6 @@ fn check_prepared(model: &Model, plan: &Plan, solvers: &[SubdomainSolver]) -> Re
             "the operators given are not this scene's participants' (subdomains or boundaries differ)".into(),
         ))
     }
-}
-
-/// q̂ = F̂ + k⁻Ŵ of one subdomain's boundary at the fine time points, from the coarse solve's
-/// ŝ (its interface solutions) interpolated linearly in time: the coarse grid's points are
-/// every c-th fine point, so the fine points between two coarse ones take the chord.
-fn coarse_directions(
-    model: &Model,
-    coarse: &TimeGrid,
-    layout: &BoundaryLayout,
-    solutions: &[InterfaceSolution],
-) -> Mat<f64> {
-    let nt = model.time.n_points();
-    let c = model.time.n_steps / coarse.n_steps;
-    let mut q = Mat::<f64>::zeros(layout.len(), nt);
-    for slot in &layout.slots {
-        let sol = &solutions[slot.interface];
-        debug_assert_eq!(sol.interface as usize, slot.interface);
-        let (w, f) = match slot.side {
-            Side::A => (view(&sol.w_a_hat), view(&sol.f_a_hat)),
-            Side::B => (view(&sol.w_b_hat), view(&sol.f_b_hat)),
-        };
-        for i in 0..nt {
-            // Fine point i lies between coarse points j and j + 1, at fraction a.
-            let j = (i / c).min(coarse.n_steps - 1);
-            let a = (i - j * c) as f64 / c as f64;
-            for r in 0..2 * slot.n_pairs {
-                let row = slot.offset + r;
-                let at = |m: MatRef<'_, f64>| (1.0 - a) * m[(r, j)] + a * m[(r, j + 1)];
-                q[(row, i)] = at(f) + layout.k[row] * at(w);
-            }
-        }
-    }
-    q
 }
 
 /// The launcher's part of an in-process run: the messages it publishes at the start (a

@@ -9,6 +9,7 @@
 //! - `macro_basis`: the macro basis of an interface and its degree;
 //! - `solver`: [`SubdomainSolver`], the micro and macro problems of one subdomain;
 //! - `fields`: passes over whole boundary fields (the sum and relaxation ending the stage);
+//! - `start`: [`interpolated_directions`], the initial directions of a run started from a known ŝ;
 //! - `state`: [`SubdomainFields`], one subdomain's fields and the stage's steps on them, as the
 //!   subdomain node and the crate's one-thread iteration call them.
 
@@ -17,11 +18,13 @@ mod fields;
 pub(crate) mod flop_tests;
 mod macro_basis;
 mod solver;
+mod start;
 mod state;
 
 pub use fields::{relax_into, sum_into, sum_relax_into};
 pub use macro_basis::{macro_bases, macro_basis, macro_degree, SLENDER};
 pub use solver::{MacroSlot, SubdomainSolver};
+pub use start::interpolated_directions;
 pub use state::{relaxation_at, LinearEnd, SubdomainFields};
 
 use crate::model::Model;
