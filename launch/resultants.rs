@@ -1,4 +1,4 @@
-//! Interface resultants (docs/outputs.md, "Interface resultants"): per interface and time point,
+//! Interface resultants (docs/outputs.md, "resultants.csv"): per interface and time point,
 //! the force the interface carries, summed over its node pairs, and on contact interfaces the
 //! share of its length in each reported status (separated, stuck, slipping, at the friction
 //! limit, grazing: `glissade_mechanics::settled`). What an engineer plots against

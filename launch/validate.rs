@@ -526,7 +526,7 @@ pub fn status_summary(results: &[Validated]) -> String {
     if !failed.is_empty() {
         let _ = writeln!(
             s,
-            "- statuses not compared (the run at 1e-3 failed): {}",
+            "- statuses not compared (the run at 1e-3 or the comparison failed): {}",
             failed.join("; ")
         );
     }

@@ -1,4 +1,4 @@
-//! The layout's rules (README, "Crates") that the source itself shows: the launcher's modules depend on one
+//! The layout's rules (README, "Crate map") that the source itself shows: the launcher's modules depend on one
 //! another without a cycle, the numerics open no file, and every key expression of a run is built
 //! in `messages`.
 
@@ -144,11 +144,12 @@ fn distributed_modules() -> BTreeMap<String, BTreeSet<String>> {
         let mut uses = BTreeSet::new();
         for (i, _) in text.match_indices("super::") {
             let rest = &text[i + "super::".len()..];
-            let group = match rest.strip_prefix('{') {
-                Some(g) => g.split('}').next().unwrap_or(""),
-                None => rest,
+            // `super::{a, b}` names several modules, `super::a` one.
+            let listed: Vec<&str> = match rest.strip_prefix('{') {
+                Some(g) => g.split('}').next().unwrap_or("").split(',').collect(),
+                None => vec![rest],
             };
-            for n in group.split(',') {
+            for n in listed {
                 let name: String = n
                     .trim_start()
                     .chars()

@@ -1,5 +1,5 @@
 //! Reactions at supports and load resultants of every boundary rule (docs/outputs.md,
-//! "Reactions and loads").
+//! "boundaries.csv").
 
 use crate::common::{glissade_exits, glissade_ok, output_file, scene, scene_text, scratch};
 use glissade::resultants::RuleKind;

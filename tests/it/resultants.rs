@@ -1,4 +1,4 @@
-//! Interface resultants of a run (docs/outputs.md, "Interface resultants").
+//! Interface resultants of a run (docs/outputs.md, "resultants.csv").
 
 use crate::common::{glissade_ok, output_file, scratch};
 

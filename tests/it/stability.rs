@@ -206,7 +206,7 @@ fn full_matrix_scenes_load() {
 /// stops and never above 3× it (the bar). A case whose reference or run fails is a
 /// failure here, not a skipped row; the two gap-open cases, whose reference has no contact force
 /// at all (a relative traction error is undefined), have no true error to compare. The counts
-/// measured on the whole matrix are in docs/accuracy.md ("On the stability matrix").
+/// measured on the whole matrix are in docs/accuracy.md.
 #[test]
 fn quick_cases_stop_within_the_requested_accuracy() {
     use glissade::accuracy::{check_cases, summary};

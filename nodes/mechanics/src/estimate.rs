@@ -1,5 +1,5 @@
-//! The estimate of the contact-traction error that the run computes as it goes (docs/method.md, "Linear stage",
-//! "Stopping on an error estimate").
+//! The estimate of the contact-traction error that the run computes as it goes (docs/accuracy.md,
+//! "Stopping on accuracy").
 //!
 //! The LATIN iteration is a fixed point sₙ₊₁ = G(sₙ). If it contracts with factor ρ < 1, the
 //! distance to the limit s* is bounded by the steps: ‖sₙ − s*‖ ≤ ‖sₙ₊₁ − sₙ‖/(1 − ρ). Neither ρ

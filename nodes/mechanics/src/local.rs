@@ -1,5 +1,5 @@
 //! The local stage on whole interfaces, the search-direction update and the convergence
-//! indicators (docs/method.md, "Indicators").
+//! indicators (docs/method.md, "Local stage", "Search-direction update" and "Indicators").
 //!
 //! Interface fields are stored per side as (2·n_pairs) × (N+1) column-major matrices: entry
 //! 2p + c is pair p, component c (global x, y); column i is time point t_i.

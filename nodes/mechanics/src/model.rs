@@ -325,8 +325,8 @@ pub struct SolverParams {
     pub search_direction_update: bool,
     /// Updated directions are k₀(1 − α) (separated: both components; slipping: tangential).
     /// With relaxation μ the relaxed iteration keeps every mode inside the unit disc only for
-    /// α ≤ [`SolverParams::alpha_limit`] = 2(1 − μ)/(2 − μ) (1/3 at μ = 0.8, where
-    /// α = 1/3 sits exactly on the limit): the default is 0.2.
+    /// α ≤ [`SolverParams::alpha_limit`] = 2(1 − μ)/(2 − μ) (1/3 at μ = 0.8: α = 1/3
+    /// would sit exactly on the limit): the default is 0.2.
     pub alpha: f64,
     pub i0: f64,
     /// Acceleration of the fixed point (docs/method.md, "Relaxation and Anderson mixing").

@@ -1,5 +1,5 @@
 //! Monolithic incremental reference solver of the same discrete problem as the LATIN solver
-//! (docs/method.md, "Cross-points").
+//! (docs/method.md, "The discrete problem", "The interface mass" and "Cross-points").
 //!
 //! **Discrete problem.** All subdomains' QUA8 stiffnesses are assembled in one global numbering
 //! in which the node pairs of *perfect* interfaces are merged (union–find, as

@@ -10,7 +10,7 @@
 //!   which holds for any s the linear stage produced and any k. The final state's s is taken from
 //!   the interface solutions, so a recording thinned by `full_fields_every` shows it too.
 //! - `interfaces/<i>/status`: the contact node pairs coloured by their reported status,
-//!   separated (grey) / stick (green) / slip (orange) / limit (yellow) / grazing (light blue), and `tractions/<i>`: the traction F̂ on side a as arrows, at every time point
+//!   separated (grey) / stick (green) / slip (orange) / limit (yellow) / grazing (light blue), and `tractions/<i>`: the traction F of s on side a as arrows, at every time point
 //!   of the final state; `legend/…`: the colour scale (the final state's 2nd–98th percentiles).
 //! - The layout: a blueprint sent before any data (`blueprint`).
 //! - `indicators/eta`, `indicators/contact_indicator` (and their log10), `contact/{separated,

@@ -5,8 +5,9 @@
 //! that held (converged without slipping everywhere), with the operators reused.
 //!
 //! A trial is classified by its reported statuses on the interfaces watched (`slip` only counts
-//! as slipping: a pair at the friction `limit` does not move beyond the margin, and a pair with a
-//! normal force within the margin is `limit` whatever it carries; `grazing` counts as open): it
+//! as slipping: a pair at the friction `limit` does not move beyond the margin, and a pair whose
+//! friction capacity f·N is within the margin is `limit` whatever it carries; `grazing` counts as
+//! open): it
 //! slips at a
 //! point if some pair slips at some time point; it slips everywhere if at some time point one
 //! interface's whole length slips, or if it did not converge: a part that would slide or spin

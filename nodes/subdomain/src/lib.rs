@@ -100,7 +100,7 @@ pub struct SubdomainNode {
     /// nodes each send the rows of their interfaces).
     directions_in: Vec<bool>,
     finished: bool,
-    /// PGD linear stage (docs/method.md, "Linear stage"), when the scene asks for it, the mode form of the state as
+    /// PGD linear stage (docs/pgd.md), when the scene asks for it, the mode form of the state as
     /// receivers hold it, and the particular part until the first message carries it.
     pgd: Option<PgdStage>,
     modes: Option<ModeForm>,

@@ -1,6 +1,6 @@
 //! The Zenoh transport of glissade (docs/architecture.md): runs sans-IO [`Node`](glissade_bus::Node)s over a Zenoh session.
 //!
-//! Topology (STACK.md, "topology trap"): the launcher opens a session in `router` mode listening
+//! Topology (docs/architecture.md, "Over Zenoh"): the launcher opens a session in `router` mode listening
 //! on an explicit endpoint (or connects as a client to a `zenohd` router); every node process
 //! opens a `client` session connected to that router, with multicast scouting off. Clients route
 //! through the router, so every node reaches every other.

@@ -1,6 +1,7 @@
 //! The initial search directions of a run that starts from a known ŝ instead of ŝ = 0
-//! (docs/method.md, "Linear stage"): a time-coarse start, whose coarse solve gives ŝ on every
-//! c-th time point, or a study's given start (ŝ of a solved variant on the run's own grid).
+//! (docs/accuracy.md, "Time-coarse start"): a time-coarse start, whose coarse solve gives ŝ on
+//! every c-th time point, or a study's given start (ŝ of a solved variant on the run's own grid:
+//! docs/studies.md, "How variants are solved").
 
 use crate::condensed::BoundaryLayout;
 use crate::model::{Side, TimeGrid};

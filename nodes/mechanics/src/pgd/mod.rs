@@ -53,7 +53,7 @@ mod basis;
 #[cfg(test)]
 mod tests;
 
-/// How the PGD enrichment criterion ξ is measured (docs/pgd.md, "When PGD pays").
+/// How the PGD enrichment criterion ξ is measured (docs/pgd.md, "The enrichment criterion decides the limit").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PgdCriterion {
     /// ξ relative to the increment δ.

@@ -1,7 +1,7 @@
 //! Subdomains and interfaces of an imported mesh: one subdomain per part (a physical surface of a
 //! Gmsh file), the elements checked (orientation, Jacobian, one piece, no duplicate nodes), the
 //! interfaces found where two parts share element edges, and the meshes that do not conform along
-//! a shared curve refused (docs/method.md, "Pair frames and weights").
+//! a shared curve refused (docs/scenes.md, "`[mesh]`: parts from a Gmsh file").
 //!
 //! This file holds the parts' data and their turning into subdomains, names and materials
 //! ([`Ctx::build_parts`]); `geometry` checks every part and finds the edges two parts share
