@@ -4,7 +4,6 @@ use crate::error::{Error, IoWhat, Result};
 pub use crate::files::{io_why, rename_new, write_through_partial};
 use crate::runner::RunResult;
 use glissade_deploy::Plan;
-use glissade_mechanics::laws::dot;
 use glissade_mechanics::linear::LinearStage;
 use glissade_mechanics::local::InterfaceFields;
 use glissade_mechanics::model::{Interface, InterfaceKind, Model};
@@ -572,17 +571,7 @@ pub fn series_paths(out: &Path, stem: &str) -> (PathBuf, PathBuf) {
 /// linear stage's state: the state the run's estimate and verdict judge, whose forces balance the
 /// parts and whose traces are the parts' displacements (docs/outputs.md).
 pub fn pair_values(itf: &Interface, sol: &InterfaceSolution, i: usize, p: usize) -> [f64; 4] {
-    let f = [sol.f_a.get(2 * p, i), sol.f_a.get(2 * p + 1, i)];
-    let jump = [
-        sol.w_b.get(2 * p, i) - sol.w_a.get(2 * p, i),
-        sol.w_b.get(2 * p + 1, i) - sol.w_a.get(2 * p + 1, i),
-    ];
-    [
-        dot(f, itf.normal(p)),
-        dot(f, itf.tangent(p)),
-        dot(jump, itf.normal(p)),
-        dot(jump, itf.tangent(p)),
-    ]
+    glissade_mechanics::settled::in_frame(itf, p, |r| [sol.w_a.get(r, i), sol.w_b.get(r, i), sol.f_a.get(r, i)])
 }
 
 /// The name of reported status code `c` ([`SETTLED_NAMES`]), or `invalid status code <c>`.

@@ -180,11 +180,14 @@ pub fn settle_interface(
 
 /// Pair `p` of interface `itf` at time point `i` of `fields`, in its frame ([`PairValues`]).
 pub fn values_of(itf: &Interface, fields: &InterfaceFields, i: usize, p: usize) -> PairValues {
-    let f = [fields.f_a[(2 * p, i)], fields.f_a[(2 * p + 1, i)]];
-    let jump = [
-        fields.w_b[(2 * p, i)] - fields.w_a[(2 * p, i)],
-        fields.w_b[(2 * p + 1, i)] - fields.w_a[(2 * p + 1, i)],
-    ];
+    in_frame(itf, p, |r| [fields.w_a[(r, i)], fields.w_b[(r, i)], fields.f_a[(r, i)]])
+}
+
+/// Pair `p` of `itf` in its frame ([`PairValues`]), from `at(r)` = [W_a, W_b, F_a] at row r
+/// (2p: x, 2p + 1: y) of the time point wanted.
+pub fn in_frame(itf: &Interface, p: usize, at: impl Fn(usize) -> [f64; 3]) -> PairValues {
+    let ([wa_x, wb_x, f_x], [wa_y, wb_y, f_y]) = (at(2 * p), at(2 * p + 1));
+    let (f, jump) = ([f_x, f_y], [wb_x - wa_x, wb_y - wa_y]);
     let (n, t) = (itf.normal(p), itf.tangent(p));
     [dot(f, n), dot(f, t), dot(jump, n), dot(jump, t)]
 }

@@ -259,8 +259,7 @@ pub fn as_reported(model: &Model, solutions: &mut [glissade_messages::InterfaceS
 /// side a copy calls a). A solution whose shape does not fit the scene is left as it is (the
 /// outputs name it).
 pub fn settle_statuses(model: &Model, solutions: &mut [glissade_messages::InterfaceSolution], nt: usize) {
-    use glissade_mechanics::laws::dot;
-    use glissade_mechanics::settled::{largest_traction, settle_interface, Margins, PairValues};
+    use glissade_mechanics::settled::{in_frame, largest_traction, settle_interface, Margins, PairValues};
     let fits = |s: &glissade_messages::InterfaceSolution| {
         model.interfaces.get(s.interface as usize).is_some_and(|itf| {
             let rows = 2 * itf.n_pairs();
@@ -280,13 +279,9 @@ pub fn settle_statuses(model: &Model, solutions: &mut [glissade_messages::Interf
                   i: usize,
                   p: usize|
      -> PairValues {
-        let f = [sol.f_a_hat.get(2 * p, i), sol.f_a_hat.get(2 * p + 1, i)];
-        let jump = [
-            sol.w_b_hat.get(2 * p, i) - sol.w_a_hat.get(2 * p, i),
-            sol.w_b_hat.get(2 * p + 1, i) - sol.w_a_hat.get(2 * p + 1, i),
-        ];
-        let (n, t) = (itf.normal(p), itf.tangent(p));
-        [dot(f, n), dot(f, t), dot(jump, n), dot(jump, t)]
+        in_frame(itf, p, |r| {
+            [sol.w_a_hat.get(r, i), sol.w_b_hat.get(r, i), sol.f_a_hat.get(r, i)]
+        })
     };
     let t_max = largest_traction(&model.interfaces, nt, |k, i, p| {
         by_interface[k].map_or([0.0; 4], |j| values(&solutions[j], &model.interfaces[k], i, p))
