@@ -37,6 +37,28 @@ fn code(path: &Path) -> String {
         .join("\n")
 }
 
+/// The first name after each `prefix` in `text` (`prefix` + `a::X` names `a`), and each name of a
+/// group (`prefix` + `{a::X, b}` names `a` and `b`).
+fn named_after(text: &str, prefix: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for (i, _) in text.match_indices(prefix) {
+        let rest = &text[i + prefix.len()..];
+        let listed: Vec<&str> = match rest.strip_prefix('{') {
+            Some(group) => group.split('}').next().unwrap_or("").split(',').collect(),
+            None => vec![rest],
+        };
+        for n in listed {
+            let name: String = n
+                .trim_start()
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
+            out.push(name);
+        }
+    }
+    out
+}
+
 /// The launcher library's modules (a file or a folder of `launch/`, the binary's own modules
 /// left out) and the modules each one names as `crate::<module>`.
 fn launcher_modules() -> BTreeMap<String, BTreeSet<String>> {
@@ -50,29 +72,15 @@ fn launcher_modules() -> BTreeMap<String, BTreeSet<String>> {
         if binary.contains(&module.as_str()) || module == "lib" || module == "scenes" {
             continue;
         }
-        let text = code(&f);
         let uses = edges.entry(module.clone()).or_default();
-        for (i, _) in text.match_indices("crate::") {
-            let rest = &text[i + "crate::".len()..];
-            // `crate::{a::X, b::Y}` names several modules.
-            let names: Vec<&str> = match rest.strip_prefix('{') {
-                Some(group) => group.split('}').next().unwrap_or("").split(',').collect(),
-                None => vec![rest],
+        for name in named_after(&code(&f), "crate::") {
+            // The crate root re-exports `error::{Error, Result}`.
+            let name = match name.as_str() {
+                "Error" | "Result" => "error".to_string(),
+                _ => name,
             };
-            for n in names {
-                let n = n.trim_start();
-                let name: String = n
-                    .chars()
-                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                    .collect();
-                // The crate root re-exports `error::{Error, Result}`.
-                let name = match name.as_str() {
-                    "Error" | "Result" => "error".to_string(),
-                    _ => name,
-                };
-                if !name.is_empty() && name.starts_with(|c: char| c.is_ascii_lowercase()) && name != module {
-                    uses.insert(name);
-                }
+            if !name.is_empty() && name.starts_with(|c: char| c.is_ascii_lowercase()) && name != module {
+                uses.insert(name);
             }
         }
     }
@@ -140,26 +148,10 @@ fn distributed_modules() -> BTreeMap<String, BTreeSet<String>> {
     let mut edges = BTreeMap::new();
     for f in &files {
         let module = f.file_stem().expect("a name").to_string_lossy().into_owned();
-        let text = code(f);
-        let mut uses = BTreeSet::new();
-        for (i, _) in text.match_indices("super::") {
-            let rest = &text[i + "super::".len()..];
-            // `super::{a, b}` names several modules, `super::a` one.
-            let listed: Vec<&str> = match rest.strip_prefix('{') {
-                Some(g) => g.split('}').next().unwrap_or("").split(',').collect(),
-                None => vec![rest],
-            };
-            for n in listed {
-                let name: String = n
-                    .trim_start()
-                    .chars()
-                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                    .collect();
-                if names.contains(&name) && name != module {
-                    uses.insert(name);
-                }
-            }
-        }
+        let uses = named_after(&code(f), "super::")
+            .into_iter()
+            .filter(|name| names.contains(name) && *name != module)
+            .collect();
         edges.insert(module, uses);
     }
     edges
