@@ -47,6 +47,8 @@ pub struct AccuracyCheck {
     /// Every iteration's (true error, estimate, force step, contact indicator), to study the
     /// estimate offline.
     pub trace: Vec<(f64, Option<f64>, f64, f64)>,
+    /// How the run followed past its stop ended (the report's `latin_verdict`).
+    pub verdict: String,
 }
 
 /// The check of one report (a run followed past its stop), whose run stagnates as
@@ -104,6 +106,7 @@ pub fn check_report(name: &str, report: &Report, stagnation: (usize, f64)) -> Ac
     };
     AccuracyCheck {
         name: name.to_string(),
+        verdict: report.latin_verdict.clone(),
         stops,
         compared: ratios.len(),
         within_3x: share(&|r| (1.0 / 3.0..=3.0).contains(&r)),

@@ -43,6 +43,9 @@ fn how_it_ended(verdict: &Verdict, n: usize) -> String {
         Verdict::MaxIterations => format!("NOT converged: stopped at the iteration cap ({n} iterations)"),
         Verdict::Stagnated { detail } => format!("NOT converged: stagnated after {n} iterations ({detail})"),
         Verdict::Diverged { detail } => format!("NOT converged: diverged after {n} iterations ({detail})"),
+        Verdict::NoEquilibrium { detail } => {
+            format!("NOT converged: no equilibrium, stopped after {n} iterations ({detail})")
+        }
         Verdict::Continue => format!("NOT converged: stopped after {n} iterations"),
     }
 }

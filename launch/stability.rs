@@ -46,6 +46,10 @@ pub enum Outcome {
     Diverged {
         detail: String,
     },
+    /// The loads exceed what friction and the supports hold (the run's `NoEquilibrium`).
+    NoEquilibrium {
+        detail: String,
+    },
     Rejected {
         reason: String,
     },
@@ -67,6 +71,7 @@ impl Outcome {
             Outcome::MaxIterations => "max_iterations",
             Outcome::Stagnated { .. } => "stagnated",
             Outcome::Diverged { .. } => "diverged",
+            Outcome::NoEquilibrium { .. } => "no_equilibrium",
             Outcome::Rejected { .. } => "rejected",
             Outcome::Error { .. } => "error",
             Outcome::Panicked { .. } => "panicked",
@@ -79,6 +84,7 @@ impl Outcome {
             Outcome::Converged | Outcome::MaxIterations => "",
             Outcome::Stagnated { detail }
             | Outcome::Diverged { detail }
+            | Outcome::NoEquilibrium { detail }
             | Outcome::Error { detail }
             | Outcome::Panicked { detail } => detail,
             Outcome::Rejected { reason } => reason,
@@ -91,6 +97,7 @@ impl Outcome {
             Outcome::MaxIterations => "stopped: max iterations".into(),
             Outcome::Stagnated { detail } => format!("stopped: stagnation ({detail})"),
             Outcome::Diverged { detail } => format!("stopped: divergence ({detail})"),
+            Outcome::NoEquilibrium { detail } => format!("stopped: no equilibrium ({detail})"),
             Outcome::Rejected { reason } => format!("rejected at validation: {reason}"),
             Outcome::Error { detail } => format!("error: {detail}"),
             Outcome::Panicked { detail } => format!("PANIC: {detail}"),
@@ -394,6 +401,7 @@ fn latin_run(case: &Case, scene: &str, accelerated: bool) -> (RunRow, Option<Sto
         Verdict::MaxIterations | Verdict::Continue => Outcome::MaxIterations,
         Verdict::Stagnated { detail } => Outcome::Stagnated { detail: detail.clone() },
         Verdict::Diverged { detail } => Outcome::Diverged { detail: detail.clone() },
+        Verdict::NoEquilibrium { detail } => Outcome::NoEquilibrium { detail: detail.clone() },
     };
     let model = &sc.model;
     let nt = model.time.n_points();

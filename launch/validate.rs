@@ -499,6 +499,18 @@ pub fn summary(results: &[Validated]) -> String {
         "- not checked (the reference or the run failed): {failed} of {}",
         results.len()
     );
+    // A scene the reference solved has an equilibrium at every time point: a run of it stopped
+    // on no equilibrium is a false diagnosis.
+    let no_equilibrium: Vec<u64> = results
+        .iter()
+        .filter(|v| v.check.as_ref().is_ok_and(|c| c.verdict.starts_with("NoEquilibrium")))
+        .map(|v| v.seed)
+        .collect();
+    let _ = writeln!(
+        s,
+        "- runs stopped on no equilibrium though the reference solved every time point: {} {no_equilibrium:?}",
+        no_equilibrium.len()
+    );
     s += &status_summary(results);
     s
 }

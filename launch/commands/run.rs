@@ -376,7 +376,8 @@ fn print_results(
     for line in glissade::resultants::console_lines(&sc.model, resultants, 4) {
         println!("{line}");
     }
-    if result.verdict != Verdict::Converged {
+    // A run stopped on no equilibrium has said which interfaces slide, and from when.
+    if !matches!(result.verdict, Verdict::Converged | Verdict::NoEquilibrium { .. }) {
         for line in glissade::resultants::whole_slip_lines(&sc.model, resultants, 4) {
             glissade::console::warn(&line);
         }

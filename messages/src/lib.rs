@@ -52,5 +52,8 @@ pub use values::{BlockLender, HeldBlock, ValueBlock, Values};
 /// several interface nodes, the one it is for. Version 7: `NodeStatus` (a node's status, asked when
 /// a run stops moving) and `Stall` (the launcher's diagnosis). Version 8: the decision carries the
 /// pointwise step and estimate (`pointwise_step`, `pointwise_estimate`), `InterfaceIndicators`
-/// the largest step and force at one point (`step_max`, `force_max`).
-pub const SCHEMA_VERSION: u32 = 8;
+/// the largest step and force at one point (`step_max`, `force_max`). Version 9:
+/// `InterfaceIndicators` carries the first time point beyond what friction holds where an
+/// interface slides and the sides that show it (`sliding_from`, `sliding_sides`), the verdict
+/// `NoEquilibrium`.
+pub const SCHEMA_VERSION: u32 = 9;

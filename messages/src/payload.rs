@@ -23,6 +23,12 @@ pub enum Verdict {
     Diverged {
         detail: String,
     },
+    /// The loads exceed what friction and the supports hold at some time points: a contact
+    /// interface slips as a whole there and its slip grows by steady steps (no fixed point); the
+    /// detail names the interfaces, the parts and the first such time point.
+    NoEquilibrium {
+        detail: String,
+    },
 }
 
 impl Verdict {
@@ -81,6 +87,12 @@ pub struct InterfaceIndicators {
     /// interfaces (tractions, MPa).
     pub step_max: f64,
     pub force_max: f64,
+    /// The first time point beyond what friction holds, when the interface slides (it slips as
+    /// a whole while the forces of a side whose part no support holds stay beyond the friction
+    /// cone: no equilibrium there).
+    pub sliding_from: Option<u32>,
+    /// The sides (a, b) whose forces showed it: their parts would slide or turn away.
+    pub sliding_sides: [bool; 2],
 }
 
 /// The particular part s₀ = (W_d, −k⁻W_d) of a subdomain's state in separated form: the boundary

@@ -237,6 +237,7 @@ fn other_payload() -> impl Strategy<Value = Payload> {
         Just(Verdict::MaxIterations),
         ".{0,12}".prop_map(|detail| Verdict::Stagnated { detail }),
         ".{0,12}".prop_map(|detail| Verdict::Diverged { detail }),
+        ".{0,12}".prop_map(|detail| Verdict::NoEquilibrium { detail }),
     ];
     prop_oneof![
         (".{0,40}", overrides()).prop_map(|(text, overrides)| Payload::Scene { text, overrides }),
@@ -342,6 +343,8 @@ fn other_payload() -> impl Strategy<Value = Payload> {
                             step_den: v[5],
                             step_max: v[1],
                             force_max: v[4],
+                            sliding_from: direction_updated.then_some(interface / 2),
+                            sliding_sides: [direction_updated, interface % 2 == 0],
                         }
                     )
                     .collect(),

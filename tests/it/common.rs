@@ -155,3 +155,42 @@ pub fn output_file(dir: &Path, suffix: &str) -> PathBuf {
     assert_eq!(found.len(), 1, "{suffix} in {}: {found:?}", dir.display());
     found.into_iter().next().unwrap()
 }
+
+/// The issue's rings on the sheath's mesh (three steel layers 10–13, 13–16 and 16–20 mm, each cut
+/// into 8 sectors glued along their cuts; an interference of 0.01 mm at r = 13, none at r = 16;
+/// f = 0.2; the bore clamped) twisted by a shear rising as `shear` on r = 20.
+pub fn rings(shear: &str) -> LoadedScene {
+    let path = format!("{}/launch/scenes/rings.toml", env!("CARGO_MANIFEST_DIR"));
+    let text = format!(
+        r#"
+name = "rings"
+plane = "strain"
+[time]
+T = 1.0
+N = 4
+[materials.steel]
+E = 210000.0
+nu = 0.3
+[mesh]
+file = "meshes/sheath.msh"
+materials = {{ inner = "steel", middle = "steel", outer = "steel" }}
+[[interface]]
+curve = "inner-middle"
+kind = "contact"
+friction = 0.2
+gap = -0.01
+[[interface]]
+curve = "middle-outer"
+kind = "contact"
+friction = 0.2
+[[boundary]]
+curve = "bore"
+ux = 0.0
+uy = 0.0
+[[boundary]]
+curve = "outside"
+shear = "{shear}"
+"#
+    );
+    load_str(&text, &path).expect("scene")
+}

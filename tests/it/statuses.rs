@@ -2,7 +2,7 @@
 //! decided from the converged fields with a margin tied to the accuracy, limit or grazing where
 //! the fields cannot tell.
 
-use crate::common::{glissade_ok, output_file, run, scene, scene_text, scratch};
+use crate::common::{glissade_ok, output_file, rings, run, scene, scene_text, scratch};
 use glissade_mechanics::settled::{agreement, Settled, MARGIN_FACTOR, SETTLED_NAMES};
 use glissade_messages::Verdict;
 
@@ -110,4 +110,78 @@ fn the_outputs_name_the_statuses_within_the_margins() {
         serde_json::from_str(&std::fs::read_to_string(output_file(&dir.0, ".summary.json")).unwrap()).unwrap();
     assert_eq!(summary["status_counts_per_time"][60]["limit"], 17);
     assert!(SETTLED_NAMES.contains(&"grazing"));
+}
+
+/// The rings' slip load in closed form (Lamé, plane strain): the contact pressures p₁₃ and p₁₆ of
+/// the three rings solved for the interference (u_r = A r + B/r per ring, the bore fixed, the
+/// outside free, u continuous at r = 16, jumping by 0.01 at r = 13), and the torque the shear τ
+/// puts on r = 20, carried through each circle r as a shear τ·20²/r². Each circle slips as a
+/// whole when that reaches f·p: τ* = f·p·r²/400. Returns (τ* at r = 13, τ* at r = 16).
+fn rings_slip_loads() -> (f64, f64) {
+    let (e, nu, f) = (210000.0, 0.3, 0.2);
+    let (lambda, mu) = (e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), e / (2.0 * (1.0 + nu)));
+    let sigma = |r: f64| [2.0 * (lambda + mu), -2.0 * mu / (r * r)];
+    // Unknowns A₁ B₁ A₂ B₂ A₃ B₃ p₁₃ p₁₆.
+    let mut m = nalgebra::SMatrix::<f64, 8, 8>::zeros();
+    let mut rhs = nalgebra::SVector::<f64, 8>::zeros();
+    let mut set = |row: usize, at: &[(usize, f64)]| {
+        for &(k, v) in at {
+            m[(row, k)] += v;
+        }
+    };
+    set(0, &[(0, 10.0), (1, 0.1)]);
+    for (row, ring, r, p) in [(1, 0, 13.0, 6), (2, 1, 13.0, 6), (3, 1, 16.0, 7), (4, 2, 16.0, 7)] {
+        let [a, b] = sigma(r);
+        set(row, &[(2 * ring, a), (2 * ring + 1, b), (p, 1.0)]);
+    }
+    let [a, b] = sigma(20.0);
+    set(5, &[(4, a), (5, b)]);
+    set(6, &[(2, 13.0), (3, 1.0 / 13.0), (0, -13.0), (1, -1.0 / 13.0)]);
+    rhs[6] = 0.01;
+    set(7, &[(4, 16.0), (5, 1.0 / 16.0), (2, -16.0), (3, -1.0 / 16.0)]);
+    let x = m.lu().solve(&rhs).expect("the Lamé system is regular");
+    (f * x[6] * 169.0 / 400.0, f * x[7] * 256.0 / 400.0)
+}
+
+/// Below the closed-form slip load no point may be reported slipping: twisted to 0.98 of the load
+/// at which the outer circle slips (τ* = 3.036 MPa there, 4.869 at r = 13), every pair of both
+/// fits at every time point is stick or, near the top, limit (within the margin of the cone: the
+/// mesh's pressure matches Lamé's to its discretisation), none slip. Twisted to 1.05 of it, the
+/// outer ring has no equilibrium from t = 1 (3.19·t > 3.036 from t = 0.952; time points every
+/// 0.25): the run says so within 30 iterations (15 measured), naming the outer ring's eight
+/// sectors and not the middle ring's.
+#[test]
+fn rings_slip_at_the_closed_form_load_and_not_below() {
+    let (at13, at16) = rings_slip_loads();
+    // p₁₃ = 57.63 and p₁₆ = 23.71 MPa: the outer circle slips first.
+    assert!(
+        (at13 - 4.8695).abs() < 1e-3 && (at16 - 3.0355).abs() < 1e-3,
+        "{at13} {at16}"
+    );
+    let sc = rings(&format!("{}*t", 0.98 * at16));
+    let result = run(&sc);
+    assert_eq!(result.verdict, Verdict::Converged);
+    for (k, sol) in result.interfaces.iter().enumerate() {
+        let slipping = sol.status.iter().filter(|&&s| s == Settled::Slip as u8).count();
+        assert_eq!(slipping, 0, "interface {k}: {:?}", sol.status);
+        assert!(sol
+            .status
+            .iter()
+            .all(|&s| s == Settled::Stick as u8 || s == Settled::Limit as u8));
+    }
+
+    let over = rings(&format!("{}*t", 1.05 * at16));
+    let result = run(&over);
+    let Verdict::NoEquilibrium { detail } = &result.verdict else {
+        panic!("{:?}", result.verdict);
+    };
+    // The outer ring turns; the middle one, held at r = 13 below its capacity, passes its twist on.
+    assert!(
+        detail.starts_with(
+            "the loads exceed what friction and the supports hold from t = 1: part [outer.1, outer.2, outer.3, \
+             outer.4, …] (8 subdomains) would slide or turn away: its interfaces 18 (middle.1 | outer.1) from t = 1"
+        ) && !detail.contains("part [middle"),
+        "{detail}"
+    );
+    assert!(result.iterations.len() <= 30, "{} iterations", result.iterations.len());
 }

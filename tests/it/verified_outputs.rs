@@ -333,37 +333,7 @@ fn outputs_against_the_reference() {
 /// issue's ±13 % on its own rings), which the outputs must not show.
 #[test]
 fn press_fitted_sectors_have_no_shear_at_rest_at_their_boundaries() {
-    let path = format!("{}/launch/scenes/rings.toml", env!("CARGO_MANIFEST_DIR"));
-    let text = r#"
-name = "rings"
-plane = "strain"
-[time]
-T = 1.0
-N = 4
-[materials.steel]
-E = 210000.0
-nu = 0.3
-[mesh]
-file = "meshes/sheath.msh"
-materials = { inner = "steel", middle = "steel", outer = "steel" }
-[[interface]]
-curve = "inner-middle"
-kind = "contact"
-friction = 0.2
-gap = -0.01
-[[interface]]
-curve = "middle-outer"
-kind = "contact"
-friction = 0.2
-[[boundary]]
-curve = "bore"
-ux = 0.0
-uy = 0.0
-[[boundary]]
-curve = "outside"
-shear = "1.9*t"
-"#;
-    let sc = load_str(text, &path).expect("scene");
+    let sc = crate::common::rings("1.9*t");
     let model = &sc.model;
     let (result, judged) = run_keeping_last_state(&sc);
     assert_eq!(result.verdict, Verdict::Converged);

@@ -4,11 +4,17 @@
 use crate::InterfaceNode;
 use glissade_bus::{expect_origin, NodeError};
 use glissade_mechanics::local::IndicatorSums;
+use glissade_mechanics::sliding::Sliding;
 use glissade_messages::{Decision, InterfaceIndicators, Message, Payload, Role, Stage, Verdict};
 use std::collections::BTreeSet;
 
 /// One interface's sums as they travel to the decider.
-pub(crate) fn indicators_of(interface: usize, s: &IndicatorSums, direction_updated: bool) -> InterfaceIndicators {
+pub(crate) fn indicators_of(
+    interface: usize,
+    s: &IndicatorSums,
+    direction_updated: bool,
+    sliding: Option<Sliding>,
+) -> InterfaceIndicators {
     InterfaceIndicators {
         interface: interface as u32,
         eta_num: s.eta_num,
@@ -24,6 +30,8 @@ pub(crate) fn indicators_of(interface: usize, s: &IndicatorSums, direction_updat
         step_den: s.step_den,
         step_max: s.step_max,
         force_max: s.force_max,
+        sliding_from: sliding.map(|s| s.from as u32),
+        sliding_sides: sliding.map_or([false; 2], |s| s.sides),
     }
 }
 
@@ -95,15 +103,31 @@ impl InterfaceNode {
                 all.sort_by_key(|i| i.interface);
                 let mut sums = IndicatorSums::default();
                 let mut updates = Vec::new();
+                let mut sliding = Vec::new();
                 for i in all {
                     sums.add(&sums_of(i));
                     if i.direction_updated {
                         updates.push(i.interface);
                     }
+                    if let Some(t) = i.sliding_from {
+                        let found = Sliding {
+                            from: t as usize,
+                            sides: i.sliding_sides,
+                        };
+                        sliding.push((i.interface as usize, found));
+                    }
                 }
                 // The residual of the last step mixed: iteration n − 1's (its step came before s_n).
                 let fixed_point = d.anderson.as_ref().and_then(|a| a.last_residual2()).map(f64::sqrt);
-                let verdict = d.rule.decide(n, &sums, fixed_point);
+                let mut verdict = d.rule.decide(n, &sums, fixed_point);
+                // Sliding interfaces: the loads have no equilibrium, the iteration no fixed point;
+                // said as such instead of running on to a stagnation (a converged or diverged
+                // verdict stands).
+                if !sliding.is_empty() && !matches!(verdict, Verdict::Converged | Verdict::Diverged { .. }) {
+                    verdict = Verdict::NoEquilibrium {
+                        detail: glissade_mechanics::sliding::no_equilibrium(&self.model, &sliding),
+                    };
+                }
                 (sums, updates, verdict)
             }
         };
@@ -172,6 +196,41 @@ impl InterfaceNode {
                 format!(
                     "indicators of interface {} from interface node {from}: the scene has {n_itf}",
                     bad.interface
+                ),
+            ));
+        }
+        let nt = self.model.time.n_points() as u32;
+        // A slide names a time point of the scene, on a contact interface, shown by a side whose
+        // part no support holds (the sides the watch reads).
+        let slides_right = |i: &InterfaceIndicators| {
+            let k = i.interface as usize;
+            match i.sliding_from {
+                None => i.sliding_sides == [false; 2],
+                Some(t) => {
+                    let free = glissade_mechanics::sliding::free_sides(&self.model, k);
+                    t < nt
+                        && self.model.interfaces[k].is_contact()
+                        && i.sliding_sides != [false; 2]
+                        && (0..2).all(|s| !i.sliding_sides[s] || free[s])
+                }
+            }
+        };
+        if let Some(bad) = share.iter().find(|i| !slides_right(i)) {
+            return Err(NodeError::rejected(
+                self.id,
+                format!(
+                    "indicators of interface {} from interface node {from} say it slides from time point {:?} as \
+                     sides {:?} show: the scene has {nt} time points, the interface is {}, and only sides {:?} are of \
+                     parts no support holds",
+                    bad.interface,
+                    bad.sliding_from,
+                    bad.sliding_sides,
+                    if self.model.interfaces[bad.interface as usize].is_contact() {
+                        "a contact"
+                    } else {
+                        "not a contact"
+                    },
+                    glissade_mechanics::sliding::free_sides(&self.model, bad.interface as usize)
                 ),
             ));
         }

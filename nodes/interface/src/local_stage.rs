@@ -29,7 +29,7 @@ impl InterfaceNode {
                     (sums.step_num, sums.step_den) = (step.num, step.den);
                     (sums.step_max, sums.force_max) = (step.max_step, step.max_force);
                 }
-                indicators_of(i, &sums, updated)
+                indicators_of(i, &sums, updated, local.sliding)
             })
             .collect();
         self.report(share, None)

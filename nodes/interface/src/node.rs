@@ -123,7 +123,11 @@ impl InterfaceNode {
         });
         let locals = owned
             .iter()
-            .map(|&i| InterfaceLocal::new(i, &model.interfaces[i], k0[i], nt))
+            .map(|&i| {
+                let mut local = InterfaceLocal::new(i, &model.interfaces[i], k0[i], nt);
+                local.watch_sides(glissade_mechanics::sliding::free_sides(&model, i));
+                local
+            })
             .collect();
         let fields = owned
             .iter()

@@ -370,6 +370,17 @@ fn two_interface_nodes_decide_as_one() {
         "{err}"
     );
     assert!(err.is_rejection(), "{err:?}");
+    // A share that says its interface slides from a time point the scene does not have, or as a
+    // side shows whose part its supports hold, is refused.
+    for (from, sides) in [(99, [true, false]), (1, [true, false]), (1, [false, false])] {
+        let mut sliding = partials.clone();
+        if let Payload::IndicatorPartials { interfaces, .. } = &mut sliding.payload {
+            (interfaces[0].sliding_from, interfaces[0].sliding_sides) = (Some(from), sides);
+        }
+        let err = n0_copy.handle(&sliding).unwrap_err();
+        assert!(err.detail.contains("say it slides from time point Some("), "{err}");
+        assert!(err.is_rejection(), "{err:?}");
+    }
 
     from0.extend(n0.handle(partials).unwrap());
     let decision = |out: &[Message]| {

@@ -25,6 +25,7 @@ pub mod post;
 pub mod scales;
 pub mod settled;
 pub mod simd;
+pub mod sliding;
 
 /// Passes over full boundary fields (n_b × (N+1)) that one plain iteration makes per subdomain,
 /// each the read or the write of one whole field, in the condensed linear stage with the coarse

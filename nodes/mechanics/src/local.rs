@@ -7,6 +7,7 @@
 use crate::laws::{self, ContactPoint, PairState, Status};
 use crate::model::{Interface, InterfaceKind, SolverParams};
 use crate::points::{junctions, PhysicalPoint, PointCopy};
+use crate::sliding::{Sliding, SlidingWatch};
 use faer::reborrow::ReborrowMut;
 use faer::{Mat, MatMut, MatRef};
 
@@ -584,6 +585,11 @@ pub struct InterfaceLocal {
     /// Storage of the updated directions, allocated with the interface (contact only), so that
     /// the update inside the iteration loop does not allocate.
     spare: Option<ContactDirections>,
+    /// Whether the loads slide the interface away at some time point ([`crate::sliding`]).
+    watch: SlidingWatch,
+    /// What the watch found after the last [`Self::local_iteration`]: none, or the first time
+    /// point beyond what friction holds and the sides that showed it.
+    pub sliding: Option<Sliding>,
 }
 
 impl InterfaceLocal {
@@ -611,6 +617,8 @@ impl InterfaceLocal {
                 k_n: Mat::zeros(np, n_times),
                 k_t: Mat::zeros(np, n_times),
             }),
+            watch: SlidingWatch::new(if itf.is_contact() { n_times } else { 0 }),
+            sliding: None,
         }
     }
 
@@ -719,6 +727,13 @@ impl InterfaceLocal {
         }
     }
 
+    /// Which sides' parts no support holds in every rigid motion ([`crate::sliding::free_sides`]):
+    /// the sides whose forces in s the sliding watch reads. Neither (the default): it never
+    /// says the interface slides.
+    pub fn watch_sides(&mut self, free: [bool; 2]) {
+        self.watch.sides = free;
+    }
+
     /// One iteration's local stage on this interface, as the interface node runs it:
     /// [`Self::local_stage_with_sums`] (`first` at iteration 0), then, when `solver` asks for it,
     /// [`Self::update_directions`]. Returns the indicator sums and whether the directions were
@@ -732,6 +747,9 @@ impl InterfaceLocal {
         first: bool,
     ) -> (IndicatorSums, bool) {
         let sums = self.local_stage_with_sums(itf, time_weights, s, first);
+        let mut watch = std::mem::replace(&mut self.watch, SlidingWatch::new(0));
+        self.sliding = watch.observe(itf, self, s);
+        self.watch = watch;
         let updated = solver.search_direction_update && self.update_directions(itf, solver.alpha, solver.i0);
         (sums, updated)
     }

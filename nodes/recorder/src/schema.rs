@@ -71,7 +71,7 @@ pub const PAYLOAD_FIELDS: [(&str, &str, &str); 16] = [
         "glissade.IndicatorPartials",
         "{ interfaces: Vec<InterfaceIndicators { interface: u32, eta_num: f64, eta_den: f64, force_num: f64, \
          force_den: f64, jump_num: f64, jump_den: f64, counts: [u64; 3], status_changes: u64, direction_updated: bool, step_num: f64, \
-         step_den: f64, step_max: f64, force_max: f64 }>, \
+         step_den: f64, step_max: f64, force_max: f64, sliding_from: Option<u32>, sliding_sides: [bool; 2] }>, \
          diverged: Option<String> }",
     ),
     (
@@ -120,7 +120,7 @@ pub fn payload_schema(field: &str) -> (String, String) {
              NodeId {{ role: Role, index: u32 }}; Role = enum {{ Subdomain, Interface, Coarse, Launcher, Recorder }}\n\
              Payload::{ty} {layout}\n\
              Field {{ rows: u32, cols: u32, data: Vec<f64> }} (column-major: one column per time point)\n\
-             Verdict = enum {{ Continue, Converged, MaxIterations, Stagnated {{ detail: String }}, Diverged {{ detail: String }} }}\n"
+             Verdict = enum {{ Continue, Converged, MaxIterations, Stagnated {{ detail: String }}, Diverged {{ detail: String }}, NoEquilibrium {{ detail: String }} }}\n"
         ),
     )
 }

@@ -11,8 +11,9 @@
 //! slips at a
 //! point if some pair slips at some time point; it slips everywhere if at some time point one
 //! interface's whole length slips, or if it did not converge: a part that would slide or spin
-//! away has no equilibrium, and LATIN's iteration then stalls with every pair slipping (its
-//! verdict, "stagnated", is kept in the trial's row).
+//! away has no equilibrium, and the run then stops on that diagnosis (or, where the excess of
+//! tangential force is too small to be seen, stalls with every pair slipping); its verdict is
+//! kept in the trial's row.
 
 use crate::driver::{Solved, Solver};
 use crate::quantities::{index_of, quantities};

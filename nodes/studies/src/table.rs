@@ -149,6 +149,7 @@ fn short(v: &glissade_messages::Verdict) -> &'static str {
         V::MaxIterations => "NOT converged: iteration cap",
         V::Stagnated { .. } => "NOT converged: stagnated",
         V::Diverged { .. } => "Diverged",
+        V::NoEquilibrium { .. } => "NOT converged: no equilibrium",
         V::Continue => "stopped early",
     }
 }

@@ -128,6 +128,7 @@ fn verdict(v: &Verdict) -> (u64, &str) {
         Verdict::MaxIterations => (2, ""),
         Verdict::Stagnated { detail } => (3, detail),
         Verdict::Diverged { detail } => (4, detail),
+        Verdict::NoEquilibrium { detail } => (5, detail),
     }
 }
 
@@ -211,6 +212,11 @@ fn indicators(out: &mut Vec<u8>, i: &InterfaceIndicators) {
     double(out, 14, i.step_den);
     double(out, 15, i.step_max);
     double(out, 16, i.force_max);
+    if let Some(t) = i.sliding_from {
+        uint(out, 17, t as u64);
+    }
+    uint(out, 18, i.sliding_sides[0] as u64);
+    uint(out, 19, i.sliding_sides[1] as u64);
 }
 
 /// Bytes of the message's fields beyond the envelope, to size the buffer once.

@@ -138,6 +138,10 @@ pub const ENUMS: &[EnumDef] = &[
                 "VERDICT_DIVERGED",
                 "eta grew without bound or a value became NaN/Inf (verdict_detail says where)",
             ),
+            (
+                "VERDICT_NO_EQUILIBRIUM",
+                "the loads exceed what friction and the supports hold at some time points (verdict_detail names the interfaces, parts and first time point)",
+            ),
         ],
     },
     EnumDef {
@@ -616,6 +620,15 @@ pub const MESSAGES: &[MessageDef] = &[
             f("step_den", 14, Ty::Double, ""),
             f("step_max", 15, Ty::Double, ""),
             f("force_max", 16, Ty::Double, ""),
+            opt(
+                "sliding_from",
+                17,
+                Ty::Uint32,
+                "the first time point beyond what friction holds, when the interface slides (no equilibrium there); \
+                 absent if it does not",
+            ),
+            f("sliding_side_a", 18, Ty::Bool, "side a's forces showed it: its part would slide or turn away"),
+            f("sliding_side_b", 19, Ty::Bool, "side b's forces showed it: its part would slide or turn away"),
         ],
     },
 ];

@@ -165,6 +165,12 @@ fn samples() -> Vec<Message> {
                 detail: "NaN in interface 3".into(),
             },
         ),
+        decision(
+            Some(3e-1),
+            Verdict::NoEquilibrium {
+                detail: "interface 0 slides from t = 0.425".into(),
+            },
+        ),
         Payload::InterfaceSolution(InterfaceSolution {
             interface: 2,
             w_a: field(4, 3, 1.0),
@@ -198,6 +204,8 @@ fn samples() -> Vec<Message> {
                     step_den: 8.0,
                     step_max: 9.0,
                     force_max: 10.0,
+                    sliding_from: Some(0),
+                    sliding_sides: [false, true],
                 },
                 InterfaceIndicators {
                     interface: 5,
@@ -214,6 +222,8 @@ fn samples() -> Vec<Message> {
                     step_den: 1.0,
                     step_max: 0.0,
                     force_max: 2.5,
+                    sliding_from: None,
+                    sliding_sides: [false, false],
                 },
             ],
             diverged: None,
@@ -499,6 +509,7 @@ fn from_proto(m: &DynamicMessage) -> Message {
                     2 => Verdict::MaxIterations,
                     3 => Verdict::Stagnated { detail },
                     4 => Verdict::Diverged { detail },
+                    5 => Verdict::NoEquilibrium { detail },
                     v => panic!("verdict {v}"),
                 },
             })
@@ -542,6 +553,8 @@ fn from_proto(m: &DynamicMessage) -> Message {
                         step_den: f64_(i, "step_den"),
                         step_max: f64_(i, "step_max"),
                         force_max: f64_(i, "force_max"),
+                        sliding_from: i.has_field_by_name("sliding_from").then(|| u32_(i, "sliding_from")),
+                        sliding_sides: [bool_(i, "sliding_side_a"), bool_(i, "sliding_side_b")],
                     }
                 })
                 .collect(),
