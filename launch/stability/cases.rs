@@ -176,7 +176,7 @@ pub enum Expect {
     /// error of s against it is ≤ `error` (the jump error where the reference's contact
     /// tractions are all zero, so that a relative traction error is undefined).
     Converge { error: f64 },
-    /// Stops without converging with this outcome ([`Outcome::kind`]: `max_iterations`,
+    /// Stops without converging with this outcome ([`Outcome::kind`]: `max_iterations`, `no_equilibrium`,
     /// `stagnated`, `diverged`), for the reason given.
     Stop { outcome: &'static str, why: &'static str },
     /// The scene is rejected at validation with a reason containing `reason`.

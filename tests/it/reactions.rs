@@ -185,7 +185,7 @@ fn stopped_after(text: &str) -> usize {
 
 /// The shrink fit twisted twice as hard as its scene (3·t MPa, beyond the 1.962 MPa friction
 /// holds from t = 0.7 on: 2.1 MPa there, 1.8 at t = 0.6) has no equilibrium: the run stops on
-/// that diagnosis within 30 iterations (14 measured; it stagnated after 201 before), naming the
+/// that diagnosis within 30 iterations (20 measured; it stagnated after 201 before), naming the
 /// interface, the first time point beyond capacity and the ring that would turn. Twisted by
 /// 1.96875·t MPa, beyond capacity at t = 1 by 0.3 % only (an excess the watch does not see), it
 /// stalls, and once stopped says which interface slips over its whole length, and from which time
